@@ -1,0 +1,344 @@
+"""Configuration: frozen dataclasses and a validating YAML loader.
+
+``load_config(path, overrides)`` reads a YAML file (or nothing, for the
+defaults), applies ``--set section.key=value`` overrides through the same
+validator, and returns a :class:`Config`. Unknown keys are errors with the
+dotted path and a did-you-mean; wrong types and out-of-range values are errors
+naming the key; nothing is silently replaced by a default.
+
+Paths in a config file (``map``, ``log``, ``truth``) are resolved relative to
+the config file's folder first and, if nothing exists there, to the current
+directory; the resolved config stores absolute paths so a run can be repeated
+from anywhere.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+
+from mcl.errors import ConfigError
+
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+# Ranges a number may take: (min, max, min_inclusive, max_inclusive). Checked by
+# `_check_range` for every field whose metadata names one.
+def _rng(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False, hi_open: bool = False):
+    return {"range": (lo, hi, lo_open, hi_open)}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FilterConfig:
+    """The particle filter loop (Prob. Rob. Table 8.2, MCL)."""
+
+    particles: int = field(default=5000, metadata=_rng(1, 10_000_000))
+    initial_pose: tuple[float, float, float] | None = None  # x, y, theta; null -> global
+    initial_std: tuple[float, float, float] = (0.1, 0.1, 0.1)  # std of x, y (m) and theta (rad)
+    global_localization: bool = False  # uniform over free space, ignoring initial_pose
+    resampling: Literal["systematic", "stratified", "residual", "multinomial"] = "systematic"
+    resample_threshold: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # resample when ESS/N < this
+    update_min_d: float = field(default=0.05, metadata=_rng(0.0))  # m travelled before an update (AMCL)
+    update_min_a: float = field(default=0.05, metadata=_rng(0.0))  # rad turned before an update (AMCL)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class MotionConfig:
+    """Odometry motion model (Prob. Rob. Table 5.6, sample_motion_model_odometry)."""
+
+    model: Literal["odometry"] = "odometry"
+    # variance: sigma^2 = alpha1*drot1^2 + alpha2*dtrans^2 (the book's Table 5.6 and AMCL);
+    # std: sigma = alpha1*|drot1| + alpha2*|dtrans| (the lecture slides' form).
+    noise_form: Literal["variance", "std"] = "variance"
+    alpha1: float = field(default=0.05, metadata=_rng(0.0))  # rotation noise from rotation
+    alpha2: float = field(default=0.05, metadata=_rng(0.0))  # rotation noise from translation
+    alpha3: float = field(default=0.05, metadata=_rng(0.0))  # translation noise from translation
+    alpha4: float = field(default=0.05, metadata=_rng(0.0))  # translation noise from rotation
+    map_rejection: bool = True  # map-based motion model (seed 5.5): resample poses that land off free space
+    max_tries: int = field(default=10, metadata=_rng(1, 1000))
+    robot_radius: float = field(default=0.0, metadata=_rng(0.0))  # m of clearance a pose needs
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class SensorConfig:
+    """Likelihood field range finder model (Prob. Rob. Table 6.3)."""
+
+    model: Literal["likelihood_field"] = "likelihood_field"
+    z_hit: float = field(default=0.95, metadata=_rng(0.0, 1.0))
+    z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
+    sigma_hit: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
+    likelihood_max_dist: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
+    max_beams: int = field(default=60, metadata=_rng(1, 100_000))
+    range_min: float = field(default=0.0, metadata=_rng(0.0))
+    range_max: float = field(default=80.0, metadata=_rng(0.0, lo_open=True))  # readings >= this: no return
+    exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # temper the beam product
+    laser_pose: tuple[float, float, float] | None = None  # mounting pose in the robot frame; null -> from the log
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RerunConfig:
+    """What goes into the Rerun recording."""
+
+    mode: Literal["save", "spawn", "serve", "off"] = "save"
+    particles_max: int = field(default=2000, metadata=_rng(0, 10_000_000))  # particles logged per step
+    particles_every: int = field(default=1, metadata=_rng(1, 1_000_000))  # log the cloud every k-th update
+    scan: bool = True  # log the scan endpoints seen from the estimate
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class EvalConfig:
+    """How `mcl eval` and a run with truth score a trajectory."""
+
+    converged_within: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m, for convergence time
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Config:
+    """A whole run: the data, the seed and each part of the filter."""
+
+    map: str | None = None
+    log: str | None = None
+    truth: str | None = None
+    laser: str = "auto"  # which laser stream of the log: auto, FLASER, RLASER, ROBOTLASER1, RAWLASER1..4
+    seed: int = field(default=1, metadata=_rng(0, 2**63 - 1))
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    rerun: RerunConfig = field(default_factory=RerunConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+
+
+LASER_KINDS = ("auto", "FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
+PATH_KEYS = ("map", "log", "truth")
+
+
+# ----------------------------------------------------------------------------- validation
+
+
+def _type_name(tp: Any) -> str:
+    origin = typing.get_origin(tp)
+    if origin is Literal:
+        return "one of " + ", ".join(repr(a) for a in typing.get_args(tp))
+    if origin in (types.UnionType, typing.Union):
+        return " or ".join(_type_name(a) for a in typing.get_args(tp))
+    if origin is tuple:
+        return f"a list of {len(typing.get_args(tp))} numbers"
+    if tp is type(None):
+        return "null"
+    return {float: "a number", int: "an integer", bool: "true or false", str: "a string"}.get(tp, str(tp))
+
+
+def _coerce(value: Any, tp: Any, key: str) -> Any:
+    """Check `value` against the annotation `tp`; return it converted (ints to floats, lists to tuples)."""
+    origin = typing.get_origin(tp)
+    if origin in (types.UnionType, typing.Union):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return _coerce(value, a, key)
+            except ConfigError:
+                pass
+        raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
+    if origin is Literal:
+        choices = typing.get_args(tp)
+        if value not in choices:
+            hint = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
+            extra = f" (did you mean {hint[0]}?)" if hint else ""
+            raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}{extra}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)) or len(value) != len(args):
+            raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
+        return tuple(_coerce(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key}: expected true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                return int(value)
+            raise ConfigError(f"{key}: expected an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{key}: expected a number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{key}: expected a string, got {value!r}")
+        return value
+    raise ConfigError(f"{key}: unsupported type {tp}")  # pragma: no cover - a bug in the dataclasses
+
+
+def _check_range(value: Any, meta: dict, key: str) -> None:
+    if "range" not in meta or value is None:
+        return
+    lo, hi, lo_open, hi_open = meta["range"]
+    if lo is not None and (value < lo or (lo_open and value == lo)):
+        raise ConfigError(f"{key}: {value!r} is out of range (must be {'>' if lo_open else '>='} {lo})")
+    if hi is not None and (value > hi or (hi_open and value == hi)):
+        raise ConfigError(f"{key}: {value!r} is out of range (must be {'<' if hi_open else '<='} {hi})")
+
+
+def _build(cls: type, data: Any, prefix: str) -> Any:
+    """Build dataclass `cls` from a mapping, validating every key."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{prefix or 'config'}: expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    kwargs = {}
+    for k, v in data.items():
+        key = f"{prefix}{k}"
+        if k not in fields:
+            hint = difflib.get_close_matches(str(k), list(fields), n=1)
+            extra = f" (did you mean {hint[0]}?)" if hint else ""
+            raise ConfigError(f"{key}: unknown key{extra}")
+        tp = hints[k]
+        if dataclasses.is_dataclass(tp):
+            kwargs[k] = _build(tp, v, key + ".")
+        else:
+            kwargs[k] = _coerce(v, tp, key)
+            _check_range(kwargs[k], fields[k].metadata, key)
+    return cls(**kwargs)
+
+
+def _cross_checks(cfg: Config) -> None:
+    if cfg.laser not in LASER_KINDS:
+        raise ConfigError(f"laser: expected one of {', '.join(LASER_KINDS)}, got {cfg.laser!r}")
+    s = cfg.sensor
+    if s.range_min >= s.range_max:
+        raise ConfigError(f"sensor.range_min: {s.range_min} must be below sensor.range_max ({s.range_max})")
+    if s.z_hit + s.z_rand <= 0:
+        raise ConfigError("sensor.z_hit: z_hit + z_rand must be positive")
+    if any(v < 0 for v in cfg.filter.initial_std):
+        raise ConfigError("filter.initial_std: standard deviations must be >= 0")
+
+
+# ----------------------------------------------------------------------------- overrides and paths
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """``section.key=value`` -> (["section", "key"], parsed YAML value)."""
+    if "=" not in text:
+        raise ConfigError(f"--set {text}: expected section.key=value")
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    if not key or any(not part for part in key.split(".")):
+        raise ConfigError(f"--set {text}: expected section.key=value")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        value = raw
+    return key.split("."), value
+
+
+def _apply(data: dict, path: list[str], value: Any) -> None:
+    node = data
+    for i, part in enumerate(path[:-1]):
+        nxt = node.get(part)
+        if nxt is None:
+            nxt = node[part] = {}
+        if not isinstance(nxt, dict):
+            raise ConfigError(f"{'.'.join(path[: i + 1])}: is not a section")
+        node = nxt
+    node[path[-1]] = value
+
+
+def _resolve_path(value: str | None, base: Path | None) -> str | None:
+    if value is None:
+        return None
+    p = Path(value).expanduser()
+    if p.is_absolute():
+        return str(p)
+    candidates = ([base / p] if base is not None else []) + [Path.cwd() / p, PROJECT_ROOT / p]
+    for c in candidates:
+        if c.exists():
+            return str(c.resolve())
+    return str(candidates[0].resolve())
+
+
+# ----------------------------------------------------------------------------- public API
+
+
+def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
+    """Load and validate a config file (None: the defaults) with ``key=value`` overrides."""
+    data: dict = {}
+    base = None
+    if path is not None:
+        path = Path(path)
+        base = path.resolve().parent
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as e:
+            raise ConfigError(f"{path}: cannot read ({e.strerror or e})") from None
+        except UnicodeDecodeError:
+            raise ConfigError(f"{path}: not a UTF-8 text file") from None
+        try:
+            loaded = yaml.safe_load(text)
+        except yaml.YAMLError as e:
+            mark = getattr(e, "problem_mark", None)
+            where = f":{mark.line + 1}" if mark is not None else ""
+            problem = getattr(e, "problem", None) or "invalid YAML"
+            raise ConfigError(f"{path}{where}: {problem}") from None
+        if loaded is None:
+            loaded = {}
+        if not isinstance(loaded, dict):
+            raise ConfigError(f"{path}: expected a mapping of sections at the top level")
+        data = loaded
+    for text in overrides:
+        keys, value = parse_override(text)
+        _apply(data, keys, value)
+    for k in PATH_KEYS:
+        if isinstance(data.get(k), str):
+            data[k] = _resolve_path(data[k], base)
+    try:
+        cfg = _build(Config, data, "")
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}" if path is not None else str(e)) from None
+    try:
+        _cross_checks(cfg)
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}" if path is not None else str(e)) from None
+    return cfg
+
+
+def replace(cfg: Any, **changes: Any) -> Any:
+    """dataclasses.replace, re-exported for callers that tweak a section."""
+    return dataclasses.replace(cfg, **changes)
+
+
+def to_dict(cfg: Any) -> dict:
+    """The config as plain YAML-ready data (tuples become lists)."""
+
+    def conv(v: Any) -> Any:
+        if dataclasses.is_dataclass(v):
+            return {f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v)}
+        if isinstance(v, tuple):
+            return [conv(x) for x in v]
+        return v
+
+    return conv(cfg)
+
+
+def dump_config(cfg: Config) -> str:
+    """YAML text of the resolved config; loading it gives back an equal Config."""
+    return yaml.safe_dump(to_dict(cfg), sort_keys=False)

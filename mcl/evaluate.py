@@ -1,0 +1,82 @@
+"""Scoring an estimated trajectory against a reference (``mcl eval``).
+
+The estimate is interpolated at each reference timestamp that lies inside its
+time span (linear in x and y, shortest-arc in theta); reference poses outside
+that span are not scored and are counted. No alignment is applied: both
+trajectories are in the map frame.
+
+Figures: ATE RMSE and maximum of the position error (m), heading RMSE (rad),
+and the convergence time: seconds from the first scored reference pose until
+the position error falls below ``converged_within`` metres and never rises above
+it again (None when it never does).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mcl.errors import DataError
+from mcl.estimate import wrap_angle
+
+
+def interpolate_poses(t: np.ndarray, poses: np.ndarray, tq: np.ndarray) -> np.ndarray:
+    """Poses (3, M) at times t (sorted), interpolated at tq (inside [t0, t-1])."""
+    x = np.interp(tq, t, poses[0])
+    y = np.interp(tq, t, poses[1])
+    th = np.interp(tq, t, np.unwrap(poses[2]))
+    return np.vstack([x, y, wrap_angle(th)])
+
+
+def position_errors(est_t, est_poses, ref_t, ref_poses):
+    """(times, position errors, heading errors) at the reference times inside the estimate's span."""
+    est_t = np.asarray(est_t, dtype=np.float64)
+    ref_t = np.asarray(ref_t, dtype=np.float64)
+    if est_t.size == 0:
+        return np.empty(0), np.empty(0), np.empty(0)
+    order = np.argsort(est_t, kind="stable")
+    est_t, est_poses = est_t[order], est_poses[:, order]
+    inside = (ref_t >= est_t[0] - 1e-9) & (ref_t <= est_t[-1] + 1e-9)
+    tq = ref_t[inside]
+    p = interpolate_poses(est_t, est_poses, tq)
+    r = ref_poses[:, inside]
+    e_pos = np.hypot(p[0] - r[0], p[1] - r[1])
+    e_th = np.abs(wrap_angle(p[2] - r[2]))
+    return tq, e_pos, e_th
+
+
+def evaluate(est_t, est_poses, ref_t, ref_poses, *, converged_within: float = 0.3) -> dict:
+    """ATE figures of an estimated trajectory against a reference one (see module doc)."""
+    tq, e_pos, e_th = position_errors(est_t, est_poses, ref_t, ref_poses)
+    n_ref = int(np.asarray(ref_t).size)
+    if tq.size == 0:
+        raise DataError("evaluation: no reference timestamp lies inside the estimated trajectory's time span")
+    above = np.flatnonzero(e_pos >= converged_within)
+    if above.size == 0:
+        conv = 0.0
+    elif above[-1] == e_pos.size - 1:
+        conv = None
+    else:
+        conv = float(tq[above[-1] + 1] - tq[0])
+    return {
+        "ate_rmse": float(math.sqrt(np.mean(e_pos**2))),
+        "ate_mean": float(np.mean(e_pos)),
+        "ate_max": float(np.max(e_pos)),
+        "heading_rmse": float(math.sqrt(np.mean(e_th**2))),
+        "heading_rmse_deg": float(math.degrees(math.sqrt(np.mean(e_th**2)))),
+        "converged_within": float(converged_within),
+        "convergence_time": conv,
+        "scored": int(tq.size),
+        "unscored": n_ref - int(tq.size),
+    }
+
+
+def format_eval(r: dict) -> str:
+    """One paragraph for the terminal."""
+    conv = "never" if r["convergence_time"] is None else f"{r['convergence_time']:.1f} s"
+    return (
+        f"ATE RMSE {r['ate_rmse']:.3f} m, max {r['ate_max']:.3f} m, heading RMSE {r['heading_rmse_deg']:.2f} deg, "
+        f"converged within {r['converged_within']:g} m after {conv} "
+        f"({r['scored']} reference poses scored, {r['unscored']} outside the estimate's span)"
+    )
