@@ -1,0 +1,322 @@
+"""Occupancy grids: ROS map_server YAML + PGM/PNG, world<->cell, distance field, free sampling.
+
+Grid arrays are indexed ``[iy, ix]`` with row 0 at the *bottom* (world
+y = origin_y): the image flipped vertically. ``ix = floor((x - x0) / res)``.
+
+Pixel semantics follow ROS map_server (``mode`` key):
+
+* p = (255 - v) / 255, or v / 255 when ``negate``; v is the mean of the
+  colour channels (integer division, as map_server does), alpha excluded.
+* ``trinary`` (default): p > occupied_thresh -> 100, p < free_thresh -> 0,
+  else -1.
+* ``scale``: as trinary, but in-between values become
+  ``int(99 * (p - free) / (occ - free))``; pixels with alpha 0 are -1.
+* ``raw``: occupancy = v when 0 <= v <= 100, else -1.
+
+Any problem with a map file raises :class:`DataError` with one line naming
+the file and the YAML key; nothing else escapes :func:`load_map`.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from mcl.errors import DataError
+from mcl.trajectory import atomic_write_bytes, atomic_write_text
+
+__all__ = ["OccupancyGrid", "load_map", "save_map"]
+
+_MODES = ("trinary", "scale", "raw")
+
+
+@dataclass(eq=False)
+class OccupancyGrid:
+    """A 2D occupancy grid with ROS OccupancyGrid values (-1 unknown, 0..100)."""
+
+    occupancy: np.ndarray  # int8 (H, W), row 0 = bottom
+    resolution: float  # metres per cell
+    origin: tuple[float, float]  # world (x0, y0) of the lower-left corner of cell (0, 0)
+    path: str = "<memory>"
+    occupied_thresh: float = 0.65
+    free_thresh: float = 0.196
+
+    @classmethod
+    def from_occupancy(cls, occupancy, resolution: float, origin, path: str = "<memory>",
+                       occupied_thresh: float = 0.65, free_thresh: float = 0.196) -> "OccupancyGrid":
+        """Build a grid in memory from an int8 (H, W) array whose row 0 is the bottom."""
+        occ = np.ascontiguousarray(np.asarray(occupancy, dtype=np.int8))
+        if occ.ndim != 2 or occ.shape[0] == 0 or occ.shape[1] == 0:
+            raise ValueError(f"{path}: occupancy must be a non-empty 2D array, got shape {occ.shape}")
+        if not (math.isfinite(resolution) and resolution > 0):
+            raise ValueError(f"{path}: resolution must be positive, got {resolution}")
+        x0, y0 = float(origin[0]), float(origin[1])
+        return cls(occ, float(resolution), (x0, y0), path, float(occupied_thresh), float(free_thresh))
+
+    # --- shape -----------------------------------------------------------
+    @property
+    def width(self) -> int:
+        return int(self.occupancy.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.occupancy.shape[0])
+
+    # --- classified cells (cached) --------------------------------------
+    @cached_property
+    def occupied(self) -> np.ndarray:
+        o = self.occupancy
+        return (o >= 0) & (o > self.occupied_thresh * 100.0)
+
+    @cached_property
+    def free(self) -> np.ndarray:
+        o = self.occupancy
+        return (o >= 0) & (o < self.free_thresh * 100.0)
+
+    @cached_property
+    def unknown(self) -> np.ndarray:
+        return ~(self.occupied | self.free)
+
+    @cached_property
+    def distance(self) -> np.ndarray:
+        """float32 (H, W): metres from each cell centre to the nearest occupied cell centre.
+
+        0 on occupied cells; the map diagonal everywhere when nothing is occupied.
+        """
+        from scipy.ndimage import distance_transform_edt
+
+        occ = self.occupied
+        if not occ.any():
+            diag = math.hypot(self.width, self.height) * self.resolution
+            return np.full(occ.shape, diag, dtype=np.float32)
+        d = distance_transform_edt(~occ)
+        d *= self.resolution
+        return d.astype(np.float32)
+
+    # --- coordinates -----------------------------------------------------
+    def world_to_cell(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """Cell indices (ix, iy), int64, of world points (no bounds check: see :meth:`contains`)."""
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        ix = np.floor((x - self.origin[0]) / self.resolution).astype(np.int64)
+        iy = np.floor((y - self.origin[1]) / self.resolution).astype(np.int64)
+        return ix, iy
+
+    def cell_to_world(self, ix, iy) -> tuple[np.ndarray, np.ndarray]:
+        """World coordinates of cell centres."""
+        ix = np.asarray(ix, dtype=np.float64)
+        iy = np.asarray(iy, dtype=np.float64)
+        return (self.origin[0] + (ix + 0.5) * self.resolution,
+                self.origin[1] + (iy + 0.5) * self.resolution)
+
+    def contains(self, ix, iy) -> np.ndarray:
+        """Boolean mask: cell indices inside the grid."""
+        ix = np.asarray(ix)
+        iy = np.asarray(iy)
+        return (ix >= 0) & (ix < self.width) & (iy >= 0) & (iy < self.height)
+
+    # --- sampling --------------------------------------------------------
+    def sample_free(self, n: int, rng: np.random.Generator, clearance: float = 0.0) -> np.ndarray:
+        """(3, n) float64 poses uniform over free cells farther than ``clearance`` from obstacles.
+
+        Position uniform inside the chosen cell, theta uniform in [-pi, pi).
+        """
+        mask = self.free & (self.distance > clearance)
+        cells = np.flatnonzero(mask)
+        if cells.size == 0:
+            raise DataError(f"{self.path}: no free cell with clearance > {clearance} m to sample from")
+        pick = cells[rng.integers(0, cells.size, size=n)]
+        iy, ix = np.divmod(pick, self.width)
+        out = np.empty((3, n), dtype=np.float64)
+        out[0] = self.origin[0] + (ix + rng.random(n)) * self.resolution
+        out[1] = self.origin[1] + (iy + rng.random(n)) * self.resolution
+        out[2] = rng.uniform(-math.pi, math.pi, size=n)
+        return out
+
+
+# --- loading ------------------------------------------------------------
+
+def _num(doc: dict, key: str, where: str) -> float:
+    v = doc[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise DataError(f"{where}: {key}: expected a number, got {type(v).__name__} {_short(v)}")
+    v = float(v)
+    if not math.isfinite(v):
+        raise DataError(f"{where}: {key}: expected a finite number, got {v}")
+    return v
+
+
+def _short(v) -> str:
+    s = repr(v).replace("\n", " ")
+    return s if len(s) <= 40 else s[:37] + "..."
+
+
+def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """Return (value (H, W) int, alpha (H, W) uint8 | None), image row 0 = top."""
+    from PIL import Image
+
+    label = f"{where}: image: {img_path}"
+    try:
+        with open(img_path, "rb") as f:
+            data = f.read()
+    except (OSError, ValueError) as e:
+        reason = getattr(e, "strerror", None) or type(e).__name__
+        raise DataError(f"{label}: cannot read image: {reason}") from None
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            im.load()
+            mode = im.mode
+            if mode in ("1", "P", "PA", "CMYK", "YCbCr", "LAB", "HSV", "La", "RGBa", "RGBX"):
+                im = im.convert("RGBA" if ("A" in mode or "a" in mode or mode == "P") else "RGB")
+                mode = im.mode
+            arr = np.asarray(im)
+    except DataError:
+        raise
+    except Exception as e:  # Pillow raises many types on corrupt input; none may escape
+        msg = str(e).replace("\n", " ") or type(e).__name__
+        raise DataError(f"{label}: truncated or corrupt image ({msg})") from None
+    alpha = None
+    if arr.ndim == 2:
+        if mode.startswith("I") or mode == "F":
+            # 16-bit / 32-bit greyscale: scale to 0..255 like an 8-bit image.
+            top = 65535.0 if (mode.startswith("I;16") or (arr.size and arr.max() > 255)) else 255.0
+            scaled = np.nan_to_num(arr.astype(np.float64) * (255.0 / top))
+            value = np.clip(np.rint(scaled), 0, 255).astype(np.int32)
+        else:
+            value = arr.astype(np.int32)
+    elif arr.ndim == 3 and arr.shape[2] in (2, 4):
+        value = arr[:, :, :-1].astype(np.int32).sum(axis=2) // (arr.shape[2] - 1)
+        alpha = arr[:, :, -1]
+    elif arr.ndim == 3 and arr.shape[2] >= 1:
+        value = arr.astype(np.int32).sum(axis=2) // arr.shape[2]
+    else:
+        raise DataError(f"{label}: unsupported image layout {arr.shape} (mode {mode})")
+    if value.size == 0:
+        raise DataError(f"{label}: empty image")
+    return value, alpha
+
+
+def load_map(path: str | os.PathLike) -> OccupancyGrid:
+    """Load a ROS map_server map (YAML + PGM/PNG) into an :class:`OccupancyGrid`."""
+    where = str(path)
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except OSError as e:
+        raise DataError(f"{where}: cannot read map YAML: {e.strerror or type(e).__name__}") from None
+    try:
+        doc = yaml.safe_load(raw)
+    except yaml.MarkedYAMLError as e:
+        line = e.problem_mark.line + 1 if e.problem_mark is not None else "?"
+        problem = (e.problem or "invalid YAML").replace("\n", " ")
+        raise DataError(f"{where}:{line}: invalid YAML: {problem}") from None
+    except Exception as e:  # YAMLError, decoding errors, recursion on hostile input
+        raise DataError(f"{where}: invalid YAML ({type(e).__name__})") from None
+    if not isinstance(doc, dict):
+        raise DataError(f"{where}: expected a YAML mapping with keys image, resolution, origin, ...")
+    for key in ("image", "resolution", "origin", "occupied_thresh", "free_thresh"):
+        if key not in doc:
+            raise DataError(f"{where}: {key}: missing key")
+
+    image = doc["image"]
+    if not isinstance(image, str) or not image.strip():
+        raise DataError(f"{where}: image: expected a file name, got {_short(image)}")
+    resolution = _num(doc, "resolution", where)
+    if resolution <= 0:
+        raise DataError(f"{where}: resolution: must be positive, got {resolution}")
+
+    origin = doc["origin"]
+    if not isinstance(origin, list) or len(origin) not in (2, 3):
+        raise DataError(f"{where}: origin: expected [x, y, yaw], got {_short(origin)}")
+    vals = []
+    for v in origin:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise DataError(f"{where}: origin: expected finite numbers [x, y, yaw], got {_short(origin)}")
+        vals.append(float(v))
+    if len(vals) == 3 and vals[2] != 0.0:
+        raise DataError(f"{where}: origin: non-zero yaw not supported (got {vals[2]})")
+
+    occ_th = _num(doc, "occupied_thresh", where)
+    free_th = _num(doc, "free_thresh", where)
+    for key, v in (("occupied_thresh", occ_th), ("free_thresh", free_th)):
+        if not 0.0 <= v <= 1.0:
+            raise DataError(f"{where}: {key}: must be in [0, 1], got {v}")
+    if free_th >= occ_th:
+        raise DataError(f"{where}: free_thresh: must be below occupied_thresh ({free_th} >= {occ_th})")
+
+    negate = doc.get("negate", 0)
+    if isinstance(negate, bool):
+        negate = int(negate)
+    if not isinstance(negate, (int, float)) or negate not in (0, 1):
+        raise DataError(f"{where}: negate: expected 0 or 1, got {_short(negate)}")
+
+    mode = doc.get("mode", "trinary")
+    if not isinstance(mode, str) or mode not in _MODES:
+        raise DataError(f"{where}: mode: expected one of {', '.join(_MODES)}, got {_short(mode)}")
+
+    try:
+        img_path = Path(path).parent / image
+    except (ValueError, TypeError):
+        raise DataError(f"{where}: image: invalid file name {_short(image)}") from None
+    value, alpha = _read_image(img_path, where)
+
+    occupancy = _classify(value, alpha, mode, bool(negate), occ_th, free_th)
+    # Image row 0 is the top; the grid's row 0 is the bottom.
+    occupancy = np.ascontiguousarray(occupancy[::-1])
+    return OccupancyGrid(occupancy, resolution, (vals[0], vals[1]), where, occ_th, free_th)
+
+
+def _classify(value: np.ndarray, alpha: np.ndarray | None, mode: str, negate: bool,
+              occ_th: float, free_th: float) -> np.ndarray:
+    """Pixel values (0..255) -> int8 occupancy, exactly as ROS map_server."""
+    if mode == "raw":
+        out = np.where((value >= 0) & (value <= 100), value, -1)
+        return out.astype(np.int8)
+    v = 255 - value if negate else value
+    p = (255.0 - v) / 255.0
+    out = np.full(value.shape, -1, dtype=np.int8)
+    occ = p > occ_th
+    free = p < free_th
+    if mode == "scale":
+        between = ~(occ | free)
+        ratio = (p[between] - free_th) / (occ_th - free_th)
+        out[between] = (99.0 * ratio).astype(np.int8)
+    out[occ] = 100
+    out[free] = 0
+    if mode == "scale" and alpha is not None:
+        out[alpha == 0] = -1
+    return out
+
+
+# --- saving -------------------------------------------------------------
+
+def save_map(grid: OccupancyGrid, yaml_path: str | os.PathLike) -> None:
+    """Write ``grid`` as a trinary P5 PGM (0 occupied, 254 free, 205 unknown) + YAML beside it.
+
+    The image is named after the YAML's stem; both files are written atomically.
+    """
+    yaml_path = Path(yaml_path)
+    pgm_path = yaml_path.with_suffix(".pgm")
+    img = np.full(grid.occupancy.shape, 205, dtype=np.uint8)
+    img[grid.free] = 254
+    img[grid.occupied] = 0
+    img = img[::-1]  # grid row 0 = bottom; PGM row 0 = top
+    header = f"P5\n# written by mcl\n{grid.width} {grid.height}\n255\n".encode("ascii")
+    atomic_write_bytes(pgm_path, header + np.ascontiguousarray(img).tobytes())
+    text = (
+        f"image: {json.dumps(pgm_path.name)}\n"
+        f"resolution: {float(grid.resolution)!r}\n"
+        f"origin: [{float(grid.origin[0])!r}, {float(grid.origin[1])!r}, 0.0]\n"
+        "negate: 0\n"
+        "occupied_thresh: 0.65\n"
+        "free_thresh: 0.196\n"
+    )
+    atomic_write_text(yaml_path, text)

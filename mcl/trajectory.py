@@ -1,0 +1,159 @@
+"""TUM trajectory files (``t x y z qx qy qz qw``) and atomic file writes.
+
+Planar poses are stored with z = 0 and the yaw as a quaternion about z
+(qx = qy = 0, qz = sin(yaw/2), qw = cos(yaw/2)); reading takes
+yaw = 2*atan2(qz, qw), wrapped to (-pi, pi].
+
+Every file this module writes appears under its final name only when
+complete: it is written to a temporary file in the same directory, flushed,
+fsynced and renamed with ``os.replace`` (atomic on POSIX and Windows).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from mcl.errors import DataError
+
+__all__ = ["read_tum", "write_tum", "TumWriter", "atomic_write_text", "atomic_write_bytes"]
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (same-dir temp file, fsync, os.replace)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        # mkstemp creates 0600; give the file the permissions open() would have.
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:
+    """Write ``text`` to ``path`` atomically (see :func:`atomic_write_bytes`)."""
+    atomic_write_bytes(path, text.encode(encoding))
+
+
+def _tum_line(t: float, x: float, y: float, theta: float) -> str:
+    half = 0.5 * theta
+    return f"{t:.6f} {x:.9f} {y:.9f} 0 0 0 {math.sin(half):.9f} {math.cos(half):.9f}\n"
+
+
+def write_tum(path: str | os.PathLike, t, poses) -> None:
+    """Write timestamps ``t`` (M,) and planar ``poses`` (3, M) as a TUM file, atomically."""
+    t = np.asarray(t, dtype=np.float64)
+    poses = np.asarray(poses, dtype=np.float64)
+    if t.ndim != 1 or poses.shape != (3, t.shape[0]):
+        raise ValueError(f"write_tum: expected t (M,) and poses (3, M), got {t.shape} and {poses.shape}")
+    lines = [_tum_line(ti, xi, yi, thi) for ti, xi, yi, thi in zip(t.tolist(), *poses.tolist())]
+    atomic_write_text(path, "".join(lines))
+
+
+def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Read a TUM trajectory: returns ``t`` (M,) and planar poses (3, M) float64.
+
+    Blank lines and ``#`` comments are skipped. A malformed line raises
+    :class:`DataError` naming ``file:line``.
+    """
+    name = str(path)
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise DataError(f"{name}: cannot read: {e.strerror or e}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        raise DataError(f"{name}:{line}: not UTF-8 text") from None
+    ts: list[float] = []
+    rows: list[tuple[float, float, float]] = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        s = raw.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = s.split()
+        if len(parts) != 8:
+            raise DataError(f"{name}:{lineno}: TUM: expected 8 fields (t x y z qx qy qz qw), got {len(parts)}")
+        try:
+            v = [float(p) for p in parts]
+        except ValueError:
+            raise DataError(f"{name}:{lineno}: TUM: non-numeric field") from None
+        if not all(math.isfinite(x) for x in v):
+            raise DataError(f"{name}:{lineno}: TUM: non-finite value")
+        qz, qw = v[6], v[7]
+        if qz == 0.0 and qw == 0.0:
+            raise DataError(f"{name}:{lineno}: TUM: zero quaternion")
+        yaw = 2.0 * math.atan2(qz, qw)
+        yaw = math.atan2(math.sin(yaw), math.cos(yaw))
+        ts.append(v[0])
+        rows.append((v[1], v[2], yaw))
+    t = np.array(ts, dtype=np.float64)
+    poses = np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(-1, 3).T)
+    return t, poses
+
+
+class TumWriter:
+    """Incremental TUM writer for long runs.
+
+    Poses go to ``<path>.partial`` (flushed after each line); :meth:`close`
+    renames it to ``path``. Call ``close()`` also after an exception or an
+    interrupt (the context manager does): every pose written so far then
+    lands under the final name, and the final name never holds a
+    half-written file.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self.partial = self.path.with_name(self.path.name + ".partial")
+        self._f = open(self.partial, "w", encoding="utf-8")
+        self.count = 0
+
+    def append(self, t: float, x: float, y: float, theta: float) -> None:
+        if self._f is None:
+            raise ValueError(f"TumWriter({self.path}): append after close")
+        self._f.write(_tum_line(float(t), float(x), float(y), float(theta)))
+        self._f.flush()
+        self.count += 1
+
+    def close(self) -> None:
+        """Flush, fsync and rename the partial file to the final name (idempotent)."""
+        if self._f is None:
+            return
+        f, self._f = self._f, None
+        try:
+            f.flush()
+            os.fsync(f.fileno())
+        finally:
+            f.close()
+        os.replace(self.partial, self.path)
+
+    @property
+    def closed(self) -> bool:
+        return self._f is None
+
+    def __enter__(self) -> "TumWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
