@@ -1,0 +1,98 @@
+"""Config loading: defaults, overrides, and one clear error per bad key."""
+
+import pytest
+
+from mcl.config import Config, dump_config, load_config
+from mcl.errors import ConfigError
+
+
+def write(tmp_path, text, name="c.yaml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_defaults_without_a_file():
+    cfg = load_config(None)
+    assert cfg == Config()
+    assert cfg.motion.noise_form == "variance"  # the book's form is the default
+    assert cfg.filter.resampling == "systematic"
+
+
+def test_default_yaml_lists_every_key():
+    # configs/default.yaml documents every parameter: each must be present there.
+    import yaml
+
+    from mcl.config import PROJECT_ROOT, to_dict
+
+    data = yaml.safe_load((PROJECT_ROOT / "configs" / "default.yaml").read_text())
+    defaults = to_dict(Config())
+    for section, value in defaults.items():
+        assert section in data, section
+        if isinstance(value, dict):
+            assert set(data[section]) == set(value), section
+
+
+def test_overrides_parse_yaml_values(tmp_path):
+    cfg = load_config(None, ["sensor.sigma_hit=0.2", "filter.particles=123", "filter.initial_pose=[1, 2, 0.5]"])
+    assert cfg.sensor.sigma_hit == 0.2
+    assert cfg.filter.particles == 123
+    assert cfg.filter.initial_pose == (1.0, 2.0, 0.5)
+
+
+def test_paths_resolve_relative_to_the_config_file(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "m.yaml").write_text("x")
+    p = write(tmp_path, "map: sub/m.yaml\n")
+    cfg = load_config(p)
+    assert cfg.map == str((tmp_path / "sub" / "m.yaml").resolve())
+
+
+def test_roundtrip_of_the_resolved_config(tmp_path):
+    cfg = load_config(None, ["seed=7", "motion.alpha1=0.3", "sensor.laser_pose=[0.1, 0, 0]"])
+    p = write(tmp_path, dump_config(cfg))
+    assert load_config(p) == cfg
+
+
+@pytest.mark.parametrize(
+    "text, fragment",
+    [
+        ("filter:\n  particels: 10\n", "filter.particels: unknown key (did you mean particles?)"),
+        ("filter:\n  particles: many\n", "filter.particles: expected an integer"),
+        ("filter:\n  particles: 0\n", "filter.particles: 0 is out of range"),
+        ("sensor:\n  sigma_hit: 0\n", "sensor.sigma_hit: 0.0 is out of range"),
+        ("sensor:\n  z_hit: 1.5\n", "sensor.z_hit: 1.5 is out of range"),
+        ("motion:\n  noise_form: varience\n", "motion.noise_form: expected one of"),
+        ("filter:\n  resampling: sytematic\n", "did you mean systematic?"),
+        ("filter:\n  initial_pose: [1, 2]\n", "filter.initial_pose: expected"),
+        ("filter: 3\n", "filter: expected a mapping"),
+        ("motion:\n  map_rejection: 1\n", "motion.map_rejection: expected true or false"),
+        ("sensor:\n  range_min: 5\n  range_max: 4\n", "sensor.range_min: 5.0 must be below sensor.range_max"),
+        ("laser: FLASR\n", "laser: expected one of"),
+        ("seeed: 1\n", "seeed: unknown key (did you mean seed?)"),
+        ("- a\n- b\n", "expected a mapping"),
+        ("filter:\n  particles: [1\n", "c.yaml:"),
+    ],
+)
+def test_errors_name_the_file_and_key(tmp_path, text, fragment):
+    p = write(tmp_path, text)
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    msg = str(e.value)
+    assert fragment in msg
+    assert "c.yaml" in msg
+    assert "\n" not in msg
+
+
+def test_override_errors():
+    with pytest.raises(ConfigError, match="expected section.key=value"):
+        load_config(None, ["sensor.sigma_hit"])
+    with pytest.raises(ConfigError, match="sensor.sigma_hit: expected a number"):
+        load_config(None, ["sensor.sigma_hit=abc"])
+    with pytest.raises(ConfigError, match="sensor.sigma: unknown key"):
+        load_config(None, ["sensor.sigma=1"])
+
+
+def test_missing_file_is_a_config_error(tmp_path):
+    with pytest.raises(ConfigError, match="nope.yaml: cannot read"):
+        load_config(tmp_path / "nope.yaml")
