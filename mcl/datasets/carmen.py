@@ -1,0 +1,371 @@
+"""CARMEN log reader (plain or gzip) -> :class:`Log` of laser scans and odometry.
+
+Messages read (everything else is skipped and counted in ``Log.skipped``):
+
+* ``ODOM x y theta tv rv accel ipc_timestamp hostname logger_timestamp``
+* ``FLASER``/``RLASER`` (old format)
+  ``n r_1..r_n x y theta odom_x odom_y odom_theta ipc_timestamp hostname logger_timestamp``;
+  the first pose is the laser's, the second the robot's, both in the odometry
+  frame. Beam i points at ``-pi/2 + i*d`` (counter-clockwise, beam 0 on the
+  right) with d = pi/180 for 180 or 181 beams, pi/360 for 360 or 361 beams,
+  otherwise pi/(n-1) for odd n (a 180-degree fan with both ends included) and
+  pi/n for even n (a fan with the left end excluded). ``max_range`` is None:
+  the config decides.
+* ``ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode
+  n r_1..r_n n_rem rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta
+  tv rv forward_safety side_safety turn_axis ipc_timestamp hostname logger_timestamp``
+* ``RAWLASER1``..``RAWLASER4``: as ROBOTLASER1 without the poses and the velocities.
+
+``Scan.laser_offset`` is the laser's mounting in the robot frame,
+``robot_pose^-1 ∘ laser_pose``. Scans without a pose of their own (RAWLASER)
+get ``odom`` by interpolating the ODOM lines at their timestamp (linear in x, y,
+shortest angle difference in theta, clamped before the first / after the last).
+
+A malformed line raises :class:`DataError` naming ``file:line`` and the message
+type, except a truncated last line (no final newline), which is skipped with a
+note in ``Log.warnings``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mcl.errors import DataError
+
+__all__ = ["Scan", "Log", "read_carmen", "flaser_angle_increment", "LASER_KINDS"]
+
+LASER_KINDS = ("FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
+_AUTO_ORDER = ("FLASER", "ROBOTLASER1", "RAWLASER1")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Scan:
+    """One laser scan. Angles in the laser frame, poses as (x, y, theta)."""
+
+    t: float  # ipc timestamp
+    ranges: np.ndarray  # float64 (n,)
+    angle_min: float
+    angle_increment: float
+    max_range: float | None  # None: the config decides
+    odom: np.ndarray | None  # (3,) robot pose in the odometry frame
+    laser_offset: np.ndarray | None  # (3,) laser pose in the robot frame; None: unknown
+    tv: float = 0.0
+    rv: float = 0.0
+    kind: str = "FLASER"
+    line: int = 0  # 1-based line number in the log
+
+    @property
+    def angles(self) -> np.ndarray:
+        """Beam angles (n,) in the laser frame."""
+        return self.angle_min + self.angle_increment * np.arange(self.ranges.shape[0], dtype=np.float64)
+
+
+@dataclass(eq=False)
+class Log:
+    """A parsed CARMEN log."""
+
+    path: str
+    scans: list[Scan]
+    odometry: np.ndarray  # (M, 6) float64: t, x, y, theta, tv, rv (file order)
+    skipped: dict[str, int] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    def scans_of(self, kind: str) -> list[Scan]:
+        """Scans of one message type, in file order."""
+        return [s for s in self.scans if s.kind == kind]
+
+    def kinds(self) -> dict[str, int]:
+        """Laser message types present -> count."""
+        out: dict[str, int] = {}
+        for s in self.scans:
+            out[s.kind] = out.get(s.kind, 0) + 1
+        return out
+
+    def default_kind(self) -> str:
+        """The laser stream ``"auto"`` picks: FLASER if present, else ROBOTLASER1, else RAWLASER1."""
+        kinds = self.kinds()
+        for k in _AUTO_ORDER:
+            if k in kinds:
+                return k
+        found = ", ".join(sorted(kinds)) or "none"
+        raise DataError(f"{self.path}: no FLASER, ROBOTLASER1 or RAWLASER1 messages "
+                        f"(found: {found}); choose the laser stream explicitly")
+
+    def laser_stream(self, kind: str = "auto") -> list[Scan]:
+        """Scans of ``kind`` (``"auto"``: see :meth:`default_kind`); DataError if there are none."""
+        if kind == "auto":
+            kind = self.default_kind()
+        scans = self.scans_of(kind)
+        if not scans:
+            found = ", ".join(sorted(self.kinds())) or "none"
+            raise DataError(f"{self.path}: no {kind} messages (found: {found})")
+        return scans
+
+
+def flaser_angle_increment(n: int) -> float:
+    """Beam spacing of an old-format FLASER/RLASER with ``n`` beams (see the module doc)."""
+    if n in (180, 181):
+        return math.pi / 180.0
+    if n in (360, 361):
+        return math.pi / 360.0
+    if n <= 1:
+        return math.pi  # at most one beam: the spacing is never used
+    return math.pi / (n - 1) if n % 2 else math.pi / n
+
+
+class _Bad(Exception):
+    """A malformed line (message without the file:line prefix)."""
+
+
+def _floats(parts: list[str], what: str, kind: str) -> np.ndarray:
+    try:
+        return np.array(parts, dtype=np.float64)
+    except ValueError:
+        bad = next((p for p in parts if not _is_float(p)), "?")
+        raise _Bad(f"{kind}: non-numeric {what} {bad[:30]!r}") from None
+
+
+def _is_float(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def _count(s: str, what: str, kind: str) -> int:
+    try:
+        n = int(s)
+    except ValueError:
+        raise _Bad(f"{kind}: {what} is not an integer: {s[:30]!r}") from None
+    if n < 0:
+        raise _Bad(f"{kind}: negative {what} {n}")
+    return n
+
+
+def _pose_check(v: np.ndarray, what: str, kind: str) -> None:
+    if not np.all(np.isfinite(v)):
+        raise _Bad(f"{kind}: non-finite {what}")
+
+
+def _timestamp(parts: list[str], kind: str) -> float:
+    """ipc_timestamp hostname logger_timestamp (the last three fields)."""
+    ts = _floats([parts[-3], parts[-1]], "timestamp", kind)
+    if not np.all(np.isfinite(ts)):
+        raise _Bad(f"{kind}: non-finite timestamp")
+    return float(ts[0])
+
+
+def _offset(laser: np.ndarray, robot: np.ndarray) -> np.ndarray:
+    """robot^-1 ∘ laser: the laser pose expressed in the robot frame."""
+    dx, dy = laser[0] - robot[0], laser[1] - robot[1]
+    c, s = math.cos(robot[2]), math.sin(robot[2])
+    dth = laser[2] - robot[2]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(dth), math.cos(dth))])
+
+
+def _parse_odom(parts: list[str]) -> list[float]:
+    if len(parts) != 10:
+        raise _Bad(f"ODOM: expected 10 fields, got {len(parts)}")
+    v = _floats(parts[1:7], "field", "ODOM")
+    _pose_check(v, "value", "ODOM")
+    t = _timestamp(parts, "ODOM")
+    return [t, float(v[0]), float(v[1]), float(v[2]), float(v[3]), float(v[4])]
+
+
+def _parse_flaser(parts: list[str], kind: str, lineno: int) -> Scan:
+    if len(parts) < 2:
+        raise _Bad(f"{kind}: missing beam count")
+    n = _count(parts[1], "beam count", kind)
+    if len(parts) != n + 11:
+        raise _Bad(f"{kind}: expected {n} ranges + 9 fields ({n + 11} in all), got {len(parts)} fields")
+    ranges = _floats(parts[2:2 + n], "range", kind)
+    poses = _floats(parts[2 + n:8 + n], "pose", kind)
+    _pose_check(poses, "pose", kind)
+    t = _timestamp(parts, kind)
+    laser, robot = poses[:3], poses[3:].copy()
+    return Scan(t, ranges, -math.pi / 2, flaser_angle_increment(n), None, robot,
+                _offset(laser, robot), 0.0, 0.0, kind, lineno)
+
+
+def _parse_laser_config(parts: list[str], kind: str, extra: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Shared head of ROBOTLASER1/RAWLASER: config (7,), ranges (n,), index after remissions.
+
+    ``extra`` is the number of fields after the remissions (poses etc. + 3 time fields).
+    """
+    if len(parts) < 9:
+        raise _Bad(f"{kind}: too few fields ({len(parts)})")
+    config = _floats(parts[1:8], "config field", kind)
+    n = _count(parts[8], "beam count", kind)
+    i_rem = 9 + n
+    if len(parts) < i_rem + 1:
+        raise _Bad(f"{kind}: expected {n} ranges, line ends after {len(parts) - 9}")
+    m = _count(parts[i_rem], "remission count", kind)
+    expect = i_rem + 1 + m + extra
+    if len(parts) != expect:
+        raise _Bad(f"{kind}: expected {n} ranges, {m} remissions and {extra} more fields "
+                   f"({expect} in all), got {len(parts)} fields")
+    ranges = _floats(parts[9:9 + n], "range", kind)
+    _floats(parts[i_rem + 1:i_rem + 1 + m], "remission", kind)
+    return config, ranges, i_rem + 1 + m
+
+
+def _parse_robotlaser(parts: list[str], kind: str, lineno: int) -> Scan:
+    config, ranges, i = _parse_laser_config(parts, kind, 6 + 5 + 3)
+    _pose_check(config[1:5], "beam geometry", kind)
+    rest = _floats(parts[i:i + 11], "pose/velocity", kind)
+    _pose_check(rest, "pose/velocity", kind)
+    t = _timestamp(parts, kind)
+    laser, robot = rest[0:3], rest[3:6].copy()
+    return Scan(t, ranges, float(config[1]), float(config[3]), float(config[4]), robot,
+                _offset(laser, robot), float(rest[6]), float(rest[7]), kind, lineno)
+
+
+def _parse_rawlaser(parts: list[str], kind: str, lineno: int) -> Scan:
+    config, ranges, _ = _parse_laser_config(parts, kind, 3)
+    _pose_check(config[1:5], "beam geometry", kind)
+    t = _timestamp(parts, kind)
+    return Scan(t, ranges, float(config[1]), float(config[3]), float(config[4]), None, None,
+                0.0, 0.0, kind, lineno)
+
+
+_PARSERS = {
+    "FLASER": _parse_flaser,
+    "RLASER": _parse_flaser,
+    "ROBOTLASER1": _parse_robotlaser,
+    "RAWLASER1": _parse_rawlaser,
+    "RAWLASER2": _parse_rawlaser,
+    "RAWLASER3": _parse_rawlaser,
+    "RAWLASER4": _parse_rawlaser,
+}
+
+
+def _read_bytes(path: str | os.PathLike, name: str, warnings: list[str]) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise DataError(f"{name}: cannot read: {e.strerror or type(e).__name__}") from None
+    if data[:2] != b"\x1f\x8b":
+        return data
+    # gzip (possibly multi-member); a truncated stream keeps what was decompressed.
+    out = []
+    rest = data
+    try:
+        while rest[:2] == b"\x1f\x8b":
+            d = zlib.decompressobj(wbits=31)
+            out.append(d.decompress(rest))
+            out.append(d.flush())
+            if not d.eof:
+                warnings.append(f"{name}: gzip stream is truncated; reading what was decompressed")
+                break
+            rest = d.unused_data
+    except zlib.error as e:
+        raise DataError(f"{name}: corrupt gzip data ({e})") from None
+    return b"".join(out)
+
+
+def read_carmen(path: str | os.PathLike) -> Log:
+    """Read a CARMEN log (plain or gzip, detected by magic bytes) into a :class:`Log`."""
+    name = str(path)
+    warnings: list[str] = []
+    data = _read_bytes(path, name, warnings)
+    if not data.strip():
+        raise DataError(f"{name}: empty file")
+    ends_with_newline = data.endswith(b"\n")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        last_start = data.rfind(b"\n") + 1
+        if ends_with_newline or e.start < last_start:
+            line = data.count(b"\n", 0, e.start) + 1
+            raise DataError(f"{name}:{line}: not UTF-8 text") from None
+        # A truncated last line may end inside a multi-byte character: drop it.
+        text = data[:last_start].decode("utf-8")  # e.start is the first bad byte
+        line = data.count(b"\n") + 1
+        warnings.append(f"{name}:{line}: truncated last line skipped (not UTF-8)")
+        ends_with_newline = True
+
+    lines = text.split("\n")
+    if ends_with_newline and lines and lines[-1] == "":
+        lines.pop()
+    last = len(lines)
+
+    scans: list[Scan] = []
+    odom_rows: list[list[float]] = []
+    skipped: dict[str, int] = {}
+    parsers = _PARSERS
+    for lineno, raw in enumerate(lines, start=1):
+        parts = raw.split()
+        if not parts:
+            skipped["(blank)"] = skipped.get("(blank)", 0) + 1
+            continue
+        word = parts[0]
+        try:
+            if word == "ODOM":
+                odom_rows.append(_parse_odom(parts))
+                continue
+            parser = parsers.get(word)
+            if parser is None:
+                key = "#" if word.startswith("#") else word
+                skipped[key] = skipped.get(key, 0) + 1
+                continue
+            scans.append(parser(parts, word, lineno))
+        except _Bad as e:
+            if lineno == last and not ends_with_newline:
+                warnings.append(f"{name}:{lineno}: truncated last line skipped ({e})")
+                continue
+            raise DataError(f"{name}:{lineno}: {e}") from None
+
+    if not scans:
+        raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4)")
+    odometry = np.array(odom_rows, dtype=np.float64).reshape(-1, 6)
+    scans = _fill_odom(scans, odometry, name)
+    return Log(name, scans, odometry, skipped, warnings)
+
+
+def interpolate_odometry(odometry: np.ndarray, t) -> np.ndarray:
+    """Robot pose (3, K) at times ``t`` (K,) from ODOM rows (M, 6), M >= 1.
+
+    Linear in x and y, shortest angle difference in theta; times before the
+    first / after the last ODOM clamp to it.
+    """
+    t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+    order = np.argsort(odometry[:, 0], kind="stable")
+    od = odometry[order]
+    ot = od[:, 0]
+    m = ot.shape[0]
+    i = np.clip(np.searchsorted(ot, t, side="right") - 1, 0, m - 1)
+    j = np.minimum(i + 1, m - 1)
+    dt = ot[j] - ot[i]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        frac = np.where(dt > 0, (t - ot[i]) / np.where(dt > 0, dt, 1.0), 0.0)
+    frac = np.clip(frac, 0.0, 1.0)
+    out = np.empty((3, t.shape[0]), dtype=np.float64)
+    out[0] = od[i, 1] + frac * (od[j, 1] - od[i, 1])
+    out[1] = od[i, 2] + frac * (od[j, 2] - od[i, 2])
+    dth = np.arctan2(np.sin(od[j, 3] - od[i, 3]), np.cos(od[j, 3] - od[i, 3]))
+    th = od[i, 3] + frac * dth
+    out[2] = np.arctan2(np.sin(th), np.cos(th))
+    return out
+
+
+def _fill_odom(scans: list[Scan], odometry: np.ndarray, name: str) -> list[Scan]:
+    need = [k for k, s in enumerate(scans) if s.odom is None]
+    if not need:
+        return scans
+    if odometry.shape[0] == 0:
+        s = scans[need[0]]
+        raise DataError(f"{name}:{s.line}: {s.kind}: no pose of its own and no ODOM lines to interpolate")
+    poses = interpolate_odometry(odometry, [scans[k].t for k in need])
+    out = list(scans)
+    for col, k in enumerate(need):
+        s = scans[k]
+        out[k] = Scan(s.t, s.ranges, s.angle_min, s.angle_increment, s.max_range,
+                      np.ascontiguousarray(poses[:, col]), s.laser_offset, s.tv, s.rv, s.kind, s.line)
+    return out
