@@ -1,0 +1,82 @@
+"""Numba kernels of the odometry motion model (Prob. Rob. Table 5.6).
+
+Pure functions over arrays. The caller draws the standard normal noise with
+its ``numpy.random.Generator`` and passes it in, so a kernel's result does not
+depend on the numba thread count. Angles come out in (-pi, pi].
+"""
+
+import math
+
+from numba import njit, prange
+
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True)
+def wrap(a):
+    """Angle a mapped into (-pi, pi] (a - 2 pi * ceil((a - pi) / 2 pi))."""
+    return a - _TWO_PI * math.ceil((a - math.pi) / _TWO_PI)
+
+
+@njit(cache=True, parallel=True)
+def sample_odometry(particles, noise, drot1, dtrans, drot2, s_rot1, s_trans, s_rot2, out):
+    """Apply one noisy odometry step to every particle.
+
+    particles, out: (3, N) float64 (x, y, theta); out may not alias particles.
+    noise: (3, N) standard normals (rows rot1, trans, rot2), scaled here by
+    the sigmas s_rot1, s_trans, s_rot2:
+        rot1_hat = drot1 + s_rot1 * noise[0]   (the book subtracts; the noise is symmetric)
+        x' = x + trans_hat * cos(theta + rot1_hat)
+        y' = y + trans_hat * sin(theta + rot1_hat)
+        theta' = wrap(theta + rot1_hat + rot2_hat)
+    """
+    n = particles.shape[1]
+    for i in prange(n):
+        r1 = drot1 + s_rot1 * noise[0, i]
+        tr = dtrans + s_trans * noise[1, i]
+        r2 = drot2 + s_rot2 * noise[2, i]
+        th = particles[2, i]
+        h = th + r1
+        out[0, i] = particles[0, i] + tr * math.cos(h)
+        out[1, i] = particles[1, i] + tr * math.sin(h)
+        out[2, i] = wrap(h + r2)
+
+
+@njit(cache=True, parallel=True)
+def sample_odometry_map(particles, noise, idx, drot1, dtrans, drot2, s_rot1, s_trans, s_rot2,
+                        allowed, ox, oy, inv_res, out, ok):
+    """Noisy odometry step for the particles idx, plus the map check, in one pass.
+
+    For j in range(len(idx)), particle i = idx[j] moves with noise[:, j]
+    (same formulas as sample_odometry) into out[:, i], and ok[i] is set to
+    whether the new pose's cell is inside the (H, W) mask ``allowed``
+    (nonzero = allowed; row 0 at world y = oy) with
+    ix = floor((x' - ox) * inv_res), iy = floor((y' - oy) * inv_res).
+    Off-map (and NaN) poses are not allowed. Returns the number of particles
+    of idx that landed in an allowed cell.
+    """
+    m = idx.shape[0]
+    h_cells = allowed.shape[0]
+    w_cells = allowed.shape[1]
+    n_ok = 0
+    for j in prange(m):
+        i = idx[j]
+        r1 = drot1 + s_rot1 * noise[0, j]
+        tr = dtrans + s_trans * noise[1, j]
+        r2 = drot2 + s_rot2 * noise[2, j]
+        h = particles[2, i] + r1
+        x = particles[0, i] + tr * math.cos(h)
+        y = particles[1, i] + tr * math.sin(h)
+        out[0, i] = x
+        out[1, i] = y
+        out[2, i] = wrap(h + r2)
+        fx = (x - ox) * inv_res
+        fy = (y - oy) * inv_res
+        good = False
+        # fx >= 0 makes int() (truncation) equal floor; NaN fails every comparison.
+        if fx >= 0.0 and fx < w_cells and fy >= 0.0 and fy < h_cells:
+            good = allowed[int(fy), int(fx)] != 0
+        ok[i] = good
+        if good:
+            n_ok += 1
+    return n_ok

@@ -1,0 +1,106 @@
+"""Resampling schemes by name, log-weight normalisation and effective sample size.
+
+``resample(name, logw, rng)`` returns N ancestor indices, in increasing order,
+drawn with probability proportional to exp(logw):
+
+* ``systematic`` (low variance, Prob. Rob. Table 4.4; the default): one
+  uniform u, positions (i + u) / N;
+* ``stratified``: one uniform per stratum, positions (i + u_i) / N;
+* ``residual``: floor(N w_i) copies of each particle, then the remaining
+  R = N - sum floor(N w_i) drawn multinomially from the residuals N w_i - floor(N w_i);
+* ``multinomial``: N independent draws, as N sorted uniforms (cumulative sums
+  of N + 1 exponentials, divided by their total: O(N), no sort).
+
+Each is one O(N) merge of sorted positions against the cumulative weights
+(``mcl.kernels.resample``). Zero weights (logw = -inf) are never chosen; if
+every weight is zero the weights are treated as equal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mcl.kernels import resample as _k
+
+SCHEMES = ("systematic", "stratified", "residual", "multinomial")
+
+
+def _check(logw) -> np.ndarray:
+    lw = np.asarray(logw, dtype=np.float64)
+    if lw.ndim != 1:
+        raise ValueError(f"log weights: expected shape (N,), got {lw.shape}")
+    return lw
+
+
+def normalize_log_weights(logw) -> tuple[np.ndarray, float]:
+    """(w, log_norm): w = exp(logw - log_norm) sums to 1, log_norm = logsumexp(logw).
+
+    If every weight is zero (all -inf, or N = 0) returns uniform weights and
+    log_norm = -inf; the caller decides what that means. NaN or +inf log
+    weights raise ValueError.
+    """
+    lw = _check(logw)
+    n = lw.size
+    if n == 0:
+        return np.empty(0), -np.inf
+    m = float(lw.max())
+    if np.isnan(m) or m == np.inf:
+        raise ValueError(f"log weights contain {'NaN' if np.isnan(m) else '+inf'}")
+    if m == -np.inf:
+        return np.full(n, 1.0 / n), -np.inf
+    w = np.exp(lw - m)
+    s = float(w.sum())
+    w /= s
+    return w, m + float(np.log(s))
+
+
+def effective_sample_size(w) -> float:
+    """1 / sum(w^2) for normalised weights w: N for equal weights, 1 for one-hot."""
+    w = np.asarray(w, dtype=np.float64)
+    return float(1.0 / np.dot(w, w))
+
+
+def _unnormalised(lw: np.ndarray) -> np.ndarray:
+    """exp(logw - max): positive weights of any scale; all ones if every weight is zero."""
+    m = float(lw.max())
+    if np.isnan(m) or m == np.inf:
+        raise ValueError(f"log weights contain {'NaN' if np.isnan(m) else '+inf'}")
+    if m == -np.inf:
+        return np.ones(lw.size)
+    return np.exp(lw - m)
+
+
+def resample(name: str, logw, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
+    """Indices (n,) int64, sorted, of the particles chosen by scheme ``name`` (n defaults to N)."""
+    if name not in SCHEMES:
+        raise ValueError(f"unknown resampling scheme {name!r} (expected one of {', '.join(SCHEMES)})")
+    lw = _check(logw)
+    n_in = lw.size
+    n_out = n_in if n is None else int(n)
+    out = np.empty(n_out, dtype=np.int64)
+    if n_in == 0 or n_out == 0:
+        if n_out:
+            raise ValueError("cannot resample from zero particles")
+        return out
+    w = _unnormalised(lw)
+    if name == "systematic":
+        _k.merge_positions(w, np.array([rng.random()]), 0, out)
+    elif name == "stratified":
+        _k.merge_positions(w, rng.random(n_out), 1, out)
+    elif name == "multinomial":
+        _k.merge_positions(w, _sorted_uniforms(rng, n_out), 2, out)
+    else:  # residual
+        counts = np.empty(n_in, dtype=np.int64)
+        resid = np.empty(n_in)
+        r = max(int(_k.residual_counts(w, n_out, counts, resid)), 0)
+        if r and not resid.sum() > 0.0:  # rounding left draws but no residual mass
+            resid = w
+        _k.residual_merge(counts, resid, _sorted_uniforms(rng, r), out)
+    return out
+
+
+def _sorted_uniforms(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n sorted uniforms on [0, 1) in O(n): cumsum of n + 1 exponentials over their total."""
+    e = rng.standard_exponential(n + 1)
+    c = np.cumsum(e)
+    return c[:-1] / c[-1]
