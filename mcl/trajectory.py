@@ -106,6 +106,8 @@ def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
             raise DataError(f"{name}:{lineno}: TUM: zero quaternion")
         yaw = 2.0 * math.atan2(qz, qw)
         yaw = math.atan2(math.sin(yaw), math.cos(yaw))
+        if yaw <= -math.pi:
+            yaw = math.pi  # theta in (-pi, pi]
         ts.append(v[0])
         rows.append((v[1], v[2], yaw))
     t = np.array(ts, dtype=np.float64)
