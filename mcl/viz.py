@@ -1,0 +1,485 @@
+"""Rerun logging of a localization run: the only module in ``mcl`` that imports rerun.
+
+Entity paths name things, not steps::
+
+    world                 static Transform3D flipping y, so the 2D view shows y up
+    world/map             static: the occupancy grid as a PNG image placed in metres
+    world/particles       Points2D, at most ``particles_max`` (evenly strided), coloured by weight
+    world/estimate        Points2D + Arrows2D (heading) + LineStrips2D (2-sigma ellipse of x, y)
+    world/scan            Points2D, scan endpoints in the world frame
+    world/truth           Points2D (current true pose); optional static LineStrips2D full path
+    world/truth/trail     LineStrips2D, one segment per step (only when no static path was logged)
+    world/odometry        Points2D (current odometry pose, in the map frame)
+    world/odometry/trail  LineStrips2D, one segment per step
+    stats/<name>          Scalars, one per entry of the ``stats`` dict
+
+Timelines: ``step`` (sequence, from the loop) and ``time`` (from the log: a timestamp
+when ``t`` looks like Unix seconds, otherwise a duration in seconds).
+
+Trails are kept linear in recording size: each step logs one 2-point segment and the
+blueprint gives the trail entities a visible time range from -inf to the cursor, so the
+viewer accumulates them.  The particle cloud dominates the size (see ``bytes_per_step``
+in the report of ``measure_bytes_per_step``).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import uuid
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+__all__ = ["RerunLogger", "MODES", "has_display", "stat_group"]
+
+MODES = ("save", "spawn", "serve", "off")
+
+# Map colours (grey levels): free light, occupied black, unknown mid grey.
+_FREE, _OCCUPIED, _UNKNOWN = 235, 0, 150
+
+# Viridis anchors (matplotlib's, sampled at 0, 1/8, ..., 1) for the weight colormap.
+_VIRIDIS = np.array(
+    [
+        [68, 1, 84],
+        [71, 45, 123],
+        [59, 82, 139],
+        [44, 114, 142],
+        [33, 145, 140],
+        [39, 173, 129],
+        [92, 200, 99],
+        [170, 220, 50],
+        [253, 231, 37],
+    ],
+    dtype=np.float64,
+)
+
+# Weights are shown on a log scale spanning this many decades below the heaviest.
+_WEIGHT_DECADES = 3.0
+
+_STAT_GROUPS = (
+    ("ess", "Particles and ESS"),
+    ("timings", "Timings (ms)"),
+    ("error", "Error vs truth"),
+    ("tries", "Map rejection tries"),
+    ("other", "Other"),
+)
+
+_DRAW_ORDER = {"map": -100.0, "trail": 5.0, "particles": 10.0, "scan": 20.0, "truth": 30.0, "estimate": 40.0}
+
+_TIMESTAMP_THRESHOLD = 1e8  # seconds: larger t is taken as Unix time (1973 onwards)
+
+
+def has_display() -> bool:
+    """True when a native viewer window can open (always on macOS/Windows)."""
+    if not sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def stat_group(name: str) -> str:
+    """Time-series group of a stats entry: the part before a ``/``, else by keyword."""
+    if "/" in name:
+        return name.split("/", 1)[0]
+    low = name.lower()
+    if "ess" in low or "particle" in low or "neff" in low or "n_eff" in low:
+        return "ess"
+    if low.endswith("_ms") or low.startswith(("t_", "time", "ms_")) or "timing" in low:
+        return "timings"
+    if "err" in low or "rmse" in low or "ate" == low:
+        return "error"
+    if "tries" in low or "reject" in low or "retry" in low:
+        return "tries"
+    return "other"
+
+
+def weight_colors(weights: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8 viridis colours of linear weights on a log scale relative to the heaviest."""
+    w = np.asarray(weights, dtype=np.float64)
+    wmax = w.max() if w.size else 0.0
+    if not np.isfinite(wmax) or wmax <= 0.0:
+        u = np.zeros(w.shape)
+    else:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = np.log10(np.where(w > 0, w / wmax, 0.0))
+        rel = np.nan_to_num(rel, nan=-_WEIGHT_DECADES, neginf=-_WEIGHT_DECADES)
+        u = np.clip(1.0 + rel / _WEIGHT_DECADES, 0.0, 1.0)
+    pos = u * (len(_VIRIDIS) - 1)
+    i0 = np.minimum(pos.astype(np.intp), len(_VIRIDIS) - 2)
+    f = (pos - i0)[:, None]
+    rgb = _VIRIDIS[i0] * (1.0 - f) + _VIRIDIS[i0 + 1] * f
+    return np.rint(rgb).astype(np.uint8)
+
+
+def subsample_indices(n: int, m: int) -> np.ndarray:
+    """At most ``m`` indices evenly strided over ``range(n)`` (deterministic, unbiased)."""
+    if n <= m:
+        return np.arange(n)
+    return (np.arange(m, dtype=np.int64) * n) // m
+
+
+def covariance_ellipse(mean_xy: np.ndarray, cov_xy: np.ndarray, k: float = 2.0, n: int = 48) -> np.ndarray:
+    """(n+1, 2) closed polyline of the k-sigma ellipse of a 2x2 covariance."""
+    c = 0.5 * (np.asarray(cov_xy, dtype=np.float64) + np.asarray(cov_xy, dtype=np.float64).T)
+    vals, vecs = np.linalg.eigh(c)
+    vals = np.clip(np.nan_to_num(vals, nan=0.0), 0.0, None)
+    a = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    circle = np.stack([np.cos(a), np.sin(a)])  # (2, n+1)
+    pts = vecs @ (k * np.sqrt(vals)[:, None] * circle)
+    pts[:, -1] = pts[:, 0]
+    return (pts + np.asarray(mean_xy, dtype=np.float64)[:, None]).T
+
+
+def _map_png(image: np.ndarray) -> bytes | None:
+    try:
+        from io import BytesIO
+
+        from PIL import Image as PILImage
+    except ImportError:  # pillow is a dependency, but stay usable without it
+        return None
+    buf = BytesIO()
+    PILImage.fromarray(image, mode="L").save(buf, format="PNG", optimize=False)
+    return buf.getvalue()
+
+
+class RerunLogger:
+    """Logs a localization run to Rerun (file, native viewer, or web viewer).
+
+    ``mode``: ``"save"`` writes an ``.rrd`` to ``path``; ``"spawn"`` opens the native
+    viewer (and also writes ``path`` if given), falling back to ``"save"`` with a
+    message on stderr when there is no display; ``"serve"`` hosts a gRPC server plus
+    the web viewer (alive while the process runs); ``"off"`` makes every method a no-op.
+
+    Particles are logged on every ``particles_every``-th call of :meth:`log_step`
+    (the 1st, (1+every)-th, ...), at most ``particles_max`` of them.
+    """
+
+    def __init__(
+        self,
+        mode: str,
+        path: str | Path | None,
+        *,
+        particles_max: int = 2000,
+        particles_every: int = 1,
+        app_id: str = "mcl",
+        recording_id: str | None = None,
+        log_scan: bool = True,
+        heading_length: float = 0.5,
+    ) -> None:
+        if mode not in MODES:
+            raise ValueError(f"rerun mode {mode!r}: expected one of {', '.join(MODES)}")
+        if particles_max < 1:
+            raise ValueError(f"particles_max must be >= 1, got {particles_max}")
+        if particles_every < 1:
+            raise ValueError(f"particles_every must be >= 1, got {particles_every}")
+        self.mode = mode
+        self.path: Path | None = Path(path) if path is not None else None
+        self.particles_max = int(particles_max)
+        self.particles_every = int(particles_every)
+        self.log_scan = bool(log_scan)
+        self.heading_length = float(heading_length)
+        self.url: str | None = None
+        self._rec: rr.RecordingStream | None = None
+        self._closed = False
+        self._calls = 0
+        self._time_kind: str | None = None
+        self._stat_names: list[str] = []
+        self._blueprint_key: tuple[str, ...] | None = None
+        self._truth_path_logged = False
+        self._prev_truth: np.ndarray | None = None
+        self._prev_odom: np.ndarray | None = None
+        if mode == "off":
+            return
+
+        rec = rr.RecordingStream(app_id, recording_id=recording_id or uuid.uuid4())
+        if mode == "spawn" and not has_display():
+            self.path = self.path or Path(f"{app_id}.rrd")
+            print(
+                f"mcl: no display (DISPLAY/WAYLAND_DISPLAY unset), cannot spawn the Rerun viewer; "
+                f"saving the recording to {self.path} instead (open it with `rerun {self.path}`)",
+                file=sys.stderr,
+            )
+            mode = "save"
+            self.mode = "save"
+        if mode == "save":
+            if self.path is None:
+                raise ValueError("rerun mode 'save' needs a path for the .rrd file")
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            rec.save(self.path)
+        elif mode == "spawn":
+            rec.spawn(connect=False)
+            sinks: list[Any] = [rr.GrpcSink()]
+            if self.path is not None:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                sinks.append(rr.FileSink(self.path))
+            rec.set_sinks(*sinks)
+        else:  # serve
+            self.url = rec.serve_grpc()
+            rr.serve_web_viewer(connect_to=self.url, open_browser=False)
+            print(
+                f"mcl: Rerun gRPC server at {self.url}; web viewer at http://localhost:9090/?url={self.url} "
+                f"(or `rerun {self.url}`); it stops when this process exits",
+                file=sys.stderr,
+            )
+        self._rec = rec
+        # The world frame is y-up; 2D views draw y down, so flip y once for everything under world.
+        rec.log("world", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
+        rec.log(
+            "world/particles",
+            rr.Points2D.from_fields(radii=rr.Radius.ui_points(1.5), draw_order=_DRAW_ORDER["particles"]),
+            static=True,
+        )
+        rec.log(
+            "world/scan",
+            rr.Points2D.from_fields(
+                radii=rr.Radius.ui_points(2.0), colors=[230, 60, 60], draw_order=_DRAW_ORDER["scan"]
+            ),
+            static=True,
+        )
+
+    # -- context manager ---------------------------------------------------------------
+    def __enter__(self) -> RerunLogger:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def enabled(self) -> bool:
+        return self._rec is not None and not self._closed
+
+    # -- static things -----------------------------------------------------------------
+    def log_map(self, grid: Any) -> None:
+        """Static image of the occupancy grid, placed so one pixel is one cell in metres."""
+        rec = self._live()
+        if rec is None:
+            return
+        occupied = np.asarray(grid.occupied, dtype=bool)
+        free = np.asarray(grid.free, dtype=bool)
+        img = np.full(occupied.shape, _UNKNOWN, dtype=np.uint8)
+        img[free] = _FREE
+        img[occupied] = _OCCUPIED
+        img = np.ascontiguousarray(img[::-1])  # grid row 0 is the bottom; image row 0 is the top
+        h, w = img.shape
+        res = float(grid.resolution)
+        x0, y0 = (float(v) for v in grid.origin[:2])
+        # pixel (u, v) -> world (x0 + u res, y0 + h res - v res): with the y flip on `world`
+        # the image is drawn unmirrored with its top row at the top.
+        rec.log(
+            "world/map",
+            rr.Transform3D(translation=[x0, y0 + h * res, 0.0], scale=[res, -res, 1.0]),
+            static=True,
+        )
+        png = _map_png(img)
+        if png is not None:
+            image: Any = rr.EncodedImage(contents=png, media_type="image/png", draw_order=_DRAW_ORDER["map"])
+        else:
+            image = rr.Image(img, color_model="L", draw_order=_DRAW_ORDER["map"])
+        rec.log("world/map", image, static=True)
+
+    def log_truth_path(self, poses: np.ndarray) -> None:
+        """Static full true path (3, M); per-step truth trails are then not logged."""
+        rec = self._live()
+        if rec is None:
+            return
+        p = np.asarray(poses, dtype=np.float64)
+        rec.log(
+            "world/truth",
+            rr.LineStrips2D(
+                [np.ascontiguousarray(p[:2].T, dtype=np.float32)],
+                colors=[40, 170, 40, 160],
+                radii=rr.Radius.ui_points(1.0),
+                draw_order=_DRAW_ORDER["trail"],
+            ),
+            static=True,
+        )
+        self._truth_path_logged = True
+
+    # -- per step ----------------------------------------------------------------------
+    def log_step(
+        self,
+        step: int,
+        t: float,
+        *,
+        particles: np.ndarray,
+        weights: np.ndarray,
+        estimate: np.ndarray,
+        cov: np.ndarray,
+        scan_world: np.ndarray | None = None,
+        odom_pose: np.ndarray | None = None,
+        truth_pose: np.ndarray | None = None,
+        stats: Mapping[str, float] | None = None,
+    ) -> None:
+        """Log one filter step. ``weights`` are normalized linear weights (N,)."""
+        rec = self._live()
+        if rec is None:
+            return
+        call = self._calls
+        self._calls += 1
+        rec.set_time("step", sequence=int(step))
+        self._set_time(rec, float(t))
+
+        if call % self.particles_every == 0:
+            self._log_particles(rec, particles, weights)
+        self._log_estimate(rec, estimate, cov)
+        if self.log_scan and scan_world is not None:
+            s = np.asarray(scan_world, dtype=np.float64)
+            rec.log("world/scan", rr.Points2D(np.ascontiguousarray(s[:2].T, dtype=np.float32)))
+        if truth_pose is not None:
+            self._prev_truth = self._log_pose(
+                rec, "world/truth", truth_pose, self._prev_truth, [40, 170, 40], trail=not self._truth_path_logged
+            )
+        if odom_pose is not None:
+            self._prev_odom = self._log_pose(rec, "world/odometry", odom_pose, self._prev_odom, [240, 150, 30])
+        if stats:
+            self._log_stats(rec, stats)
+        self._send_blueprint()
+
+    def close(self) -> None:
+        """Flush and close the sinks (idempotent). The .rrd is complete afterwards."""
+        if self._closed:
+            return
+        self._closed = True
+        rec, self._rec = self._rec, None
+        if rec is None:
+            return
+        if self._blueprint_key is None:
+            self._send_blueprint_to(rec)
+        rec.flush()
+        rec.disconnect()
+
+    # -- helpers -----------------------------------------------------------------------
+    def _live(self) -> rr.RecordingStream | None:
+        if self._closed:
+            if self.mode == "off":
+                return None
+            raise RuntimeError("RerunLogger is closed")
+        return self._rec
+
+    def _set_time(self, rec: rr.RecordingStream, t: float) -> None:
+        if not np.isfinite(t):
+            return
+        if self._time_kind is None:
+            self._time_kind = "timestamp" if t > _TIMESTAMP_THRESHOLD else "duration"
+        if self._time_kind == "timestamp":
+            rec.set_time("time", timestamp=t)
+        else:
+            rec.set_time("time", duration=t)
+
+    def _log_particles(self, rec: rr.RecordingStream, particles: np.ndarray, weights: np.ndarray) -> None:
+        p = np.asarray(particles)
+        idx = subsample_indices(p.shape[1], self.particles_max)
+        xy = np.empty((idx.size, 2), dtype=np.float32)
+        xy[:, 0] = p[0, idx]
+        xy[:, 1] = p[1, idx]
+        rec.log("world/particles", rr.Points2D(xy, colors=weight_colors(np.asarray(weights)[idx])))
+
+    def _log_estimate(self, rec: rr.RecordingStream, estimate: np.ndarray, cov: np.ndarray) -> None:
+        e = np.asarray(estimate, dtype=np.float64)
+        c = np.asarray(cov, dtype=np.float64)
+        color = [220, 40, 200]
+        heading = self.heading_length * np.array([np.cos(e[2]), np.sin(e[2])])
+        rec.log(
+            "world/estimate",
+            rr.Points2D([e[:2]], colors=[color], radii=rr.Radius.ui_points(4.0), draw_order=_DRAW_ORDER["estimate"]),
+            rr.Arrows2D(
+                origins=[e[:2]],
+                vectors=[heading],
+                colors=[color],
+                radii=rr.Radius.ui_points(1.5),
+                draw_order=_DRAW_ORDER["estimate"],
+            ),
+            rr.LineStrips2D(
+                [covariance_ellipse(e[:2], c[:2, :2]).astype(np.float32)],
+                colors=[color],
+                radii=rr.Radius.ui_points(1.0),
+                draw_order=_DRAW_ORDER["estimate"],
+            ),
+        )
+
+    def _log_pose(
+        self,
+        rec: rr.RecordingStream,
+        entity: str,
+        pose: np.ndarray,
+        prev: np.ndarray | None,
+        color: list[int],
+        *,
+        trail: bool = True,
+    ) -> np.ndarray:
+        xy = np.asarray(pose, dtype=np.float64)[:2].copy()
+        rec.log(
+            entity,
+            rr.Points2D([xy], colors=[color], radii=rr.Radius.ui_points(4.0), draw_order=_DRAW_ORDER["truth"]),
+        )
+        if trail and prev is not None:
+            rec.log(
+                f"{entity}/trail",
+                rr.LineStrips2D(
+                    [np.stack([prev, xy]).astype(np.float32)],
+                    colors=[color],
+                    radii=rr.Radius.ui_points(1.0),
+                    draw_order=_DRAW_ORDER["trail"],
+                ),
+            )
+        return xy
+
+    def _log_stats(self, rec: rr.RecordingStream, stats: Mapping[str, float]) -> None:
+        for name, value in stats.items():
+            if value is None:
+                continue
+            if name not in self._stat_names:
+                self._stat_names.append(name)
+            rec.log(f"stats/{name}", rr.Scalars(float(value)))
+
+    def _send_blueprint(self) -> None:
+        """(Re)send the layout when new stats names appeared (usually once, at step 1)."""
+        if self._rec is not None and tuple(self._stat_names) != self._blueprint_key:
+            self._send_blueprint_to(self._rec)
+
+    def _send_blueprint_to(self, rec: rr.RecordingStream) -> None:
+        self._blueprint_key = tuple(self._stat_names)
+        rec.send_blueprint(build_blueprint(self._stat_names))
+
+
+def build_blueprint(stat_names: list[str] | tuple[str, ...] = ()) -> rrb.Blueprint:
+    """World view large on the left; one time-series view per stats group on the right."""
+    trail_range = [
+        rrb.VisibleTimeRange(
+            timeline, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.cursor_relative()
+        )
+        for timeline in ("step", "time")
+    ]
+    world = rrb.Spatial2DView(
+        name="World",
+        origin="/",
+        contents=["+ /world/**"],
+        background=[30, 30, 30],
+        overrides={
+            "world/truth/trail": rrb.VisibleTimeRanges(trail_range),
+            "world/odometry/trail": rrb.VisibleTimeRanges(trail_range),
+        },
+    )
+    groups: dict[str, list[str]] = {}
+    for name in stat_names:
+        groups.setdefault(stat_group(name), []).append(name)
+    titles = dict(_STAT_GROUPS)
+    order = [g for g, _ in _STAT_GROUPS] + sorted(set(groups) - set(titles))
+    views = [
+        rrb.TimeSeriesView(
+            name=titles.get(g, g),
+            origin="/stats",
+            contents=[f"+ /stats/{n}" for n in groups[g]] + ([f"+ /stats/{g}/**"] if g not in titles else []),
+        )
+        for g in order
+        if g in groups
+    ]
+    if not views:
+        views = [rrb.TimeSeriesView(name="Stats", origin="/stats")]
+    return rrb.Blueprint(
+        rrb.Horizontal(world, rrb.Vertical(*views), column_shares=[3, 2]),
+        collapse_panels=False,
+    )
