@@ -1,0 +1,308 @@
+"""Map loading (ROS map_server semantics), geometry, distance field, free sampling, saving."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from PIL import Image
+from scipy import stats
+
+from mcl.errors import DataError
+from mcl.maps import OccupancyGrid, load_map, save_map
+
+DATA = Path(__file__).parents[2] / "shared" / "data"
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"real datasets not found at {DATA}")
+
+YAML = """image: {image}
+resolution: {resolution}
+origin: {origin}
+negate: {negate}
+occupied_thresh: {occ}
+free_thresh: {free}
+"""
+
+
+def write_map(tmp_path, pixels, fmt="pgm", name="m", mode=None, negate=0, origin="[1.0, 2.0, 0.0]",
+              resolution=0.5, occ=0.65, free=0.196, pil_mode=None):
+    """Write an image (row 0 = top) and its YAML; returns the YAML path."""
+    img_name = f"{name}.{fmt}"
+    pixels = np.asarray(pixels, dtype=np.uint8)
+    if fmt == "p2":
+        img_name = f"{name}.pgm"
+        h, w = pixels.shape
+        body = "\n".join(" ".join(str(v) for v in row) for row in pixels)
+        (tmp_path / img_name).write_text(f"P2\n# plain pgm\n{w} {h}\n255\n{body}\n")
+    else:
+        Image.fromarray(pixels, mode=pil_mode).save(tmp_path / img_name)
+    text = YAML.format(image=img_name, resolution=resolution, origin=origin, negate=negate, occ=occ, free=free)
+    if mode is not None:
+        text += f"mode: {mode}\n"
+    y = tmp_path / f"{name}.yaml"
+    y.write_text(text)
+    return y
+
+
+PIX = np.array([[0, 254, 205], [100, 128, 255]], dtype=np.uint8)  # image row 0 = top
+
+
+def ros_expected(v, mode, negate=False, occ=0.65, free=0.196):
+    """Straight transcription of ROS map_server for one grey value."""
+    if mode == "raw":
+        return v if 0 <= v <= 100 else -1
+    if negate:
+        v = 255 - v
+    p = (255 - v) / 255.0
+    if p > occ:
+        return 100
+    if p < free:
+        return 0
+    if mode == "trinary":
+        return -1
+    return int(99 * (p - free) / (occ - free))
+
+
+@pytest.mark.parametrize("fmt", ["pgm", "p2", "png"])
+@pytest.mark.parametrize("mode", ["trinary", "scale", "raw"])
+@pytest.mark.parametrize("negate", [0, 1])
+def test_modes_formats_negate(tmp_path, fmt, mode, negate):
+    grid = load_map(write_map(tmp_path, PIX, fmt=fmt, mode=mode, negate=negate))
+    expected = np.array([[ros_expected(int(v), mode, bool(negate)) for v in row] for row in PIX[::-1]])
+    assert grid.occupancy.dtype == np.int8 and grid.occupancy.shape == (2, 3)
+    np.testing.assert_array_equal(grid.occupancy, expected)
+    assert grid.resolution == 0.5 and grid.origin == (1.0, 2.0)
+    assert grid.width == 3 and grid.height == 2
+
+
+def test_trinary_values_explicitly(tmp_path):
+    grid = load_map(write_map(tmp_path, PIX))
+    # bottom row first: image row 1 = [100, 128, 255], row 0 = [0, 254, 205]
+    np.testing.assert_array_equal(grid.occupancy, [[-1, -1, 0], [100, 0, -1]])
+    np.testing.assert_array_equal(grid.occupied, [[False, False, False], [True, False, False]])
+    np.testing.assert_array_equal(grid.free, [[False, False, True], [False, True, False]])
+    np.testing.assert_array_equal(grid.unknown, ~(grid.occupied | grid.free))
+
+
+def test_scale_value_and_alpha(tmp_path):
+    rgba = np.zeros((1, 3, 4), dtype=np.uint8)
+    rgba[0, :, :3] = 128
+    rgba[0, :, 3] = [255, 0, 255]
+    rgba[0, 2, :3] = 0  # black, opaque: occupied
+    grid = load_map(write_map(tmp_path, rgba, fmt="png", mode="scale"))
+    ratio = ((255 - 128) / 255 - 0.196) / (0.65 - 0.196)
+    assert grid.occupancy[0, 0] == int(99 * ratio) == 65
+    assert grid.occupancy[0, 1] == -1  # alpha 0 -> unknown in scale mode
+    assert grid.occupancy[0, 2] == 100
+
+
+def test_colour_channels_are_averaged(tmp_path):
+    rgb = np.array([[[255, 0, 0], [0, 255, 255], [254, 254, 254]]], dtype=np.uint8)
+    grid = load_map(write_map(tmp_path, rgb, fmt="png"))
+    # means 85 (p=0.667 -> occupied), 170 (p=0.333 -> unknown), 254 (free)
+    np.testing.assert_array_equal(grid.occupancy, [[100, -1, 0]])
+
+
+def test_row_flip_top_left_pixel_lands_at_top_left_corner(tmp_path):
+    img = np.full((4, 5), 254, dtype=np.uint8)
+    img[0, 0] = 0
+    grid = load_map(write_map(tmp_path, img, origin="[10.0, 20.0, 0]", resolution=0.5))
+    x_left, y_top = 10.0, 20.0 + 4 * 0.5
+    ix, iy = grid.world_to_cell(x_left + 0.1, y_top - 0.1)
+    assert (int(ix), int(iy)) == (0, 3)
+    assert grid.occupancy[iy, ix] == 100
+    assert grid.occupied.sum() == 1 and grid.occupancy[3, 0] == 100
+
+
+def test_world_cell_round_trip():
+    grid = OccupancyGrid.from_occupancy(np.zeros((30, 40), np.int8), 0.05, (-1.3, 2.7))
+    ix, iy = np.meshgrid(np.arange(40), np.arange(30))
+    x, y = grid.cell_to_world(ix, iy)
+    ix2, iy2 = grid.world_to_cell(x, y)
+    np.testing.assert_array_equal(ix2, ix)
+    np.testing.assert_array_equal(iy2, iy)
+    assert ix2.dtype == np.int64
+    # floor semantics at and outside the edges
+    ix3, iy3 = grid.world_to_cell([-1.3, -1.3 - 1e-9, -1.3 + 40 * 0.05 + 1e-9], [2.7, 2.7, 2.7])
+    np.testing.assert_array_equal(ix3, [0, -1, 40])
+    np.testing.assert_array_equal(grid.contains(ix3, iy3), [True, False, False])
+
+
+def test_distance_field_against_brute_force():
+    rng = np.random.default_rng(3)
+    occ = np.where(rng.random((7, 9)) < 0.15, 100, 0).astype(np.int8)
+    occ[0, 0] = 100
+    occ[3, 4] = -1
+    grid = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
+    oy, ox = np.nonzero(occ == 100)
+    iy, ix = np.mgrid[0:7, 0:9]
+    brute = np.min(np.hypot(ix[..., None] - ox, iy[..., None] - oy), axis=-1) * 0.1
+    assert grid.distance.dtype == np.float32 and grid.distance.shape == (7, 9)
+    np.testing.assert_allclose(grid.distance, brute, rtol=1e-6)
+    assert np.all(grid.distance[occ == 100] == 0)
+
+
+def test_distance_without_obstacles_is_large():
+    grid = OccupancyGrid.from_occupancy(np.zeros((3, 4), np.int8), 0.5, (0, 0))
+    assert np.all(grid.distance >= math.hypot(3, 4) * 0.5)
+
+
+def two_region_grid():
+    occ = np.full((10, 20), -1, np.int8)
+    occ[:, 0:5] = 0      # 50 free cells
+    occ[:, 5] = 100
+    occ[:, 10:20] = 0    # 100 free cells
+    return OccupancyGrid.from_occupancy(occ, 0.1, (-1.0, 0.5))
+
+
+def test_sample_free_only_free_cells_and_uniform():
+    grid = two_region_grid()
+    rng = np.random.default_rng(42)
+    n = 30000
+    s = grid.sample_free(n, rng)
+    assert s.shape == (3, n) and s.dtype == np.float64
+    ix, iy = grid.world_to_cell(s[0], s[1])
+    assert grid.contains(ix, iy).all()
+    assert grid.free[iy, ix].all()
+    assert s[2].min() >= -math.pi and s[2].max() < math.pi
+    left = int((ix < 5).sum())
+    # Chi-square on the two regions (1:2 by cell count); fixed seed, reject only at p < 0.001.
+    res = stats.chisquare([left, n - left], [n / 3, 2 * n / 3])
+    assert res.pvalue > 1e-3, (left, res)
+    # Within cells: positions uniform (fractional part of the cell coordinate), KS at p > 0.001.
+    frac = (s[0] - grid.origin[0]) / grid.resolution % 1.0
+    assert stats.kstest(frac, "uniform").pvalue > 1e-3
+    # and every free cell gets visited
+    hits = np.zeros(grid.occupancy.shape, bool)
+    hits[iy, ix] = True
+    np.testing.assert_array_equal(hits, grid.free)
+
+
+def test_sample_free_clearance_and_no_cell():
+    grid = two_region_grid()
+    s = grid.sample_free(2000, np.random.default_rng(1), clearance=0.25)
+    ix, iy = grid.world_to_cell(s[0], s[1])
+    assert np.all(grid.distance[iy, ix] > 0.25)
+    # the wall is column 5: columns 3, 4, 6, 7 are within 0.2 m of it
+    assert ((ix <= 2) | (ix >= 8)).all()
+    assert (ix <= 2).any() and (ix >= 8).any()
+    with pytest.raises(DataError, match="no free cell"):
+        grid.sample_free(10, np.random.default_rng(1), clearance=100.0)
+
+
+def test_save_map_round_trip(tmp_path):
+    occ = np.array([[100, 0, -1, 0], [0, 0, 100, -1], [-1, -1, 0, 0]], np.int8)
+    grid = OccupancyGrid.from_occupancy(occ, 0.05, (-3.25, 1.125))
+    save_map(grid, tmp_path / "out.yaml")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.pgm", "out.yaml"]
+    raw = (tmp_path / "out.pgm").read_bytes()
+    assert raw.startswith(b"P5")
+    img = np.asarray(Image.open(tmp_path / "out.pgm"))
+    np.testing.assert_array_equal(img[0], [205, 205, 254, 254])  # image row 0 = top = grid row 2
+    back = load_map(tmp_path / "out.yaml")
+    np.testing.assert_array_equal(back.occupancy, occ)
+    assert back.resolution == 0.05 and back.origin == (-3.25, 1.125)
+
+
+# --- malformed files ---------------------------------------------------------
+
+def test_missing_key(tmp_path):
+    y = write_map(tmp_path, PIX)
+    y.write_text("\n".join(l for l in y.read_text().splitlines() if not l.startswith("resolution")))
+    with pytest.raises(DataError, match=r"m\.yaml: resolution: missing"):
+        load_map(y)
+
+
+def test_non_zero_yaw(tmp_path):
+    y = write_map(tmp_path, PIX, origin="[0, 0, 0.5]")
+    with pytest.raises(DataError, match=r"m\.yaml: origin: non-zero yaw not supported"):
+        load_map(y)
+
+
+@pytest.mark.parametrize("occ,free,key", [(1.5, 0.196, "occupied_thresh"), (0.65, -0.1, "free_thresh"),
+                                          (0.3, 0.5, "free_thresh"), ("high", 0.1, "occupied_thresh")])
+def test_bad_thresholds(tmp_path, occ, free, key):
+    y = write_map(tmp_path, PIX, occ=occ, free=free)
+    with pytest.raises(DataError, match=rf"m\.yaml: {key}: "):
+        load_map(y)
+
+
+def test_truncated_image(tmp_path):
+    y = write_map(tmp_path, np.full((50, 60), 254, np.uint8))
+    img = tmp_path / "m.pgm"
+    img.write_bytes(img.read_bytes()[:500])
+    with pytest.raises(DataError, match=r"m\.yaml: image: .*m\.pgm") as e:
+        load_map(y)
+    assert "\n" not in str(e.value)
+
+
+def test_corrupt_image(tmp_path):
+    y = write_map(tmp_path, PIX, fmt="png")
+    (tmp_path / "m.png").write_bytes(b"\x89PNG\r\n\x1a\nnot really a png")
+    with pytest.raises(DataError, match=r"m\.yaml: image: .*m\.png"):
+        load_map(y)
+
+
+def test_missing_image(tmp_path):
+    y = write_map(tmp_path, PIX)
+    (tmp_path / "m.pgm").unlink()
+    with pytest.raises(DataError, match=r"m\.yaml: image: .*m\.pgm"):
+        load_map(y)
+
+
+@pytest.mark.parametrize("text,key", [
+    ("- a\n- b\n", "mapping"),
+    ("image: [\n", "m.yaml:"),
+    ("image: m.pgm\nresolution: -1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.1\n", "resolution"),
+    ("image: m.pgm\nresolution: 0.1\norigin: [0, a, 0]\noccupied_thresh: 0.65\nfree_thresh: 0.1\n", "origin"),
+    ("image: m.pgm\nresolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.1\nmode: bogus\n",
+     "mode"),
+    ("image: m.pgm\nresolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.1\nnegate: 2\n",
+     "negate"),
+    ("image: 3\nresolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.1\n", "image"),
+])
+def test_bad_yaml(tmp_path, text, key):
+    write_map(tmp_path, PIX)
+    y = tmp_path / "m.yaml"
+    y.write_text(text)
+    with pytest.raises(DataError, match="m.yaml") as e:
+        load_map(y)
+    assert key in str(e.value) and "\n" not in str(e.value)
+
+
+def test_missing_yaml(tmp_path):
+    with pytest.raises(DataError, match="nothere.yaml"):
+        load_map(tmp_path / "nothere.yaml")
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(yaml_bytes=st.binary(max_size=200), image_bytes=st.binary(max_size=200))
+def test_fuzz_only_dataerror(tmp_path, yaml_bytes, image_bytes):
+    y = tmp_path / "f.yaml"
+    y.write_bytes(yaml_bytes)
+    try:
+        load_map(y)
+    except DataError:
+        pass
+    write_map(tmp_path, PIX, name="g")
+    (tmp_path / "g.pgm").write_bytes(b"P5\n3 2\n255\n" + image_bytes)
+    try:
+        grid = load_map(tmp_path / "g.yaml")
+        assert grid.occupancy.shape == (2, 3)
+    except DataError as e:
+        assert "g.yaml" in str(e) and "\n" not in str(e)
+
+
+# --- real map -------------------------------------------------------------------
+
+@needs_data
+def test_real_intel_lab_map():
+    grid = load_map(DATA / "intel_lab" / "map.yaml")
+    assert grid.occupancy.shape == (800, 854)
+    assert grid.resolution == 0.05 and grid.origin == (-21.892, -25.203)
+    assert grid.occupied.any() and grid.free.sum() > grid.occupied.sum()
+    # The start pose from the data README lies in free space.
+    ix, iy = grid.world_to_cell(0.600266, -0.032033)
+    assert grid.free[iy, ix]
+    assert grid.distance.max() > 1.0
