@@ -81,9 +81,14 @@ def has_display() -> bool:
 
 
 def stat_group(name: str) -> str:
-    """Time-series group of a stats entry: the part before a ``/``, else by keyword."""
+    """Time-series group of a stats entry, by keyword (of the part before a ``/`` if any).
+
+    ``ess``, ``timings``, ``error``, ``tries``; else the prefix before ``/``, else ``other``.
+    """
     if "/" in name:
-        return name.split("/", 1)[0]
+        prefix = name.split("/", 1)[0]
+        group = stat_group(prefix)
+        return prefix if group == "other" else group
     low = name.lower()
     if "ess" in low or "particle" in low or "neff" in low or "n_eff" in low:
         return "ess"

@@ -1,0 +1,284 @@
+"""RerunLogger: write small recordings and read them back with rerun.chunk.RrdReader."""
+
+from __future__ import annotations
+
+import io
+import math
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rr = pytest.importorskip("rerun")
+import pyarrow as pa  # noqa: E402  (a dependency of rerun-sdk)
+from rerun.chunk import RrdReader  # noqa: E402
+
+from mcl import viz  # noqa: E402
+from mcl.viz import RerunLogger  # noqa: E402
+
+STEPS = 10
+N = 500
+RES, ORIGIN = 0.1, (-1.0, -2.0)
+
+
+# --- helpers ------------------------------------------------------------------------------
+def make_occupancy() -> np.ndarray:
+    occ = np.zeros((20, 30), dtype=np.int8)  # row 0 = bottom
+    occ[0, :] = 100  # bottom wall
+    occ[:, 0] = 100  # left wall
+    occ[15:, 20:] = -1  # unknown top-right block
+    return occ
+
+
+def make_grid():
+    occ = make_occupancy()
+    try:
+        from mcl.maps import OccupancyGrid
+
+        return OccupancyGrid.from_occupancy(occ, RES, ORIGIN)
+    except (ImportError, AttributeError):
+        return types.SimpleNamespace(
+            occupancy=occ,
+            resolution=RES,
+            origin=ORIGIN,
+            width=occ.shape[1],
+            height=occ.shape[0],
+            occupied=occ >= 65,
+            free=(occ >= 0) & (occ <= 19),
+            unknown=occ < 0,
+        )
+
+
+def step_stats(k: int) -> dict[str, float]:
+    return {"ess": 100.0 + k, "particles": float(N), "time_ms/predict": 0.5 * k, "error_xy": 0.01 * k, "tries": float(k % 3)}
+
+
+def write_run(path: Path, n_steps: int = STEPS, **kwargs) -> list[dict[str, float]]:
+    rng = np.random.default_rng(0)
+    logged = []
+    with RerunLogger("save", path, **kwargs) as log:
+        log.log_map(make_grid())
+        log.log_truth_path(np.stack([np.linspace(0, 2, 50), np.zeros(50), np.zeros(50)]))
+        for k in range(n_steps):
+            particles = rng.normal(size=(3, N))
+            w = rng.random(N)
+            stats = step_stats(k)
+            log.log_step(
+                k,
+                10.0 + 0.5 * k,
+                particles=particles,
+                weights=w / w.sum(),
+                estimate=np.array([0.1 * k, 0.0, 0.2]),
+                cov=np.diag([0.04, 0.01, 0.001]),
+                scan_world=rng.normal(size=(2, 30)),
+                odom_pose=np.array([0.1 * k, 0.05, 0.0]),
+                truth_pose=np.array([0.1 * k, 0.0, 0.0]),
+                stats=stats,
+            )
+            logged.append(stats)
+    return logged
+
+
+def chunks(path: Path):
+    return RrdReader(path).stream().to_chunks()
+
+
+def rows(path: Path, entity: str, timeline: str | None) -> list[tuple[int | None, dict]]:
+    """(time on `timeline`, {component: value}) per row of `entity`; timeline None = static rows."""
+    out = []
+    for c in chunks(path):
+        if c.entity_path != entity:
+            continue
+        if timeline is None:
+            if not c.is_static:
+                continue
+        elif c.is_static or timeline not in c.timeline_names:
+            continue
+        batch = c.to_record_batch()
+        # index columns as int64: sequence numbers, or nanoseconds for timestamp/duration
+        times = batch.column(timeline).cast(pa.int64()).to_pylist() if timeline else [None] * c.num_rows
+        data = {k: batch.column(k).to_pylist() for k in batch.schema.names if ":" in k}
+        for i in range(c.num_rows):
+            out.append((times[i], {k: v[i] for k, v in data.items()}))
+    return sorted(out, key=lambda r: (r[0] is None, r[0]))
+
+
+def count_rows(path: Path, entity: str, timeline: str | None) -> int:
+    return len(rows(path, entity, timeline))
+
+
+# --- recordings read back ---------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def run_every1(tmp_path_factory):
+    path = tmp_path_factory.mktemp("viz") / "run.rrd"
+    logged = write_run(path, particles_max=200)
+    return path, logged
+
+
+def test_particles_one_row_per_step_and_subsampled(run_every1):
+    path, _ = run_every1
+    r = rows(path, "/world/particles", "step")
+    assert [t for t, _ in r] == list(range(STEPS))
+    for _, comps in r:
+        assert len(comps["Points2D:positions"]) == 200  # min(N, particles_max)
+        assert len(comps["Points2D:colors"]) == 200
+    # radii and draw order are a static style, never per step
+    assert all("Points2D:radii" not in comps for _, comps in r)
+    assert any("Points2D:radii" in comps for _, comps in rows(path, "/world/particles", None))
+
+
+def test_particles_every_third_step(tmp_path):
+    path = tmp_path / "every3.rrd"
+    write_run(path, particles_max=1000, particles_every=3)
+    r = rows(path, "/world/particles", "step")
+    assert [t for t, _ in r] == [0, 3, 6, 9]  # ceil(10 / 3) rows
+    assert all(len(c["Points2D:positions"]) == N for _, c in r)  # N < particles_max: all of them
+    # other entities still log every step
+    assert count_rows(path, "/world/estimate", "step") == STEPS
+
+
+def test_map_is_static_image_placed_in_world(run_every1):
+    path, _ = run_every1
+    assert count_rows(path, "/world/map", "step") == 0
+    static = {}
+    for _, comps in rows(path, "/world/map", None):
+        static.update({k: v for k, v in comps.items() if v is not None})
+    from PIL import Image
+
+    img = np.asarray(Image.open(io.BytesIO(bytes(static["EncodedImage:blob"][0]))))
+    occ = make_occupancy()
+    assert img.shape == occ.shape
+    # image row 0 is the top of the map = grid row H-1
+    assert (img[-1] == 0).all()  # bottom wall, occupied -> black
+    assert (img[:, 0] == 0).all()  # left wall
+    assert img[0, 25] == viz._UNKNOWN and img[-3, 25] == viz._FREE
+    h = occ.shape[0]
+    np.testing.assert_allclose(static["Transform3D:translation"][0], [ORIGIN[0], ORIGIN[1] + h * RES, 0.0], atol=1e-6)
+    np.testing.assert_allclose(static["Transform3D:scale"][0], [RES, -RES, 1.0], atol=1e-6)
+
+
+def test_stats_series_values(run_every1):
+    path, logged = run_every1
+    for name in logged[0]:
+        r = rows(path, f"/stats/{name}", "step")
+        assert [t for t, _ in r] == list(range(STEPS)), name
+        values = [c["Scalars:scalars"][0] for _, c in r]
+        np.testing.assert_allclose(values, [s[name] for s in logged], err_msg=name)
+
+
+def test_time_timeline_from_log(run_every1):
+    path, _ = run_every1
+    r = rows(path, "/stats/ess", "time")
+    got = [t * 1e-9 for t, _ in r]  # duration timeline in nanoseconds
+    np.testing.assert_allclose(got, [10.0 + 0.5 * k for k in range(STEPS)])
+
+
+def test_estimate_trails_truth_and_blueprint(run_every1):
+    path, _ = run_every1
+    est = rows(path, "/world/estimate", "step")
+    assert len(est) == STEPS
+    comps = est[0][1]
+    assert len(comps["Points2D:positions"]) == 1
+    assert len(comps["Arrows2D:vectors"]) == 1
+    ellipse = np.asarray(comps["LineStrips2D:strips"][0])
+    d = ellipse - np.array([0.0, 0.0])
+    mahal = d[:, 0] ** 2 / 0.04 + d[:, 1] ** 2 / 0.01
+    np.testing.assert_allclose(mahal, 4.0, rtol=1e-5)  # 2-sigma ellipse
+    # linear size: one 2-point segment per step after the first
+    trail = rows(path, "/world/odometry/trail", "step")
+    assert len(trail) == STEPS - 1 and all(len(c["LineStrips2D:strips"][0]) == 2 for _, c in trail)
+    # a static truth path was given, so no per-step truth trail; current truth point per step
+    assert count_rows(path, "/world/truth/trail", "step") == 0
+    assert count_rows(path, "/world/truth", "step") == STEPS
+    assert any("LineStrips2D:strips" in c for _, c in rows(path, "/world/truth", None))
+    assert len(RrdReader(path).blueprints()) >= 1
+
+
+def test_no_component_both_static_and_temporal(run_every1):
+    path, _ = run_every1
+    static, temporal = set(), set()
+    for c in chunks(path):
+        names = {(c.entity_path, k) for k in c.to_record_batch().schema.names if ":" in k}
+        (static if c.is_static else temporal).update(names)
+    assert temporal, "no temporal data read back"
+    assert static & temporal == set()
+
+
+def test_off_mode_writes_nothing(tmp_path):
+    path = tmp_path / "off.rrd"
+    with RerunLogger("off", path) as log:
+        log.log_map(make_grid())
+        log.log_step(0, 0.0, particles=np.zeros((3, 4)), weights=np.full(4, 0.25), estimate=np.zeros(3), cov=np.eye(3), stats={"ess": 4.0})
+        assert not log.enabled
+    log.close()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_spawn_without_display_falls_back_to_save(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(sys, "platform", "linux")
+    path = tmp_path / "spawned.rrd"
+    with RerunLogger("spawn", path) as log:
+        assert log.mode == "save"
+        log.log_step(3, 1.0, particles=np.zeros((3, 4)), weights=np.full(4, 0.25), estimate=np.zeros(3), cov=np.eye(3), stats={"ess": 4.0})
+    err = capsys.readouterr().err
+    assert "no display" in err and str(path) in err
+    assert rows(path, "/stats/ess", "step")[0][0] == 3
+
+
+def test_close_is_idempotent_and_rejects_logging_after(tmp_path):
+    log = RerunLogger("save", tmp_path / "c.rrd")
+    log.close()
+    log.close()
+    with pytest.raises(RuntimeError):
+        log.log_map(make_grid())
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="mode"):
+        RerunLogger("sve", None)
+    with pytest.raises(ValueError, match="needs a path"):
+        RerunLogger("save", None)
+    with pytest.raises(ValueError, match="particles_every"):
+        RerunLogger("off", None, particles_every=0)
+
+
+# --- pure helpers -----------------------------------------------------------------------------
+def test_subsample_is_even_and_deterministic():
+    idx = viz.subsample_indices(20000, 2000)
+    assert idx.size == 2000 and np.unique(idx).size == 2000
+    assert idx[0] == 0 and np.all(np.diff(idx) == 10)
+    np.testing.assert_array_equal(viz.subsample_indices(5, 10), np.arange(5))
+
+
+def test_weight_colors_heaviest_is_top_of_colormap():
+    w = np.array([1.0, 1e-2, 1e-9, 0.0]) / 1.01
+    c = viz.weight_colors(w)
+    np.testing.assert_array_equal(c[0], viz._VIRIDIS[-1].astype(np.uint8))
+    np.testing.assert_array_equal(c[2], viz._VIRIDIS[0].astype(np.uint8))  # > 3 decades below: bottom
+    np.testing.assert_array_equal(c[3], viz._VIRIDIS[0].astype(np.uint8))
+    assert 0 < c[1].astype(int).sum() and not np.array_equal(c[1], c[0])
+
+
+def test_covariance_ellipse_rotated():
+    theta = 0.3
+    r = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+    cov = r @ np.diag([0.09, 0.01]) @ r.T
+    pts = viz.covariance_ellipse(np.array([1.0, 2.0]), cov)
+    d = pts - [1.0, 2.0]
+    np.testing.assert_allclose(np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d), 4.0, rtol=1e-9)
+    np.testing.assert_allclose(pts[0], pts[-1])
+
+
+def test_stat_groups():
+    assert viz.stat_group("ess") == "ess"
+    assert viz.stat_group("particles") == "ess"
+    assert viz.stat_group("time_ms/predict") == "timings"
+    assert viz.stat_group("motion/foo") == "motion"
+    assert viz.stat_group("predict_ms") == "timings"
+    assert viz.stat_group("error_xy") == "error"
+    assert viz.stat_group("tries") == "tries"
+    assert viz.stat_group("foo") == "other"
