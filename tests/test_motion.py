@@ -1,0 +1,292 @@
+"""Odometry motion model (Prob. Rob. Table 5.6) and the map-based model (section 5.5)."""
+
+import math
+from types import SimpleNamespace
+
+import numba
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+from mcl.kernels import motion as km
+from mcl.maps import OccupancyGrid
+from mcl.motion import OdometryMotionModel, allowed_mask, noise_sigmas, odometry_deltas
+
+
+def motion_cfg(noise_form="variance", alphas=(0.1, 0.05, 0.2, 0.03), max_tries=10):
+    a1, a2, a3, a4 = alphas
+    return SimpleNamespace(model="odometry", noise_form=noise_form, alpha1=a1, alpha2=a2, alpha3=a3,
+                           alpha4=a4, map_rejection=True, max_tries=max_tries, robot_radius=0.0)
+
+
+def wrap_np(a):
+    """(-pi, pi], written independently of the kernel's formula."""
+    w = np.arctan2(np.sin(a), np.cos(a))
+    return np.where(w <= -np.pi, w + 2 * np.pi, w)
+
+
+def random_particles(rng, n, spread=2.0):
+    p = np.empty((3, n))
+    p[0:2] = rng.uniform(-spread, spread, size=(2, n))
+    p[2] = rng.uniform(-np.pi, np.pi, size=n)
+    return p
+
+
+def numpy_motion(p, noise, deltas, sigmas):
+    """Table 5.6 lines 5-10 in NumPy, with the noise added: the oracle for the kernels."""
+    r1 = deltas[0] + sigmas[0] * noise[0]
+    tr = deltas[1] + sigmas[1] * noise[1]
+    r2 = deltas[2] + sigmas[2] * noise[2]
+    return np.stack([p[0] + tr * np.cos(p[2] + r1), p[1] + tr * np.sin(p[2] + r1), wrap_np(p[2] + r1 + r2)])
+
+
+# ---------------------------------------------------------------- deltas and sigmas
+
+def test_odometry_deltas_forward_turn_and_in_place():
+    r1, t, r2 = odometry_deltas((1.0, 2.0, 0.5), (1.0 + math.cos(1.0), 2.0 + math.sin(1.0), 0.2))
+    assert r1 == pytest.approx(0.5) and t == pytest.approx(1.0) and r2 == pytest.approx(0.2 - 1.0)
+    # under 1 cm, rot1 = 0 and rot2 carries the whole turn (AMCL)
+    r1, t, r2 = odometry_deltas((0.0, 0.0, 3.0), (0.005, 0.005, -3.0))
+    assert r1 == 0.0 and t == pytest.approx(math.hypot(0.005, 0.005))
+    assert r2 == pytest.approx(-6.0 + 2 * math.pi)  # wrapped through +-pi
+
+
+def test_noise_sigmas_both_forms():
+    cfg_v, cfg_s = motion_cfg("variance"), motion_cfg("std")
+    a1, a2, a3, a4 = 0.1, 0.05, 0.2, 0.03
+    r1, t, r2 = 0.3, 0.5, -0.2
+    s = noise_sigmas(r1, t, r2, cfg_v)
+    assert s == pytest.approx((math.sqrt(a1 * r1**2 + a2 * t**2), math.sqrt(a3 * t**2 + a4 * (r1**2 + r2**2)),
+                               math.sqrt(a1 * r2**2 + a2 * t**2)), rel=1e-12)
+    s = noise_sigmas(r1, t, r2, cfg_s)
+    assert s == pytest.approx((a1 * abs(r1) + a2 * t, a3 * t + a4 * (abs(r1) + abs(r2)), a1 * abs(r2) + a2 * t),
+                              rel=1e-12)
+    with pytest.raises(ValueError, match="noise_form"):
+        noise_sigmas(r1, t, r2, SimpleNamespace(**{**vars(cfg_v), "noise_form": "bogus"}))
+
+
+def test_reversing_robot_gets_small_noise():
+    """Driving backwards: rot1 ~ pi, but the noise uses min(|rot|, |rot - pi|) ~ 0."""
+    cfg = motion_cfg()
+    back = odometry_deltas((0.0, 0.0, 0.3), (-0.5 * math.cos(0.3), -0.5 * math.sin(0.3), 0.3))
+    fwd = odometry_deltas((0.0, 0.0, 0.3), (0.5 * math.cos(0.3), 0.5 * math.sin(0.3), 0.3))
+    assert abs(back[0]) == pytest.approx(math.pi) and back[1] == pytest.approx(0.5)
+    assert noise_sigmas(*back, cfg) == pytest.approx(noise_sigmas(*fwd, cfg), abs=1e-9)
+    # and the sampled headings stay near the start heading (not spread by ~pi)
+    rng = np.random.default_rng(7)
+    p = np.zeros((3, 20_000))
+    p[2] = 0.3
+    new, ok, _ = OdometryMotionModel(cfg).sample(p, (0.0, 0.0, 0.3), (-0.5 * math.cos(0.3), -0.5 * math.sin(0.3), 0.3), rng)
+    dth = wrap_np(new[2] - 0.3)
+    # sigma_rot1 = sigma_rot2 = sqrt(alpha2) * 0.5 ~ 0.11 rad: heading std ~ 0.16 rad
+    assert np.std(dth) < 0.25
+    assert np.mean(new[0]) == pytest.approx(-0.5 * math.cos(0.3), abs=0.01)
+
+
+# ---------------------------------------------------------------- kernels against NumPy
+
+@pytest.mark.parametrize("form", ["variance", "std"])
+def test_kernel_matches_numpy_on_same_noise(form):
+    rng = np.random.default_rng(1)
+    n = 5000
+    p = random_particles(rng, n)
+    noise = rng.standard_normal((3, n))
+    deltas = odometry_deltas((0.2, -0.1, 0.4), (0.5, 0.3, 1.2))
+    sig = noise_sigmas(*deltas, motion_cfg(form))
+    out = np.empty_like(p)
+    km.sample_odometry(p, noise, *deltas, *sig, out)
+    np.testing.assert_allclose(out[:2], numpy_motion(p, noise, deltas, sig)[:2], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(wrap_np(out[2] - numpy_motion(p, noise, deltas, sig)[2]), 0.0, atol=1e-12)
+    assert np.all(out[2] > -np.pi) and np.all(out[2] <= np.pi)
+
+
+@pytest.mark.parametrize("odom_now", [(0.7, 0.2, 0.5), (-0.4, 0.1, 0.05), (0.3, -0.6, -2.9), (0.1, 0.0, 2.0)])
+def test_zero_alphas_apply_the_odometry_delta_in_the_particle_frame(odom_now):
+    """No noise: each particle moves by odom_prev^-1 * odom_now composed onto its own pose."""
+    odom_prev = (0.1, 0.0, 0.3)
+    rng = np.random.default_rng(2)
+    p = random_particles(rng, 1000)
+    new, ok, tries = OdometryMotionModel(motion_cfg(alphas=(0, 0, 0, 0))).sample(p, odom_prev, odom_now, rng)
+    c, s = math.cos(odom_prev[2]), math.sin(odom_prev[2])
+    dx, dy = odom_now[0] - odom_prev[0], odom_now[1] - odom_prev[1]
+    lx, ly = c * dx + s * dy, -s * dx + c * dy  # the step in the odometry frame
+    dth = odom_now[2] - odom_prev[2]
+    exp_x = p[0] + np.cos(p[2]) * lx - np.sin(p[2]) * ly
+    exp_y = p[1] + np.sin(p[2]) * lx + np.cos(p[2]) * ly
+    np.testing.assert_allclose(new[0], exp_x, atol=1e-12)
+    np.testing.assert_allclose(new[1], exp_y, atol=1e-12)
+    np.testing.assert_allclose(wrap_np(new[2] - (p[2] + dth)), 0.0, atol=1e-12)
+    assert ok.all() and tries == 1.0
+
+
+@pytest.mark.parametrize("form", ["variance", "std"])
+def test_sampled_noise_matches_closed_form_variances(form):
+    """Recover (rot1, trans, rot2) from 200,000 moved particles; compare moments with the sigmas.
+
+    Tolerance: the standard error of a sample variance of N normals is
+    sigma^2 * sqrt(2 / (N - 1)) (0.32 % at N = 200,000); we allow 5 SE. Means
+    within 5 sigma / sqrt(N). A KS test of the standardised noise at p > 1e-3.
+    """
+    cfg = motion_cfg(form, alphas=(0.1, 0.05, 0.01, 0.03))  # small alpha3: trans_hat stays > 0 (6 sigma)
+    deltas = (0.3, 0.5, -0.2)
+    odom_now = (0.5 * math.cos(0.3), 0.5 * math.sin(0.3), 0.1)  # from (0, 0, 0)
+    assert odometry_deltas((0, 0, 0), odom_now) == pytest.approx(deltas)
+    sig = noise_sigmas(*deltas, cfg)
+    n = 200_000
+    rng = np.random.default_rng(12345)
+    new, _, _ = OdometryMotionModel(cfg).sample(np.zeros((3, n)), (0.0, 0.0, 0.0), odom_now, rng)
+    trans = np.hypot(new[0], new[1])
+    rot1 = np.arctan2(new[1], new[0])
+    assert np.abs(rot1 - deltas[0]).max() < 1.0  # no trans_hat < 0 (that would flip rot1 by pi)
+    rot2 = wrap_np(new[2] - rot1)
+    for sample, mean, sd in ((rot1, deltas[0], sig[0]), (trans, deltas[1], sig[1]), (rot2, deltas[2], sig[2])):
+        err = sample - mean
+        assert abs(err.mean()) < 5 * sd / math.sqrt(n)
+        assert err.var(ddof=1) == pytest.approx(sd**2, rel=5 * math.sqrt(2 / (n - 1)))
+        assert stats.kstest(err / sd, "norm").pvalue > 1e-3
+
+
+@given(st.floats(-1e3, 1e3, allow_nan=False))
+@settings(max_examples=300, deadline=None)
+def test_wrap_is_in_half_open_interval(a):
+    w = km.wrap(a)
+    assert -math.pi < w <= math.pi
+    k = (a - w) / (2 * math.pi)
+    assert abs(k - round(k)) < 1e-9
+
+
+# ---------------------------------------------------------------- map-based motion model
+
+def corridor_grid():
+    """20 x 100 cells of 0.1 m, origin (-5, -1): a free corridor in rows 8..11 (y in [-0.2, 0.2)), walls elsewhere."""
+    occ = np.full((20, 100), 100, dtype=np.int8)
+    occ[8:12, :] = 0
+    occ[8:12, 60:65] = -1  # an unknown patch inside the corridor: not allowed
+    return OccupancyGrid.from_occupancy(occ, 0.1, (-5.0, -1.0))
+
+
+def numpy_allowed(grid, mask, x, y):
+    ix = np.floor((x - grid.origin[0]) / grid.resolution).astype(np.int64)
+    iy = np.floor((y - grid.origin[1]) / grid.resolution).astype(np.int64)
+    inside = (ix >= 0) & (ix < mask.shape[1]) & (iy >= 0) & (iy < mask.shape[0])
+    res = np.zeros(x.shape, dtype=bool)
+    res[inside] = mask[iy[inside], ix[inside]] != 0
+    return res
+
+
+def test_allowed_mask_is_free_and_clear_of_walls():
+    g = corridor_grid()
+    m0 = allowed_mask(g, 0.0)
+    assert m0.dtype == np.uint8
+    np.testing.assert_array_equal(m0 != 0, g.free)
+    m1 = allowed_mask(g, 0.15)  # only the two middle rows are more than 0.15 m from a wall cell centre
+    assert not m1[8].any() and not m1[11].any() and m1[9, 0:60].all() and m1[10, 0:60].all()
+    assert not m1[9:11, 60:65].any()
+
+
+def test_map_kernel_matches_numpy_on_same_noise():
+    g = corridor_grid()
+    mask = allowed_mask(g, 0.0)
+    rng = np.random.default_rng(3)
+    n = 4000
+    p = np.stack([rng.uniform(-5.5, 5.5, n), rng.uniform(-1.2, 1.2, n), rng.uniform(-np.pi, np.pi, n)])
+    noise = rng.standard_normal((3, n))
+    idx = np.sort(rng.choice(n, size=n // 2, replace=False)).astype(np.int64)
+    deltas, sig = (0.1, 0.3, -0.05), (0.2, 0.1, 0.05)
+    out = np.full_like(p, np.nan)
+    ok = np.zeros(n, dtype=bool)
+    n_ok = km.sample_odometry_map(p, noise[:, :idx.size], idx, *deltas, *sig, mask,
+                                  g.origin[0], g.origin[1], 1.0 / g.resolution, out, ok)
+    ref = numpy_motion(p[:, idx], noise[:, :idx.size], deltas, sig)
+    np.testing.assert_allclose(out[:2, idx], ref[:2], atol=1e-12)
+    exp_ok = numpy_allowed(g, mask, ref[0], ref[1])
+    np.testing.assert_array_equal(ok[idx], exp_ok)
+    assert n_ok == exp_ok.sum() and 0 < n_ok < idx.size
+    untouched = np.setdiff1d(np.arange(n), idx)
+    assert np.isnan(out[:, untouched]).all() and not ok[untouched].any()
+
+
+def test_map_rejection_matches_numpy_retry_loop():
+    """The whole sample() with a map against a NumPy retry loop drawing from the same seed."""
+    g = corridor_grid()
+    mask = allowed_mask(g, 0.0)
+    cfg = motion_cfg(alphas=(0.5, 0.5, 0.5, 0.5), max_tries=6)
+    n = 3000
+    rng0 = np.random.default_rng(4)
+    p = np.stack([rng0.uniform(-4, 4, n), rng0.uniform(-0.19, 0.19, n), rng0.normal(0, 0.2, n)])
+    odom_prev, odom_now = (0.0, 0.0, 0.0), (0.3, 0.05, 0.2)
+    new, ok, tries = OdometryMotionModel(cfg).sample(p, odom_prev, odom_now, np.random.default_rng(99),
+                                                     allowed=mask, grid=g)
+    rng = np.random.default_rng(99)
+    deltas = odometry_deltas(odom_prev, odom_now)
+    sig = noise_sigmas(*deltas, cfg)
+    ref = numpy_motion(p, rng.standard_normal((3, n)), deltas, sig)
+    ref_ok = numpy_allowed(g, mask, ref[0], ref[1])
+    draws = n
+    for _ in range(cfg.max_tries - 1):
+        idx = np.flatnonzero(~ref_ok)
+        if idx.size == 0:
+            break
+        draws += idx.size
+        ref[:, idx] = numpy_motion(p[:, idx], rng.standard_normal((3, idx.size)), deltas, sig)
+        ref_ok[idx] = numpy_allowed(g, mask, ref[0, idx], ref[1, idx])
+    np.testing.assert_allclose(new[:2], ref[:2], atol=1e-12)
+    np.testing.assert_array_equal(ok, ref_ok)
+    assert tries == pytest.approx(draws / n) and tries > 1.2  # the corridor rejects a good share
+
+
+def test_map_rejection_leaves_no_particle_outside_free_space():
+    """Noisy motion in a 0.4 m corridor: with enough tries every particle lands on an allowed cell."""
+    g = corridor_grid()
+    mask = allowed_mask(g, 0.0)
+    cfg = motion_cfg(alphas=(0.3, 0.3, 0.3, 0.3), max_tries=100)
+    rng = np.random.default_rng(5)
+    n = 20_000
+    p = np.stack([rng.uniform(-4, 0, n), rng.uniform(-0.15, 0.15, n), rng.normal(0, 0.1, n)])
+    new, ok, tries = OdometryMotionModel(cfg).sample(p, (0, 0, 0), (0.5, 0.0, 0.0), rng, allowed=mask, grid=g)
+    assert ok.all()
+    assert numpy_allowed(g, mask, new[0], new[1]).all()
+    assert tries > 1.0  # some first tries hit the walls or the unknown patch
+    # without the map the same motion puts many particles into the walls
+    free, _, _ = OdometryMotionModel(cfg).sample(p, (0, 0, 0), (0.5, 0.0, 0.0), np.random.default_rng(5))
+    assert (~numpy_allowed(g, mask, free[0], free[1])).mean() > 0.05
+
+
+def test_particle_that_cannot_reach_free_space_is_not_ok():
+    g = corridor_grid()
+    mask = allowed_mask(g, 0.0)
+    cfg = motion_cfg(alphas=(0.001, 0.001, 0.001, 0.001), max_tries=5)
+    p = np.array([[0.0, 0.0], [0.0, 0.0], [0.0, math.pi / 2]])  # the second faces the wall
+    rng = np.random.default_rng(6)
+    new, ok, tries = OdometryMotionModel(cfg).sample(p, (0, 0, 0), (0.5, 0.0, 0.0), rng, allowed=mask, grid=g)
+    assert ok.tolist() == [True, False]
+    assert tries == pytest.approx((1 + 5) / 2)  # the first lands at once, the second uses all 5 tries
+    assert new[1, 1] > 0.2  # its last try, inside the wall (y >= 0.2 is occupied)
+
+
+def test_map_without_grid_is_an_error():
+    with pytest.raises(ValueError, match="grid"):
+        OdometryMotionModel(motion_cfg()).sample(np.zeros((3, 2)), (0, 0, 0), (1, 0, 0),
+                                                  np.random.default_rng(0), allowed=np.ones((2, 2), np.uint8))
+
+
+def test_same_result_with_one_and_two_threads():
+    g = corridor_grid()
+    mask = allowed_mask(g, 0.0)
+    cfg = motion_cfg(alphas=(0.3, 0.3, 0.3, 0.3))
+    p = np.stack([np.linspace(-4, 4, 50_000), np.zeros(50_000), np.zeros(50_000)])
+    results = []
+    saved = numba.get_num_threads()
+    try:
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(threads)
+            m = OdometryMotionModel(cfg)
+            a = m.sample(p, (0, 0, 0), (0.4, 0.1, 0.3), np.random.default_rng(8), allowed=mask, grid=g)
+            b = m.sample(p, (0, 0, 0), (0.4, 0.1, 0.3), np.random.default_rng(8))
+            results.append((a[0].copy(), a[1].copy(), a[2], b[0].copy()))
+    finally:
+        numba.set_num_threads(saved)
+    (a0, ok0, t0, b0), (a1, ok1, t1, b1) = results
+    assert np.array_equal(a0, a1) and np.array_equal(ok0, ok1) and t0 == t1 and np.array_equal(b0, b1)
