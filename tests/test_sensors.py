@@ -1,0 +1,185 @@
+"""Likelihood field range finder model (Prob. Rob. Table 6.3) and scan -> endpoints."""
+
+import math
+from types import SimpleNamespace
+
+import numba
+import numpy as np
+import pytest
+from scipy import stats
+
+from mcl.kernels.likelihood import likelihood_field_loglik
+from mcl.maps import OccupancyGrid
+from mcl.sensors import LikelihoodField, beam_endpoints, point_log_likelihood, scan_endpoints
+
+
+def sensor_cfg(**kw):
+    base = dict(model="likelihood_field", z_hit=0.9, z_rand=0.1, sigma_hit=0.2, likelihood_max_dist=1.0,
+                max_beams=1000, range_min=0.05, range_max=10.0, exponent=1.0, laser_pose=None)
+    base.update(kw)
+    return SimpleNamespace(**base)
+
+
+def box_grid():
+    """A 6 m x 4 m room (0.05 m cells) with 1-cell walls, an inner pillar and an unknown band outside x > 5.5."""
+    occ = np.zeros((80, 120), dtype=np.int8)
+    occ[0, :] = occ[-1, :] = 100
+    occ[:, 0] = occ[:, 109] = 100
+    occ[30:40, 40:50] = 100
+    occ[:, 110:] = -1
+    return OccupancyGrid.from_occupancy(occ, 0.05, (-1.0, -2.0))
+
+
+def numpy_loglik(grid, table, offmap, exponent, particles, endpoints):
+    """The same formula written out with NumPy, for every particle-beam pair."""
+    x, y, th = (particles[i][:, None] for i in range(3))
+    bx, by = endpoints[0][None, :], endpoints[1][None, :]
+    ex = x + np.cos(th) * bx - np.sin(th) * by
+    ey = y + np.sin(th) * bx + np.cos(th) * by
+    ix = np.floor((ex - grid.origin[0]) / grid.resolution).astype(np.int64)
+    iy = np.floor((ey - grid.origin[1]) / grid.resolution).astype(np.int64)
+    inside = (ix >= 0) & (ix < table.shape[1]) & (iy >= 0) & (iy < table.shape[0])
+    vals = np.full(ex.shape, offmap, dtype=np.float64)
+    vals[inside] = table[iy[inside], ix[inside]]
+    return exponent * vals.sum(axis=1)
+
+
+# ---------------------------------------------------------------- the table
+
+def test_table_is_log_of_hit_plus_random_at_clipped_distance():
+    g = box_grid()
+    cfg = sensor_cfg()
+    lf = LikelihoodField(g, cfg)
+    assert lf.table.dtype == np.float32 and lf.table.shape == g.occupancy.shape
+    d = np.minimum(g.distance.astype(np.float64), cfg.likelihood_max_dist)
+    expected = np.log(cfg.z_hit * stats.norm.pdf(d, 0.0, cfg.sigma_hit) + cfg.z_rand / cfg.range_max)
+    np.testing.assert_allclose(lf.table, expected, rtol=1e-6)
+    # off-map: the value at likelihood_max_dist, which is also the table's minimum
+    off = math.log(cfg.z_hit * stats.norm.pdf(1.0, 0.0, 0.2) + 0.1 / 10.0)
+    assert lf.offmap == pytest.approx(off, rel=1e-6)
+    assert lf.table.min() == pytest.approx(off, rel=1e-6)
+    # occupied cells score the peak, unknown cells their own distance value
+    assert lf.table[0, 5] == pytest.approx(math.log(0.9 / (math.sqrt(2 * math.pi) * 0.2) + 0.01), rel=1e-6)
+    assert lf.table[40, 112] == pytest.approx(float(point_log_likelihood(g.distance[40, 112], cfg)), rel=1e-6)
+    assert lf.table[40, 112] > lf.offmap  # 0.15 m from the wall at column 109
+
+
+# ---------------------------------------------------------------- the kernel against NumPy
+
+@pytest.mark.parametrize("exponent", [1.0, 0.3])
+def test_kernel_matches_numpy_including_off_map(exponent):
+    g = box_grid()
+    lf = LikelihoodField(g, sensor_cfg(exponent=exponent))
+    rng = np.random.default_rng(0)
+    n, k = 2000, 37
+    # particles inside and around the map (some endpoints fall off it, some particles are off it)
+    p = np.stack([rng.uniform(-3, 8, n), rng.uniform(-4, 4, n), rng.uniform(-np.pi, np.pi, n)])
+    p[0, :20] = 30.0  # far off the map: every endpoint is off-map
+    ang = np.linspace(-np.pi, np.pi, k, endpoint=False)
+    r = rng.uniform(0.1, 6.0, k)
+    e = np.stack([0.1 + r * np.cos(ang), -0.05 + r * np.sin(ang)])
+    got = lf.log_likelihood(p, e)
+    ref = numpy_loglik(g, lf.table, lf.offmap, exponent, p, e)
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(got[:20], exponent * k * lf.offmap, rtol=1e-12)
+    # the mixed particles exercise both branches: some endpoints on, some off the map
+    ex = p[0, 20:, None] + np.cos(p[2, 20:, None]) * e[0] - np.sin(p[2, 20:, None]) * e[1]
+    off = (ex < -1.0) | (ex >= 5.0)
+    assert 0.1 < off.mean() < 0.9
+
+
+def test_off_map_endpoint_scores_value_at_max_dist_and_empty_scan_scores_zero():
+    g = box_grid()
+    lf = LikelihoodField(g, sensor_cfg())
+    p = np.array([[0.0, 100.0, -50.0], [0.0, 0.0, -50.0], [0.0, 1.0, -2.0]])
+    e = np.array([[0.5, -20.0], [0.0, 0.0]])  # the second endpoint is off-map for every particle
+    ll = lf.log_likelihood(p, e)
+    assert ll[1] == pytest.approx(2 * lf.offmap) and ll[2] == pytest.approx(2 * lf.offmap)
+    ix, iy = g.world_to_cell(0.5, 0.0)
+    assert ll[0] == pytest.approx(float(lf.table[iy, ix]) + lf.offmap)
+    np.testing.assert_array_equal(lf.log_likelihood(p, np.empty((2, 0))), np.zeros(3))
+
+
+def test_true_pose_scores_best_among_perturbed_poses():
+    """Simulate a scan in the box by ray marching; the true pose beats every shifted/rotated pose."""
+    g = box_grid()
+    cfg = sensor_cfg(sigma_hit=0.1)
+    lf = LikelihoodField(g, cfg)
+    true = np.array([1.5, 0.3, 0.4])
+    ang = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    ranges = np.empty_like(ang)
+    for i, a in enumerate(ang):  # march 1 cm steps until an occupied cell
+        for r in np.arange(0.0, 10.0, 0.01):
+            ix, iy = g.world_to_cell(true[0] + r * math.cos(true[2] + a), true[1] + r * math.sin(true[2] + a))
+            if g.occupied[iy, ix]:
+                break
+        ranges[i] = r
+    e = beam_endpoints(ranges, ang, None, cfg, (0.0, 0.0, 0.0))
+    offsets = [(dx, dy, dth) for dx in (-0.2, 0, 0.2) for dy in (-0.2, 0, 0.2) for dth in (-0.1, 0, 0.1)]
+    poses = np.array([true + np.array(o) for o in offsets]).T.copy()
+    ll = lf.log_likelihood(poses, e)
+    assert np.argmax(ll) == offsets.index((0, 0, 0))
+
+
+# ---------------------------------------------------------------- endpoints
+
+def test_beam_endpoints_skip_invalid_and_apply_laser_pose():
+    cfg = sensor_cfg(range_min=0.1, range_max=8.0)
+    ranges = np.array([1.0, np.nan, 0.05, 8.0, 2.0, np.inf, 7.9, 5.0, -1.0])
+    angles = np.linspace(-1.0, 1.0, ranges.size)
+    e = beam_endpoints(ranges, angles, 6.0, cfg, (0.2, -0.1, 0.5))  # the scan's own max_range = 6
+    keep = [0, 4, 7]  # 1.0, 2.0, 5.0; 7.9 >= the scan max 6
+    r, a = ranges[keep], angles[keep] + 0.5
+    np.testing.assert_allclose(e, np.stack([0.2 + r * np.cos(a), -0.1 + r * np.sin(a)]), atol=1e-12)
+    e2 = beam_endpoints(ranges, angles, None, cfg, (0.0, 0.0, 0.0))
+    assert e2.shape == (2, 4)  # without the scan's max_range, 7.9 < range_max is a return
+
+
+def test_beam_endpoints_subsample_over_all_beams_then_drop_invalid():
+    cfg = sensor_cfg(max_beams=60)
+    ranges = np.full(180, 3.0)
+    ranges[::2] = np.inf  # every even beam has no return
+    angles = np.deg2rad(np.arange(180) - 90.0)
+    e = beam_endpoints(ranges, angles, None, cfg, (0.0, 0.0, 0.0))
+    chosen = np.unique(np.rint(np.linspace(0, 179, 60)).astype(int))
+    assert chosen.size == 60 and chosen[0] == 0 and chosen[-1] == 179
+    odd = chosen[chosen % 2 == 1]
+    np.testing.assert_allclose(e, np.stack([3 * np.cos(angles[odd]), 3 * np.sin(angles[odd])]), atol=1e-12)
+    assert beam_endpoints(np.full(40, 3.0), np.zeros(40), None, cfg, (0, 0, 0)).shape == (2, 40)
+
+
+def test_scan_endpoints_uses_scan_fields():
+    cfg = sensor_cfg()
+    scan = SimpleNamespace(ranges=np.array([1.0, 2.0, 20.0]), angle_min=-0.5, angle_increment=0.5,
+                           max_range=None, laser_offset=np.array([0.1, 0.0, 0.0]))
+    e = scan_endpoints(scan, cfg)
+    np.testing.assert_allclose(e, [[0.1 + math.cos(-0.5), 2.1], [math.sin(-0.5), 0.0]], atol=1e-12)
+    e = scan_endpoints(scan, sensor_cfg(laser_pose=(0.0, 0.0, 0.0)))
+    np.testing.assert_allclose(e[0], [math.cos(-0.5), 2.0], atol=1e-12)
+
+
+def test_same_result_with_one_and_two_threads():
+    g = box_grid()
+    lf = LikelihoodField(g, sensor_cfg())
+    rng = np.random.default_rng(3)
+    n = 50_000
+    p = np.stack([rng.uniform(-1, 5, n), rng.uniform(-2, 2, n), rng.uniform(-np.pi, np.pi, n)])
+    e = np.stack([np.linspace(-3, 3, 61), np.linspace(2, -2, 61)])
+    saved = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        a = lf.log_likelihood(p, e).copy()
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        b = lf.log_likelihood(p, e).copy()
+    finally:
+        numba.set_num_threads(saved)
+    assert np.array_equal(a, b)
+
+
+def test_kernel_direct_call_writes_out():
+    table = np.arange(12, dtype=np.float32).reshape(3, 4)
+    p = np.array([[0.5], [0.5], [0.0]])  # cell (0, 0) with origin (0, 0), 1 m cells
+    e = np.array([[0.0, 1.0, 0.0, 5.0], [0.0, 0.0, 2.0, 0.0]])  # cells (0,0), (0,1), (2,0), off-map
+    out = np.full(1, np.nan)
+    likelihood_field_loglik(p, e, table, 0.0, 0.0, 1.0, -100.0, 0.5, out)
+    assert out[0] == pytest.approx(0.5 * (0 + 1 + 8 - 100))
