@@ -139,6 +139,13 @@ def test_particles_every_third_step(tmp_path):
     assert count_rows(path, "/world/estimate", "step") == STEPS
 
 
+def test_particles_max_zero_logs_no_particles(tmp_path):
+    path = tmp_path / "none.rrd"
+    write_run(path, n_steps=3, particles_max=0)
+    assert count_rows(path, "/world/particles", "step") == 0
+    assert count_rows(path, "/world/estimate", "step") == 3
+
+
 def test_map_is_static_image_placed_in_world(run_every1):
     path, _ = run_every1
     assert count_rows(path, "/world/map", "step") == 0
@@ -193,7 +200,26 @@ def test_estimate_trails_truth_and_blueprint(run_every1):
     assert count_rows(path, "/world/truth/trail", "step") == 0
     assert count_rows(path, "/world/truth", "step") == STEPS
     assert any("LineStrips2D:strips" in c for _, c in rows(path, "/world/truth", None))
-    assert len(RrdReader(path).blueprints()) >= 1
+
+
+def test_blueprint_world_view_and_stats_views(run_every1):
+    path, logged = run_every1
+    reader = RrdReader(path)
+    assert len(reader.blueprints()) == 1  # sent once, when the stats names were first seen
+    origins, queries, overrides = [], [], []
+    for c in reader.stream(store=reader.blueprints()[0]).to_chunks():
+        batch = c.to_record_batch()
+        names = batch.schema.names
+        if "ViewBlueprint:space_origin" in names:
+            origins += batch.column("ViewBlueprint:space_origin").to_pylist()[0]
+        if "ViewContents:query" in names:
+            queries += batch.column("ViewContents:query").to_pylist()[0]
+        if "VisibleTimeRanges:ranges" in names:
+            overrides.append(c.entity_path)
+    assert "/" in origins and "+ /world/**" in queries
+    for name in logged[0]:
+        assert f"+ /stats/{name}" in queries, name
+    assert any(p.endswith("/overrides/world/odometry/trail/visualizers") for p in overrides)
 
 
 def test_no_component_both_static_and_temporal(run_every1):
@@ -244,6 +270,8 @@ def test_bad_arguments():
         RerunLogger("save", None)
     with pytest.raises(ValueError, match="particles_every"):
         RerunLogger("off", None, particles_every=0)
+    with pytest.raises(ValueError, match="particles_max"):
+        RerunLogger("off", None, particles_max=-1)
 
 
 # --- pure helpers -----------------------------------------------------------------------------
