@@ -52,7 +52,18 @@ def make_grid():
 
 
 def step_stats(k: int) -> dict[str, float]:
-    return {"ess": 100.0 + k, "particles": float(N), "time_ms/predict": 0.5 * k, "error_xy": 0.01 * k, "tries": float(k % 3)}
+    return {
+        "ess": 100.0 + k,
+        "particles": float(N),
+        "time_ms/predict": 0.5 * k,
+        "error_xy": 0.01 * k,
+        "tries": float(k % 3),
+    }
+
+
+def tiny_step(log: RerunLogger, step: int, t: float) -> None:
+    four = np.full(4, 0.25)
+    log.log_step(step, t, particles=np.zeros((3, 4)), weights=four, estimate=np.zeros(3), cov=np.eye(3), stats={"ess": 4.0})
 
 
 def write_run(path: Path, n_steps: int = STEPS, **kwargs) -> list[dict[str, float]]:
@@ -236,7 +247,7 @@ def test_off_mode_writes_nothing(tmp_path):
     path = tmp_path / "off.rrd"
     with RerunLogger("off", path) as log:
         log.log_map(make_grid())
-        log.log_step(0, 0.0, particles=np.zeros((3, 4)), weights=np.full(4, 0.25), estimate=np.zeros(3), cov=np.eye(3), stats={"ess": 4.0})
+        tiny_step(log, 0, 0.0)
         assert not log.enabled
     log.close()
     assert list(tmp_path.iterdir()) == []
@@ -249,7 +260,7 @@ def test_spawn_without_display_falls_back_to_save(tmp_path, monkeypatch, capsys)
     path = tmp_path / "spawned.rrd"
     with RerunLogger("spawn", path) as log:
         assert log.mode == "save"
-        log.log_step(3, 1.0, particles=np.zeros((3, 4)), weights=np.full(4, 0.25), estimate=np.zeros(3), cov=np.eye(3), stats={"ess": 4.0})
+        tiny_step(log, 3, 1.0)
     err = capsys.readouterr().err
     assert "no display" in err and str(path) in err
     assert rows(path, "/stats/ess", "step")[0][0] == 3
