@@ -153,6 +153,11 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
         raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
     if origin is Literal:
         choices = typing.get_args(tp)
+        if isinstance(value, bool):
+            # YAML 1.1 reads a bare off/no as false and on/yes as true: map back to the choice meant.
+            spelled = [c for c in choices if c in (("on", "yes", "true") if value else ("off", "no", "false"))]
+            if len(spelled) == 1:
+                value = spelled[0]
         if value not in choices:
             hint = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
             extra = f" (did you mean {hint[0]}?)" if hint else ""

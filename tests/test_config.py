@@ -96,3 +96,11 @@ def test_override_errors():
 def test_missing_file_is_a_config_error(tmp_path):
     with pytest.raises(ConfigError, match="nope.yaml: cannot read"):
         load_config(tmp_path / "nope.yaml")
+
+
+def test_yaml_off_means_the_off_choice(tmp_path):
+    # YAML 1.1 reads a bare `off` as false; rerun.mode must still be "off".
+    assert load_config(write(tmp_path, "rerun:\n  mode: off\n")).rerun.mode == "off"
+    assert load_config(None, ["rerun.mode=off"]).rerun.mode == "off"
+    with pytest.raises(ConfigError, match="rerun.mode: expected one of"):
+        load_config(None, ["rerun.mode=true"])
