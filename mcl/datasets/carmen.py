@@ -37,7 +37,7 @@ import numpy as np
 
 from mcl.errors import DataError
 
-__all__ = ["Scan", "Log", "read_carmen", "flaser_angle_increment", "LASER_KINDS"]
+__all__ = ["Scan", "Log", "read_carmen", "interpolate_odometry", "flaser_angle_increment", "LASER_KINDS"]
 
 LASER_KINDS = ("FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
 _AUTO_ORDER = ("FLASER", "ROBOTLASER1", "RAWLASER1")
