@@ -264,7 +264,7 @@ def run(
         "ms_per_update": {k: 1e3 * v / n_up for k, v in stage_totals.items()},
         "outputs": {
             "trajectory": str(out_dir / "trajectory.tum"),
-            "recording": str(rrd_path) if (viz is not None and viz.saved_path is not None) else None,
+            "recording": str(viz.path) if (viz is not None and viz.path is not None and Path(viz.path).exists()) else None,
             "config": str(out_dir / "config.yaml"),
         },
     }
@@ -289,7 +289,7 @@ def run(
         text += " " + format_eval(summary["eval"]) + "."
     text += f" Outputs in {out_dir}."
     if summary["outputs"]["recording"]:
-        text += f" Open the recording with: rerun {rrd_path}"
+        text += f" Open the recording with: rerun {summary['outputs']['recording']}"
     summary["text"] = text
     echo(text)
     return summary
