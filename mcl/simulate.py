@@ -1,0 +1,789 @@
+"""Synthetic indoor world, robot drive, noisy CARMEN log and exact truth.
+
+``simulate(outdir, seed=...)`` writes a complete data set, deterministic for
+a seed:
+
+``map.yaml`` + ``map.pgm``
+    The floor plan (0.05 m cells): outer walls around a building of about
+    20 m x 15 m with a corner cut off, a main corridor and a side corridor,
+    rooms from a random binary space partition joined by doorways (a random
+    spanning tree of the room adjacency graph plus extra doors), furniture
+    and pillars. Unknown (205) outside the outer walls.
+``log.clf``
+    CARMEN: ``ODOM`` lines at 10 Hz and ``FLASER`` lines at 5 Hz (181 beams
+    over pi, beam i at -pi/2 + i*pi/180, counter-clockwise, laser at the
+    robot centre). Geometries that FLASER cannot express are written as
+    ``ROBOTLASER1``, which carries its own start angle and resolution.
+    Poses are in the odometry frame, which starts at (0, 0, 0).
+``truth.tum``
+    The true pose in the map frame at every scan timestamp.
+``sim.yaml``
+    Every parameter used, the true start pose (for tracking configs) and the
+    kidnapping, if any.
+
+The random streams of the world, the drive, the odometry noise and the
+sensor noise are independent children of one ``SeedSequence(seed)``, so
+changing, say, the sensor noise leaves the world and the path unchanged.
+
+Odometry noise is the sample_motion_model_odometry of Probabilistic
+Robotics (Table 5.6), in its variance form: each tick's true motion
+(rot1, trans, rot2) is perturbed with variances ``a1*rot^2 + a2*trans^2``
+(rotations) and ``a3*trans^2 + a4*(rot1^2 + rot2^2)`` (translation), then a
+systematic drift is applied (a scale on translation and a yaw bias per
+metre), as real wheel odometry has.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mcl.errors import ConfigError
+
+__all__ = ["simulate", "make_world", "World", "add_arguments", "run_from_args"]
+
+RESOLUTION = 0.05
+_MARGIN = 1.0  # metres of unknown around the building
+_T_OUT = 0.15  # outer wall thickness
+_T_IN = 0.10  # inner wall thickness
+_MIN_ROOM = 3.0
+_DOOR_MARGIN = 0.35  # from a door's edge to the nearest perpendicular wall
+_ODOM_RATE = 10.0  # Hz, truth and ODOM
+_SCAN_EVERY = 2  # odometry ticks per scan (5 Hz)
+_SIM_DT = 0.01  # integration step, s
+
+
+# --------------------------------------------------------------------------
+# World
+# --------------------------------------------------------------------------
+
+@dataclass(eq=False)
+class World:
+    """A generated floor plan.
+
+    ``occupancy`` is int8 (H, W), row 0 at the bottom: 100 occupied, 0 free,
+    -1 unknown. ``distance`` is metres from each cell centre to the nearest
+    occupied cell centre; ``reachable`` marks the free cells the robot's
+    planner may use (clear of obstacles by ``clearance`` and connected).
+    """
+
+    occupancy: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+    distance: np.ndarray
+    reachable: np.ndarray
+    room_id: np.ndarray  # int32 (H, W): index of the room/corridor a cell lies in, -1 elsewhere
+    clearance: float
+
+    @property
+    def blocked(self) -> np.ndarray:
+        return self.occupancy == 100
+
+
+class _Raster:
+    """World rectangles -> cell index ranges (a cell belongs if its centre is inside)."""
+
+    def __init__(self, shape, origin, res):
+        self.shape = shape
+        self.ox, self.oy = origin
+        self.res = res
+
+    def slices(self, x0, y0, x1, y1):
+        r = self.res
+        ix0 = max(math.ceil((x0 - self.ox) / r - 0.5 - 1e-9), 0)
+        ix1 = min(math.floor((x1 - self.ox) / r - 0.5 + 1e-9), self.shape[1] - 1)
+        iy0 = max(math.ceil((y0 - self.oy) / r - 0.5 - 1e-9), 0)
+        iy1 = min(math.floor((y1 - self.oy) / r - 0.5 + 1e-9), self.shape[0] - 1)
+        return slice(iy0, max(iy1 + 1, iy0)), slice(ix0, max(ix1 + 1, ix0))
+
+
+def _bsp(rect, rng, out):
+    """Split ``rect`` (x0, y0, x1, y1) recursively into rooms."""
+    x0, y0, x1, y1 = rect
+    w, h = x1 - x0, y1 - y0
+    longest = max(w, h)
+    max_side = rng.uniform(4.5, 8.0)
+    if longest < 2 * _MIN_ROOM or (longest <= max_side and rng.random() < 0.7):
+        out.append(rect)
+        return
+    if w >= h:
+        c = rng.uniform(x0 + _MIN_ROOM, x1 - _MIN_ROOM)
+        _bsp((x0, y0, c, y1), rng, out)
+        _bsp((c, y0, x1, y1), rng, out)
+    else:
+        c = rng.uniform(y0 + _MIN_ROOM, y1 - _MIN_ROOM)
+        _bsp((x0, y0, x1, c), rng, out)
+        _bsp((x0, c, x1, y1), rng, out)
+
+
+def _shared_edge(a, b, need):
+    """The wall segment rooms ``a`` and ``b`` share, as (axis, coord, lo, hi), or None.
+
+    axis 0: a vertical wall at x = coord spanning y in [lo, hi]; axis 1: horizontal.
+    Only segments long enough for a door (``need``) count.
+    """
+    eps = 1e-6
+    for axis in (0, 1):
+        lo_a, hi_a = (a[0], a[2]) if axis == 0 else (a[1], a[3])
+        lo_b, hi_b = (b[0], b[2]) if axis == 0 else (b[1], b[3])
+        if abs(hi_a - lo_b) < eps:
+            coord = hi_a
+        elif abs(hi_b - lo_a) < eps:
+            coord = lo_a
+        else:
+            continue
+        o = (1, 3) if axis == 0 else (0, 2)
+        lo, hi = max(a[o[0]], b[o[0]]), min(a[o[1]], b[o[1]])
+        if hi - lo >= need:
+            return axis, coord, lo, hi
+    return None
+
+
+def _components(trav):
+    from scipy.ndimage import label
+
+    return label(trav, structure=np.ones((3, 3), dtype=bool))
+
+
+def make_world(rng: np.random.Generator, *, width: float = 20.0, height: float = 15.0,
+               clearance: float = 0.42) -> World:
+    """Generate a floor plan; ``clearance`` is the planner's distance to obstacles."""
+    from scipy.ndimage import distance_transform_edt
+
+    res = RESOLUTION
+    W, H = width, height
+    shape = (int(round((H + 2 * _MARGIN) / res)), int(round((W + 2 * _MARGIN) / res)))
+    origin = (-_MARGIN, -_MARGIN)
+    ras = _Raster(shape, origin, res)
+
+    # --- layout: a main corridor across, a side corridor off it, room blocks
+    cw = rng.uniform(1.6, 2.1)
+    yc = rng.uniform(0.36, 0.52) * H
+    cw2 = rng.uniform(1.4, 1.8)
+    xv = rng.uniform(0.25, 0.65) * W
+    south = rng.random() < 0.5  # side corridor below or above the main one
+    corridors = [(0.0, yc, W, yc + cw)]
+    if south:
+        corridors.append((xv, 0.0, xv + cw2, yc))
+        blocks = [(0.0, yc + cw, W, H), (0.0, 0.0, xv, yc), (xv + cw2, 0.0, W, yc)]
+    else:
+        corridors.append((xv, yc + cw, xv + cw2, H))
+        blocks = [(0.0, 0.0, W, yc), (0.0, yc + cw, xv, H), (xv + cw2, yc + cw, W, H)]
+    rooms: list[tuple] = []
+    for b in blocks:
+        _bsp(b, rng, rooms)
+
+    door_need = 1.3 + 2 * _DOOR_MARGIN
+    n_rooms = len(rooms)
+    cnode = n_rooms  # all corridor pieces are one open space
+
+    def edges_of(removed):
+        e = []
+        keep = [i for i in range(n_rooms) if i not in removed]
+        for ii, i in enumerate(keep):
+            for j in keep[ii + 1:]:
+                s = _shared_edge(rooms[i], rooms[j], door_need)
+                if s:
+                    e.append((i, j, s))
+            best = None
+            for c in corridors:
+                s = _shared_edge(rooms[i], c, door_need)
+                if s and (best is None or s[3] - s[2] > best[3] - best[2]):
+                    best = s
+            if best:
+                e.append((i, cnode, best))
+        return keep, e
+
+    def connected(nodes, edges):
+        parent = {n: n for n in nodes}
+
+        def find(a):
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            return a
+
+        for i, j, _ in edges:
+            parent[find(i)] = find(j)
+        return len({find(n) for n in nodes}) == 1
+
+    # --- cut one building corner off (asymmetry): a room holding a corner
+    corners = [(0.0, 0.0), (W, 0.0), (0.0, H), (W, H)]
+    removed: set[int] = set()
+    for ci in rng.permutation(4):
+        cx, cy = corners[ci]
+        cand = [i for i, r in enumerate(rooms) if (r[0] == cx or r[2] == cx) and (r[1] == cy or r[3] == cy)]
+        if not cand:
+            continue
+        i = cand[0]
+        r = rooms[i]
+        if (r[2] - r[0]) * (r[3] - r[1]) > 0.15 * W * H:
+            continue
+        keep, e = edges_of({i})
+        if connected(keep + [cnode], e):
+            removed = {i}
+            break
+    keep, edges = edges_of(removed)
+    if not connected(keep + [cnode], edges):  # cannot happen with corridor-adjacent blocks; be safe
+        raise RuntimeError("world generation produced disconnected rooms")
+
+    # --- doors: a random spanning tree, plus extra doors onto the corridor and between rooms
+    order = rng.permutation(len(edges))
+    parent = {n: n for n in keep + [cnode]}
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    doors = []
+    for k in order:
+        i, j, s = edges[k]
+        ri, rj = find(i), find(j)
+        if ri != rj:
+            parent[ri] = rj
+            doors.append(s)
+        elif rng.random() < (0.5 if j == cnode else 0.15):
+            doors.append(s)
+
+    # --- rasterise: interior free, inner walls, outer walls by dilation
+    interior = np.zeros(shape, dtype=bool)
+    room_id = np.full(shape, -1, dtype=np.int32)
+    for i in keep:
+        sl = ras.slices(*rooms[i])
+        interior[sl] = True
+        room_id[sl] = i
+    for c in corridors:
+        sl = ras.slices(*c)
+        interior[sl] = True
+        room_id[sl] = cnode
+    walls = np.zeros(shape, dtype=bool)
+    h2 = _T_IN / 2
+    for i in keep:
+        x0, y0, x1, y1 = rooms[i]
+        for rect in ((x0 - h2, y0 - h2, x0 + h2, y1 + h2), (x1 - h2, y0 - h2, x1 + h2, y1 + h2),
+                     (x0 - h2, y0 - h2, x1 + h2, y0 + h2), (x0 - h2, y1 - h2, x1 + h2, y1 + h2)):
+            walls[ras.slices(*rect)] = True
+    walls &= interior
+    dist_out = distance_transform_edt(~interior) * res
+    outer = ~interior & (dist_out <= _T_OUT + 1e-9)
+    door_centres = []
+    for axis, coord, lo, hi in doors:
+        dw = rng.uniform(1.0, 1.3)
+        c = rng.uniform(lo + _DOOR_MARGIN + dw / 2, hi - _DOOR_MARGIN - dw / 2)
+        if axis == 0:
+            walls[ras.slices(coord - _T_IN, c - dw / 2, coord + _T_IN, c + dw / 2)] = False
+            door_centres.append((coord, c))
+        else:
+            walls[ras.slices(c - dw / 2, coord - _T_IN, c + dw / 2, coord + _T_IN)] = False
+            door_centres.append((c, coord))
+    occupied = walls | outer
+
+    def trav_of(occ):
+        d = distance_transform_edt(~occ) * res
+        return d, interior & (d >= clearance)
+
+    d, trav = trav_of(occupied)
+    lab, n = _components(trav)
+    sizes = np.bincount(lab.ravel())
+    sizes[0] = 0
+    main = lab == np.argmax(sizes)
+
+    # --- furniture: tables/cabinets, shelves against walls, pillars; never cutting off space
+    dc = np.array(door_centres) if door_centres else np.zeros((0, 2))
+
+    def try_place(rect):
+        nonlocal occupied, main
+        x0, y0, x1, y1 = rect
+        if len(dc):
+            qx = np.clip(dc[:, 0], x0, x1)
+            qy = np.clip(dc[:, 1], y0, y1)
+            if np.min(np.hypot(dc[:, 0] - qx, dc[:, 1] - qy)) < 1.0:
+                return False
+        cand = occupied.copy()
+        cand[ras.slices(*rect)] = True
+        _, tr = trav_of(cand)
+        lab, _ = _components(tr)
+        kept = lab[main & tr]
+        if kept.size == 0:
+            return False
+        counts = np.bincount(kept)
+        counts[0] = 0
+        best = int(np.argmax(counts))
+        if kept.size - counts[best] > 30:  # would cut off part of the reachable space
+            return False
+        occupied = cand
+        main = lab == best
+        return True
+
+    for i in keep:
+        x0, y0, x1, y1 = rooms[i]
+        ix0, iy0, ix1, iy1 = x0 + h2, y0 + h2, x1 - h2, y1 - h2
+        area = (x1 - x0) * (y1 - y0)
+        n_items = int(rng.integers(0, 2 + int(area // 10)))
+        for _ in range(n_items):
+            for _attempt in range(6):
+                kind = rng.random()
+                if kind < 0.45:  # a table or cabinet anywhere
+                    a, b = rng.uniform(0.5, 1.6), rng.uniform(0.5, 1.2)
+                    if rng.random() < 0.5:
+                        a, b = b, a
+                    if ix1 - ix0 <= a or iy1 - iy0 <= b:
+                        continue
+                    fx, fy = rng.uniform(ix0, ix1 - a), rng.uniform(iy0, iy1 - b)
+                    rect = (fx, fy, fx + a, fy + b)
+                elif kind < 0.85:  # a shelf along one wall
+                    ln, th = rng.uniform(1.0, 2.5), rng.uniform(0.3, 0.45)
+                    side = int(rng.integers(4))
+                    if side < 2:
+                        if ix1 - ix0 <= ln:
+                            continue
+                        fx = rng.uniform(ix0, ix1 - ln)
+                        fy = iy0 if side == 0 else iy1 - th
+                        rect = (fx, fy, fx + ln, fy + th)
+                    else:
+                        if iy1 - iy0 <= ln:
+                            continue
+                        fy = rng.uniform(iy0, iy1 - ln)
+                        fx = ix0 if side == 2 else ix1 - th
+                        rect = (fx, fy, fx + th, fy + ln)
+                else:  # a pillar
+                    s = rng.uniform(0.25, 0.4)
+                    fx, fy = rng.uniform(ix0 + 0.8, ix1 - 0.8 - s), rng.uniform(iy0 + 0.8, iy1 - 0.8 - s)
+                    rect = (fx, fy, fx + s, fy + s)
+                if try_place(rect):
+                    break
+    # a few pillars in the corridors, half set into a wall
+    for c in corridors:
+        for _ in range(int(rng.integers(1, 3))):
+            s = rng.uniform(0.3, 0.4)
+            if c[2] - c[0] > c[3] - c[1]:
+                fx = rng.uniform(c[0] + 1.0, c[2] - 1.0 - s)
+                fy = c[1] - s / 2 if rng.random() < 0.5 else c[3] - s / 2
+            else:
+                fy = rng.uniform(c[1] + 1.0, c[3] - 1.0 - s)
+                fx = c[0] - s / 2 if rng.random() < 0.5 else c[2] - s / 2
+            try_place((fx, fy, fx + s, fy + s))
+
+    distance, trav = trav_of(occupied)
+    reachable = main & trav
+    occ = np.where(occupied, 100, np.where(interior, 0, -1)).astype(np.int8)
+    room_id[occupied] = -1
+    return World(occ, res, origin, distance.astype(np.float64), reachable, room_id, clearance)
+
+
+# --------------------------------------------------------------------------
+# Drive
+# --------------------------------------------------------------------------
+
+class _Planner:
+    """Shortest paths over reachable cells (8-connected) that keep away from walls."""
+
+    def __init__(self, world: World):
+        from scipy.sparse import csr_matrix
+
+        self.world = world
+        reach = world.reachable
+        h, w = reach.shape
+        self.node = np.full(reach.shape, -1, dtype=np.int64)
+        iy, ix = np.nonzero(reach)
+        self.iy, self.ix = iy, ix
+        self.node[iy, ix] = np.arange(iy.size)
+        d = world.distance
+        rows, cols, vals = [], [], []
+        for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            jy, jx = iy + dy, ix + dx
+            ok = (jy >= 0) & (jy < h) & (jx >= 0) & (jx < w)
+            ok[ok] &= reach[jy[ok], jx[ok]]
+            a = self.node[iy[ok], ix[ok]]
+            b = self.node[jy[ok], jx[ok]]
+            dm = 0.5 * (d[iy[ok], ix[ok]] + d[jy[ok], jx[ok]])
+            # prefer the middle of corridors and doorways: up to 4x cost near walls
+            cost = math.hypot(dx, dy) * world.resolution * (1.0 + 3.0 * np.clip(1.0 - dm, 0.0, None))
+            rows += [a, b]
+            cols += [b, a]
+            vals += [cost, cost]
+        n = iy.size
+        self.graph = csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                shape=(n, n))
+
+    def xy(self, nodes):
+        ox, oy = self.world.origin
+        r = self.world.resolution
+        return np.column_stack([ox + (self.ix[nodes] + 0.5) * r, oy + (self.iy[nodes] + 0.5) * r])
+
+    def tree(self, src):
+        from scipy.sparse.csgraph import dijkstra
+
+        return dijkstra(self.graph, indices=src, return_predecessors=True)
+
+    def nearest_node(self, x, y):
+        ox, oy = self.world.origin
+        r = self.world.resolution
+        pts = self.xy(np.arange(self.iy.size))
+        return int(np.argmin((pts[:, 0] - x) ** 2 + (pts[:, 1] - y) ** 2))
+
+
+def _smooth(path: np.ndarray, world: World) -> np.ndarray:
+    """Resample a polyline at 0.05 m and smooth it, keeping its clearance."""
+    seg = np.hypot(*np.diff(path, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] < 1e-9:
+        return path[:1]
+    si = np.linspace(0.0, s[-1], max(int(s[-1] / 0.05), 1) + 1)
+    p = np.column_stack([np.interp(si, s, path[:, 0]), np.interp(si, s, path[:, 1])])
+    for win in (11, 7, 3, 1):
+        q = p.copy()
+        if win > 1:
+            k = np.ones(win) / win
+            for _ in range(2):
+                pad = np.pad(q, ((win // 2, win // 2), (0, 0)), mode="edge")
+                q = np.column_stack([np.convolve(pad[:, 0], k, "valid"), np.convolve(pad[:, 1], k, "valid")])
+        if _clear(q, world).min() >= world.clearance - 0.06:
+            return q
+    return p
+
+
+def _clear(xy: np.ndarray, world: World) -> np.ndarray:
+    ox, oy = world.origin
+    ix = np.clip(np.floor((xy[:, 0] - ox) / world.resolution).astype(int), 0, world.distance.shape[1] - 1)
+    iy = np.clip(np.floor((xy[:, 1] - oy) / world.resolution).astype(int), 0, world.distance.shape[0] - 1)
+    return world.distance[iy, ix]
+
+
+def _plan_route(planner: _Planner, world: World, start_node: int, length: float, rng) -> np.ndarray:
+    """A route from ``start_node`` through goals in rarely visited rooms, at least ``length`` long."""
+    goal_ok = world.reachable & (world.distance >= 0.55)
+    rid = world.room_id[planner.iy, planner.ix]
+    goal_mask = goal_ok[planner.iy, planner.ix]
+    rooms = np.unique(rid[goal_mask])
+    visits = {int(r): 0 for r in rooms}
+    cur = start_node
+    visits[int(rid[cur])] = visits.get(int(rid[cur]), 0) + 1
+    pieces = []
+    total = 0.0
+    while total < length:
+        dist, pred = planner.tree(cur)
+        here = int(rid[cur])
+        cand_rooms = [r for r in visits if r != here]
+        wts = np.array([1.0 / (1 + visits[r]) ** 2 for r in cand_rooms])
+        room = cand_rooms[int(rng.choice(len(cand_rooms), p=wts / wts.sum()))]
+        cells = np.flatnonzero(goal_mask & (rid == room) & np.isfinite(dist))
+        if cells.size == 0:
+            visits[room] += 10
+            continue
+        goal = int(cells[rng.integers(cells.size)])
+        nodes = [goal]
+        while nodes[-1] != cur:
+            nodes.append(int(pred[nodes[-1]]))
+        nodes.reverse()
+        leg = planner.xy(np.array(nodes))
+        pieces.append(leg if not pieces else leg[1:])
+        total += float(np.hypot(*np.diff(leg, axis=0).T).sum())
+        visits[room] += 1
+        cur = goal
+    return _smooth(np.vstack(pieces), world)
+
+
+def _wrap(a):
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+class _Robot:
+    """Pure-pursuit path follower with speed, turn-rate and acceleration limits."""
+
+    def __init__(self, path, pose, v_max, w_max, lookahead=0.5, a_max=0.6, alpha_max=2.0):
+        self.path = path
+        self.pose = np.array(pose, dtype=np.float64)
+        self.v = self.w = 0.0
+        self.idx = 0
+        self.v_max, self.w_max = v_max, w_max
+        self.look = lookahead
+        self.a_max, self.alpha_max = a_max, alpha_max
+
+    def step(self, dt):
+        x, y, th = self.pose
+        p = self.path
+        hi = min(self.idx + 40, len(p))
+        j = self.idx + int(np.argmin((p[self.idx:hi, 0] - x) ** 2 + (p[self.idx:hi, 1] - y) ** 2))
+        self.idx = j
+        tgt = min(j + int(round(self.look / 0.05)), len(p) - 1)
+        dx, dy = p[tgt, 0] - x, p[tgt, 1] - y
+        dist = math.hypot(dx, dy)
+        alpha = _wrap(math.atan2(dy, dx) - th) if dist > 1e-6 else 0.0
+        if abs(alpha) > 0.7:  # turn on the spot towards the path
+            v_cmd, w_cmd = 0.0, math.copysign(self.w_max, alpha)
+        else:
+            kappa = 2.0 * math.sin(alpha) / max(dist, 1e-6)
+            v_cmd = self.v_max if abs(kappa) < 1e-9 else min(self.v_max, self.w_max / abs(kappa))
+            v_cmd = min(v_cmd, 0.3 + dist)  # slow down near the end
+            w_cmd = v_cmd * kappa
+        self.v += float(np.clip(v_cmd - self.v, -self.a_max * dt, self.a_max * dt))
+        self.w += float(np.clip(w_cmd - self.w, -self.alpha_max * dt, self.alpha_max * dt))
+        self.w = float(np.clip(self.w, -self.w_max, self.w_max))
+        v, w = self.v, self.w
+        if abs(w) > 1e-9:
+            r = v / w
+            self.pose[0] += r * (math.sin(th + w * dt) - math.sin(th))
+            self.pose[1] += -r * (math.cos(th + w * dt) - math.cos(th))
+        else:
+            self.pose[0] += v * dt * math.cos(th)
+            self.pose[1] += v * dt * math.sin(th)
+        self.pose[2] = _wrap(th + w * dt)
+
+    @property
+    def remaining(self):
+        return len(self.path) - 1 - self.idx
+
+
+def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick):
+    """Truth poses (n_ticks, 3) at 10 Hz, the pre-teleport poses, start and kidnap poses."""
+    planner = _Planner(world)
+    per_tick = int(round(1.0 / (_ODOM_RATE * _SIM_DT)))
+    route_len = speed * n_ticks / _ODOM_RATE * 1.3 + 5.0
+
+    def start_at(node, theta=None):
+        path = _plan_route(planner, world, node, route_len, rng)
+        if theta is None:
+            k = min(10, len(path) - 1)
+            theta = math.atan2(path[k, 1] - path[0, 1], path[k, 0] - path[0, 0])
+        return _Robot(path, (path[0, 0], path[0, 1], theta), speed, turn_rate)
+
+    goal_nodes = np.flatnonzero(world.distance[planner.iy, planner.ix] >= 0.6)
+    robot = start_at(int(goal_nodes[rng.integers(goal_nodes.size)]))
+    truth = np.empty((n_ticks, 3))
+    pre = np.empty((n_ticks, 3))
+    truth[0] = pre[0] = robot.pose
+    start = robot.pose.copy()
+    kidnap = None
+    length = 0.0
+    for k in range(1, n_ticks):
+        for _ in range(per_tick):
+            before = robot.pose[:2].copy()
+            robot.step(_SIM_DT)
+            length += math.hypot(*(robot.pose[:2] - before))
+        if robot.remaining < 5:  # route used up (slow driving): extend from here
+            robot = _Robot(np.vstack([robot.path[robot.idx:],
+                                      _plan_route(planner, world, planner.nearest_node(*robot.pose[:2]),
+                                                  route_len, rng)]),
+                           robot.pose, speed, turn_rate)
+        pre[k] = truth[k] = robot.pose
+        if k == kidnap_tick:
+            far = goal_nodes[np.hypot(*(planner.xy(goal_nodes) - robot.pose[:2]).T) > 5.0]
+            node = int(far[rng.integers(far.size)])
+            theta = float(rng.uniform(-math.pi, math.pi))
+            robot = start_at(node, theta)
+            truth[k] = robot.pose
+            kidnap = {"t": k / _ODOM_RATE, "from": robot_pose_list(pre[k]), "to": robot_pose_list(truth[k])}
+    return truth, pre, start, kidnap, length
+
+
+def robot_pose_list(p):
+    return [round(float(p[0]), 6), round(float(p[1]), 6), round(float(p[2]), 6)]
+
+
+# --------------------------------------------------------------------------
+# Odometry and laser
+# --------------------------------------------------------------------------
+
+def _odometry(truth, pre, rng, alphas, scale, yaw_drift):
+    """Noisy odometry poses (n, 3) starting at (0, 0, 0), and measured tv, rv (n,)."""
+    a1, a2, a3, a4 = alphas
+    n = truth.shape[0]
+    z = rng.standard_normal((n, 3))
+    odom = np.zeros((n, 3))
+    tv = np.zeros(n)
+    rv = np.zeros(n)
+    dt = 1.0 / _ODOM_RATE
+    for k in range(1, n):
+        x0, y0, t0 = truth[k - 1]
+        x1, y1, t1 = pre[k]
+        trans = math.hypot(x1 - x0, y1 - y0)
+        if trans < 1e-6:
+            rot1 = 0.0
+        else:
+            rot1 = _wrap(math.atan2(y1 - y0, x1 - x0) - t0)
+        rot2 = _wrap(t1 - t0 - rot1)
+        r1 = rot1 - z[k, 0] * math.sqrt(a1 * rot1 ** 2 + a2 * trans ** 2)
+        tr = trans - z[k, 1] * math.sqrt(a3 * trans ** 2 + a4 * (rot1 ** 2 + rot2 ** 2))
+        r2 = rot2 - z[k, 2] * math.sqrt(a1 * rot2 ** 2 + a2 * trans ** 2)
+        tr *= scale
+        r1 += 0.5 * yaw_drift * trans
+        r2 += 0.5 * yaw_drift * trans
+        ox, oy, ot = odom[k - 1]
+        odom[k] = (ox + tr * math.cos(ot + r1), oy + tr * math.sin(ot + r1), _wrap(ot + r1 + r2))
+        tv[k] = tr / dt
+        rv[k] = (r1 + r2) / dt
+    return odom, tv, rv
+
+
+def beam_angles(n_beams: int, fov: float) -> np.ndarray:
+    """Beam i at -fov/2 + i*fov/(n-1), counter-clockwise from the robot's heading."""
+    return -fov / 2 + np.arange(n_beams) * (fov / (n_beams - 1))
+
+
+def _flaser_ok(n_beams, fov):
+    """FLASER has no geometry: readers assume pi/180 (180/181 beams) or pi/360 (360/361)."""
+    return abs(fov - math.pi) < 1e-12 and n_beams in (181, 361)
+
+
+# --------------------------------------------------------------------------
+# Entry point
+# --------------------------------------------------------------------------
+
+def _check(cond, key, msg):
+    if not cond:
+        raise ConfigError(f"simulate: {key}: {msg}")
+
+
+def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 181, fov: float = math.pi,
+             range_max: float = 12.0, range_sigma: float = 0.02, p_short: float = 0.03, p_max: float = 0.01,
+             odom_alphas=(0.05, 0.05, 0.05, 0.02), odom_scale: float = 1.01, odom_yaw_drift: float = 0.01,
+             kidnap_at: float | None = None, speed: float = 0.5, turn_rate: float = 0.6,
+             robot_radius: float = 0.2) -> dict:
+    """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
+
+    Deterministic for a given ``seed`` and parameters. ``range_sigma``,
+    ``p_short`` (short readings from unexpected obstacles) and ``p_max``
+    (max-range dropouts) set the laser noise; set all three to 0 for exact
+    ranges. ``odom_alphas`` are (a1, a2, a3, a4) of the odometry motion model
+    (variance form); ``odom_scale`` multiplies every translation and
+    ``odom_yaw_drift`` adds rad per metre travelled. ``kidnap_at`` teleports
+    the robot at that time (rounded to the 10 Hz tick) to a free pose at
+    least 5 m away; the odometry does not see the jump.
+
+    Returns a summary: scans, duration, path length, start pose, kidnap.
+    """
+    from mcl.kernels.raycast import cast_rays
+    from mcl.maps import OccupancyGrid, save_map
+    from mcl.trajectory import atomic_write_text, write_tum
+
+    _check(isinstance(seed, (int, np.integer)) and seed >= 0, "seed", f"expected an integer >= 0, got {seed!r}")
+    _check(math.isfinite(duration) and 1.0 <= duration <= 3600.0, "duration", f"expected 1..3600 s, got {duration}")
+    _check(isinstance(n_beams, (int, np.integer)) and 2 <= n_beams <= 4096, "n_beams", f"expected 2..4096, got {n_beams}")
+    _check(0.0 < fov <= 2 * math.pi, "fov", f"expected 0 < fov <= 2*pi, got {fov}")
+    _check(math.isfinite(range_max) and 0.5 <= range_max <= 100.0, "range_max", f"expected 0.5..100 m, got {range_max}")
+    _check(range_sigma >= 0 and 0 <= p_short and 0 <= p_max and p_short + p_max <= 1, "range_sigma/p_short/p_max",
+           "noise must be >= 0 and p_short + p_max <= 1")
+    _check(len(odom_alphas) == 4 and all(a >= 0 for a in odom_alphas), "odom_alphas", "expected four values >= 0")
+    _check(0.5 <= odom_scale <= 1.5, "odom_scale", f"expected 0.5..1.5, got {odom_scale}")
+    _check(0.1 <= speed <= 2.0 and 0.1 <= turn_rate <= 3.0, "speed/turn_rate", "out of range")
+    n_ticks = int(round(duration * _ODOM_RATE)) + 1
+    kidnap_tick = None
+    if kidnap_at is not None:
+        kidnap_tick = int(round(kidnap_at * _ODOM_RATE))
+        _check(0 < kidnap_tick < n_ticks - 1, "kidnap_at", f"must lie inside (0, {duration}) s, got {kidnap_at}")
+
+    seeds = np.random.SeedSequence(int(seed)).spawn(4)
+    rng_world, rng_drive, rng_odom, rng_laser = (np.random.default_rng(s) for s in seeds)
+    world = make_world(rng_world)
+    truth, pre, start, kidnap, length = _drive(world, rng_drive, n_ticks, speed, turn_rate, kidnap_tick)
+    clear = _clear(truth[:, :2], world).min()
+    if clear < robot_radius + world.resolution:
+        raise RuntimeError(f"simulate: seed {seed}: the drive came {clear:.3f} m close to a wall (a bug)")
+    odom, tv, rv = _odometry(truth, pre, rng_odom, tuple(map(float, odom_alphas)),
+                             odom_scale, odom_yaw_drift)
+
+    # --- laser
+    t = np.round(np.arange(n_ticks) / _ODOM_RATE, 6)
+    scan_ticks = np.arange(0, n_ticks, _SCAN_EVERY)
+    angles = beam_angles(int(n_beams), fov)
+    blocked = world.blocked
+    exact = np.empty((scan_ticks.size, angles.size))
+    cast_rays(np.ascontiguousarray(truth[scan_ticks].T), angles, blocked, world.origin[0], world.origin[1],
+              world.resolution, range_max, exact)
+    noise = rng_laser.standard_normal(exact.shape)
+    u = rng_laser.random(exact.shape)
+    frac = rng_laser.uniform(0.05, 1.0, exact.shape)
+    ranges = exact + range_sigma * noise
+    short = u < p_short
+    ranges[short] = exact[short] * frac[short]
+    ranges[(u >= p_short) & (u < p_short + p_max)] = range_max
+    ranges[exact >= range_max] = range_max
+    ranges = np.clip(ranges, 0.0, range_max)
+
+    # --- write
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    grid = OccupancyGrid.from_occupancy(world.occupancy, world.resolution, world.origin)
+    save_map(grid, out / "map.yaml")
+
+    host = "sim"
+    flaser = _flaser_ok(int(n_beams), fov)
+    lines = [f"# mcl simulate seed={int(seed)} duration={duration:g} beams={int(n_beams)} "
+             f"fov={fov:.6f} range_max={range_max:g}; poses in the odometry frame\n",
+             f"PARAM robot_front_laser_max {range_max:g} {0.0:.6f} {host} {0.0:.6f}\n"]
+    scan_row = {int(k): i for i, k in enumerate(scan_ticks)}
+    for k in range(n_ticks):
+        ts = f"{t[k]:.6f} {host} {t[k]:.6f}"
+        x, y, th = odom[k]
+        lines.append(f"ODOM {x:.6f} {y:.6f} {th:.6f} {tv[k]:.6f} {rv[k]:.6f} 0.000000 {ts}\n")
+        i = scan_row.get(k)
+        if i is None:
+            continue
+        rs = " ".join(f"{r:.3f}" for r in ranges[i])
+        pose = f"{x:.6f} {y:.6f} {th:.6f}"
+        if flaser:
+            lines.append(f"FLASER {angles.size} {rs} {pose} {pose} {ts}\n")
+        else:
+            lines.append(f"ROBOTLASER1 0 {angles[0]:.9f} {fov:.9f} {fov / (angles.size - 1):.9f} "
+                         f"{range_max:g} 0.01 0 {angles.size} {rs} 0 {pose} {pose} "
+                         f"{tv[k]:.6f} {rv[k]:.6f} 0.0 0.0 0.0 {ts}\n")
+    atomic_write_text(out / "log.clf", "".join(lines))
+    write_tum(out / "truth.tum", t[scan_ticks], truth[scan_ticks].T)
+
+    import yaml
+
+    params = {
+        "seed": int(seed),
+        "duration": float(duration),
+        "start_pose": robot_pose_list(start),
+        "odom_start_pose": [0.0, 0.0, 0.0],
+        "kidnap": kidnap,
+        "laser": {"message": "FLASER" if flaser else "ROBOTLASER1", "n_beams": int(n_beams), "fov": float(fov),
+                  "angle_min": float(angles[0]), "range_max": float(range_max),
+                  "range_sigma": float(range_sigma), "p_short": float(p_short), "p_max": float(p_max),
+                  "rate_hz": _ODOM_RATE / _SCAN_EVERY},
+        "odometry": {"model": "odometry (Probabilistic Robotics Table 5.6, variance form)",
+                     "alphas": [float(a) for a in odom_alphas], "scale": float(odom_scale),
+                     "yaw_drift_per_m": float(odom_yaw_drift), "rate_hz": _ODOM_RATE},
+        "robot": {"radius": float(robot_radius), "speed": float(speed), "turn_rate": float(turn_rate)},
+        "map": {"resolution": world.resolution, "origin": [world.origin[0], world.origin[1]],
+                "width": int(world.occupancy.shape[1]), "height": int(world.occupancy.shape[0])},
+        "scans": int(scan_ticks.size),
+        "path_length": round(length, 3),
+    }
+    atomic_write_text(out / "sim.yaml", yaml.safe_dump(params, sort_keys=False))
+    return {"outdir": str(out), "scans": int(scan_ticks.size), "duration": float(t[-1]),
+            "path_length": round(length, 3), "start_pose": robot_pose_list(start), "kidnap": kidnap}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``mcl simulate``."""
+    parser.add_argument("outdir", help="folder to write map.yaml, map.pgm, log.clf, truth.tum, sim.yaml")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (world, path, noise); default 0")
+    parser.add_argument("--duration", type=float, default=60.0, help="seconds of driving; default 60")
+    parser.add_argument("--range-max", type=float, default=12.0, help="laser maximum range in m; default 12")
+    parser.add_argument("--beams", type=int, default=181,
+                        help="beams over 180 degrees; default 181 (FLASER; other counts write ROBOTLASER1)")
+    parser.add_argument("--kidnap-at", type=float, default=None, metavar="T",
+                        help="teleport the robot at time T s (odometry does not see it)")
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """Run ``mcl simulate`` from parsed arguments; prints a one-line summary."""
+    s = simulate(args.outdir, seed=args.seed, duration=args.duration, range_max=args.range_max,
+                 n_beams=args.beams, kidnap_at=args.kidnap_at)
+    x, y, th = s["start_pose"]
+    msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
+           f"start pose {x:.3f} {y:.3f} {th:.3f}")
+    if s["kidnap"]:
+        msg += f", kidnapped at {s['kidnap']['t']:.1f} s"
+    print(msg)
+    return 0
