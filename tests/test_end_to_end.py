@@ -1,0 +1,128 @@
+"""End-to-end: real logs tracked within the accuracy issue 1 asks, outputs, determinism, the CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mcl.cli import main
+from mcl.config import PROJECT_ROOT, load_config
+from mcl.runner import run
+from mcl.trajectory import read_tum
+
+SHARED = PROJECT_ROOT.parent / "shared" / "data"
+CONFIGS = PROJECT_ROOT / "configs"
+DEMO = PROJECT_ROOT / "data" / "demo"
+
+needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason=f"real datasets not found at {SHARED}")
+
+
+def _quiet(*_a, **_k):
+    pass
+
+
+@needs_shared
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["intel_lab", "mit_csail"])
+def test_tracking_accuracy_on_real_logs(tmp_path, name):
+    # Issue 1: ATE RMSE <= 0.06 m with the dataset config, seed 1, 5,000 particles.
+    # Measured 0.057 (intel_lab) and 0.043 (mit_csail); the bound is the issue's.
+    cfg = load_config(CONFIGS / f"{name}.yaml", ["rerun.mode=off"])
+    assert cfg.filter.particles == 5000 and cfg.seed == 1
+    s = run(cfg, tmp_path, progress=False, echo=_quiet)
+    assert not s["interrupted"]
+    ev = s["eval"]
+    assert ev["ate_rmse"] <= 0.06, ev
+    assert ev["ate_max"] < 0.5, ev  # never lost
+    if name == "mit_csail":
+        assert ev["scored"] == 406  # the truth covers 406 scans, all inside the run
+
+
+@needs_shared
+def test_run_writes_every_output_and_a_recording_with_one_row_per_update(tmp_path):
+    # A short run (the first 150 scans of mit_csail) with a recording, read back with RrdReader.
+    from mcl.datasets.carmen import read_carmen
+
+    log = read_carmen(SHARED / "mit_csail" / "log.clf")
+    short = tmp_path / "short.clf"
+    lines = (SHARED / "mit_csail" / "log.clf").read_text().splitlines(keepends=True)
+    short.write_text("".join(lines[: log.scans[150].line]))
+    out = tmp_path / "run"
+    code = main(
+        ["run", str(CONFIGS / "mit_csail.yaml"), "--log", str(short), "--out", str(out), "--particles", "500",
+         "--no-progress", "--set", "rerun.particles_max=100"]
+    )
+    assert code == 0
+    for f in ("trajectory.tum", "recording.rrd", "config.yaml", "summary.json"):
+        assert (out / f).is_file(), f
+    assert not list(out.glob("*.partial")) and not list(out.glob("*.tmp*"))
+    summary = json.loads((out / "summary.json").read_text())
+    t, poses = read_tum(out / "trajectory.tum")
+    assert t.size == summary["updates"] > 0
+    assert summary["particles"] == 500
+    for stage in ("predict", "correct", "resample", "estimate", "viz"):
+        assert summary["wall_time_s"][stage] >= 0
+    # The resolved config repeats the run: same trajectory, byte for byte.
+    out2 = tmp_path / "again"
+    assert main(["run", str(out / "config.yaml"), "--out", str(out2), "--no-progress", "--rerun", "off"]) == 0
+    assert (out2 / "trajectory.tum").read_bytes() == (out / "trajectory.tum").read_bytes()
+
+    from rerun.chunk import RrdReader
+
+    import pyarrow as pa
+
+    rows_per_step: dict[int, int] = {}
+    for c in RrdReader(out / "recording.rrd").stream().to_chunks():
+        if c.entity_path != "/world/particles" or c.is_static or "step" not in c.timeline_names:
+            continue
+        for s in c.to_record_batch().column("step").cast(pa.int64()).to_pylist():
+            rows_per_step[s] = rows_per_step.get(s, 0) + 1
+    assert sorted(rows_per_step) == list(range(summary["updates"]))
+    assert set(rows_per_step.values()) == {1}
+
+
+@needs_shared
+def test_same_seed_same_trajectory_with_one_and_two_threads(tmp_path):
+    # Randomness is drawn outside the parallel kernels, so the thread count cannot change a result.
+    outs = []
+    for threads in (1, 2):
+        out = tmp_path / f"t{threads}"
+        env = dict(os.environ, NUMBA_NUM_THREADS=str(threads))
+        subprocess.run(
+            [sys.executable, "-m", "mcl", "run", str(CONFIGS / "intel_lab.yaml"), "--out", str(out), "--rerun", "off",
+             "--no-progress", "--particles", "2000"],
+            check=True, env=env, capture_output=True,
+        )
+        outs.append((out / "trajectory.tum").read_bytes())
+    assert outs[0] == outs[1]
+    assert len(outs[0]) > 10_000
+
+
+def test_bad_config_is_one_line_and_exit_2(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("filter:\n  particels: 10\n")
+    assert main(["run", str(bad), "--rerun", "off"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert "bad.yaml" in err and "filter.particels: unknown key (did you mean particles?)" in err
+
+
+def test_missing_map_is_one_line_and_exit_2(tmp_path, capsys):
+    assert main(["run", "--map", str(tmp_path / "nope.yaml"), "--log", str(tmp_path / "x.clf"), "--rerun", "off",
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "nope.yaml" in err
+
+
+@needs_shared
+def test_eval_command(tmp_path, capsys):
+    truth = SHARED / "intel_lab" / "truth.tum"
+    assert main(["eval", str(truth), str(truth), "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["ate_rmse"] == 0.0 and r["scored"] == 910 and r["convergence_time"] == 0.0
