@@ -158,10 +158,12 @@ class OdometryMotionModel:
         n_ok = _k.sample_odometry_map(p, noise, idx_all, rot1, trans, rot2, s1, st, s2,
                                       mask, ox, oy, inv_res, out, ok)
         draws = n
+        idx = None
         for _ in range(self.max_tries - 1):
             if n_ok == n:
                 break
-            idx = np.flatnonzero(~ok)
+            # the particles still out: from the whole array once, then from the shrinking set
+            idx = np.flatnonzero(~ok) if idx is None else idx[~ok[idx]]
             draws += idx.size
             fresh = rng.standard_normal((3, idx.size))
             n_ok += _k.sample_odometry_map(p, fresh, idx, rot1, trans, rot2, s1, st, s2,
