@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -424,8 +423,6 @@ class _Planner:
         return dijkstra(self.graph, indices=src, return_predecessors=True)
 
     def nearest_node(self, x, y):
-        ox, oy = self.world.origin
-        r = self.world.resolution
         pts = self.xy(np.arange(self.iy.size))
         return int(np.argmin((pts[:, 0] - x) ** 2 + (pts[:, 1] - y) ** 2))
 
@@ -580,11 +577,11 @@ def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick):
             theta = float(rng.uniform(-math.pi, math.pi))
             robot = start_at(node, theta)
             truth[k] = robot.pose
-            kidnap = {"t": k / _ODOM_RATE, "from": robot_pose_list(pre[k]), "to": robot_pose_list(truth[k])}
+            kidnap = {"t": k / _ODOM_RATE, "from": _pose_list(pre[k]), "to": _pose_list(truth[k])}
     return truth, pre, start, kidnap, length
 
 
-def robot_pose_list(p):
+def _pose_list(p):
     return [round(float(p[0]), 6), round(float(p[1]), 6), round(float(p[2]), 6)]
 
 
@@ -743,7 +740,7 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     params = {
         "seed": int(seed),
         "duration": float(duration),
-        "start_pose": robot_pose_list(start),
+        "start_pose": _pose_list(start),
         "odom_start_pose": [0.0, 0.0, 0.0],
         "kidnap": kidnap,
         "laser": {"message": "FLASER" if flaser else "ROBOTLASER1", "n_beams": int(n_beams), "fov": float(fov),
@@ -761,7 +758,7 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     }
     atomic_write_text(out / "sim.yaml", yaml.safe_dump(params, sort_keys=False))
     return {"outdir": str(out), "scans": int(scan_ticks.size), "duration": float(t[-1]),
-            "path_length": round(length, 3), "start_pose": robot_pose_list(start), "kidnap": kidnap}
+            "path_length": round(length, 3), "start_pose": _pose_list(start), "kidnap": kidnap}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,0 +1,279 @@
+"""Simulator: determinism, a collision-free drive, exact scans, odometry noise statistics, log format."""
+
+import argparse
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from mcl.datasets.carmen import read_carmen
+from mcl.errors import ConfigError
+from mcl.kernels.raycast import cast_rays
+from mcl.maps import load_map
+from mcl.simulate import _odometry, add_arguments, beam_angles, run_from_args, simulate
+from mcl.trajectory import read_tum
+
+NOISE_FREE = dict(range_sigma=0.0, p_short=0.0, p_max=0.0)
+
+
+def _wrap(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim")
+    summary = simulate(out, seed=4, duration=40.0)
+    return out, summary
+
+
+@pytest.fixture(scope="module")
+def exact(tmp_path_factory):
+    out = tmp_path_factory.mktemp("exact")
+    simulate(out, seed=4, duration=40.0, **NOISE_FREE)
+    return out
+
+
+def test_same_seed_gives_byte_identical_files(sim, tmp_path):
+    out, _ = sim
+    simulate(tmp_path, seed=4, duration=40.0)
+    for name in ("log.clf", "truth.tum", "map.pgm", "map.yaml", "sim.yaml"):
+        assert (tmp_path / name).read_bytes() == (out / name).read_bytes(), name
+
+
+def test_different_seeds_give_different_worlds(sim, tmp_path):
+    out, _ = sim
+    simulate(tmp_path, seed=5, duration=2.0)
+    a = load_map(out / "map.yaml").occupancy
+    b = load_map(tmp_path / "map.yaml").occupancy
+    assert a.shape == b.shape
+    assert np.mean(a != b) > 0.02
+
+
+def test_world_is_an_asymmetric_walled_floor_plan(sim):
+    out, _ = sim
+    g = load_map(out / "map.yaml")
+    assert g.resolution == 0.05
+    assert 18.0 <= g.width * g.resolution <= 26.0 and 13.0 <= g.height * g.resolution <= 20.0
+    # unknown all around the outside, walls between unknown and free
+    assert g.unknown[0].all() and g.unknown[-1].all() and g.unknown[:, 0].all() and g.unknown[:, -1].all()
+    free, unk = g.free, g.unknown
+    touch = (free[1:] & unk[:-1]) | (free[:-1] & unk[1:])
+    touch2 = (free[:, 1:] & unk[:, :-1]) | (free[:, :-1] & unk[:, 1:])
+    assert not touch.any() and not touch2.any()
+    assert 0.4 < free.mean() < 0.9
+    # no mirror or half-turn symmetry: global localization can tell places apart
+    for f in (free[::-1], free[:, ::-1], free[::-1, ::-1]):
+        assert np.mean(f != free) > 0.05
+
+
+def test_truth_path_stays_clear_of_walls(sim):
+    out, summary = sim
+    g = load_map(out / "map.yaml")
+    params = yaml.safe_load((out / "sim.yaml").read_text())
+    radius = params["robot"]["radius"]
+    t, p = read_tum(out / "truth.tum")
+    # check between scan poses too (they are <= 0.1 m apart at 0.5 m/s)
+    s = np.linspace(0, 1, 6)[:-1]
+    x = (p[0, :-1, None] * (1 - s) + p[0, 1:, None] * s).ravel()
+    y = (p[1, :-1, None] * (1 - s) + p[1, 1:, None] * s).ravel()
+    ix, iy = g.world_to_cell(x, y)
+    assert g.contains(ix, iy).all()
+    assert g.free[iy, ix].all()
+    # distance is to occupied cell centres: the body is clear if it exceeds radius + half a cell
+    assert g.distance[iy, ix].min() >= radius + g.resolution / 2
+    steps = np.hypot(np.diff(p[0]), np.diff(p[1]))
+    assert steps.max() <= 0.5 * 0.2 + 1e-6  # never faster than 0.5 m/s
+    assert np.abs(_wrap(np.diff(p[2]))).max() <= 0.6 * 0.2 + 1e-6  # never turns faster than 0.6 rad/s
+    assert summary["path_length"] > 10.0  # it really drove
+    assert len({(int(a), int(b)) for a, b in zip(x // 3, y // 3)}) > 5  # through several places
+
+
+def test_log_parses_and_matches_truth_timing(sim):
+    out, summary = sim
+    log = read_carmen(out / "log.clf")
+    t, p = read_tum(out / "truth.tum")
+    assert len(log.scans) == summary["scans"] == t.size == 201
+    assert set(log.skipped) <= {"#", "PARAM"}
+    np.testing.assert_allclose([s.t for s in log.scans], t, atol=1e-9)
+    assert log.odometry.shape == (401, 6)
+    np.testing.assert_allclose(np.diff(log.odometry[:, 0]), 0.1, atol=1e-6)
+    s0 = log.scans[0]
+    assert s0.kind == "FLASER" and s0.ranges.size == 181
+    assert s0.angle_min == pytest.approx(-math.pi / 2) and s0.angle_increment == pytest.approx(math.pi / 180)
+    # odometry frame starts at the origin; the truth does not
+    np.testing.assert_allclose(log.odometry[0, 1:4], 0.0)
+    np.testing.assert_allclose(s0.odom, 0.0)
+    params = yaml.safe_load((out / "sim.yaml").read_text())
+    np.testing.assert_allclose(params["start_pose"], p[:, 0], atol=1e-6)
+    assert math.hypot(*params["start_pose"][:2]) > 1.0
+    # scan pose = ODOM pose at the same timestamp (laser at the robot centre)
+    for s in log.scans[::17]:
+        k = int(np.argmin(np.abs(log.odometry[:, 0] - s.t)))
+        np.testing.assert_allclose(s.odom, log.odometry[k, 1:4], atol=1e-9)
+
+
+def test_noise_free_ranges_equal_ray_casting_from_truth(exact):
+    g = load_map(exact / "map.yaml")
+    log = read_carmen(exact / "log.clf")
+    t, p = read_tum(exact / "truth.tum")
+    angles = np.array([log.scans[0].angle_min + i * log.scans[0].angle_increment for i in range(181)])
+    np.testing.assert_allclose(angles, beam_angles(181, math.pi), atol=1e-12)
+    ref = np.empty((t.size, angles.size))
+    cast_rays(np.ascontiguousarray(p), angles, g.occupied, g.origin[0], g.origin[1], g.resolution, 12.0, ref)
+    got = np.vstack([s.ranges for s in log.scans])
+    err = np.abs(got - ref)
+    # ranges are written with 3 decimals; a ray grazing a cell corner may flip
+    # with the 1e-9 rounding of the truth pose
+    assert np.mean(err <= 0.0005 + 1e-9) > 0.995
+    assert np.median(ref) > 1.0 and ref.min() > 0.2
+
+
+def test_sensor_noise_statistics(sim, exact):
+    out, _ = sim
+    noisy = np.vstack([s.ranges for s in read_carmen(out / "log.clf").scans])
+    clean = np.vstack([s.ranges for s in read_carmen(exact / "log.clf").scans])
+    hit = clean < 12.0
+    d = noisy[hit] - clean[hit]
+    dropouts = np.mean(noisy[hit] == 12.0)
+    short = np.mean(d < -0.15)
+    core = d[np.abs(d) < 0.1]
+    assert 0.005 < dropouts < 0.02  # p_max = 0.01
+    assert 0.015 < short < 0.04  # p_short = 0.03, most of them far shorter than 0.15 m
+    assert np.std(core) == pytest.approx(0.02, rel=0.1)  # sigma = 0.02
+    assert abs(np.mean(core)) < 0.002
+    assert noisy.max() == 12.0 and noisy.min() >= 0.0
+
+
+def _arc_truth(n, v, w, dt=0.1):
+    th = 0.5 + np.arange(n) * w * dt
+    x = np.concatenate([[0.0], np.cumsum(v * dt * np.cos(th[:-1] + w * dt / 2))])
+    y = np.concatenate([[0.0], np.cumsum(v * dt * np.sin(th[:-1] + w * dt / 2))])
+    return np.column_stack([x + 3.0, y - 2.0, _wrap(th)])
+
+
+def _odom_deltas(odom):
+    d = np.diff(odom, axis=0)
+    trans = np.hypot(d[:, 0], d[:, 1])
+    rot1 = _wrap(np.arctan2(d[:, 1], d[:, 0]) - odom[:-1, 2])
+    rot2 = _wrap(d[:, 2] - rot1)
+    return rot1, trans, rot2
+
+
+def test_odometry_noise_matches_motion_model_variances():
+    # Oracle: recover each tick's (rot1, trans, rot2) from the odometry and
+    # standardise the errors by the model's variances: N(0, 1) each.
+    a = (0.08, 0.05, 0.06, 0.03)
+    truth = _arc_truth(20001, v=0.4, w=0.3)
+    odom, tv, rv = _odometry(truth, truth, np.random.default_rng(3), a, 1.0, 0.0)
+    r1, tr, r2 = _odom_deltas(truth)
+    o1, ot, o2 = _odom_deltas(odom)
+    # a noisy translation can come out negative (the model allows it); its
+    # (rot1, trans, rot2) then reads back as a turn by pi: undo that
+    back = np.abs(_wrap(o1 - r1)) > np.pi / 2
+    assert back.mean() < 0.001
+    o1, ot, o2 = np.where(back, _wrap(o1 - np.pi), o1), np.where(back, -ot, ot), np.where(back, _wrap(o2 + np.pi), o2)
+    s1 = np.sqrt(a[0] * r1**2 + a[1] * tr**2)
+    st = np.sqrt(a[2] * tr**2 + a[3] * (r1**2 + r2**2))
+    s2 = np.sqrt(a[0] * r2**2 + a[1] * tr**2)
+    for z in (_wrap(o1 - r1) / s1, (ot - tr) / st, _wrap(o2 - r2) / s2):
+        assert abs(z.mean()) < 0.03  # 20000 samples: sd of the mean 0.007
+        assert z.std() == pytest.approx(1.0, abs=0.03)
+    np.testing.assert_allclose(odom[0], 0.0)
+    np.testing.assert_allclose(tv[1:], ot / 0.1, rtol=1e-9)
+
+
+def test_odometry_systematic_drift_is_exact_without_noise():
+    truth = _arc_truth(501, v=0.5, w=-0.2)
+    odom, _, _ = _odometry(truth, truth, np.random.default_rng(0), (0.0, 0.0, 0.0, 0.0), 1.02, 0.03)
+    _, tr, _ = _odom_deltas(truth)
+    _, ot, _ = _odom_deltas(odom)
+    np.testing.assert_allclose(ot, 1.02 * tr, rtol=1e-9)
+    turned = np.sum(_wrap(np.diff(odom[:, 2])))
+    assert turned == pytest.approx(np.sum(_wrap(np.diff(truth[:, 2]))) + 0.03 * tr.sum(), abs=1e-9)
+
+
+def test_logged_odometry_error_per_scan_interval(sim):
+    # End to end: between scans (two ticks), on straight stretches, the
+    # translation error is ~N(scale-1, a3/2) relative, the heading error
+    # ~N(drift*d, a2*d^2) (two ticks of a1*rot^2 + a2*(d/2)^2 on each of rot1, rot2).
+    out, _ = sim
+    params = yaml.safe_load((out / "sim.yaml").read_text())
+    a1, a2, a3, a4 = params["odometry"]["alphas"]
+    scale, drift = params["odometry"]["scale"], params["odometry"]["yaw_drift_per_m"]
+    _, p = read_tum(out / "truth.tum")
+    o = np.vstack([s.odom for s in read_carmen(out / "log.clf").scans])
+    dt_true = np.hypot(np.diff(p[0]), np.diff(p[1]))
+    dt_odom = np.hypot(np.diff(o[:, 0]), np.diff(o[:, 1]))
+    dth_true = _wrap(np.diff(p[2]))
+    dth_odom = _wrap(np.diff(o[:, 2]))
+    straight = (dt_true > 0.06) & (np.abs(dth_true) < 0.02)
+    assert straight.sum() > 60
+    rel = dt_odom[straight] / dt_true[straight] - scale
+    assert abs(rel.mean()) < 0.05
+    assert rel.std() == pytest.approx(math.sqrt(a3 / 2), rel=0.3)
+    d = dt_true[straight]
+    z = (dth_odom[straight] - dth_true[straight] - drift * d) / (math.sqrt(a2) * d)
+    assert abs(z.mean()) < 0.35
+    assert z.std() == pytest.approx(1.0, rel=0.3)
+
+
+def test_kidnapping_moves_truth_but_not_odometry(tmp_path):
+    s = simulate(tmp_path, seed=2, duration=20.0, kidnap_at=10.0)
+    assert s["kidnap"]["t"] == pytest.approx(10.0)
+    t, p = read_tum(tmp_path / "truth.tum")
+    jumps = np.hypot(np.diff(p[0]), np.diff(p[1]))
+    k = int(np.argmax(jumps))
+    assert jumps[k] > 5.0 and t[k + 1] == pytest.approx(10.0)
+    assert np.sort(jumps)[-2] <= 0.1 + 1e-6  # only one jump
+    np.testing.assert_allclose(p[:, k + 1], s["kidnap"]["to"], atol=1e-6)
+    o = read_carmen(tmp_path / "log.clf").odometry
+    assert np.hypot(np.diff(o[:, 1]), np.diff(o[:, 2])).max() < 0.1
+    assert yaml.safe_load((tmp_path / "sim.yaml").read_text())["kidnap"]["t"] == pytest.approx(10.0)
+
+
+def test_short_range_and_robotlaser_geometry_via_cli_arguments(tmp_path, capsys):
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args([str(tmp_path), "--seed", "1", "--duration", "6", "--range-max", "5",
+                              "--beams", "91"])
+    assert run_from_args(args) == 0
+    assert "31 scans" in capsys.readouterr().out
+    log = read_carmen(tmp_path / "log.clf")
+    s = log.scans[0]
+    assert s.kind == "ROBOTLASER1" and s.ranges.size == 91
+    assert s.angle_min == pytest.approx(-math.pi / 2, abs=1e-8)
+    assert s.angle_increment == pytest.approx(math.pi / 90, abs=1e-8)
+    r = np.vstack([x.ranges for x in log.scans])
+    assert r.max() == 5.0 and np.mean(r == 5.0) > 0.05
+    assert "PARAM robot_front_laser_max 5 " in (tmp_path / "log.clf").read_text()
+
+
+@pytest.mark.parametrize("kw, key", [
+    (dict(kidnap_at=100.0), "kidnap_at"),
+    (dict(duration=-1.0), "duration"),
+    (dict(n_beams=1), "n_beams"),
+    (dict(range_max=0.0), "range_max"),
+])
+def test_bad_options_raise_config_error(tmp_path, kw, key):
+    with pytest.raises(ConfigError, match=key):
+        simulate(tmp_path, **kw)
+    assert not (tmp_path / "log.clf").exists()
+
+
+def test_bundled_demo_is_consistent():
+    from pathlib import Path
+
+    demo = Path(__file__).resolve().parent.parent / "data" / "demo"
+    params = yaml.safe_load((demo / "sim.yaml").read_text())
+    assert params["seed"] == 0 and params["duration"] == 60.0 and params["kidnap"] is None
+    assert "--seed 0 --duration 60" in (demo / "README.md").read_text()
+    g = load_map(demo / "map.yaml")
+    log = read_carmen(demo / "log.clf")
+    t, p = read_tum(demo / "truth.tum")
+    assert len(log.scans) == t.size == params["scans"] == 301
+    np.testing.assert_allclose(p[:, 0], params["start_pose"], atol=1e-6)
+    ix, iy = g.world_to_cell(p[0], p[1])
+    assert g.distance[iy, ix].min() >= params["robot"]["radius"] + g.resolution / 2
+    assert sum(f.stat().st_size for f in demo.iterdir()) < 3_000_000
