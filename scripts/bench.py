@@ -1,0 +1,227 @@
+#!/usr/bin/env python
+"""Time the filter's stages on the intel_lab map, after warm-up.
+
+Stages: prediction with map rejection (noise drawing included), likelihood
+field, normalisation + systematic resampling, and the whole update
+(predict + correct + normalise + resample). For 1k, 10k and 100k particles,
+60 and 360 beams, and 1 and 2 numba threads.
+
+Each figure is the median of consecutive calls (threads stay awake). A
+parallel call after the threads have idled pays an OpenMP wake-up; the
+"idle" column is the median when every call follows a 50 ms sleep.
+
+    .venv/bin/python scripts/bench.py [--quick] [--data DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numba
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mcl.motion import OdometryMotionModel, allowed_mask  # noqa: E402
+from mcl.resampling import normalize_log_weights, resample  # noqa: E402
+from mcl.sensors import LikelihoodField, beam_endpoints  # noqa: E402
+
+
+def motion_cfg():
+    try:
+        from mcl.config import MotionConfig
+        return MotionConfig()
+    except Exception:  # config module absent or changed: the book-ish defaults
+        return SimpleNamespace(model="odometry", noise_form="variance", alpha1=0.05, alpha2=0.05, alpha3=0.05,
+                               alpha4=0.05, map_rejection=True, max_tries=10, robot_radius=0.0)
+
+
+def sensor_cfg(max_beams):
+    base = dict(model="likelihood_field", z_hit=0.95, z_rand=0.05, sigma_hit=0.1, likelihood_max_dist=2.0,
+                range_min=0.0, range_max=80.0, exponent=1.0, laser_pose=None)
+    try:
+        from mcl.config import SensorConfig
+        return SensorConfig(max_beams=max_beams)
+    except Exception:
+        return SimpleNamespace(max_beams=max_beams, **base)
+
+
+def load_world(data_dir: Path):
+    """(grid, scan ranges, angles, max_range, laser pose, odometry pair, source note)."""
+    from mcl.maps import load_map
+
+    map_yaml = data_dir / "intel_lab" / "map.yaml"
+    if not map_yaml.exists():
+        print(f"NOTE: {map_yaml} not found; benchmarking on a synthetic 30 m x 30 m map with synthetic beams.\n"
+              "      (pass --data DIR with intel_lab/map.yaml and log.clf for the real figures)")
+        return synthetic_world()
+    grid = load_map(map_yaml)
+    log_path = data_dir / "intel_lab" / "log.clf"
+    try:
+        from mcl.datasets.carmen import read_carmen
+        log = read_carmen(log_path)
+        scan = log.scans[len(log.scans) // 2]
+        ranges, angles = np.asarray(scan.ranges, float), scan.angles
+        pose = scan.laser_offset if scan.laser_offset is not None else np.zeros(3)
+        note = f"intel_lab map {grid.width}x{grid.height} cells, scan line {scan.line} ({ranges.size} beams)"
+        return grid, ranges, angles, scan.max_range, pose, note
+    except Exception as exc:  # the reader is someone else's file; the benchmark should still run
+        print(f"NOTE: could not read {log_path} ({exc}); using synthetic beams on the real map")
+        ranges = 2.0 + 1.5 * np.sin(np.linspace(0, 6 * math.pi, 180))
+        return grid, ranges, np.linspace(-math.pi / 2, math.pi / 2, 180), None, np.zeros(3), \
+            f"intel_lab map {grid.width}x{grid.height} cells, synthetic beams"
+
+
+def synthetic_world():
+    from mcl.maps import OccupancyGrid
+
+    occ = np.zeros((600, 600), dtype=np.int8)
+    occ[[0, -1], :] = 100
+    occ[:, [0, -1]] = 100
+    rng = np.random.default_rng(0)
+    for _ in range(60):  # pillars
+        x, y = rng.integers(20, 580, 2)
+        occ[y:y + 8, x:x + 8] = 100
+    grid = OccupancyGrid.from_occupancy(occ, 0.05, (-15.0, -15.0))
+    ranges = 2.0 + 1.5 * np.sin(np.linspace(0, 6 * math.pi, 180))
+    return grid, ranges, np.linspace(-math.pi / 2, math.pi / 2, 180), None, np.zeros(3), "synthetic map, synthetic beams"
+
+
+def endpoints_for(n_beams, ranges, angles, max_range, laser_pose):
+    """n_beams endpoints: the real scan subsampled (60), or its ranges interpolated to n_beams angles (360)."""
+    if n_beams <= ranges.size:
+        return beam_endpoints(ranges, angles, max_range, sensor_cfg(n_beams), laser_pose)
+    ok = np.isfinite(ranges) & (ranges > 0) & (ranges < (max_range or 80.0))
+    a = np.linspace(angles[0], angles[-1], n_beams)
+    r = np.interp(a, angles[ok], ranges[ok])
+    return beam_endpoints(r, a, None, sensor_cfg(n_beams), laser_pose)
+
+
+def particles_near_centre(grid, mask, n, rng, radius=6.0):
+    """(3, n) poses uniform over allowed cells within `radius` m of the map centre."""
+    iy, ix = np.nonzero(mask)
+    cx = grid.origin[0] + grid.width * grid.resolution / 2
+    cy = grid.origin[1] + grid.height * grid.resolution / 2
+    x = grid.origin[0] + (ix + 0.5) * grid.resolution
+    y = grid.origin[1] + (iy + 0.5) * grid.resolution
+    near = np.hypot(x - cx, y - cy) < radius
+    pick = rng.integers(0, near.sum(), n)
+    p = np.empty((3, n))
+    p[0] = x[near][pick] + (rng.random(n) - 0.5) * grid.resolution
+    p[1] = y[near][pick] + (rng.random(n) - 0.5) * grid.resolution
+    p[2] = rng.uniform(-math.pi, math.pi, n)
+    return p
+
+
+def timed(fn, reps, idle=0.0):
+    """(median, min) seconds of `reps` calls of fn (each after `idle` seconds of sleep if idle > 0)."""
+    if reps <= 0:
+        return float("nan"), float("nan")
+    out = []
+    for _ in range(reps):
+        if idle:
+            time.sleep(idle)
+        t = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t)
+    return float(np.median(out)), float(np.min(out))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="fewer repetitions, no idle-latency column")
+    ap.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data", help="folder holding intel_lab/")
+    args = ap.parse_args(argv)
+
+    grid, ranges, angles, max_range, laser_pose, note = load_world(args.data)
+    mcfg = motion_cfg()
+    mask = allowed_mask(grid, mcfg.robot_radius)
+    model = OdometryMotionModel(mcfg)
+    odom_prev, odom_now = (0.0, 0.0, 0.0), (0.2 * math.cos(0.1), 0.2 * math.sin(0.1), 0.2)  # one AMCL-sized step
+    beams = {b: endpoints_for(b, ranges, angles, max_range, laser_pose) for b in (60, 360)}
+    fields = {b: LikelihoodField(grid, sensor_cfg(b)) for b in beams}
+    max_threads = numba.config.NUMBA_NUM_THREADS
+    thread_counts = [t for t in (1, 2) if t <= max_threads]
+    sizes = (1_000, 10_000, 100_000)
+    print(f"# {note}; numba {numba.__version__}, threading layer after warm-up below, "
+          f"{max_threads} threads available")
+    print(f"# motion: noise_form={mcfg.noise_form} alphas=({mcfg.alpha1}, {mcfg.alpha2}, {mcfg.alpha3}, {mcfg.alpha4}) "
+          f"max_tries={mcfg.max_tries}; beams: {', '.join(f'{b}->{e.shape[1]} valid' for b, e in beams.items())}")
+
+    rng = np.random.default_rng(0)
+    # warm-up: compile (or load from cache) every kernel once
+    p0 = particles_near_centre(grid, mask, 1000, rng)
+    model.sample(p0, odom_prev, odom_now, rng, allowed=mask, grid=grid)
+    fields[60].log_likelihood(p0, beams[60])
+    resample("systematic", np.zeros(1000), rng)
+    print(f"# threading layer: {numba.threading_layer()}")
+
+    header = (f"{'stage':<20}{'N':>7}{'beams':>6}{'thr':>4}{'ms/call':>9}{'best':>8}{'idle ms':>9}"
+              f"{'ns/part':>9}{'ns/p-beam':>10}{'tries':>6}")
+    print("# ms/call: median of consecutive calls; best: their minimum; idle ms: median when each call\n"
+          "# follows a 50 ms sleep (OpenMP threads gone to sleep); ns/p-beam uses the valid beams")
+    print(header)
+    print("-" * len(header))
+    saved = numba.get_num_threads()
+    try:
+        for threads in thread_counts:
+            numba.set_num_threads(threads)
+            for n in sizes:
+                reps = {1_000: 200, 10_000: 60, 100_000: 25}[n] // (5 if args.quick else 1)
+                idle_reps = 0 if args.quick else max(5, reps // 5)
+                p = particles_near_centre(grid, mask, n, rng)
+                out = np.empty_like(p)
+                tries = []
+
+                def predict():
+                    _, ok, t = model.sample(p, odom_prev, odom_now, rng, allowed=mask, grid=grid, out=out)
+                    tries.append(t)
+
+                rows = [("predict+map", None, predict)]
+                for b, e in beams.items():
+                    ll = np.empty(n)
+                    rows.append((f"likelihood", b, lambda f=fields[b], e=e, ll=ll: f.log_likelihood(p, e, out=ll)))
+                logw = rng.normal(0, 3, n)
+
+                def resamp():
+                    normalize_log_weights(logw)
+                    resample("systematic", logw, rng)
+
+                rows.append(("normalise+resample", None, resamp))
+                for b, e in beams.items():
+                    state = {"p": p.copy(), "logw": np.full(n, -math.log(n))}
+
+                    def update(f=fields[b], e=e, state=state):
+                        new, ok, _ = model.sample(state["p"], odom_prev, odom_now, rng, allowed=mask, grid=grid)
+                        lw = state["logw"] + f.log_likelihood(new, e)
+                        lw[~ok] = -np.inf
+                        w, log_norm = normalize_log_weights(lw)
+                        idx = resample("systematic", lw, rng)
+                        state["p"] = np.ascontiguousarray(new[:, idx])
+                        state["logw"] = np.full(n, -math.log(n))
+
+                    rows.append(("whole update", b, update))
+                for name, b, fn in rows:
+                    fn()
+                    tries.clear()
+                    ms, best = (v * 1e3 for v in timed(fn, reps))
+                    idle_ms = timed(fn, idle_reps, idle=0.05)[0] * 1e3
+                    k = beams[b].shape[1] if b else 0
+                    per_pb = f"{ms * 1e6 / (n * k):10.2f}" if k else f"{'':>10}"
+                    t = f"{np.mean(tries):6.2f}" if tries else f"{'':>6}"
+                    print(f"{name:<20}{n:>7}{(b or ''):>6}{threads:>4}{ms:9.3f}{best:8.3f}{idle_ms:9.3f}"
+                          f"{ms * 1e6 / n:9.1f}{per_pb}{t}", flush=True)
+            print()
+    finally:
+        numba.set_num_threads(saved)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
