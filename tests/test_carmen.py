@@ -55,7 +55,7 @@ def test_every_message_type(tmp_path):
     np.testing.assert_array_equal(f.ranges, [1, 2, 3, 4])
     assert f.angle_min == -math.pi / 2 and f.angle_increment == math.pi / 4
     np.testing.assert_allclose(f.angles, -math.pi / 2 + np.arange(4) * math.pi / 4)
-    assert f.max_range is None and f.tv == 0 and f.rv == 0
+    assert f.max_range == 81.9 and f.tv == 0 and f.rv == 0  # from PARAM robot_front_laser_max
     np.testing.assert_allclose(f.odom, [1, 2, math.pi / 2])
     np.testing.assert_allclose(f.laser_offset, [0.1, 0, 0], atol=1e-12)  # 0.1 m ahead, in the robot frame
     # RLASER: rear laser, 0.2 m behind, facing backwards
@@ -226,3 +226,17 @@ def test_real_intel_start_pose():
     np.testing.assert_allclose(log.scans[0].odom, [0.600266, -0.032033, -0.354665])
     np.testing.assert_allclose(log.scans[0].laser_offset, 0, atol=1e-12)
     assert log.scans[0].angle_increment == math.pi / 180
+
+
+def test_param_lines_give_flaser_its_maximum_range(tmp_path):
+    ranges = " ".join(["1.0"] * 181)
+    p = tmp_path / "p.clf"
+    p.write_text(
+        "PARAM robot_front_laser_max 12.0 host 0\n"
+        f"FLASER 181 {ranges} 0 0 0 0 0 0 1.0 host 1.0\n"
+        f"RLASER 181 {ranges} 0 0 0 0 0 0 1.0 host 1.0\n"
+    )
+    log = read_carmen(p)
+    assert log.scans_of("FLASER")[0].max_range == 12.0
+    assert log.scans_of("RLASER")[0].max_range is None  # no robot_rear_laser_max given
+    assert log.skipped["PARAM"] == 1

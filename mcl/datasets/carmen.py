@@ -9,8 +9,9 @@ Messages read (everything else is skipped and counted in ``Log.skipped``):
   frame. Beam i points at ``-pi/2 + i*d`` (counter-clockwise, beam 0 on the
   right) with d = pi/180 for 180 or 181 beams, pi/360 for 360 or 361 beams,
   otherwise pi/(n-1) for odd n (a 180-degree fan with both ends included) and
-  pi/n for even n (a fan with the left end excluded). ``max_range`` is None:
-  the config decides.
+  pi/n for even n (a fan with the left end excluded). ``max_range`` comes from
+  the log's ``PARAM robot_front_laser_max`` (``robot_rear_laser_max`` for
+  RLASER) when it has one, else None: the config's ``sensor.range_max`` decides.
 * ``ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode
   n r_1..r_n n_rem rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta
   tv rv forward_safety side_safety turn_axis ipc_timestamp hostname logger_timestamp``
@@ -31,6 +32,7 @@ from __future__ import annotations
 import math
 import os
 import zlib
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -299,6 +301,7 @@ def read_carmen(path: str | os.PathLike) -> Log:
     scans: list[Scan] = []
     odom_rows: list[list[float]] = []
     skipped: dict[str, int] = {}
+    params: dict[str, str] = {}
     parsers = _PARSERS
     for lineno, raw in enumerate(lines, start=1):
         parts = raw.split()
@@ -312,6 +315,8 @@ def read_carmen(path: str | os.PathLike) -> Log:
                 continue
             parser = parsers.get(word)
             if parser is None:
+                if word == "PARAM" and len(parts) >= 3:
+                    params[parts[1]] = parts[2]
                 key = "#" if word.startswith("#") else word
                 skipped[key] = skipped.get(key, 0) + 1
                 continue
@@ -326,7 +331,30 @@ def read_carmen(path: str | os.PathLike) -> Log:
         raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4)")
     odometry = np.array(odom_rows, dtype=np.float64).reshape(-1, 6)
     scans = _fill_odom(scans, odometry, name)
+    scans = _param_max_range(scans, params)
     return Log(name, scans, odometry, skipped, warnings)
+
+
+# FLASER/RLASER lines carry no maximum range; a log's PARAM lines may give it.
+_MAX_RANGE_PARAMS = {"FLASER": "robot_front_laser_max", "RLASER": "robot_rear_laser_max"}
+
+
+def _param_max_range(scans: list[Scan], params: dict[str, str]) -> list[Scan]:
+    """Give FLASER/RLASER scans the ``PARAM robot_{front,rear}_laser_max`` of the log, when it has one."""
+    limits = {}
+    for kind, key in _MAX_RANGE_PARAMS.items():
+        try:
+            v = float(params[key])
+        except (KeyError, ValueError):
+            continue
+        if math.isfinite(v) and v > 0:
+            limits[kind] = v
+    if not limits:
+        return scans
+    return [
+        dataclasses.replace(s, max_range=limits[s.kind]) if (s.max_range is None and s.kind in limits) else s
+        for s in scans
+    ]
 
 
 def interpolate_odometry(odometry: np.ndarray, t) -> np.ndarray:
