@@ -73,7 +73,9 @@ def scan_endpoints(scan, cfg, laser_pose=None) -> np.ndarray:
     else the scan's own ``laser_offset``, else the robot origin.
     """
     ranges = np.asarray(scan.ranges, dtype=np.float64)
-    angles = float(scan.angle_min) + float(scan.angle_increment) * np.arange(ranges.size)
+    angles = getattr(scan, "angles", None)
+    if angles is None:
+        angles = float(scan.angle_min) + float(scan.angle_increment) * np.arange(ranges.size)
     if laser_pose is None:
         laser_pose = getattr(cfg, "laser_pose", None)
     if laser_pose is None:
