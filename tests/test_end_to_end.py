@@ -126,3 +126,15 @@ def test_eval_command(tmp_path, capsys):
     assert main(["eval", str(truth), str(truth), "--json"]) == 0
     r = json.loads(capsys.readouterr().out)
     assert r["ate_rmse"] == 0.0 and r["scored"] == 910 and r["convergence_time"] == 0.0
+
+
+def test_global_localization_on_the_bundled_demo(tmp_path):
+    # Issue 1: global localization on data/demo with 20,000 particles is within 0.3 m
+    # before 15 s of log time, and stays there (convergence_time is "the error falls
+    # below 0.3 m and never rises above it again").
+    cfg = load_config(CONFIGS / "default.yaml", ["rerun.mode=off"])
+    assert cfg.filter.global_localization and cfg.filter.particles == 20000
+    s = run(cfg, tmp_path, progress=False, echo=_quiet)
+    ev = s["eval"]
+    assert ev["convergence_time"] is not None and ev["convergence_time"] < 15.0, ev
+    assert ev["scored"] >= 290
