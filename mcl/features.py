@@ -10,7 +10,7 @@ Pipeline (:func:`extract_lines`):
 
 1. valid beams only (finite, > 0, below ``max_range``), in beam order; a new chain
    starts wherever two consecutive valid points are more than ``max_gap`` apart.
-   Chains do not wrap from the last beam to the first.
+   In a 360-degree scan the last beam's point may continue the first beam's chain.
 2. split: recursively cut a chain at the point farthest from the chord joining its
    first and last point while that distance exceeds ``split_threshold``;
 3. merge: join neighbouring segments of one chain while the total-least-squares
@@ -70,7 +70,8 @@ __all__ = [
 ]
 
 # Relative size of |lambda_1 - lambda_2| / (lambda_1 + lambda_2) below which a point set
-# has no direction (see the module docstring).
+# has no direction (see the module docstring); points spread less than 1e-9 of their
+# distance from the sensor count as identical.
 _DEGENERATE = 1e-9
 
 
@@ -144,8 +145,10 @@ def _tls(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float, float, floa
     dx, dy = x - xm, y - ym
     sxx, syy, sxy = dx @ dx, dy @ dy, dx @ dy
     num, den = -2.0 * sxy, syy - sxx
-    if not math.hypot(num, den) > _DEGENERATE * (sxx + syy):  # also catches sxx + syy == 0 and NaN
-        return None
+    # points spread less than ~1e-9 of their distance (rounding of the centroid) or no direction
+    scale = max(1.0, abs(xm), abs(ym))
+    if not (sxx + syy > x.shape[0] * (1e-9 * scale) ** 2 and math.hypot(num, den) > _DEGENERATE * (sxx + syy)):
+        return None  # the negated form also catches NaN
     alpha = 0.5 * math.atan2(num, den)
     r = xm * math.cos(alpha) + ym * math.sin(alpha)
     if r < 0.0:
@@ -290,6 +293,13 @@ def extract_lines(
     rho, theta = ranges[idx], angles[idx]
     c, s = np.cos(theta), np.sin(theta)
     x, y = rho * c, rho * s
+    if idx.shape[0] > 2 and _full_circle(angles):
+        # a 360-degree scan: start at a gap (or, in a closed loop, at the farthest point,
+        # usually a corner) so that a wall seen across the last-to-first beam stays one piece
+        gaps = np.hypot(np.diff(x, append=x[0]), np.diff(y, append=y[0])) > cfg.max_gap
+        start = (int(np.argmax(gaps)) + 1) % idx.shape[0] if gaps.any() else int(np.argmax(rho))
+        if start:
+            idx, rho, theta, x, y = (np.roll(v, -start) for v in (idx, rho, theta, x, y))
 
     alphas, rs, covs, ends, beams, rms = [], [], [], [], [], []
     for a, b in split_and_merge(x, y, cfg):
@@ -312,6 +322,15 @@ def extract_lines(
     if not alphas:
         return Lines.empty()
     return Lines(np.array(alphas), np.array(rs), np.array(covs), np.array(ends), tuple(beams), np.array(rms))
+
+
+def _full_circle(angles: np.ndarray) -> bool:
+    """Do the beams cover the whole circle (the last beam is the first's neighbour)?"""
+    n = angles.shape[0]
+    if n < 3:
+        return False
+    step = float(np.median(np.diff(angles)))
+    return step != 0.0 and abs(n * abs(step) - 2.0 * math.pi) < 0.5 * abs(step)
 
 
 def extract_scan_lines(scan, cfg: LineConfig = LineConfig(), max_range: float | None = None) -> Lines:
