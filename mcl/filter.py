@@ -18,9 +18,24 @@ import numpy as np
 
 from mcl.config import Config
 from mcl.estimate import estimate, wrap_angle
-from mcl.motion import OdometryMotionModel, allowed_mask
+from mcl.motion import allowed_mask, make_motion_model
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
-from mcl.sensors import LikelihoodField
+from mcl.sensors import make_sensor_model
+
+
+@dataclass(frozen=True)
+class Control:
+    """u_t for the motion model: the odometry pair, and the velocities with their duration.
+
+    The odometry model reads ``odom_prev`` and ``odom_now`` (robot poses in the
+    odometry frame); a velocity model reads ``v``, ``w`` and ``dt``.
+    """
+
+    odom_prev: np.ndarray
+    odom_now: np.ndarray
+    dt: float = 0.0
+    v: float = 0.0
+    w: float = 0.0
 
 
 @dataclass
@@ -44,9 +59,9 @@ class ParticleFilter:
         self.cfg = cfg
         self.grid = grid
         self.rng = rng if rng is not None else np.random.default_rng(cfg.seed)
-        self.motion = OdometryMotionModel(cfg.motion)
+        self.motion = make_motion_model(cfg.motion)
         self.allowed = allowed_mask(grid, cfg.motion.robot_radius) if cfg.motion.map_rejection else None
-        self.sensor = LikelihoodField(grid, cfg.sensor)
+        self.sensor = make_sensor_model(grid, cfg.sensor)
         n = cfg.filter.particles
         self.particles = np.zeros((3, n))
         self.logw = np.full(n, -np.log(n))
@@ -80,9 +95,9 @@ class ParticleFilter:
 
     # ------------------------------------------------------------------ the loop
 
-    def predict(self, odom_prev, odom_now, info: StepInfo) -> None:
+    def predict(self, control: Control, info: StepInfo) -> None:
         """x_t ~ p(x_t | u_t, x_{t-1}, m): sample the motion model, rejecting poses off free space."""
-        new, ok, tries = self.motion.sample(self.particles, odom_prev, odom_now, self.rng, allowed=self.allowed, grid=self.grid)
+        new, ok, tries = self.motion.sample_control(self.particles, control, self.rng, allowed=self.allowed, grid=self.grid)
         self.particles = new
         info.tries = float(tries)
         if ok is not None:
@@ -91,11 +106,11 @@ class ParticleFilter:
             if info.rejected:
                 self.logw[bad] = -np.inf
 
-    def correct(self, endpoints: np.ndarray) -> None:
-        """w_t = w_{t-1} * p(z_t | x_t, m), in log space."""
-        if endpoints.shape[1] == 0:
+    def correct(self, observation) -> None:
+        """w_t = w_{t-1} * p(z_t | x_t, m), in log space. `observation` comes from ``self.sensor.prepare``."""
+        if observation is None:
             return
-        self.logw += self.sensor.log_likelihood(self.particles, endpoints)
+        self.logw += self.sensor.log_likelihood(self.particles, observation)
 
     def normalize(self, info: StepInfo) -> None:
         """Normalise the log weights (log-sum-exp); recover when no particle explains the scan."""
@@ -126,14 +141,14 @@ class ParticleFilter:
         """Weighted mean pose (circular mean for theta) and covariance."""
         return estimate(self.particles, self.weights)
 
-    def step(self, odom_prev, odom_now, endpoints) -> StepInfo:
+    def step(self, control: Control | None, observation) -> StepInfo:
         """One MCL update: predict -> correct -> normalise -> estimate -> resample. Returns what it did."""
         info = StepInfo()
         t0 = time.perf_counter()
-        if odom_prev is not None:
-            self.predict(odom_prev, odom_now, info)
+        if control is not None:
+            self.predict(control, info)
         t1 = time.perf_counter()
-        self.correct(endpoints)
+        self.correct(observation)
         t2 = time.perf_counter()
         self.normalize(info)
         t3 = time.perf_counter()

@@ -117,6 +117,10 @@ class OdometryMotionModel:
             self._all = np.arange(n, dtype=np.int64)
         return self._noise, self._all
 
+    def sample_control(self, particles, control, rng, allowed=None, grid=None):
+        """``sample`` for a :class:`mcl.filter.Control` (uses its odometry pair)."""
+        return self.sample(particles, control.odom_prev, control.odom_now, rng, allowed=allowed, grid=grid)
+
     def sample(self, particles, odom_prev, odom_now, rng: np.random.Generator,
                allowed=None, grid=None, out=None):
         """Move every particle by the odometry step odom_prev -> odom_now, with noise.
@@ -169,3 +173,10 @@ class OdometryMotionModel:
             n_ok += _k.sample_odometry_map(p, fresh, idx, rot1, trans, rot2, s1, st, s2,
                                            mask, ox, oy, inv_res, out, ok)
         return out, ok, draws / n if n else 0.0
+
+
+def make_motion_model(cfg):
+    """The motion model named by ``motion.model``."""
+    if cfg.model == "odometry":
+        return OdometryMotionModel(cfg)
+    raise ValueError(f"motion.model: unknown model {cfg.model!r}")

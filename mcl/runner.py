@@ -114,7 +114,7 @@ def run(
 
     from mcl.datasets.carmen import read_carmen
     from mcl.evaluate import evaluate, format_eval
-    from mcl.filter import ParticleFilter
+    from mcl.filter import Control, ParticleFilter
     from mcl.maps import load_map
     from mcl.sensors import beam_endpoints
     from mcl.trajectory import TumWriter, atomic_write_text, read_tum
@@ -169,6 +169,7 @@ def run(
     traj_p: list[np.ndarray] = []
     interrupted = False
     last_odom = None
+    last_t = 0.0
     odom_to_map = None
     writer = TumWriter(out_dir / "trajectory.tum")
     bar = tqdm(total=len(scans), unit="scan", disable=(None if progress is None else not progress), leave=False, dynamic_ncols=True)
@@ -188,9 +189,13 @@ def run(
                     if cfg.sensor.laser_pose is not None
                     else (scan.laser_offset if scan.laser_offset is not None else np.zeros(3))
                 )
-                endpoints = beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose)
-                info = pf.step(last_odom, odom, endpoints)
-                last_odom = odom
+                observation = pf.sensor.prepare(scan, laser_pose)
+                control = None
+                if last_odom is not None:
+                    dt = scan.t - last_t
+                    control = Control(last_odom, odom, dt=dt, v=scan.tv, w=scan.rv)
+                info = pf.step(control, observation)
+                last_odom, last_t = odom, scan.t
                 mean, cov = info.mean, info.cov
                 writer.append(scan.t, mean[0], mean[1], mean[2])
                 traj_t.append(scan.t)
@@ -217,6 +222,7 @@ def run(
                         stats["error/position"] = float(math.hypot(mean[0] - ref[0], mean[1] - ref[1]))
                         stats["error/heading"] = abs(float(wrap_angle(mean[2] - ref[2])))
                     scan_world = None
+                    endpoints = beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose)
                     if cfg.rerun.scan and endpoints.shape[1]:
                         c, s = math.cos(mean[2]), math.sin(mean[2])
                         scan_world = np.vstack(

@@ -113,6 +113,10 @@ class LikelihoodField:
         self.inv_res = 1.0 / self.resolution
         self.exponent = float(getattr(cfg, "exponent", 1.0))
 
+    def prepare(self, scan, laser_pose) -> np.ndarray:
+        """The observation this model scores, made once per scan: robot-frame beam endpoints (2, K)."""
+        return beam_endpoints(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose)
+
     def log_likelihood(self, particles, endpoints, out=None) -> np.ndarray:
         """(N,) float64: exponent * sum over beams of the table value at each rotated endpoint.
 
@@ -131,3 +135,10 @@ class LikelihoodField:
         likelihood_field_loglik(p, e_cells, self.table, self.origin[0], self.origin[1],
                                 self.inv_res, self.offmap, self.exponent, out)
         return out
+
+
+def make_sensor_model(grid, cfg):
+    """The range sensor model named by ``sensor.model``."""
+    if cfg.model == "likelihood_field":
+        return LikelihoodField(grid, cfg)
+    raise ValueError(f"sensor.model: unknown model {cfg.model!r}")
