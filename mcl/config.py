@@ -48,6 +48,26 @@ class FilterConfig:
     resample_threshold: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # resample when ESS/N < this
     update_min_d: float = field(default=0.05, metadata=_rng(0.0))  # m travelled before an update (AMCL)
     update_min_a: float = field(default=0.05, metadata=_rng(0.0))  # rad turned before an update (AMCL)
+    # estimate: mean of the heaviest cluster (AMCL's pf_cluster_stats) or of the whole set (mcl.clusters)
+    estimate: Literal["cluster", "mean"] = "cluster"
+    cluster_size: float = field(default=0.5, metadata=_rng(0.0, lo_open=True))  # m, histogram cell for clusters
+    cluster_angle: float = field(default=0.5236, metadata=_rng(0.0, 6.2832, lo_open=True))  # rad, its theta cell
+    # degenerate input (mcl.filter): an odometry step longer than this is a jump, not motion
+    max_odom_step: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
+    respread_std: tuple[float, float, float] = (0.5, 0.5, 0.5)  # std x, y (m), theta (rad) of a re-spread
+    # KLD sampling (Fox 2003, Prob. Rob. Table 8.4; mcl.adaptive): with kld on, `particles` is the
+    # maximum (and the count drawn at initialisation, as AMCL's max_particles) and each resample draws
+    # between min_particles and particles, as many as the occupied histogram bins call for.
+    kld: bool = False
+    min_particles: int = field(default=500, metadata=_rng(1, 10_000_000))
+    kld_epsilon: float = field(default=0.05, metadata=_rng(0.0, 1.0, lo_open=True))  # bound on the KL error
+    kld_delta: float = field(default=0.01, metadata=_rng(0.0, 1.0, lo_open=True, hi_open=True))  # P(error > eps)
+    kld_bin_xy: float = field(default=0.5, metadata=_rng(0.0, lo_open=True))  # histogram bin side (m)
+    kld_bin_theta: float = field(default=0.1745, metadata=_rng(0.0, 6.2832, lo_open=True))  # bin width (rad)
+    # Augmented MCL (Prob. Rob. Table 8.3): inject poses from free space with p = max(0, 1 - w_fast/w_slow).
+    recovery: bool = False
+    recovery_alpha_slow: float = field(default=0.001, metadata=_rng(0.0, 1.0, lo_open=True))
+    recovery_alpha_fast: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -69,17 +89,32 @@ class MotionConfig:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SensorConfig:
-    """Likelihood field range finder model (Prob. Rob. Table 6.3)."""
+    """Range finder model: likelihood field (Prob. Rob. Table 6.3) or beam model (Table 6.1).
 
-    model: Literal["likelihood_field"] = "likelihood_field"
+    Both use z_hit, z_rand, sigma_hit; the beam model adds z_short, z_max and
+    lambda_short, and its four weights must sum to 1. ``mcl calibrate sensor``
+    fits them (Table 6.2, learn_intrinsic_parameters).
+    """
+
+    model: Literal["likelihood_field", "beam"] = "likelihood_field"
     z_hit: float = field(default=0.95, metadata=_rng(0.0, 1.0))
     z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
     sigma_hit: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
+    z_short: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # beam: weight of short readings (unexpected obstacles)
+    z_max: float = field(default=0.05, metadata=_rng(0.0, 1.0))  # beam: weight of no-return (max-range) readings
+    lambda_short: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # beam: 1/m, rate of p_short
+    beam_lut: bool = False  # beam: gather expected ranges from a precomputed (x, y, theta) table instead of casting
+    beam_lut_bins: int = field(default=120, metadata=_rng(4, 4096))  # beam: heading bins of that table
     likelihood_max_dist: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
     max_beams: int = field(default=60, metadata=_rng(1, 100_000))
     range_min: float = field(default=0.0, metadata=_rng(0.0))
     range_max: float = field(default=80.0, metadata=_rng(0.0, lo_open=True))  # readings >= this: no return
     exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # temper the beam product
+    # beam skipping (AMCL likelihood_field_prob): once converged, ignore beams most particles cannot explain
+    beam_skip: bool = False
+    beam_skip_distance: float = field(default=0.5, metadata=_rng(0.0, lo_open=True))  # m: endpoint explained if closer
+    beam_skip_threshold: float = field(default=0.3, metadata=_rng(0.0, 1.0))  # keep a beam explained by > this fraction
+    beam_skip_error_threshold: float = field(default=0.9, metadata=_rng(0.0, 1.0))  # skip >= this fraction: use all
     laser_pose: tuple[float, float, float] | None = None  # mounting pose in the robot frame; null -> from the log
 
 
@@ -234,8 +269,27 @@ def _cross_checks(cfg: Config) -> None:
         raise ConfigError(f"sensor.range_min: {s.range_min} must be below sensor.range_max ({s.range_max})")
     if s.z_hit + s.z_rand <= 0:
         raise ConfigError("sensor.z_hit: z_hit + z_rand must be positive")
+    if s.model == "beam":
+        total = s.z_hit + s.z_short + s.z_max + s.z_rand
+        if abs(total - 1.0) > 1e-6:
+            raise ConfigError(
+                f"sensor.z_hit: with sensor.model=beam the mixture weights z_hit + z_short + z_max + z_rand must sum "
+                f"to 1, got {s.z_hit:g} + {s.z_short:g} + {s.z_max:g} + {s.z_rand:g} = {total:g}"
+            )
     if any(v < 0 for v in cfg.filter.initial_std):
         raise ConfigError("filter.initial_std: standard deviations must be >= 0")
+    if any(not v > 0 for v in cfg.filter.respread_std):
+        raise ConfigError("filter.respread_std: standard deviations must be > 0")
+    f = cfg.filter
+    if f.kld and f.min_particles > f.particles:
+        raise ConfigError(
+            f"filter.min_particles: {f.min_particles} must be <= filter.particles ({f.particles}, the maximum with kld on)"
+        )
+    if f.recovery and f.recovery_alpha_slow >= f.recovery_alpha_fast:
+        raise ConfigError(
+            f"filter.recovery_alpha_slow: {f.recovery_alpha_slow} must be below filter.recovery_alpha_fast "
+            f"({f.recovery_alpha_fast})"
+        )
 
 
 # ----------------------------------------------------------------------------- overrides and paths

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mcl.adaptive import BinCounter, Recovery, draw_injected, kld_quantile, kld_resample
 from mcl.config import Config
 from mcl.estimate import estimate, wrap_angle
 from mcl.motion import allowed_mask, make_motion_model
@@ -47,6 +48,9 @@ class StepInfo:
     tries: float = 0.0  # mean motion samples per particle (map-based motion model)
     rejected: int = 0  # particles that never landed in free space (weight zero)
     degenerate: bool = False  # every weight was zero; weights were reset to uniform
+    particles: int = 0  # N weighted in this update (KLD sampling changes it at resampling)
+    injected: int = 0  # particles drawn from the recovery sampler at this resampling (augmented MCL)
+    inject_p: float = 0.0  # max(0, 1 - w_fast / w_slow) after this update's scan
     mean: np.ndarray | None = None  # the estimate (x, y, theta), from the weighted set before resampling
     cov: np.ndarray | None = None  # its 3x3 covariance
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
@@ -67,6 +71,18 @@ class ParticleFilter:
         self.logw = np.full(n, -np.log(n))
         self.weights = np.full(n, 1.0 / n)
         self.degenerate_events = 0
+        fc = cfg.filter
+        self.kld_counter = None
+        if fc.kld:
+            h, w = grid.occupancy.shape
+            size = (w * grid.resolution, h * grid.resolution)
+            self.kld_counter = BinCounter(grid.origin, size, fc.kld_bin_xy, fc.kld_bin_theta)
+            self.kld_z = kld_quantile(fc.kld_delta)
+        self.recovery = Recovery(fc.recovery_alpha_slow, fc.recovery_alpha_fast) if fc.recovery else None
+        # Augmented MCL draws injected poses from this: sampler(n, rng, observation) -> (3, n). Uniform over
+        # the free space the motion model allows unless replaced (e.g. by a landmark-based pose sampler).
+        self.recovery_sampler = self.sample_uniform
+        self._observation = None
 
     # ------------------------------------------------------------------ initialisation
 
@@ -84,8 +100,12 @@ class ParticleFilter:
 
     def init_global(self) -> None:
         """Particles uniform over the poses the map allows (global localization)."""
+        self._set(self.sample_uniform(self.cfg.filter.particles, self.rng))
+
+    def sample_uniform(self, n: int, rng: np.random.Generator, observation=None) -> np.ndarray:
+        """(3, n) poses uniform over free space, with the robot-radius clearance when map rejection is on."""
         clearance = self.cfg.motion.robot_radius if self.cfg.motion.map_rejection else 0.0
-        self._set(self.grid.sample_free(self.cfg.filter.particles, self.rng, clearance=clearance))
+        return self.grid.sample_free(n, rng, clearance=clearance)
 
     def _set(self, particles: np.ndarray) -> None:
         self.particles = particles
@@ -110,7 +130,11 @@ class ParticleFilter:
         """w_t = w_{t-1} * p(z_t | x_t, m), in log space. `observation` comes from ``self.sensor.prepare``."""
         if observation is None:
             return
-        self.logw += self.sensor.log_likelihood(self.particles, observation)
+        loglik = self.sensor.log_likelihood(self.particles, observation)
+        if self.recovery is not None:
+            self.recovery.update(Recovery.log_mean_likelihood(self.logw, loglik))
+        self._observation = observation
+        self.logw += loglik
 
     def normalize(self, info: StepInfo) -> None:
         """Normalise the log weights (log-sum-exp); recover when no particle explains the scan."""
@@ -129,12 +153,32 @@ class ParticleFilter:
         info.ess = float(effective_sample_size(w))
 
     def maybe_resample(self, info: StepInfo) -> None:
-        """Resample when ESS / N < resample_threshold (the scheme named in filter.resampling)."""
-        if info.ess >= self.cfg.filter.resample_threshold * self.n:
+        """Resample when ESS / N < resample_threshold (the scheme named in filter.resampling).
+
+        With KLD sampling the new set's size follows the occupied bins (``mcl.adaptive.kld_resample``);
+        with recovery a Binomial(N, max(0, 1 - w_fast/w_slow)) of the new particles come from
+        ``recovery_sampler`` instead of the weighted set (augmented MCL).
+        """
+        fc = self.cfg.filter
+        p = self.recovery.inject_probability if self.recovery is not None else 0.0
+        info.inject_p = p
+        if info.ess >= fc.resample_threshold * self.n:
             return
-        idx = resample(self.cfg.filter.resampling, self.logw, self.rng)
-        self.particles = np.ascontiguousarray(self.particles[:, idx])
-        self._set(self.particles)
+        obs = self._observation
+        if self.kld_counter is not None:
+            new, info.injected, _ = kld_resample(
+                self.particles, self.logw, self.rng, self.kld_counter, scheme=fc.resampling,
+                min_particles=fc.min_particles, max_particles=fc.particles, epsilon=fc.kld_epsilon, z=self.kld_z,
+                inject_p=p, sampler=lambda n: self.recovery_sampler(n, self.rng, obs),
+            )
+        else:
+            n_inj = draw_injected(self.n, p, self.rng)
+            idx = resample(fc.resampling, self.logw, self.rng, n=self.n - n_inj)
+            new = self.particles[:, idx]
+            if n_inj:
+                new = np.concatenate([new, self.recovery_sampler(n_inj, self.rng, obs)], axis=1)
+            info.injected = n_inj
+        self._set(np.ascontiguousarray(new))
         info.resampled = True
 
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
@@ -143,7 +187,7 @@ class ParticleFilter:
 
     def step(self, control: Control | None, observation) -> StepInfo:
         """One MCL update: predict -> correct -> normalise -> estimate -> resample. Returns what it did."""
-        info = StepInfo()
+        info = StepInfo(particles=self.n)
         t0 = time.perf_counter()
         if control is not None:
             self.predict(control, info)

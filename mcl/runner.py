@@ -100,6 +100,13 @@ def _choose_scans(log, laser: str):
     return scans
 
 
+def _particles_text(summary: dict) -> str:
+    lo, hi = summary["particles_min"], summary["particles_max"]
+    if lo == hi:
+        return f"{hi} particles"
+    return f"{summary['particles_mean']:.0f} particles on average, {lo}..{hi}"
+
+
 def run(
     cfg: Config,
     out_dir: Path,
@@ -165,6 +172,8 @@ def run(
     stage_totals = {"predict": 0.0, "correct": 0.0, "estimate": 0.0, "resample": 0.0, "viz": 0.0}
     counts = {"updates": 0, "resamples": 0, "rejected": 0, "degenerate": 0}
     tries_sum = 0.0
+    n_used: list[int] = []  # particles weighted at each update (KLD sampling varies it)
+    injected = 0
     traj_t: list[float] = []
     traj_p: list[np.ndarray] = []
     interrupted = False
@@ -205,6 +214,8 @@ def run(
                 counts["rejected"] += info.rejected
                 counts["degenerate"] += int(info.degenerate)
                 tries_sum += info.tries
+                n_used.append(info.particles)
+                injected += info.injected
                 for k, v in info.timings.items():
                     stage_totals[k] += v
                 if viz is not None:
@@ -214,7 +225,8 @@ def run(
                     ref = truth.at(scan.t) if truth is not None else None
                     stats = {
                         "ess": info.ess,
-                        "particles": float(pf.n),
+                        "particles": float(info.particles),
+                        "inject_p": info.inject_p,
                         "tries": info.tries,
                         **{f"time_ms/{k}": 1e3 * v for k, v in info.timings.items()},
                     }
@@ -261,6 +273,10 @@ def run(
         "scans": len(scans),
         "updates": counts["updates"],
         "particles": pf.n,
+        "particles_mean": float(np.mean(n_used)) if n_used else float(pf.n),
+        "particles_min": int(min(n_used)) if n_used else pf.n,
+        "particles_max": int(max(n_used)) if n_used else pf.n,
+        "injected_particles": injected,
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / n_up,
         "rejected_particles": counts["rejected"],
@@ -287,7 +303,7 @@ def run(
     ms = summary["ms_per_update"]
     text = (
         f"{'Interrupted after' if interrupted else 'Localized'} {counts['updates']} updates of {len(scans)} scans "
-        f"({mode}, {pf.n} particles) in {loop_time:.1f} s: "
+        f"({mode}, {_particles_text(summary)}) in {loop_time:.1f} s: "
         f"{ms['predict']:.1f} ms predict (mean {summary['mean_tries']:.2f} tries), {ms['correct']:.1f} ms correct, "
         f"{ms['resample']:.1f} ms resample, {ms['viz']:.1f} ms rerun per update."
     )
