@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from mcl.kernels.likelihood import likelihood_field_loglik
+from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik
 
 
 def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -112,6 +112,8 @@ class LikelihoodField:
         self.resolution = float(grid.resolution)
         self.inv_res = 1.0 / self.resolution
         self.exponent = float(getattr(cfg, "exponent", 1.0))
+        self._grid_distance = grid.distance  # float32 copy made on first use by beam skipping
+        self.dist = None
 
     def prepare(self, scan, laser_pose) -> np.ndarray:
         """The observation this model scores, made once per scan: robot-frame beam endpoints (2, K)."""
@@ -136,9 +138,148 @@ class LikelihoodField:
                                 self.inv_res, self.offmap, self.exponent, out)
         return out
 
+    def beam_support(self, particles, weights, endpoints) -> np.ndarray:
+        """(K,) for each beam, the weight of the particles that explain it (endpoint within beam_skip_distance
+        of a mapped obstacle). One numba kernel, parallel over beams."""
+        p = np.asarray(particles, dtype=np.float64)
+        e_cells = np.ascontiguousarray(np.asarray(endpoints, dtype=np.float64) * self.inv_res)
+        out = np.empty(e_cells.shape[1])
+        if self.dist is None:
+            self.dist = np.ascontiguousarray(self._grid_distance, dtype=np.float32)
+        beam_explained_weight(np.ascontiguousarray((p[0] - self.origin[0]) * self.inv_res),
+                              np.ascontiguousarray((p[1] - self.origin[1]) * self.inv_res),
+                              np.cos(p[2]), np.sin(p[2]), np.ascontiguousarray(weights, dtype=np.float64),
+                              e_cells, self.dist, float(self.cfg.beam_skip_distance), out)
+        return out
+
+    def skip_beams(self, particles, weights, endpoints) -> tuple[np.ndarray, int]:
+        """Beam skipping (AMCL ``likelihood_field_prob``): (the endpoints to score, how many were skipped).
+
+        A beam is kept when the particles explaining it weigh more than
+        ``beam_skip_threshold``; if that would skip ``beam_skip_error_threshold``
+        of the beams or more, the filter (not the world) is probably wrong and
+        every beam is kept. Call only once the filter has converged.
+        """
+        e = np.asarray(endpoints, dtype=np.float64)
+        k = e.shape[1]
+        if k == 0:
+            return e, 0
+        keep = self.beam_support(particles, weights, e) > float(self.cfg.beam_skip_threshold)
+        skipped = k - int(np.count_nonzero(keep))
+        if skipped == 0 or skipped >= float(self.cfg.beam_skip_error_threshold) * k:
+            return e, 0
+        return np.ascontiguousarray(e[:, keep]), skipped
+
 
 def make_sensor_model(grid, cfg):
     """The range sensor model named by ``sensor.model``."""
     if cfg.model == "likelihood_field":
         return LikelihoodField(grid, cfg)
+    if cfg.model == "beam":
+        return BeamModel(grid, cfg)
     raise ValueError(f"sensor.model: unknown model {cfg.model!r}")
+
+
+# ----------------------------------------------------------------------------- beam model
+
+# The lookup table option refuses maps whose table would exceed this many bytes.
+BEAM_LUT_MAX_BYTES = 512 * 2**20
+
+
+def beam_observation(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0)):
+    """What the beam model scores for one scan: ``(ranges (K,), angles (K,), laser_pose (3,), zmax)``.
+
+    Beams are subsampled as in ``beam_endpoints`` (up to ``max_beams`` evenly
+    spaced over all beams). zmax is ``range_max``, or the scan's own
+    ``max_range`` when that is smaller. Readings >= zmax (no return) become
+    exactly zmax and are *kept* (they are scored by p_max); NaN readings and
+    readings <= range_min are dropped; +inf counts as no return.
+    """
+    r = np.asarray(ranges, dtype=np.float64).ravel()
+    a = np.asarray(angles, dtype=np.float64).ravel()
+    if r.shape != a.shape:
+        raise ValueError(f"ranges and angles differ in length: {r.size} vs {a.size}")
+    max_beams = int(cfg.max_beams)
+    if r.size > max_beams:
+        sel = np.unique(np.rint(np.linspace(0.0, r.size - 1, max_beams)).astype(np.int64))
+        r, a = r[sel], a[sel]
+    zmax = float(cfg.range_max)
+    if max_range is not None and 0.0 < float(max_range) < zmax:
+        zmax = float(max_range)
+    with np.errstate(invalid="ignore"):
+        keep = ~np.isnan(r) & (r > float(cfg.range_min))
+    r, a = r[keep], a[keep]
+    r = np.where(r >= zmax, zmax, r)
+    return (np.ascontiguousarray(r), np.ascontiguousarray(a),
+            np.asarray(laser_pose, dtype=np.float64).reshape(3), zmax)
+
+
+def beam_params(cfg) -> np.ndarray:
+    """(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short) as the float64 array the kernels take."""
+    return np.array([cfg.z_hit, cfg.z_short, cfg.z_max, cfg.z_rand, cfg.sigma_hit, cfg.lambda_short],
+                    dtype=np.float64)
+
+
+class BeamModel:
+    """Beam range finder model (Prob. Rob. Table 6.1) with exact ray casting or a range lookup table.
+
+    log p(z | x, m) = exponent * sum_k log(z_hit p_hit + z_short p_short + z_max p_max + z_rand p_rand),
+    the expected range z*_k cast (Amanatides-Woo DDA over ``grid.occupied``)
+    from the particle's laser pose; see ``mcl.kernels.beam`` for the
+    component densities. Unlike the likelihood field, no-return readings are
+    scored (by p_max, and by p_hit when the ray also expects none).
+
+    With ``cfg.beam_lut`` the ranges from every free cell centre at
+    ``beam_lut_bins`` headings are cast once (uint16, ``range_max / 65535``
+    m steps) and gathered per beam (nearest cell, nearest heading bin):
+    much faster, slightly less exact; refused (ConfigError naming
+    ``sensor.beam_lut``) when the table would exceed 512 MiB.
+    """
+
+    def __init__(self, grid, cfg):
+        from mcl.errors import ConfigError
+        from mcl.kernels.beam import build_range_table
+
+        self.cfg = cfg
+        self.blocked = np.ascontiguousarray(grid.occupied, dtype=np.bool_)
+        self.origin = (float(grid.origin[0]), float(grid.origin[1]))
+        self.resolution = float(grid.resolution)
+        self.exponent = float(getattr(cfg, "exponent", 1.0))
+        self.params = beam_params(cfg)
+        self.table = None
+        self.unit = float(cfg.range_max) / 65535.0
+        if getattr(cfg, "beam_lut", False):
+            bins = int(cfg.beam_lut_bins)
+            h, w = self.blocked.shape
+            nbytes = h * w * bins * 2
+            if nbytes > BEAM_LUT_MAX_BYTES:
+                raise ConfigError(
+                    f"sensor.beam_lut: the range table for this {w}x{h}-cell map with {bins} heading bins would take "
+                    f"{nbytes / 2**20:.0f} MiB (limit {BEAM_LUT_MAX_BYTES / 2**20:.0f} MiB); use fewer "
+                    "sensor.beam_lut_bins or beam_lut: false")
+            self.table = np.empty((h, w, bins), dtype=np.uint16)
+            build_range_table(self.blocked, self.origin[0], self.origin[1], self.resolution, float(cfg.range_max),
+                              self.unit, self.table)
+
+    def prepare(self, scan, laser_pose):
+        """The observation, made once per scan: ``beam_observation`` of the scan."""
+        return beam_observation(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose)
+
+    def log_likelihood(self, particles, observation, out=None) -> np.ndarray:
+        """(N,) float64 log p(z | x, m) per particle; no beams gives zeros."""
+        from mcl.kernels.beam import beam_loglik, beam_loglik_lut
+
+        p = np.ascontiguousarray(particles, dtype=np.float64)
+        if p.ndim != 2 or p.shape[0] != 3:
+            raise ValueError(f"particles: expected shape (3, N), got {p.shape}")
+        ranges, angles, lp, zmax = observation
+        if out is None:
+            out = np.empty(p.shape[1])
+        ox, oy = self.origin
+        if self.table is not None:
+            beam_loglik_lut(p, ranges, angles, lp[0], lp[1], lp[2], self.table, self.unit, ox, oy, self.resolution,
+                            zmax, self.params, self.exponent, out)
+        else:
+            beam_loglik(p, ranges, angles, lp[0], lp[1], lp[2], self.blocked, ox, oy, self.resolution, zmax,
+                        self.params, self.exponent, out)
+        return out
