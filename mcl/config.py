@@ -74,7 +74,8 @@ class FilterConfig:
 class MotionConfig:
     """Odometry motion model (Prob. Rob. Table 5.6, sample_motion_model_odometry)."""
 
-    model: Literal["odometry"] = "odometry"
+    # odometry: sample_motion_model_odometry (Table 5.6); velocity: sample_motion_model_velocity (Table 5.3)
+    model: Literal["odometry", "velocity"] = "odometry"
     # variance: sigma^2 = alpha1*drot1^2 + alpha2*dtrans^2 (the book's Table 5.6 and AMCL);
     # std: sigma = alpha1*|drot1| + alpha2*|dtrans| (the lecture slides' form).
     noise_form: Literal["variance", "std"] = "variance"
@@ -82,6 +83,12 @@ class MotionConfig:
     alpha2: float = field(default=0.05, metadata=_rng(0.0))  # rotation noise from translation
     alpha3: float = field(default=0.05, metadata=_rng(0.0))  # translation noise from translation
     alpha4: float = field(default=0.05, metadata=_rng(0.0))  # translation noise from rotation
+    # velocity model only (Table 5.3): the final rotation gamma; variance form sigma_g^2 = alpha5 v^2 + alpha6 w^2
+    alpha5: float = field(default=0.01, metadata=_rng(0.0))  # final-rotation noise from translational velocity
+    alpha6: float = field(default=0.01, metadata=_rng(0.0))  # final-rotation noise from rotational velocity
+    # the noise's distribution (mcl.noise), all with the std above: normal (NumPy's exact normal),
+    # normal_twelve (sum of twelve uniforms) or triangular (two uniforms)
+    noise: Literal["normal", "normal_twelve", "triangular"] = "normal"
     map_rejection: bool = True  # map-based motion model (seed 5.5): resample poses that land off free space
     max_tries: int = field(default=10, metadata=_rng(1, 1000))
     robot_radius: float = field(default=0.0, metadata=_rng(0.0))  # m of clearance a pose needs

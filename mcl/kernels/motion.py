@@ -18,6 +18,22 @@ def wrap(a):
     return a - _TWO_PI * math.ceil((a - math.pi) / _TWO_PI)
 
 
+@njit(cache=True)
+def allowed_at(allowed, x, y, ox, oy, inv_res):
+    """Whether world point (x, y) falls in a nonzero cell of the (H, W) mask ``allowed``.
+
+    Row 0 at world y = oy; ix = floor((x - ox) * inv_res), iy likewise.
+    Off-map (and NaN) points are not allowed. Shared by every motion model's
+    map check (odometry, velocity).
+    """
+    fx = (x - ox) * inv_res
+    fy = (y - oy) * inv_res
+    # fx >= 0 makes int() (truncation) equal floor; NaN fails every comparison.
+    if fx >= 0.0 and fx < allowed.shape[1] and fy >= 0.0 and fy < allowed.shape[0]:
+        return allowed[int(fy), int(fx)] != 0
+    return False
+
+
 @njit(cache=True, parallel=True)
 def sample_odometry(particles, noise, drot1, dtrans, drot2, s_rot1, s_trans, s_rot2, out):
     """Apply one noisy odometry step to every particle.
@@ -56,8 +72,6 @@ def sample_odometry_map(particles, noise, idx, drot1, dtrans, drot2, s_rot1, s_t
     of idx that landed in an allowed cell.
     """
     m = idx.shape[0]
-    h_cells = allowed.shape[0]
-    w_cells = allowed.shape[1]
     n_ok = 0
     for j in prange(m):
         i = idx[j]
@@ -70,12 +84,7 @@ def sample_odometry_map(particles, noise, idx, drot1, dtrans, drot2, s_rot1, s_t
         out[0, i] = x
         out[1, i] = y
         out[2, i] = wrap(h + r2)
-        fx = (x - ox) * inv_res
-        fy = (y - oy) * inv_res
-        good = False
-        # fx >= 0 makes int() (truncation) equal floor; NaN fails every comparison.
-        if fx >= 0.0 and fx < w_cells and fy >= 0.0 and fy < h_cells:
-            good = allowed[int(fy), int(fx)] != 0
+        good = allowed_at(allowed, x, y, ox, oy, inv_res)
         ok[i] = good
         if good:
             n_ok += 1
