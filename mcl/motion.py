@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from mcl.kernels import motion as _k
+from mcl.noise import log_density, standard_noise
 
 ROT1_MIN_TRANS = 0.01  # m: below this translation rot1 is set to 0 (AMCL)
 
@@ -146,7 +147,7 @@ class OdometryMotionModel:
         rot1, trans, rot2 = odometry_deltas(odom_prev, odom_now)
         s1, st, s2 = noise_sigmas(rot1, trans, rot2, self.cfg)
         noise, idx_all = self._buffers(n)
-        rng.standard_normal(out=noise)
+        standard_noise(getattr(self.cfg, "noise", "normal"), rng, out=noise)  # normal: rng.standard_normal
 
         if allowed is None:
             _k.sample_odometry(p, noise, rot1, trans, rot2, s1, st, s2, out)
@@ -169,7 +170,7 @@ class OdometryMotionModel:
             # the particles still out: from the whole array once, then from the shrinking set
             idx = np.flatnonzero(~ok) if idx is None else idx[~ok[idx]]
             draws += idx.size
-            fresh = rng.standard_normal((3, idx.size))
+            fresh = standard_noise(getattr(self.cfg, "noise", "normal"), rng, (3, idx.size))
             n_ok += _k.sample_odometry_map(p, fresh, idx, rot1, trans, rot2, s1, st, s2,
                                            mask, ox, oy, inv_res, out, ok)
         return out, ok, draws / n if n else 0.0
@@ -179,4 +180,355 @@ def make_motion_model(cfg):
     """The motion model named by ``motion.model``."""
     if cfg.model == "odometry":
         return OdometryMotionModel(cfg)
+    if cfg.model == "velocity":
+        return VelocityMotionModel(cfg)
     raise ValueError(f"motion.model: unknown model {cfg.model!r}")
+
+
+# =============================================================================
+# Closed-form densities, the velocity model and the map-based density
+# (issue 3). Conventions for every density below:
+#
+# * ``x_new`` is (3, N) hypotheses x_t (or (3,)), ``x_prev`` is (3, N) or (3,)
+#   (broadcast); the result is (N,).
+# * The noise distribution is ``cfg.noise`` (mcl.noise: normal,
+#   normal_twelve, triangular), its std given by ``cfg.noise_form`` and the
+#   alphas exactly as in the samplers.
+# * ``jacobian=True`` (default) returns a density over poses (x', y', theta'),
+#   which integrates to 1 over (x', y', theta'). The book's algorithms
+#   (motion_model_odometry, Table 5.5; motion_model_velocity, Table 5.1)
+#   return the product of the noise densities p1 p2 p3, a density over the
+#   *motion parameters* (rot1, trans, rot2) or (v, w, gamma); over poses it
+#   integrates to about the travelled distance (odometry) or to 1 / |J| of the
+#   velocity map, not to 1. The two differ by the Jacobian of the map from
+#   the motion parameters to the pose: dtrans_hat for odometry,
+#   |v_hat| dt^4 sinc(w_hat dt / 2)^2 / 2 for velocity. ``jacobian=False``
+#   returns the book's value. For maximum likelihood over the alphas the
+#   factor is a constant, so calibration gets the same answer either way.
+# =============================================================================
+
+SIGMA_MIN = 1e-9  # floor on a noise std in the densities (a zero std is a delta: density 0 or inf)
+
+
+def _wrap_np(a):
+    """a wrapped into (-pi, pi] (the kernels' formula, vectorised)."""
+    a = np.asarray(a, dtype=np.float64)
+    return a - 2.0 * np.pi * np.ceil((a - np.pi) / (2.0 * np.pi))
+
+
+def _poses(x, name: str) -> np.ndarray:
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim == 1:
+        x = x[:, None]
+    if x.ndim != 2 or x.shape[0] != 3:
+        raise ValueError(f"{name}: expected shape (3,) or (3, N), got {x.shape}")
+    return x
+
+
+def odometry_deltas_array(x_prev, x_new, min_trans: float = ROT1_MIN_TRANS):
+    """Vectorised ``odometry_deltas``: (rot1, trans, rot2) arrays taking x_prev to x_new (Table 5.5 lines 5-7).
+
+    Same rules: angles wrapped into (-pi, pi], rot1 = 0 when trans < min_trans.
+    """
+    a, b = _poses(x_prev, "x_prev"), _poses(x_new, "x_new")
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    trans = np.hypot(dx, dy)
+    rot1 = np.where(trans < min_trans, 0.0, _wrap_np(np.arctan2(dy, dx) - a[2]))
+    rot2 = _wrap_np(_wrap_np(b[2] - a[2]) - rot1)
+    return rot1, trans, rot2
+
+
+def _noise_angle_np(rot):
+    r = np.abs(_wrap_np(rot))
+    return np.minimum(r, np.pi - r)  # min(|rot|, |rot -+ pi|), as _noise_angle
+
+
+def noise_sigmas_array(rot1, trans, rot2, cfg):
+    """Vectorised ``noise_sigmas``: (sigma_rot1, sigma_trans, sigma_rot2) arrays, same rules."""
+    a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
+    r1, r2, t = _noise_angle_np(rot1), _noise_angle_np(rot2), np.abs(np.asarray(trans, dtype=np.float64))
+    if cfg.noise_form == "variance":
+        return (np.sqrt(a1 * r1 * r1 + a2 * t * t), np.sqrt(a3 * t * t + a4 * (r1 * r1 + r2 * r2)),
+                np.sqrt(a1 * r2 * r2 + a2 * t * t))
+    if cfg.noise_form == "std":
+        return a1 * r1 + a2 * t, a3 * t + a4 * (r1 + r2), a1 * r2 + a2 * t
+    raise ValueError(f"motion.noise_form: unknown value {cfg.noise_form!r} (expected 'variance' or 'std')")
+
+
+def _odometry_pair(u):
+    if hasattr(u, "odom_prev"):
+        return u.odom_prev, u.odom_now
+    odom_prev, odom_now = u
+    return odom_prev, odom_now
+
+
+def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "hypothesis",
+                              jacobian: bool = True, min_trans: float = ROT1_MIN_TRANS) -> np.ndarray:
+    """log p(x_new | u, x_prev) of the odometry model (Prob. Rob. Table 5.5, motion_model_odometry), (N,).
+
+    u: the odometry pair (odom_prev, odom_now), or a ``Control``. The deltas
+    of u and of each hypothesis (x_prev -> x_new) follow ``odometry_deltas``;
+    the differences delta - delta_hat are wrapped into (-pi, pi].
+    sigma_from: "hypothesis" takes the noise stds from the hypothesis' deltas
+    (the book's Table 5.5: the true motion makes the noise, as in
+    ``mcl.simulate``); "odometry" takes them from the odometry's deltas (the
+    Spanish slides, seed 002), which is exactly the density the sampler
+    ``OdometryMotionModel`` draws from. jacobian: see the section comment.
+    """
+    rot1, trans, rot2 = odometry_deltas(*_odometry_pair(u))
+    h1, ht, h2 = odometry_deltas_array(x_prev, x_new, min_trans)
+    if sigma_from == "hypothesis":
+        s1, st, s2 = noise_sigmas_array(h1, ht, h2, cfg)
+    elif sigma_from == "odometry":
+        s1, st, s2 = (np.full(h1.shape, s) for s in noise_sigmas(rot1, trans, rot2, cfg))
+    else:
+        raise ValueError(f"sigma_from: expected 'hypothesis' or 'odometry', got {sigma_from!r}")
+    kind = getattr(cfg, "noise", "normal")
+    out = (log_density(kind, _wrap_np(rot1 - h1), np.maximum(s1, SIGMA_MIN))
+           + log_density(kind, trans - ht, np.maximum(st, SIGMA_MIN))
+           + log_density(kind, _wrap_np(rot2 - h2), np.maximum(s2, SIGMA_MIN)))
+    if jacobian:
+        with np.errstate(divide="ignore"):
+            out = out - np.log(ht)
+    return out
+
+
+def motion_model_odometry(x_new, u, x_prev, cfg, **kw) -> np.ndarray:
+    """p(x_new | u, x_prev) of the odometry model, (N,): exp of ``log_motion_model_odometry`` (same options)."""
+    return np.exp(log_motion_model_odometry(x_new, u, x_prev, cfg, **kw))
+
+
+# ----------------------------------------------------------------------------- velocity model
+
+
+def velocity_sigmas(v: float, w: float, cfg) -> tuple[float, float, float]:
+    """Stds (sigma_v, sigma_w, sigma_gamma) of the velocity model's noise (Table 5.3 lines 2-4).
+
+    variance form (book): sigma_v^2 = a1 v^2 + a2 w^2, sigma_w^2 = a3 v^2 + a4 w^2,
+    sigma_g^2 = a5 v^2 + a6 w^2; std form (slides): sigma_v = a1 |v| + a2 |w|, and so on.
+    """
+    a = [float(getattr(cfg, f"alpha{k}")) for k in range(1, 7)]
+    v, w = abs(float(v)), abs(float(w))
+    if cfg.noise_form == "variance":
+        return (math.sqrt(a[0] * v * v + a[1] * w * w), math.sqrt(a[2] * v * v + a[3] * w * w),
+                math.sqrt(a[4] * v * v + a[5] * w * w))
+    if cfg.noise_form == "std":
+        return a[0] * v + a[1] * w, a[2] * v + a[3] * w, a[4] * v + a[5] * w
+    raise ValueError(f"motion.noise_form: unknown value {cfg.noise_form!r} (expected 'variance' or 'std')")
+
+
+def _sinc(u):
+    u = np.asarray(u, dtype=np.float64)
+    small = np.abs(u) < 1e-12
+    return np.where(small, 1.0, np.sin(u) / np.where(small, 1.0, u))
+
+
+def velocity_inverse(x_prev, x_new, dt: float):
+    """(v_hat, w_hat, gamma_hat) arrays that take x_prev to x_new in dt (Table 5.1 lines 2-9).
+
+    The book's circle-centre construction: the centre (x*, y*) lies on the
+    normal to the heading at x_prev and on the bisector of x_prev x_new,
+    mu = 1/2 ((x-x') cos th + (y-y') sin th) / ((y-y') cos th - (x-x') sin th),
+    r* the radius, dtheta the angle swept, v = dtheta r* / dt, w = dtheta / dt,
+    gamma = (th' - th) / dt - w. It is computed here in the robot frame,
+    where it reduces to the inscribed-angle theorem: with (f, l) the forward
+    and left displacement and d = hypot(f, l), the swept angle is
+    dtheta = wrap(2 atan2(l, f)) and the arc length is
+    v dt = sign(f) d (dtheta/2) / sin(dtheta/2). This has no division by the
+    book's vanishing denominator (x_new on the heading line: dtheta = 0, v dt =
+    f, the straight line) and keeps the sign of v for backward motion, which
+    the book's v = dtheta r* / dt loses (r* >= 0).
+    """
+    a, b = _poses(x_prev, "x_prev"), _poses(x_new, "x_new")
+    dt = float(dt)
+    if not dt > 0:
+        raise ValueError(f"dt: the velocity model needs a positive duration, got {dt}")
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    c, s = np.cos(a[2]), np.sin(a[2])
+    f = c * dx + s * dy
+    l = -s * dx + c * dy
+    d = np.hypot(f, l)
+    dth = _wrap_np(2.0 * np.arctan2(l, f))
+    arc = np.where(f >= 0, 1.0, -1.0) * d / _sinc(0.5 * dth)
+    w_hat = dth / dt
+    v_hat = arc / dt
+    g_hat = _wrap_np(b[2] - a[2] - dth) / dt
+    return v_hat, w_hat, g_hat
+
+
+def _velocity_control(u):
+    if hasattr(u, "v"):
+        return float(u.v), float(u.w), float(u.dt)
+    v, w, dt = u
+    return float(v), float(w), float(dt)
+
+
+def log_motion_model_velocity(x_new, u, x_prev, cfg, *, jacobian: bool = True) -> np.ndarray:
+    """log p(x_new | u, x_prev) of the velocity model (Prob. Rob. Table 5.1, motion_model_velocity), (N,).
+
+    u: (v, w, dt) or a ``Control``. The noise stds come from the commanded
+    (v, w) (``velocity_sigmas``), so this is exactly the density that
+    ``VelocityMotionModel`` samples from. jacobian=True divides by
+    |d(x', y', theta') / d(v, w, gamma)| = |v_hat| dt^4 sinc(w_hat dt / 2)^2 / 2
+    to give a density over poses; it is infinite where v_hat = 0 (turning on
+    the spot maps a 2-D set of controls onto one point).
+    """
+    v, w, dt = _velocity_control(u)
+    v_hat, w_hat, g_hat = velocity_inverse(x_prev, x_new, dt)
+    sv, sw, sg = (max(s, SIGMA_MIN) for s in velocity_sigmas(v, w, cfg))
+    kind = getattr(cfg, "noise", "normal")
+    out = log_density(kind, v - v_hat, sv) + log_density(kind, w - w_hat, sw) + log_density(kind, g_hat, sg)
+    if jacobian:
+        jac = np.abs(v_hat) * dt ** 4 * 0.5 * _sinc(0.5 * w_hat * dt) ** 2
+        with np.errstate(divide="ignore"):
+            out = out - np.log(jac)
+    return out
+
+
+def motion_model_velocity(x_new, u, x_prev, cfg, **kw) -> np.ndarray:
+    """p(x_new | u, x_prev) of the velocity model, (N,): exp of ``log_motion_model_velocity``."""
+    return np.exp(log_motion_model_velocity(x_new, u, x_prev, cfg, **kw))
+
+
+def velocities_from_odometry(odom_prev, odom_now, dt: float) -> tuple[float, float, float]:
+    """(v, w, dt) from two odometry poses, for a velocity model fed by a log without tv/rv.
+
+    v = trans / dt, negative when the robot moved backwards (the displacement
+    points behind the old heading); w = wrap(theta_now - theta_prev) / dt.
+    When dt <= 0 (equal timestamps) dt = 1 s is used: the velocity model's
+    motion and noise depend on v dt and w dt only (both noise forms scale
+    with dt), so the duration chosen does not matter.
+
+    The approximation: an arc with w dt = dtheta and length trans ends at the
+    odometry's final heading but not exactly at its final position unless
+    rot1 = dtheta / 2 (the arc's chord direction). The residual, the odometry's
+    rot1 - dtheta/2 and the matching final rotation, is not a command of the
+    velocity model; the sampler covers it only through its noise (the gamma
+    term on the heading, the v and w noise on the position), an error of
+    about trans * |rot1 - dtheta/2| per update.
+    """
+    x0, y0, t0 = (float(q) for q in odom_prev[:3])
+    x1, y1, t1 = (float(q) for q in odom_now[:3])
+    dt = float(dt) if dt > 0 else 1.0
+    dx, dy = x1 - x0, y1 - y0
+    trans = math.hypot(dx, dy)
+    sign = -1.0 if dx * math.cos(t0) + dy * math.sin(t0) < 0 else 1.0
+    return sign * trans / dt, angle_diff(t1, t0) / dt, dt
+
+
+def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, allowed, grid, out):
+    """Map-based sampling (seed 5.5) shared by the models: move all, then redraw the rejected.
+
+    move(noise, out) moves every particle; move_map(noise, idx, mask, ox, oy,
+    inv_res, out, ok) moves the particles idx and checks the map, returning
+    how many landed. Same semantics as ``OdometryMotionModel.sample``.
+    """
+    if allowed is None:
+        move(noise, out)
+        return out, np.ones(n, dtype=bool), 1.0
+    if grid is None:
+        raise ValueError("a map mask (allowed) needs grid (origin, resolution) to place it")
+    mask = allowed if (allowed.dtype == np.uint8 and allowed.flags.c_contiguous) \
+        else np.ascontiguousarray(allowed, dtype=np.uint8)
+    ox, oy = float(grid.origin[0]), float(grid.origin[1])
+    inv_res = 1.0 / float(grid.resolution)
+    ok = np.empty(n, dtype=bool)
+    n_ok = move_map(noise, idx_all, mask, ox, oy, inv_res, out, ok)
+    draws = n
+    idx = None
+    for _ in range(max_tries - 1):
+        if n_ok == n:
+            break
+        idx = np.flatnonzero(~ok) if idx is None else idx[~ok[idx]]
+        draws += idx.size
+        fresh = standard_noise(kind, rng, (3, idx.size))
+        n_ok += move_map(fresh, idx, mask, ox, oy, inv_res, out, ok)
+    return out, ok, draws / n if n else 0.0
+
+
+class VelocityMotionModel:
+    """Sample x_t ~ p(x_t | u_t, x_{t-1}[, m]) with the velocity model (Prob. Rob. Table 5.3).
+
+    ``cfg`` is read duck-typed: noise_form, noise, alpha1..alpha6, max_tries.
+    The map rejection is the odometry model's (``_sample_with_map``, kernel
+    check ``kernels.motion.allowed_at``).
+    """
+
+    def __init__(self, cfg):
+        self.cfg = cfg
+        if cfg.noise_form not in ("variance", "std"):
+            raise ValueError(f"motion.noise_form: unknown value {cfg.noise_form!r} (expected 'variance' or 'std')")
+        self.noise_kind = getattr(cfg, "noise", "normal")
+        self.max_tries = int(getattr(cfg, "max_tries", 10))
+        self._noise = np.empty((3, 0))
+        self._all = np.empty(0, dtype=np.int64)
+
+    def sample_control(self, particles, control, rng, allowed=None, grid=None):
+        """``sample`` for a :class:`mcl.filter.Control` (uses its v, w, dt)."""
+        return self.sample(particles, control.v, control.w, control.dt, rng, allowed=allowed, grid=grid)
+
+    def sample(self, particles, v, w, dt, rng: np.random.Generator, allowed=None, grid=None, out=None):
+        """Move every particle by the command (v, w) for dt, with noise. Returns (new, ok, mean_tries)."""
+        from mcl.kernels import velocity as _kv
+
+        p = np.ascontiguousarray(particles, dtype=np.float64)
+        if p.ndim != 2 or p.shape[0] != 3:
+            raise ValueError(f"particles: expected shape (3, N), got {p.shape}")
+        n = p.shape[1]
+        if out is None:
+            out = np.empty_like(p)
+        elif out is p or np.shares_memory(out, p):
+            raise ValueError("out must not share memory with particles")
+        v, w, dt = float(v), float(w), max(float(dt), 0.0)
+        sv, sw, sg = velocity_sigmas(v, w, self.cfg)
+        if self._noise.shape[1] != n:
+            self._noise = np.empty((3, n))
+            self._all = np.arange(n, dtype=np.int64)
+        noise = standard_noise(self.noise_kind, rng, out=self._noise)
+
+        def move(nz, o):
+            _kv.sample_velocity(p, nz, v, w, dt, sv, sw, sg, o)
+
+        def move_map(nz, idx, mask, ox, oy, inv_res, o, ok):
+            return _kv.sample_velocity_map(p, nz, idx, v, w, dt, sv, sw, sg, mask, ox, oy, inv_res, o, ok)
+
+        return _sample_with_map(move, move_map, n, noise, self._all, rng, self.noise_kind, self.max_tries,
+                                allowed, grid, out)
+
+
+# ----------------------------------------------------------------------------- map-based density
+
+
+def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np.ndarray:
+    """p(x_t | u_t, x_{t-1}, m) = eta p(x_t | u_t, x_{t-1}) p(x_t | m) over N hypotheses (seed 5.5), (N,).
+
+    p(x_t | m) is 0 for a hypothesis whose cell is not in ``allowed`` (default
+    ``allowed_mask(grid, cfg.robot_radius)``; off the map counts as not
+    allowed) and a constant otherwise. eta normalises over the given set of
+    hypotheses: the result sums to 1 over x_new, a discrete posterior over the
+    candidates (the constant p(x|m) and the continuous normaliser cancel). It is
+    the book's approximation, good for motions shorter than about half the
+    robot's size: it checks the end pose only, not the path. The free-space
+    density is ``motion_model_odometry`` or ``motion_model_velocity`` by
+    ``cfg.model`` (keyword options go through). When no hypothesis is
+    allowed, the result is all zeros (eta is undefined).
+    """
+    xn = _poses(x_new, "x_new")
+    if cfg.model == "velocity":
+        logp = log_motion_model_velocity(xn, u, x_prev, cfg, **kw)
+    else:
+        logp = log_motion_model_odometry(xn, u, x_prev, cfg, **kw)
+    if allowed is None:
+        allowed = allowed_mask(grid, float(getattr(cfg, "robot_radius", 0.0)))
+    mask = np.ascontiguousarray(allowed, dtype=np.uint8)
+    ix = np.floor((xn[0] - float(grid.origin[0])) / float(grid.resolution))
+    iy = np.floor((xn[1] - float(grid.origin[1])) / float(grid.resolution))
+    inside = (ix >= 0) & (ix < mask.shape[1]) & (iy >= 0) & (iy < mask.shape[0])
+    free = np.zeros(xn.shape[1], dtype=bool)
+    free[inside] = mask[iy[inside].astype(np.int64), ix[inside].astype(np.int64)] != 0
+    logp = np.where(free, logp, -np.inf)
+    top = np.max(logp) if logp.size else -np.inf
+    if not np.isfinite(top):
+        return np.zeros(xn.shape[1])
+    p = np.exp(logp - top)
+    return p / p.sum()
