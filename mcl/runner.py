@@ -123,6 +123,7 @@ def run(
     from mcl.evaluate import evaluate, format_eval
     from mcl.filter import Control, ParticleFilter
     from mcl.maps import load_map
+    from mcl.motion import velocities_from_odometry
     from mcl.sensors import beam_endpoints
     from mcl.trajectory import TumWriter, atomic_write_text, read_tum
 
@@ -202,7 +203,10 @@ def run(
                 control = None
                 if last_odom is not None:
                     dt = scan.t - last_t
-                    control = Control(last_odom, odom, dt=dt, v=scan.tv, w=scan.rv)
+                    v, w = scan.tv, scan.rv
+                    if v == 0.0 and w == 0.0:  # no velocities in the log: from the odometry pair
+                        v, w, dt = velocities_from_odometry(last_odom, odom, dt)
+                    control = Control(last_odom, odom, dt=dt, v=v, w=w)
                 info = pf.step(control, observation)
                 last_odom, last_t = odom, scan.t
                 mean, cov = info.mean, info.cov
