@@ -6,22 +6,52 @@ correct the log weights with the sensor model, resample when the effective
 sample size falls below a fraction of N, and estimate. The filter owns the one
 random generator, seeded from the config, so a seed gives the same trajectory
 whatever the numba thread count. It does no I/O.
+
+Degenerate input never puts a NaN into the particles. Each kind warns once
+(``RuntimeWarning``) and is counted in ``ParticleFilter.events``:
+
+* ``nan_ranges``: a scan with NaN or infinite readings (those beams are dropped);
+* ``empty_scans``: a scan with no usable reading (zero beams, or none finite
+  and positive): the update only predicts;
+* ``time_backwards``: a control with dt < 0 (or not finite): dt is taken as 0;
+  the odometry step itself is still applied (the odometry model does not use dt);
+* ``odometry_jumps``: an odometry step longer than ``filter.max_odom_step`` or
+  not finite: the step is a glitch, not motion; it is not applied and the
+  particles are re-spread by ``filter.respread_std`` where they were (poses off
+  the allowed map are drawn again), so the scan decides;
+* ``degenerate_weights``: every weight is zero after the correction (no pose
+  explains the scan): the particles are re-spread by ``respread_std`` around
+  the last estimate moved by the odometry step, twice wider each consecutive
+  time, and scored again; after three consecutive failures, or with no
+  estimate yet, the filter reinitialises globally. If the fresh particles do
+  not explain the scan either, their weights stay uniform.
+
+Re-spreading rather than reinitialising first: a scan no pose explains is
+far more often a bad scan or a short glitch than a kidnapping (augmented MCL
+handles that), and a global reinitialisation throws away a good track.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import BinCounter, Recovery, draw_injected, kld_quantile, kld_resample
+from mcl.adaptive import BinCounter, Recovery, draw_injected, kld_quantile, kld_resample, measurement_count
 from mcl.config import Config
+from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.estimate import estimate, wrap_angle
 from mcl.motion import allowed_mask, make_motion_model
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
 from mcl.sensors import make_sensor_model
+
+
+EVENT_KINDS = ("degenerate_weights", "nan_ranges", "odometry_jumps", "time_backwards", "empty_scans")
+_MAX_DEGENERATE_RUN = 3  # consecutive all-zero updates before a global reinitialisation
 
 
 @dataclass(frozen=True)
@@ -53,6 +83,12 @@ class StepInfo:
     inject_p: float = 0.0  # max(0, 1 - w_fast / w_slow) after this update's scan
     mean: np.ndarray | None = None  # the estimate (x, y, theta), from the weighted set before resampling
     cov: np.ndarray | None = None  # its 3x3 covariance
+    full_mean: np.ndarray | None = None  # the whole weighted set's mean (= mean when the cloud is one cluster)
+    full_cov: np.ndarray | None = None  # the whole set's 3x3 covariance: its spread
+    clusters: int = 1  # clusters in the cloud (filter.estimate = cluster)
+    cluster_weight: float = 1.0  # weight of the heaviest cluster, whose mean is the estimate
+    skipped_beams: int = 0  # beams ignored by beam skipping
+    events: tuple[str, ...] = ()  # degenerate-input events of this update (kinds of ParticleFilter.events)
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
 
 
@@ -71,6 +107,14 @@ class ParticleFilter:
         self.logw = np.full(n, -np.log(n))
         self.weights = np.full(n, 1.0 / n)
         self.degenerate_events = 0
+        # Degenerate input: counts per kind (summary.json "events"); each kind warns once.
+        self.events = dict.fromkeys(EVENT_KINDS, 0)
+        self._warned: set[str] = set()
+        self._step_events: list[str] = []
+        self._degenerate_run = 0  # consecutive updates where every weight was zero
+        self._delta = None  # this update's odometry step in the robot frame, for re-spreading
+        self.last_estimate: ClusterEstimate | None = None
+        self.converged = False  # for beam skipping: the heaviest cluster holds the weight and is tight
         fc = cfg.filter
         self.kld_counter = None
         if fc.kld:
@@ -116,8 +160,23 @@ class ParticleFilter:
     # ------------------------------------------------------------------ the loop
 
     def predict(self, control: Control, info: StepInfo) -> None:
-        """x_t ~ p(x_t | u_t, x_{t-1}, m): sample the motion model, rejecting poses off free space."""
+        """x_t ~ p(x_t | u_t, x_{t-1}, m): sample the motion model, rejecting poses off free space.
+
+        An odometry jump is not applied (the particles are re-spread instead);
+        a negative dt becomes 0; particles the motion model made non-finite
+        keep their previous pose with weight zero.
+        """
+        control = self._check_control(control)
+        if control is None:
+            self._delta = np.zeros(3)
+            self.particles = self._draw_around(self.particles, np.asarray(self.cfg.filter.respread_std))
+            return
+        prev = self.particles
         new, ok, tries = self.motion.sample_control(self.particles, control, self.rng, allowed=self.allowed, grid=self.grid)
+        finite = np.isfinite(new).all(axis=0)
+        if not finite.all():
+            new[:, ~finite] = prev[:, ~finite]
+            self.logw[~finite] = -np.inf
         self.particles = new
         info.tries = float(tries)
         if ok is not None:
@@ -126,13 +185,25 @@ class ParticleFilter:
             if info.rejected:
                 self.logw[bad] = -np.inf
 
-    def correct(self, observation) -> None:
-        """w_t = w_{t-1} * p(z_t | x_t, m), in log space. `observation` comes from ``self.sensor.prepare``."""
+    def correct(self, observation, info: StepInfo | None = None) -> None:
+        """w_t = w_{t-1} * p(z_t | x_t, m), in log space. `observation` comes from ``self.sensor.prepare``.
+
+        With ``sensor.beam_skip`` and a converged filter, the beams most
+        particles cannot explain are dropped first (``skip_beams`` of the sensor
+        model). A NaN or +inf log-likelihood counts as weight zero.
+        """
         if observation is None:
             return
+        if self.cfg.sensor.beam_skip and self.converged and hasattr(self.sensor, "skip_beams"):
+            observation, skipped = self.sensor.skip_beams(self.particles, self.weights, observation)
+            if info is not None:
+                info.skipped_beams = skipped
         loglik = self.sensor.log_likelihood(self.particles, observation)
+        if not np.isfinite(loglik).all():
+            loglik = np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
         if self.recovery is not None:
-            self.recovery.update(Recovery.log_mean_likelihood(self.logw, loglik))
+            k = max(measurement_count(observation), 1)  # per-beam (geometric mean) likelihood: see mcl.adaptive
+            self.recovery.update(Recovery.log_mean_likelihood(self.logw, loglik / k))
         self._observation = observation
         self.logw += loglik
 
@@ -143,8 +214,6 @@ class ParticleFilter:
             # Every weight is zero: keep the particles, forget the weights.
             info.degenerate = True
             self.degenerate_events += 1
-            if self.degenerate_events == 1:
-                warnings.warn("every particle weight is zero (no pose explains the scan); weights reset to uniform", stacklevel=2)
             w = np.full(self.n, 1.0 / self.n)
             self.logw = np.full(self.n, -np.log(self.n))
         else:
@@ -182,21 +251,144 @@ class ParticleFilter:
         info.resampled = True
 
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted mean pose (circular mean for theta) and covariance."""
-        return estimate(self.particles, self.weights)
+        """The pose estimate and its covariance: of the heaviest cluster (``filter.estimate = cluster``) or of the
+        whole weighted set (``mean``; circular mean for theta). Keeps both in ``last_estimate``."""
+        fc = self.cfg.filter
+        if fc.estimate == "cluster":
+            est = cluster_estimate(self.particles, self.weights, fc.cluster_size, fc.cluster_angle)
+        else:
+            mean, cov = estimate(self.particles, self.weights)
+            est = ClusterEstimate(mean, cov, mean, cov, 1, 1.0)
+        self.last_estimate = est
+        spread = math.sqrt(max(est.cov[0, 0], est.cov[1, 1], 0.0))
+        self.converged = est.weight >= 0.5 and spread < self.cfg.sensor.beam_skip_distance
+        return est.mean, est.cov
+
+    # ------------------------------------------------------------------ degenerate input
+
+    def _event(self, kind: str, message: str) -> None:
+        """Count one degenerate-input event; warn the first time of each kind."""
+        self.events[kind] += 1
+        self._step_events.append(kind)
+        if kind not in self._warned:
+            self._warned.add(kind)
+            warnings.warn(f"{message} (warned once; summary.json counts every {kind} event)", RuntimeWarning,
+                          stacklevel=3)
+
+    def prepare(self, scan, laser_pose):
+        """The sensor model's observation for a scan, or None when the scan has no usable reading.
+
+        Counts ``nan_ranges`` (NaN or infinite readings; the sensor model drops
+        them) and ``empty_scans``.
+        """
+        r = np.asarray(scan.ranges, dtype=np.float64)
+        finite = np.isfinite(r)
+        if not finite.all():
+            self._event("nan_ranges", f"a scan at t={scan.t} has NaN or infinite ranges; those beams are ignored")
+        if not np.any(finite & (r > 0.0)):
+            self._event("empty_scans", f"a scan at t={scan.t} has no usable reading; the update only predicts")
+            return None
+        return self.sensor.prepare(scan, laser_pose)
+
+    def _check_control(self, control: Control) -> Control | None:
+        """The control to apply: dt < 0 made 0; None for an odometry jump (or non-finite odometry)."""
+        a = np.asarray(control.odom_prev, dtype=np.float64)[:3]
+        b = np.asarray(control.odom_now, dtype=np.float64)[:3]
+        if not (np.isfinite(a).all() and np.isfinite(b).all()):
+            self._event("odometry_jumps", "odometry is not finite; the step is not applied, the particles are re-spread")
+            return None
+        step = math.hypot(b[0] - a[0], b[1] - a[1])
+        if step > self.cfg.filter.max_odom_step:
+            self._event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> filter.max_odom_step = "
+                        f"{self.cfg.filter.max_odom_step} m); the step is not applied, the particles are re-spread")
+            return None
+        if not (math.isfinite(control.dt) and control.dt >= 0.0):
+            self._event("time_backwards", f"time ran backwards (dt = {control.dt:.3f} s); dt taken as 0, the "
+                        "odometry step still applied")
+            control = dataclasses.replace(control, dt=0.0)
+        c, s_ = math.cos(a[2]), math.sin(a[2])
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        self._delta = np.array([c * dx + s_ * dy, -s_ * dx + c * dy, float(wrap_angle(b[2] - a[2]))])
+        return control
+
+    def _allowed_at(self, p: np.ndarray) -> np.ndarray:
+        """(N,) bool: the poses the motion model allows (all True without map rejection)."""
+        if self.allowed is None:
+            return np.ones(p.shape[1], dtype=bool)
+        res = float(self.grid.resolution)
+        with np.errstate(invalid="ignore"):
+            fx = np.floor((p[0] - self.grid.origin[0]) / res)
+            fy = np.floor((p[1] - self.grid.origin[1]) / res)
+            h, w = self.allowed.shape
+            inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
+        out = np.zeros(p.shape[1], dtype=bool)
+        out[inside] = self.allowed[fy[inside].astype(np.int64), fx[inside].astype(np.int64)] != 0
+        return out
+
+    def _draw_around(self, centres: np.ndarray, std: np.ndarray) -> np.ndarray:
+        """(3, N) poses ~ N(centres, diag(std^2)) (centres (3,) or (3, N)), drawn again (up to max_tries) where
+        the map does not allow them; those never allowed keep the last draw. Always finite."""
+        n = self.n
+        c = np.broadcast_to(np.asarray(centres, dtype=np.float64).reshape(3, -1), (3, n))
+        std = np.asarray(std, dtype=np.float64)[:, None]
+        p = c + self.rng.standard_normal((3, n)) * std
+        for _ in range(max(self.cfg.motion.max_tries - 1, 0)):
+            bad = np.flatnonzero(~self._allowed_at(p))
+            if bad.size == 0:
+                break
+            p[:, bad] = c[:, bad] + self.rng.standard_normal((3, bad.size)) * std
+        p[2] = wrap_angle(p[2])
+        return np.ascontiguousarray(p)
+
+    def recover_degenerate(self, observation, info: StepInfo) -> None:
+        """Every weight was zero: re-spread around the last estimate (moved by the odometry step), or reinitialise
+        globally after _MAX_DEGENERATE_RUN consecutive failures, then score the scan again."""
+        self._event("degenerate_weights", "every particle weight is zero (no pose explains the scan); the "
+                    "particles are re-spread around the last estimate")
+        self._degenerate_run += 1
+        k = self._degenerate_run
+        if self.last_estimate is None or k > _MAX_DEGENERATE_RUN:
+            self.init_global()
+            self._degenerate_run = 0
+        else:
+            m = np.asarray(self.last_estimate.mean, dtype=np.float64)
+            d = self._delta if self._delta is not None else np.zeros(3)
+            c, s_ = math.cos(m[2]), math.sin(m[2])
+            centre = np.array([m[0] + c * d[0] - s_ * d[1], m[1] + s_ * d[0] + c * d[1], m[2] + d[2]])
+            self._set(self._draw_around(centre, np.asarray(self.cfg.filter.respread_std) * 2.0 ** (k - 1)))
+        if observation is not None:
+            loglik = self.sensor.log_likelihood(self.particles, observation)
+            self.logw = self.logw + np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
+        w, log_norm = normalize_log_weights(self.logw)
+        if np.isfinite(log_norm):
+            self.logw -= log_norm
+        else:
+            w = np.full(self.n, 1.0 / self.n)
+            self.logw = np.full(self.n, -np.log(self.n))
+        self.weights = w
+        info.ess = float(effective_sample_size(w))
 
     def step(self, control: Control | None, observation) -> StepInfo:
         """One MCL update: predict -> correct -> normalise -> estimate -> resample. Returns what it did."""
         info = StepInfo(particles=self.n)
+        self._delta = None
         t0 = time.perf_counter()
         if control is not None:
             self.predict(control, info)
         t1 = time.perf_counter()
-        self.correct(observation)
+        self.correct(observation, info)
         t2 = time.perf_counter()
         self.normalize(info)
+        if info.degenerate:
+            self.recover_degenerate(observation, info)
+        else:
+            self._degenerate_run = 0
         t3 = time.perf_counter()
         info.mean, info.cov = self.estimate()
+        est = self.last_estimate
+        info.full_mean, info.full_cov = est.full_mean, est.full_cov
+        info.clusters, info.cluster_weight = est.n_clusters, est.weight
+        info.events, self._step_events = tuple(self._step_events), []
         t4 = time.perf_counter()
         self.maybe_resample(info)
         t5 = time.perf_counter()

@@ -41,6 +41,11 @@ def inverse(a: np.ndarray) -> np.ndarray:
     return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
 
 
+def _spread(cov) -> float:
+    """sqrt of the larger x/y variance of a 3x3 pose covariance: the cloud's spread in metres."""
+    return float(math.sqrt(max(float(cov[0, 0]), float(cov[1, 1]), 0.0)))
+
+
 def default_out_dir(root: Path | None = None) -> Path:
     """A fresh folder under runs/ named by the start time."""
     root = root or Path.cwd() / "runs"
@@ -173,6 +178,7 @@ def run(
     stage_totals = {"predict": 0.0, "correct": 0.0, "estimate": 0.0, "resample": 0.0, "viz": 0.0}
     counts = {"updates": 0, "resamples": 0, "rejected": 0, "degenerate": 0}
     tries_sum = 0.0
+    spread_sum, spread_max, multimodal, skipped_beams = 0.0, 0.0, 0, 0
     n_used: list[int] = []  # particles weighted at each update (KLD sampling varies it)
     injected = 0
     traj_t: list[float] = []
@@ -199,7 +205,7 @@ def run(
                     if cfg.sensor.laser_pose is not None
                     else (scan.laser_offset if scan.laser_offset is not None else np.zeros(3))
                 )
-                observation = pf.sensor.prepare(scan, laser_pose)
+                observation = pf.prepare(scan, laser_pose)  # None (and counted) when the scan is unusable
                 control = None
                 if last_odom is not None:
                     dt = scan.t - last_t
@@ -217,6 +223,11 @@ def run(
                 counts["resamples"] += int(info.resampled)
                 counts["rejected"] += info.rejected
                 counts["degenerate"] += int(info.degenerate)
+                spread_full = _spread(info.full_cov)
+                spread_sum += spread_full
+                spread_max = max(spread_max, spread_full)
+                multimodal += int(info.clusters > 1)
+                skipped_beams += info.skipped_beams
                 tries_sum += info.tries
                 n_used.append(info.particles)
                 injected += info.injected
@@ -232,6 +243,10 @@ def run(
                         "particles": float(info.particles),
                         "inject_p": info.inject_p,
                         "tries": info.tries,
+                        "spread/full": spread_full,
+                        "spread/estimate": _spread(cov),
+                        "clusters": float(info.clusters),
+                        "skipped_beams": float(info.skipped_beams),
                         **{f"time_ms/{k}": 1e3 * v for k, v in info.timings.items()},
                     }
                     if ref is not None:
@@ -285,6 +300,13 @@ def run(
         "mean_tries": tries_sum / n_up,
         "rejected_particles": counts["rejected"],
         "degenerate_updates": counts["degenerate"],
+        "events": dict(pf.events),
+        "spread": {
+            "full_mean_m": spread_sum / n_up,
+            "full_max_m": spread_max,
+            "multimodal_updates": multimodal,
+        },
+        "skipped_beams": skipped_beams,
         "skipped_messages": dict(log.skipped),
         "wall_time_s": {"load": load_time, "loop": loop_time, **stage_totals},
         "ms_per_update": {k: 1e3 * v / n_up for k, v in stage_totals.items()},
