@@ -1,0 +1,352 @@
+"""Learning the range sensor's intrinsic parameters: ``mcl calibrate sensor``.
+
+Prob. Rob. Table 6.2 (learn_intrinsic_parameters) is expectation-maximisation
+over readings whose expected value is known. The reference poses (truth
+timestamps matched to scans within 1 ms) give each reading its expectation:
+
+Beam model (``fit_beam``)
+    z* by ray casting (``cast_ray``, the filter's own caster) from the laser
+    pose. The mixture is the filter's (``mcl.kernels.beam``): truncated
+    Gaussian p_hit, exponential p_short on [0, z*], the p_max atom at zmax,
+    uniform p_rand. E-step: responsibilities e_c = z_c p_c / sum. M-step:
+    z_c = mean e_c; sigma_hit^2 = sum e_hit (z - z*)^2 / sum e_hit (the
+    book's, which ignores the truncation: exact when z* is several sigma
+    inside [0, zmax]); lambda_short is the exact weighted maximum likelihood
+    of the *normalised* exponential (one concave 1-D equation, solved by
+    bisection; the book's sum e_short / sum e_short z ignores the 1/(1 -
+    exp(-lambda z*)) normaliser and is biased when z* is small). Beams whose
+    ray expects no return (z* = zmax) are left out: their readings say
+    nothing about hit noise or short readings (a no-return reading there
+    would be credited to p_hit with zero error). Readings >= zmax are
+    no-return readings (z = zmax), NaN and <= range_min are dropped.
+
+Likelihood field (``fit_likelihood_field``)
+    d = the distance field at the endpoint's cell (as the filter reads it;
+    endpoints off the map count as D), clipped to D = likelihood_max_dist;
+    no-return readings are left out (the filter skips them). Fitted density
+    on [0, D]:  q(d) = w_hit * 2 N(d; 0, sigma^2) / (2 Phi(D / sigma) - 1)
+    + w_rand / D  (a half-normal and a uniform). The filter scores
+    z_hit N(d; 0, sigma^2) + z_rand / range_max, which is proportional to q
+    when z_hit : z_rand = 2 w_hit / c : w_rand range_max / D (c the
+    half-normal's truncation mass); the printed z_hit, z_rand are that
+    ratio normalised to sum 1 (only the ratio matters to the filter).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import erf
+
+from mcl.errors import DataError
+
+BEAM_KEYS = ("z_hit", "z_short", "z_max", "z_rand", "sigma_hit", "lambda_short")
+_LAMBDA_MIN, _LAMBDA_MAX = 1e-3, 1e3
+
+
+@dataclass
+class FitResult:
+    """What EM fitted, with what it fitted it on."""
+
+    model: str
+    params: dict[str, float]  # the config keys, ready to paste
+    n: int  # readings used
+    loglik: float  # mean log-likelihood per reading at the fit
+    iterations: int
+    converged: bool
+    extra: dict[str, float] = field(default_factory=dict)  # model-specific figures (e.g. the raw LF weights)
+    scans: int = 0
+
+
+# ----------------------------------------------------------------------------- beam model
+
+
+def beam_component_densities(z, zs, zmax, sigma, lam):
+    """(4, M) float64: p_hit, p_short, p_max, p_rand of readings z given z* (NumPy, the kernel's formulas)."""
+    z = np.asarray(z, dtype=np.float64)
+    zs = np.asarray(zs, dtype=np.float64)
+    zmax = np.broadcast_to(np.asarray(zmax, dtype=np.float64), z.shape)
+    out = np.zeros((4,) + z.shape)
+    s2 = sigma * math.sqrt(2.0)
+    eta = 0.5 * (erf((zmax - zs) / s2) - erf(-zs / s2))
+    inside = (z >= 0) & (z <= zmax) & (eta > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.exp(-0.5 * ((z - zs) / sigma) ** 2) / (math.sqrt(2 * math.pi) * sigma) / eta
+        out[0] = np.where(inside, g, 0.0)
+        sh = (z >= 0) & (z <= zs) & (zs > 0)
+        out[1] = np.where(sh, lam * np.exp(-lam * z) / -np.expm1(-lam * zs), 0.0)
+    out[2] = (z >= zmax).astype(np.float64)
+    out[3] = np.where((z >= 0) & (z < zmax), 1.0 / zmax, 0.0)
+    return out
+
+
+def _fit_lambda(r, z, zs, lam0):
+    """Weighted ML rate of the exponential normalised on [0, z*]: root of S/lam - sum r z - sum r z*/(e^{lam z*} - 1)."""
+    s = r.sum()
+    if s <= 0:
+        return lam0
+    rz = float(np.dot(r, z))
+
+    def g(lam):
+        with np.errstate(over="ignore"):
+            return s / lam - rz - float(np.dot(r, zs / np.expm1(lam * zs)))
+
+    lo, hi = _LAMBDA_MIN, _LAMBDA_MAX
+    if g(lo) <= 0:
+        return lo
+    if g(hi) >= 0:
+        return hi
+    for _ in range(200):  # bisection on log lambda: g is decreasing (the log-likelihood is concave)
+        mid = math.sqrt(lo * hi)
+        if g(mid) > 0:
+            lo = mid
+        else:
+            hi = mid
+        if hi / lo < 1 + 1e-10:
+            break
+    return math.sqrt(lo * hi)
+
+
+def fit_beam(z, zs, zmax, *, init=None, max_iter=1000, tol=1e-10) -> FitResult:
+    """EM for (z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short) from readings z with expectations z*.
+
+    z, zs: (M,) readings and expected ranges (m); zmax: scalar or (M,).
+    Readings with z* >= zmax should be left out by the caller (see the
+    module docstring). Stops when the mean log-likelihood gains < tol.
+    """
+    z = np.asarray(z, dtype=np.float64)
+    zs = np.asarray(zs, dtype=np.float64)
+    zmax = np.broadcast_to(np.asarray(zmax, dtype=np.float64), z.shape)
+    if z.size < 10:
+        raise DataError(f"calibrate sensor: only {z.size} usable readings (need at least 10)")
+    p = dict(z_hit=0.7, z_short=0.1, z_max=0.1, z_rand=0.1, sigma_hit=0.2, lambda_short=0.5)
+    if init:
+        p.update(init)
+    w = np.array([p["z_hit"], p["z_short"], p["z_max"], p["z_rand"]], dtype=np.float64)
+    sigma, lam = float(p["sigma_hit"]), float(p["lambda_short"])
+    prev = -np.inf
+    converged = False
+    it = 0
+    for it in range(1, max_iter + 1):
+        dens = beam_component_densities(z, zs, zmax, sigma, lam)
+        joint = w[:, None] * dens
+        tot = joint.sum(axis=0)
+        ll = float(np.mean(np.log(tot)))
+        resp = joint / tot
+        w = resp.mean(axis=1)
+        rh = resp[0]
+        if rh.sum() > 0:
+            sigma = max(math.sqrt(float(np.dot(rh, (z - zs) ** 2)) / float(rh.sum())), 1e-6)
+        lam = _fit_lambda(resp[1], z, zs, lam)
+        if abs(ll - prev) < tol:
+            converged = True
+            break
+        prev = ll
+    params = dict(z_hit=w[0], z_short=w[1], z_max=w[2], z_rand=w[3], sigma_hit=sigma, lambda_short=lam)
+    return FitResult("beam", {k: float(v) for k, v in params.items()}, int(z.size), ll, it, converged)
+
+
+def sample_beam(rng, zs, zmax, params):
+    """One reading per expected range in zs (M,), drawn from the beam mixture (for tests and synthetic checks).
+
+    Components by ``rng.choice``; hit and short by inverse CDF of the truncated normal / exponential.
+    """
+    zs = np.asarray(zs, dtype=np.float64).ravel()
+    m = zs.size
+    w = np.array([params["z_hit"], params["z_short"], params["z_max"], params["z_rand"]], dtype=np.float64)
+    comp = rng.choice(4, size=m, p=w / w.sum())
+    z = np.empty(m)
+    sigma, lam = params["sigma_hit"], params["lambda_short"]
+    # hit: truncated normal on [0, zmax] by inverse CDF
+    from scipy.special import ndtr, ndtri
+
+    a, b = ndtr(-zs / sigma), ndtr((zmax - zs) / sigma)
+    u = rng.random(m)
+    hit = zs + sigma * ndtri(a + u * (b - a))
+    # short: truncated exponential on [0, zs] by inverse CDF
+    v = rng.random(m)
+    short = -np.log1p(v * np.expm1(-lam * zs)) / lam
+    rand = rng.random(m) * zmax
+    z[:] = np.select([comp == 0, comp == 1, comp == 2], [np.clip(hit, 0, zmax), short, np.full(m, zmax)], rand)
+    return z
+
+
+# ----------------------------------------------------------------------------- likelihood field
+
+
+def fit_likelihood_field(d, dmax, *, init=None, max_iter=1000, tol=1e-10) -> tuple[float, float, float, int, float, bool]:
+    """EM for q(d) = w_hit * truncated half-normal(d; sigma, [0, dmax]) + w_rand / dmax.
+
+    Returns (w_hit, w_rand, sigma, iterations, mean log-likelihood, converged).
+    """
+    d = np.minimum(np.asarray(d, dtype=np.float64), dmax)
+    if d.size < 10:
+        raise DataError(f"calibrate sensor: only {d.size} usable readings (need at least 10)")
+    p = dict(w_hit=0.8, sigma=0.2)
+    if init:
+        p.update(init)
+    w_hit, sigma = float(p["w_hit"]), float(p["sigma"])
+    prev, ll, converged, it = -np.inf, -np.inf, False, 0
+    for it in range(1, max_iter + 1):
+        c = float(erf(dmax / (sigma * math.sqrt(2.0))))
+        hit = 2.0 * np.exp(-0.5 * (d / sigma) ** 2) / (math.sqrt(2 * math.pi) * sigma) / c
+        jh = w_hit * hit
+        jr = (1.0 - w_hit) / dmax
+        tot = jh + jr
+        ll = float(np.mean(np.log(tot)))
+        r = jh / tot
+        w_hit = float(r.mean())
+        if r.sum() > 0:
+            sigma = max(math.sqrt(float(np.dot(r, d * d)) / float(r.sum())), 1e-6)
+        if abs(ll - prev) < tol:
+            converged = True
+            break
+        prev = ll
+    return w_hit, 1.0 - w_hit, sigma, it, ll, converged
+
+
+def lf_config_weights(w_hit, w_rand, sigma, dmax, range_max):
+    """(z_hit, z_rand) summing to 1 whose filter score z_hit N(d;0,sigma^2) + z_rand/range_max is proportional to q(d)."""
+    c = float(erf(dmax / (sigma * math.sqrt(2.0))))
+    a = 2.0 * w_hit / c
+    b = w_rand * range_max / dmax
+    return a / (a + b), b / (a + b)
+
+
+# ----------------------------------------------------------------------------- data from a log
+
+
+def collect(cfg, *, model: str):
+    """Readings with their expectation from the log's scans at reference poses.
+
+    Returns (values, expected, zmax, scans): for the beam model the readings
+    z (no-return as zmax), z* and zmax per reading (beams with z* >= zmax
+    left out); for the likelihood field the clipped distances d (and None).
+    """
+    from mcl.datasets.carmen import read_carmen
+    from mcl.kernels.raycast import cast_rays
+    from mcl.maps import load_map
+    from mcl.runner import Truth, _choose_scans
+    from mcl.trajectory import read_tum
+
+    from mcl.errors import ConfigError
+
+    for key in ("map", "log", "truth"):
+        if getattr(cfg, key) is None:
+            raise ConfigError(f"{key}: calibrate sensor needs a {key} (set it in the config or pass --{key})")
+    s = cfg.sensor
+    grid = load_map(cfg.map)
+    log = read_carmen(cfg.log)
+    truth = Truth(*read_tum(cfg.truth))
+    scans = _choose_scans(log, cfg.laser)
+    ox, oy, res = float(grid.origin[0]), float(grid.origin[1]), float(grid.resolution)
+    rays_x, rays_y, rays_a, zs_list, zmax_list, used = [], [], [], [], [], 0
+    for scan in scans:
+        ref = truth.at(scan.t)
+        if ref is None:
+            continue
+        used += 1
+        lp = s.laser_pose if s.laser_pose is not None else (scan.laser_offset if scan.laser_offset is not None else (0, 0, 0))
+        lx, ly, lth = (float(v) for v in lp)
+        c, sn = math.cos(ref[2]), math.sin(ref[2])
+        x, y = ref[0] + c * lx - sn * ly, ref[1] + sn * lx + c * ly
+        r = np.asarray(scan.ranges, dtype=np.float64)
+        a = np.asarray(scan.angles, dtype=np.float64)
+        zmax = float(s.range_max)
+        if scan.max_range is not None and 0 < float(scan.max_range) < zmax:
+            zmax = float(scan.max_range)
+        with np.errstate(invalid="ignore"):
+            keep = ~np.isnan(r) & (r > float(s.range_min))
+        r, a = np.minimum(r[keep], zmax), a[keep]
+        rays_x.append(np.full(r.size, x))
+        rays_y.append(np.full(r.size, y))
+        rays_a.append(ref[2] + lth + a)
+        zs_list.append(r)
+        zmax_list.append(np.full(r.size, zmax))
+    if used == 0:
+        raise DataError(f"{cfg.truth}: no reference pose matches a scan time of {cfg.log} (within 1 ms)")
+    X, Y, A = (np.concatenate(v) for v in (rays_x, rays_y, rays_a))
+    z, zmax = np.concatenate(zs_list), np.concatenate(zmax_list)
+    if model == "beam":
+        # one "pose" per ray, heading = the ray's world angle, one beam at 0
+        zcast = np.empty((z.size, 1))
+        cast_rays(np.ascontiguousarray(np.stack([X, Y, A])), np.zeros(1), np.ascontiguousarray(grid.occupied),
+                  ox, oy, res, float(s.range_max), zcast)
+        zstar = np.minimum(zcast[:, 0], zmax)
+        ok = zstar < zmax
+        return z[ok], zstar[ok], zmax[ok], used
+    # likelihood field: endpoints of the returns, distance field at their cells
+    ret = z < zmax
+    ex, ey = X[ret] + z[ret] * np.cos(A[ret]), Y[ret] + z[ret] * np.sin(A[ret])
+    ix = np.floor((ex - ox) / res).astype(np.int64)
+    iy = np.floor((ey - oy) / res).astype(np.int64)
+    dmax = float(s.likelihood_max_dist)
+    inside = (ix >= 0) & (ix < grid.width) & (iy >= 0) & (iy < grid.height)
+    d = np.full(ex.size, dmax)
+    d[inside] = grid.distance[iy[inside], ix[inside]]
+    return np.minimum(d, dmax), None, None, used
+
+
+def calibrate_sensor(cfg, model: str | None = None) -> FitResult:
+    """Fit the sensor model named by ``model`` (default ``cfg.sensor.model``) on cfg's map, log and truth."""
+    model = model or cfg.sensor.model
+    s = cfg.sensor
+    if model == "beam":
+        z, zs, zmax, used = collect(cfg, model="beam")
+        fit = fit_beam(z, zs, zmax)
+        fit.scans = used
+        return fit
+    if model == "likelihood_field":
+        d, _, _, used = collect(cfg, model="likelihood_field")
+        dmax = float(s.likelihood_max_dist)
+        w_hit, w_rand, sigma, it, ll, conv = fit_likelihood_field(d, dmax)
+        z_hit, z_rand = lf_config_weights(w_hit, w_rand, sigma, dmax, float(s.range_max))
+        return FitResult("likelihood_field", dict(z_hit=z_hit, z_rand=z_rand, sigma_hit=sigma), int(d.size), ll, it,
+                         conv, extra=dict(w_hit=w_hit, w_rand=w_rand, likelihood_max_dist=dmax,
+                                          range_max=float(s.range_max)), scans=used)
+    raise ValueError(f"calibrate sensor: unknown model {model!r}")
+
+
+def format_yaml(fit: FitResult) -> str:
+    """The fit as a commented ``sensor:`` block ready to paste into a config."""
+    lines = [f"# mcl calibrate sensor: {fit.model} model, EM (Prob. Rob. Table 6.2) on {fit.n} readings from "
+             f"{fit.scans} scans at reference poses; mean log-likelihood {fit.loglik:.4f} per reading, "
+             f"{fit.iterations} iterations{'' if fit.converged else ' (NOT converged)'}"]
+    if fit.model == "likelihood_field":
+        e = fit.extra
+        lines += [f"# fitted p(d) = {e['w_hit']:.4f} * half-normal(d; sigma_hit) + {e['w_rand']:.4f} * uniform[0, "
+                  f"{e['likelihood_max_dist']:g}]; z_hit/z_rand give the filter's form z_hit*N(d;0,sigma^2) + "
+                  f"z_rand/range_max (range_max {e['range_max']:g}) the same shape"]
+    lines.append("sensor:")
+    lines.append(f"  model: {fit.model}")
+    for k, v in fit.params.items():
+        lines.append(f"  {k}: {v:.6g}")
+    return "\n".join(lines) + "\n"
+
+
+def add_arguments(p) -> None:
+    """Options of ``mcl calibrate sensor``."""
+    p.add_argument("--map", help="ROS map_server YAML of the occupancy grid")
+    p.add_argument("--log", help="CARMEN log (.clf, plain or gzip)")
+    p.add_argument("--truth", help="reference trajectory (TUM) whose timestamps match the scans")
+    p.add_argument("--model", choices=["beam", "likelihood_field"], help="model to fit (default: the config's sensor.model)")
+    p.add_argument("--config", help="YAML config for range_max, range_min, likelihood_max_dist, laser, laser_pose, "
+                   "and map/log/truth if not given")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
+
+
+def run_from_args(args) -> int:
+    """``mcl calibrate sensor``: print the fitted ``sensor:`` block on stdout."""
+    from pathlib import Path
+
+    from mcl.config import load_config
+
+    overrides = [f"{k}={Path(v).resolve()}" for k, v in (("map", args.map), ("log", args.log), ("truth", args.truth))
+                 if v is not None]
+    cfg = load_config(args.config, overrides + list(args.set))
+    fit = calibrate_sensor(cfg, args.model)
+    sys.stdout.write(format_yaml(fit))
+    return 0
