@@ -6,7 +6,7 @@ validator, and returns a :class:`Config`. Unknown keys are errors with the
 dotted path and a did-you-mean; wrong types and out-of-range values are errors
 naming the key; nothing is silently replaced by a default.
 
-Paths in a config file (``map``, ``log``, ``truth``) are resolved relative to
+Paths in a config file (``map``, ``log``, ``truth``, ``landmarks.map``) are resolved relative to
 the config file's folder first and, if nothing exists there, to the current
 directory; the resolved config stores absolute paths so a run can be repeated
 from anywhere.
@@ -103,6 +103,7 @@ class SensorConfig:
     fits them (Table 6.2, learn_intrinsic_parameters).
     """
 
+    use: bool = True  # false: the laser is not used (landmark-only runs, landmarks.use: true)
     model: Literal["likelihood_field", "beam"] = "likelihood_field"
     z_hit: float = field(default=0.95, metadata=_rng(0.0, 1.0))
     z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
@@ -143,6 +144,20 @@ class EvalConfig:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class LandmarkConfig:
+    """Range-bearing landmarks with known correspondences (Prob. Rob. Table 6.4,
+    landmark_model_known_correspondence, with a false-positive mixture; mcl.landmarks)."""
+
+    use: bool = False  # correct with the log's LANDMARK observations
+    map: str | None = None  # landmark map YAML (landmarks: [{id, x, y}, ...])
+    sigma_range: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
+    sigma_bearing: float = field(default=0.05, metadata=_rng(0.0, lo_open=True))  # rad
+    z_det: float = field(default=0.95, metadata=_rng(0.0, 1.0))  # weight of p_det
+    z_fp: float = field(default=0.05, metadata=_rng(0.0, 1.0))  # weight of false positives, uniform density
+    range_max: float = field(default=10.0, metadata=_rng(0.0, lo_open=True))  # m: p_uniform = 1/(range_max 2 pi)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Config:
     """A whole run: the data, the seed and each part of the filter."""
 
@@ -156,6 +171,7 @@ class Config:
     sensor: SensorConfig = field(default_factory=SensorConfig)
     rerun: RerunConfig = field(default_factory=RerunConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
+    landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
 
 
 LASER_KINDS = ("auto", "FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
@@ -223,7 +239,10 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{key}: expected a number, got {value!r}")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # a YAML integer beyond the float range
+            raise ConfigError(f"{key}: expected a finite number, got an integer of {len(str(value))} digits") from None
         if not math.isfinite(value):
             raise ConfigError(f"{key}: expected a finite number, got {value!r}")
         return value
@@ -254,7 +273,7 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
     fields = {f.name: f for f in dataclasses.fields(cls)}
     kwargs = {}
     for k, v in data.items():
-        key = f"{prefix}{k}"
+        key = f"{prefix}{_printable(k)}"
         if k not in fields:
             hint = difflib.get_close_matches(str(k), list(fields), n=1)
             extra = f" (did you mean {hint[0]}?)" if hint else ""
@@ -276,6 +295,13 @@ def _cross_checks(cfg: Config) -> None:
         raise ConfigError(f"sensor.range_min: {s.range_min} must be below sensor.range_max ({s.range_max})")
     if s.z_hit + s.z_rand <= 0:
         raise ConfigError("sensor.z_hit: z_hit + z_rand must be positive")
+    lm = cfg.landmarks
+    if lm.z_det + lm.z_fp <= 0:
+        raise ConfigError("landmarks.z_det: z_det + z_fp must be positive")
+    if lm.use and lm.map is None:
+        raise ConfigError("landmarks.map: landmarks.use is true but no landmark map is given")
+    if not s.use and not lm.use:
+        raise ConfigError("sensor.use: false needs landmarks.use: true (nothing else to correct with)")
     if s.model == "beam":
         total = s.z_hit + s.z_short + s.z_max + s.z_rand
         if abs(total - 1.0) > 1e-6:
@@ -302,14 +328,20 @@ def _cross_checks(cfg: Config) -> None:
 # ----------------------------------------------------------------------------- overrides and paths
 
 
+def _printable(k: Any) -> str:
+    """A key or override as it goes into a one-line message: control characters escaped."""
+    s = str(k)
+    return s if s.isprintable() else repr(s)[1:-1]
+
+
 def parse_override(text: str) -> tuple[list[str], Any]:
     """``section.key=value`` -> (["section", "key"], parsed YAML value)."""
     if "=" not in text:
-        raise ConfigError(f"--set {text}: expected section.key=value")
+        raise ConfigError(f"--set {_printable(text)}: expected section.key=value")
     key, raw = text.split("=", 1)
     key = key.strip()
     if not key or any(not part for part in key.split(".")):
-        raise ConfigError(f"--set {text}: expected section.key=value")
+        raise ConfigError(f"--set {_printable(text)}: expected section.key=value")
     try:
         value = yaml.safe_load(raw) if raw.strip() else None
     except yaml.YAMLError:
@@ -324,7 +356,7 @@ def _apply(data: dict, path: list[str], value: Any) -> None:
         if nxt is None:
             nxt = node[part] = {}
         if not isinstance(nxt, dict):
-            raise ConfigError(f"{'.'.join(path[: i + 1])}: is not a section")
+            raise ConfigError(f"{_printable('.'.join(path[: i + 1]))}: is not a section")
         node = nxt
     node[path[-1]] = value
 
@@ -372,10 +404,22 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         data = loaded
     for text in overrides:
         keys, value = parse_override(text)
-        _apply(data, keys, value)
+        try:
+            _apply(data, keys, value)
+        except ConfigError as e:
+            raise ConfigError(f"--set {_printable(text)}: {e}") from None
     for k in PATH_KEYS:
         if isinstance(data.get(k), str):
-            data[k] = _resolve_path(data[k], base)
+            try:
+                data[k] = _resolve_path(data[k], base)
+            except (RuntimeError, ValueError):  # ~user that does not exist; a NUL byte
+                where = f"{path}: " if path is not None else ""
+                raise ConfigError(f"{where}{k}: not a usable path: {data[k]!r}") from None
+    if isinstance(data.get("landmarks"), dict) and isinstance(data["landmarks"].get("map"), str):
+        try:
+            data["landmarks"]["map"] = _resolve_path(data["landmarks"]["map"], base)
+        except (RuntimeError, ValueError):
+            raise ConfigError(f"{path}: landmarks.map: not a usable path") from None
     try:
         cfg = _build(Config, data, "")
     except ConfigError as e:
