@@ -16,6 +16,12 @@ Messages read (everything else is skipped and counted in ``Log.skipped``):
   n r_1..r_n n_rem rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta
   tv rv forward_safety side_safety turn_axis ipc_timestamp hostname logger_timestamp``
 * ``RAWLASER1``..``RAWLASER4``: as ROBOTLASER1 without the poses and the velocities.
+* ``LANDMARK n id_1 range_1 bearing_1 ... id_n range_n bearing_n ipc_timestamp hostname logger_timestamp``
+  (an mcl extension, not a CARMEN message): n >= 0 range-bearing observations of
+  landmarks with known correspondences, ids integers >= 0 of the landmark map,
+  ranges in m from the robot centre, bearings in rad counter-clockwise from the
+  robot's heading. -> ``Log.landmarks`` (:class:`Landmarks`), ``odom`` from the
+  ODOM lines interpolated at ``t``. A log may have landmarks and no laser.
 
 ``Scan.laser_offset`` is the laser's mounting in the robot frame,
 ``robot_pose^-1 ∘ laser_pose``. Scans without a pose of their own (RAWLASER)
@@ -39,7 +45,7 @@ import numpy as np
 
 from mcl.errors import DataError
 
-__all__ = ["Scan", "Log", "read_carmen", "interpolate_odometry", "flaser_angle_increment", "LASER_KINDS"]
+__all__ = ["Scan", "Landmarks", "Log", "read_carmen", "interpolate_odometry", "flaser_angle_increment", "LASER_KINDS"]
 
 LASER_KINDS = ("FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
 _AUTO_ORDER = ("FLASER", "ROBOTLASER1", "RAWLASER1")
@@ -67,6 +73,24 @@ class Scan:
         return self.angle_min + self.angle_increment * np.arange(self.ranges.shape[0], dtype=np.float64)
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class Landmarks:
+    """One LANDMARK line: range-bearing observations of landmarks by id (mcl extension).
+
+    ``odom`` is the robot pose in the odometry frame interpolated from ODOM at
+    ``t``; ``tv``/``rv`` are 0 (the line carries no velocities), as RAWLASER.
+    """
+
+    t: float
+    ids: np.ndarray  # int64 (n,)
+    ranges: np.ndarray  # float64 (n,), m
+    bearings: np.ndarray  # float64 (n,), rad
+    line: int = 0
+    odom: np.ndarray | None = None
+    tv: float = 0.0
+    rv: float = 0.0
+
+
 @dataclass(eq=False)
 class Log:
     """A parsed CARMEN log."""
@@ -76,6 +100,7 @@ class Log:
     odometry: np.ndarray  # (M, 6) float64: t, x, y, theta, tv, rv (file order)
     skipped: dict[str, int] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    landmarks: list[Landmarks] = field(default_factory=list)  # LANDMARK lines in file order
 
     def scans_of(self, kind: str) -> list[Scan]:
         """Scans of one message type, in file order."""
@@ -236,6 +261,24 @@ def _parse_rawlaser(parts: list[str], kind: str, lineno: int) -> Scan:
                 0.0, 0.0, kind, lineno)
 
 
+def _parse_landmark(parts: list[str], lineno: int) -> Landmarks:
+    kind = "LANDMARK"
+    if len(parts) < 2:
+        raise _Bad(f"{kind}: missing observation count")
+    n = _count(parts[1], "observation count", kind)
+    if len(parts) != 3 * n + 5:
+        raise _Bad(f"{kind}: expected {n} (id range bearing) triples + 3 time fields ({3 * n + 5} in all), "
+                   f"got {len(parts)} fields")
+    ids = np.array([_count(p, "landmark id", kind) for p in parts[2:2 + 3 * n:3]], dtype=np.int64)
+    v = _floats([p for k, p in enumerate(parts[2:2 + 3 * n]) if k % 3], "range/bearing", kind).reshape(n, 2)
+    if not np.all(np.isfinite(v)):
+        raise _Bad(f"{kind}: non-finite range or bearing")
+    if np.any(v[:, 0] < 0):
+        raise _Bad(f"{kind}: negative range {float(v[v[:, 0] < 0, 0][0])}")
+    t = _timestamp(parts, kind)
+    return Landmarks(t, ids, np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), lineno)
+
+
 _PARSERS = {
     "FLASER": _parse_flaser,
     "RLASER": _parse_flaser,
@@ -300,6 +343,7 @@ def read_carmen(path: str | os.PathLike) -> Log:
 
     scans: list[Scan] = []
     odom_rows: list[list[float]] = []
+    landmarks: list[Landmarks] = []
     skipped: dict[str, int] = {}
     params: dict[str, str] = {}
     parsers = _PARSERS
@@ -312,6 +356,9 @@ def read_carmen(path: str | os.PathLike) -> Log:
         try:
             if word == "ODOM":
                 odom_rows.append(_parse_odom(parts))
+                continue
+            if word == "LANDMARK":
+                landmarks.append(_parse_landmark(parts, lineno))
                 continue
             parser = parsers.get(word)
             if parser is None:
@@ -327,12 +374,28 @@ def read_carmen(path: str | os.PathLike) -> Log:
                 continue
             raise DataError(f"{name}:{lineno}: {e}") from None
 
-    if not scans:
+    if not scans and not landmarks:
         raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4)")
     odometry = np.array(odom_rows, dtype=np.float64).reshape(-1, 6)
     scans = _fill_odom(scans, odometry, name)
     scans = _param_max_range(scans, params)
-    return Log(name, scans, odometry, skipped, warnings)
+    landmarks = _landmark_odom(landmarks, odometry, name)
+    return Log(name, scans, odometry, skipped, warnings, landmarks)
+
+
+def _landmark_odom(records: list[Landmarks], odometry: np.ndarray, name: str) -> list[Landmarks]:
+    """Give each LANDMARK record the odometry pose interpolated at its time."""
+    if not records:
+        return records
+    if odometry.shape[0] == 0:
+        raise DataError(f"{name}:{records[0].line}: LANDMARK: no ODOM lines to interpolate the pose from")
+    with np.errstate(over="ignore", invalid="ignore"):
+        poses = interpolate_odometry(odometry, [r.t for r in records])
+    bad = np.flatnonzero(~np.isfinite(poses).all(axis=0))
+    if bad.size:
+        r = records[bad[0]]
+        raise DataError(f"{name}:{r.line}: LANDMARK: odometry interpolated at t={r.t} is not finite")
+    return [dataclasses.replace(r, odom=np.ascontiguousarray(poses[:, k])) for k, r in enumerate(records)]
 
 
 # FLASER/RLASER lines carry no maximum range; a log's PARAM lines may give it.
@@ -390,7 +453,12 @@ def _fill_odom(scans: list[Scan], odometry: np.ndarray, name: str) -> list[Scan]
     if odometry.shape[0] == 0:
         s = scans[need[0]]
         raise DataError(f"{name}:{s.line}: {s.kind}: no pose of its own and no ODOM lines to interpolate")
-    poses = interpolate_odometry(odometry, [scans[k].t for k in need])
+    with np.errstate(over="ignore", invalid="ignore"):
+        poses = interpolate_odometry(odometry, [scans[k].t for k in need])
+    bad = np.flatnonzero(~np.isfinite(poses).all(axis=0))
+    if bad.size:  # finite ODOM values whose differences overflow (|x| near 1e308)
+        s = scans[need[bad[0]]]
+        raise DataError(f"{name}:{s.line}: {s.kind}: odometry interpolated at t={s.t} is not finite")
     out = list(scans)
     for col, k in enumerate(need):
         s = scans[k]
