@@ -643,7 +643,7 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
              range_max: float = 12.0, range_sigma: float = 0.02, p_short: float = 0.03, p_max: float = 0.01,
              odom_alphas=(0.05, 0.05, 0.05, 0.02), odom_scale: float = 1.01, odom_yaw_drift: float = 0.01,
              kidnap_at: float | None = None, speed: float = 0.5, turn_rate: float = 0.6,
-             robot_radius: float = 0.2) -> dict:
+             robot_radius: float = 0.2, dynamic_obstacles: int = 0) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``range_sigma``,
@@ -653,7 +653,11 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     (variance form); ``odom_scale`` multiplies every translation and
     ``odom_yaw_drift`` adds rad per metre travelled. ``kidnap_at`` teleports
     the robot at that time (rounded to the 10 Hz tick) to a free pose at
-    least 5 m away; the odometry does not see the jump.
+    least 5 m away; the odometry does not see the jump. ``dynamic_obstacles``
+    adds that many obstacles the saved map does not show (``_unmapped_obstacles``):
+    half of them boxes standing near the path, half people walking to and fro;
+    the laser sees them, the map does not. The world, path and noise stay those
+    of the same seed without them.
 
     Returns a summary: scans, duration, path length, start pose, kidnap.
     """
@@ -671,6 +675,8 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     _check(len(odom_alphas) == 4 and all(a >= 0 for a in odom_alphas), "odom_alphas", "expected four values >= 0")
     _check(0.5 <= odom_scale <= 1.5, "odom_scale", f"expected 0.5..1.5, got {odom_scale}")
     _check(0.1 <= speed <= 2.0 and 0.1 <= turn_rate <= 3.0, "speed/turn_rate", "out of range")
+    _check(isinstance(dynamic_obstacles, (int, np.integer)) and 0 <= dynamic_obstacles <= 200, "dynamic_obstacles",
+           f"expected 0..200, got {dynamic_obstacles!r}")
     n_ticks = int(round(duration * _ODOM_RATE)) + 1
     kidnap_tick = None
     if kidnap_at is not None:
@@ -695,6 +701,11 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     exact = np.empty((scan_ticks.size, angles.size))
     cast_rays(np.ascontiguousarray(truth[scan_ticks].T), angles, blocked, world.origin[0], world.origin[1],
               world.resolution, range_max, exact)
+    if dynamic_obstacles:
+        # A fifth child stream: the first four (world, drive, odometry, laser) are unchanged.
+        rng_obst = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(5)[4])
+        _cast_with_unmapped(world, truth[scan_ticks], t[scan_ticks], angles, range_max, int(dynamic_obstacles),
+                            rng_obst, exact)
     noise = rng_laser.standard_normal(exact.shape)
     u = rng_laser.random(exact.shape)
     frac = rng_laser.uniform(0.05, 1.0, exact.shape)
@@ -755,10 +766,83 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
                 "width": int(world.occupancy.shape[1]), "height": int(world.occupancy.shape[0])},
         "scans": int(scan_ticks.size),
         "path_length": round(length, 3),
+        "dynamic_obstacles": int(dynamic_obstacles),
     }
     atomic_write_text(out / "sim.yaml", yaml.safe_dump(params, sort_keys=False))
     return {"outdir": str(out), "scans": int(scan_ticks.size), "duration": float(t[-1]),
             "path_length": round(length, 3), "start_pose": _pose_list(start), "kidnap": kidnap}
+
+
+def _unmapped_obstacles(world: World, path_xy: np.ndarray, n: int, rng: np.random.Generator):
+    """n obstacles missing from the map: (boxes, people).
+
+    boxes: list of (x0, y0, x1, y1), 0.3-0.8 m sides, centres on reachable
+    cells 0.8-3 m from the path (never on it). people: list of (a (2,), b (2,),
+    speed m/s, phase): a 0.25 m-radius disc walking from a to b and back, a
+    on a reachable cell 0.5-3 m from the path, b 2-5 m away in a random direction.
+    """
+    from scipy.spatial import cKDTree
+
+    iy, ix = np.nonzero(world.reachable)
+    cells = np.column_stack([world.origin[0] + (ix + 0.5) * world.resolution,
+                             world.origin[1] + (iy + 0.5) * world.resolution])
+    d, _ = cKDTree(path_xy).query(cells)
+    n_box = (n + 1) // 2
+    box_ok = cells[(d >= 0.8) & (d <= 3.0)]
+    walk_ok = cells[(d >= 0.5) & (d <= 3.0)]
+    boxes, people = [], []
+    for _ in range(n_box):
+        if box_ok.size == 0:
+            break
+        cx, cy = box_ok[rng.integers(box_ok.shape[0])]
+        hw, hh = rng.uniform(0.15, 0.4, 2)
+        boxes.append((cx - hw, cy - hh, cx + hw, cy + hh))
+    for _ in range(n - n_box):
+        if walk_ok.size == 0:
+            break
+        a = walk_ok[rng.integers(walk_ok.shape[0])]
+        ang = rng.uniform(-math.pi, math.pi)
+        b = a + rng.uniform(2.0, 5.0) * np.array([math.cos(ang), math.sin(ang)])
+        people.append((a, b, float(rng.uniform(0.4, 1.0)), float(rng.uniform(0.0, 1.0))))
+    return boxes, people
+
+
+def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angles: np.ndarray, range_max: float,
+                        n: int, rng: np.random.Generator, out: np.ndarray) -> None:
+    """Cast every scan (poses (M, 3)) into ``out`` (M, B) against the world plus ``n`` unmapped obstacles.
+
+    Obstacles are painted on free cells only. A person within 0.6 m of the
+    robot steps aside (is not drawn); boxes stand at least 0.8 m from the path.
+    """
+    from mcl.kernels.raycast import cast_rays
+
+    boxes, people = _unmapped_obstacles(world, poses[:, :2], n, rng)
+    res = world.resolution
+    ox, oy = world.origin
+    h, w = world.occupancy.shape
+    base = world.blocked
+    free = world.occupancy == 0
+    static = np.zeros_like(base)
+    for x0, y0, x1, y1 in boxes:
+        static[max(int((y0 - oy) / res), 0):max(int(math.ceil((y1 - oy) / res)), 0),
+               max(int((x0 - ox) / res), 0):max(int(math.ceil((x1 - ox) / res)), 0)] = True
+    yy = oy + (np.arange(h) + 0.5) * res
+    xx = ox + (np.arange(w) + 0.5) * res
+    for m in range(poses.shape[0]):
+        rx, ry = poses[m, 0], poses[m, 1]
+        grid = base | (static & free)
+        for a, b, speed, phase in people:
+            length = float(np.hypot(*(b - a)))
+            s = (phase * 2 * length + speed * times[m]) % (2 * length)
+            c = a + (b - a) * (min(s, 2 * length - s) / length)
+            if math.hypot(c[0] - rx, c[1] - ry) < 0.6 + 0.25:
+                continue
+            j0, j1 = np.searchsorted(xx, [c[0] - 0.25, c[0] + 0.25])
+            i0, i1 = np.searchsorted(yy, [c[1] - 0.25, c[1] + 0.25])
+            disc = (xx[None, j0:j1] - c[0]) ** 2 + (yy[i0:i1, None] - c[1]) ** 2 <= 0.25 ** 2
+            grid[i0:i1, j0:j1] |= disc & free[i0:i1, j0:j1]
+        cast_rays(np.ascontiguousarray(poses[m : m + 1].T), angles, np.ascontiguousarray(grid), ox, oy, res,
+                  range_max, out[m : m + 1])
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -771,12 +855,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="beams over 180 degrees; default 181 (FLASER; other counts write ROBOTLASER1)")
     parser.add_argument("--kidnap-at", type=float, default=None, metavar="T",
                         help="teleport the robot at time T s (odometry does not see it)")
+    parser.add_argument("--dynamic-obstacles", type=int, default=0, metavar="N",
+                        help="N obstacles the map does not show (boxes near the path, walking people); default 0")
 
 
 def run_from_args(args: argparse.Namespace) -> int:
     """Run ``mcl simulate`` from parsed arguments; prints a one-line summary."""
     s = simulate(args.outdir, seed=args.seed, duration=args.duration, range_max=args.range_max,
-                 n_beams=args.beams, kidnap_at=args.kidnap_at)
+                 n_beams=args.beams, kidnap_at=args.kidnap_at, dynamic_obstacles=args.dynamic_obstacles)
     x, y, th = s["start_pose"]
     msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
            f"start pose {x:.3f} {y:.3f} {th:.3f}")
