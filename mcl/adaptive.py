@@ -34,11 +34,16 @@ Short- and long-term averages of the measurement likelihood,
 
     w_slow += alpha_slow (w_avg - w_slow),   w_fast += alpha_fast (w_avg - w_fast),
 
-where w_avg = sum_i w_{t-1,i} p(z_t | x_t^i) is the mean (prior-weighted)
-*unnormalised* likelihood of the scan. Likelihoods of 60 beams are far below
-the float range, so everything is kept in log space: log w_avg is a
-log-sum-exp, and each update is ``logaddexp(log(1 - alpha) + log w, log alpha +
-log w_avg)``. Both averages start at the first w_avg (the book starts at 0,
+where w_avg = sum_i w_{t-1,i} p(z_t | x_t^i)^(1/K) is the mean (prior-weighted)
+*unnormalised* likelihood of the scan, per beam: the K-th root (geometric mean
+over the K beams used) rather than the book's raw product. With the raw
+product of 60 beams, ordinary scan-to-scan variation of a few nats already
+gives w_fast/w_slow ~ e^-1 and injects 60 % of the set while tracking well
+(measured on the bundled demo); the root also makes scans with different
+numbers of valid beams comparable (short-range lasers drop many). The filter
+passes loglik / K (``measurement_count``). Likelihoods are far outside the
+float range, so everything is kept in log space: log w_avg is a log-sum-exp,
+and each update is ``logaddexp(log(1 - alpha) + log w, log alpha + log w_avg)``. Both averages start at the first w_avg (the book starts at 0,
 which makes w_slow lag for ~1/alpha_slow updates and blocks recovery early).
 At resampling time each new particle is, with probability
 p = max(0, 1 - w_fast / w_slow), drawn from the recovery sampler instead of
@@ -60,6 +65,19 @@ import numpy as np
 from mcl.resampling import resample
 
 Sampler = Callable[[int, np.random.Generator, object], np.ndarray]
+
+
+def measurement_count(observation) -> int:
+    """K, the number of measurements in a sensor model's observation (for the per-beam likelihood).
+
+    An array is (.., K) (likelihood field endpoints (2, K)); a tuple's first
+    element is (K,) (the beam model's ranges); anything else counts as 1.
+    """
+    if isinstance(observation, np.ndarray):
+        return int(observation.shape[-1]) if observation.ndim else 1
+    if isinstance(observation, tuple) and observation and isinstance(observation[0], np.ndarray):
+        return int(observation[0].shape[-1]) if observation[0].ndim else 1
+    return 1
 
 
 def kld_quantile(delta: float) -> float:

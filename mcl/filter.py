@@ -45,6 +45,7 @@ from mcl.adaptive import BinCounter, Recovery, draw_injected, kld_quantile, kld_
 from mcl.config import Config
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.estimate import estimate, wrap_angle
+from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
 from mcl.motion import allowed_mask, make_motion_model
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
 from mcl.sensors import make_sensor_model
@@ -95,7 +96,7 @@ class StepInfo:
 class ParticleFilter:
     """MCL over a (3, N) particle array with log weights."""
 
-    def __init__(self, cfg: Config, grid, *, rng: np.random.Generator | None = None):
+    def __init__(self, cfg: Config, grid, *, rng: np.random.Generator | None = None, landmark_map=None):
         self.cfg = cfg
         self.grid = grid
         self.rng = rng if rng is not None else np.random.default_rng(cfg.seed)
@@ -127,6 +128,12 @@ class ParticleFilter:
         # the free space the motion model allows unless replaced (e.g. by a landmark-based pose sampler).
         self.recovery_sampler = self.sample_uniform
         self._observation = None
+        # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
+        # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
+        self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
+        self._marks = None
+        if self.landmarks is not None:
+            self.recovery_sampler = self.sample_from_landmarks
 
     # ------------------------------------------------------------------ initialisation
 
@@ -150,6 +157,58 @@ class ParticleFilter:
         """(3, n) poses uniform over free space, with the robot-radius clearance when map rejection is on."""
         clearance = self.cfg.motion.robot_radius if self.cfg.motion.map_rejection else 0.0
         return self.grid.sample_free(n, rng, clearance=clearance)
+
+    def sample_from_landmarks(self, n: int, rng: np.random.Generator, observation=None, marks=None) -> np.ndarray:
+        """(3, n) poses drawn from the landmark observation ``marks`` (default: the latest one) with
+        ``sample_poses_from_landmark``, drawn again (up to motion.max_tries) where the map does not allow them;
+        uniform over free space when there is no observation of a known landmark."""
+        marks = self._marks if marks is None else marks
+        lm = self.landmarks
+        if lm is None or marks is None or not np.any(lm.map.index_of(marks.ids) >= 0):
+            return self.sample_uniform(n, rng, observation)
+        p = sample_poses_from_landmark(marks, lm.map, n, rng, self.cfg.landmarks)
+        for _ in range(max(self.cfg.motion.max_tries - 1, 0)):
+            bad = np.flatnonzero(~self._allowed_at(p) | ~self._free_at(p))
+            if bad.size == 0:
+                break
+            # a fresh draw of all n keeps pose k on observation k mod J (the even share)
+            q = sample_poses_from_landmark(marks, lm.map, n, rng, self.cfg.landmarks)
+            p[:, bad] = q[:, bad]
+        return np.ascontiguousarray(p)
+
+    def _free_at(self, p: np.ndarray) -> np.ndarray:
+        """(N,) bool: poses on free cells of the map (off the map: False)."""
+        res = float(self.grid.resolution)
+        with np.errstate(invalid="ignore"):
+            fx = np.floor((p[0] - self.grid.origin[0]) / res)
+            fy = np.floor((p[1] - self.grid.origin[1]) / res)
+        free = np.asarray(self.grid.free)
+        h, w = free.shape
+        inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
+        out = np.zeros(p.shape[1], dtype=bool)
+        out[inside] = free[fy[inside].astype(np.int64), fx[inside].astype(np.int64)]
+        return out
+
+    def init_from_landmarks(self, marks) -> bool:
+        """Global localization seeded by landmarks: particles drawn from the observations of ``marks`` (a
+        ``Landmarks`` record), shared evenly over those with known ids. False (nothing drawn) if none is known."""
+        if self.landmarks is None or not np.any(self.landmarks.map.index_of(marks.ids) >= 0):
+            return False
+        self._set(self.sample_from_landmarks(self.cfg.filter.particles, self.rng, marks=marks))
+        return True
+
+    def correct_landmarks(self, marks, info: StepInfo | None = None) -> None:
+        """w_t *= p(z_t | x_t, m) for a ``Landmarks`` record (mcl.landmarks.LandmarkModel), in log space."""
+        self._marks = marks
+        if marks is None or self.landmarks is None:
+            return
+        prepared = self.landmarks.prepare(marks)
+        if prepared is None:
+            return
+        loglik = self.landmarks.log_likelihood(self.particles, prepared)
+        if self.recovery is not None and self._observation is None:  # landmark-only: they drive w_slow / w_fast
+            self.recovery.update(Recovery.log_mean_likelihood(self.logw, loglik / prepared.shape[1]))
+        self.logw += loglik
 
     def _set(self, particles: np.ndarray) -> None:
         self.particles = particles
@@ -368,7 +427,7 @@ class ParticleFilter:
         self.weights = w
         info.ess = float(effective_sample_size(w))
 
-    def step(self, control: Control | None, observation) -> StepInfo:
+    def step(self, control: Control | None, observation, landmarks=None) -> StepInfo:
         """One MCL update: predict -> correct -> normalise -> estimate -> resample. Returns what it did."""
         info = StepInfo(particles=self.n)
         self._delta = None
@@ -377,6 +436,7 @@ class ParticleFilter:
             self.predict(control, info)
         t1 = time.perf_counter()
         self.correct(observation, info)
+        self.correct_landmarks(landmarks, info)
         t2 = time.perf_counter()
         self.normalize(info)
         if info.degenerate:
