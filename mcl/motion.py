@@ -255,6 +255,28 @@ def noise_sigmas_array(rot1, trans, rot2, cfg):
     raise ValueError(f"motion.noise_form: unknown value {cfg.noise_form!r} (expected 'variance' or 'std')")
 
 
+def odometry_residuals(r1, tr, r2, h1, ht, h2):
+    """delta - delta_hat for the odometry deltas (r1, tr, r2) against the hypothesis' (h1, ht, h2).
+
+    Angle differences wrapped into (-pi, pi]. (rot1, trans, rot2) and
+    (rot1 + pi, -trans, rot2 - pi) are the same motion; the sampler reaches the
+    second when its translation noise flips the sign of a short step (a robot
+    turning on the spot whose odometry creeps 1 cm backwards reads rot1 = pi).
+    So the odometry deltas are taken in the form whose rot1 is nearer the
+    hypothesis' (|rot1 - rot1_hat| <= pi/2), and a backward creep costs a
+    translation error, not a rotation error of pi.
+    """
+    r1 = np.asarray(r1, dtype=np.float64)
+    tr = np.asarray(tr, dtype=np.float64)
+    r2 = np.asarray(r2, dtype=np.float64)
+    d1 = _wrap_np(r1 - h1)
+    flip = np.abs(d1) > 0.5 * np.pi
+    d1 = np.where(flip, _wrap_np(d1 - np.pi), d1)
+    dt = np.where(flip, -tr, tr) - ht
+    d2 = _wrap_np(np.where(flip, r2 + np.pi, r2) - h2)
+    return d1, dt, d2
+
+
 def _odometry_pair(u):
     if hasattr(u, "odom_prev"):
         return u.odom_prev, u.odom_now
@@ -268,7 +290,8 @@ def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "hypot
 
     u: the odometry pair (odom_prev, odom_now), or a ``Control``. The deltas
     of u and of each hypothesis (x_prev -> x_new) follow ``odometry_deltas``;
-    the differences delta - delta_hat are wrapped into (-pi, pi].
+    the differences delta - delta_hat are wrapped into (-pi, pi]
+    (``odometry_residuals``, which also folds a backward creep).
     sigma_from: "hypothesis" takes the noise stds from the hypothesis' deltas
     (the book's Table 5.5: the true motion makes the noise, as in
     ``mcl.simulate``); "odometry" takes them from the odometry's deltas (the
@@ -284,9 +307,10 @@ def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "hypot
     else:
         raise ValueError(f"sigma_from: expected 'hypothesis' or 'odometry', got {sigma_from!r}")
     kind = getattr(cfg, "noise", "normal")
-    out = (log_density(kind, _wrap_np(rot1 - h1), np.maximum(s1, SIGMA_MIN))
-           + log_density(kind, trans - ht, np.maximum(st, SIGMA_MIN))
-           + log_density(kind, _wrap_np(rot2 - h2), np.maximum(s2, SIGMA_MIN)))
+    d1, dtr, d2 = odometry_residuals(rot1, trans, rot2, h1, ht, h2)
+    out = (log_density(kind, d1, np.maximum(s1, SIGMA_MIN))
+           + log_density(kind, dtr, np.maximum(st, SIGMA_MIN))
+           + log_density(kind, d2, np.maximum(s2, SIGMA_MIN)))
     if jacobian:
         with np.errstate(divide="ignore"):
             out = out - np.log(ht)
