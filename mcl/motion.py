@@ -360,8 +360,9 @@ def velocity_inverse(x_prev, x_new, dt: float):
     dtheta = wrap(2 atan2(l, f)) and the arc length is
     v dt = sign(f) d (dtheta/2) / sin(dtheta/2). This has no division by the
     book's vanishing denominator (x_new on the heading line: dtheta = 0, v dt =
-    f, the straight line) and keeps the sign of v for backward motion, which
-    the book's v = dtheta r* / dt loses (r* >= 0).
+    f, the straight line) and gives v the sign of the motion (forward > 0);
+    the book's v = dtheta r* / dt (r* >= 0) has the sign of dtheta instead,
+    wrong for a forward right turn and a backward left turn.
     """
     a, b = _poses(x_prev, "x_prev"), _poses(x_new, "x_new")
     dt = float(dt)
