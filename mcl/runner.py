@@ -105,6 +105,40 @@ def _choose_scans(log, laser: str):
     return scans
 
 
+def _landmark_records(log, cfg: Config) -> list:
+    """The log's LANDMARK records when ``landmarks.use`` is on (DataError if it has none), else []."""
+    if not cfg.landmarks.use:
+        return []
+    if not log.landmarks:
+        raise DataError(f"{log.path}: no LANDMARK lines, but landmarks.use is true")
+    return list(log.landmarks)
+
+
+def _updates(scans: list, marks: list) -> list[tuple]:
+    """The filter updates in time order, as (scan, marks) pairs.
+
+    A LANDMARK record within 1 ms of a scan joins that scan's update; one with
+    no scan is an update of its own, given as ``(record, record)``: the record
+    carries ``t``, ``odom``, ``tv``, ``rv`` like a Scan, so ``scan is marks``
+    tells a landmark-only update. Scans with no landmarks come as ``(scan, None)``.
+    """
+    if not marks:
+        return [(s, None) for s in scans]
+    attached: dict[int, object] = {}
+    alone = []
+    st = np.array([s.t for s in scans])
+    for m in marks:
+        i = int(np.searchsorted(st, m.t)) if st.size else 0
+        near = [j for j in (i - 1, i) if 0 <= j < st.size and abs(st[j] - m.t) <= 1e-3 and j not in attached]
+        if near:
+            attached[min(near, key=lambda j: abs(st[j] - m.t))] = m
+        else:
+            alone.append(m)
+    out = [(s, attached.get(k)) for k, s in enumerate(scans)] + [(m, m) for m in alone]
+    out.sort(key=lambda u: u[0].t)  # stable: file order at equal times
+    return out
+
+
 def _particles_text(summary: dict) -> str:
     lo, hi = summary["particles_min"], summary["particles_max"]
     if lo == hi:
@@ -143,14 +177,21 @@ def run(
     for w in log.warnings:
         echo(f"warning: {w}")
     truth = Truth(*read_tum(cfg.truth)) if cfg.truth else None
-    scans = _choose_scans(log, cfg.laser)
+    scans = _choose_scans(log, cfg.laser) if cfg.sensor.use else []
+    marks_all = _landmark_records(log, cfg)
+    landmark_map = None
+    if cfg.landmarks.use:
+        from mcl.landmarks import load_landmarks
+
+        landmark_map = load_landmarks(cfg.landmarks.map)
+    updates = _updates(scans, marks_all)
     load_time = time.perf_counter() - wall0
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "config.yaml", dump_config(cfg))
 
-    pf = ParticleFilter(cfg, grid)
+    pf = ParticleFilter(cfg, grid, landmark_map=landmark_map)
     fc = cfg.filter
     if fc.global_localization or fc.initial_pose is None:
         pf.init_global()
@@ -158,6 +199,7 @@ def run(
     else:
         pf.init_gaussian(fc.initial_pose, fc.initial_std)
         mode = "tracking"
+    seed_from_landmarks = mode == "global" and landmark_map is not None  # at the first known landmark (Table 6.5)
 
     viz = None
     rrd_path = out_dir / "recording.rrd"
@@ -172,6 +214,10 @@ def run(
             log_scan=cfg.rerun.scan,
         )
         viz.log_map(grid)
+        if landmark_map is not None:
+            from mcl.viz import log_landmark_map
+
+            log_landmark_map(viz, landmark_map)
         if truth is not None:
             viz.log_truth_path(truth.poses)
 
@@ -188,11 +234,11 @@ def run(
     last_t = 0.0
     odom_to_map = None
     writer = TumWriter(out_dir / "trajectory.tum")
-    bar = tqdm(total=len(scans), unit="scan", disable=(None if progress is None else not progress), leave=False, dynamic_ncols=True)
+    bar = tqdm(total=len(updates), unit="scan", disable=(None if progress is None else not progress), leave=False, dynamic_ncols=True)
     loop0 = time.perf_counter()
     try:
         with _sigterm_as_interrupt():
-            for scan in scans:
+            for scan, marks in updates:  # scan is marks: an update from a LANDMARK line alone
                 bar.update(1)
                 odom = scan.odom
                 if last_odom is not None:
@@ -203,9 +249,9 @@ def run(
                 laser_pose = (
                     np.asarray(cfg.sensor.laser_pose)
                     if cfg.sensor.laser_pose is not None
-                    else (scan.laser_offset if scan.laser_offset is not None else np.zeros(3))
+                    else (getattr(scan, "laser_offset", None) if getattr(scan, "laser_offset", None) is not None else np.zeros(3))
                 )
-                observation = pf.prepare(scan, laser_pose)  # None (and counted) when the scan is unusable
+                observation = pf.prepare(scan, laser_pose) if scan is not marks else None  # None when unusable
                 control = None
                 if last_odom is not None:
                     dt = scan.t - last_t
@@ -213,7 +259,9 @@ def run(
                     if v == 0.0 and w == 0.0:  # no velocities in the log: from the odometry pair
                         v, w, dt = velocities_from_odometry(last_odom, odom, dt)
                     control = Control(last_odom, odom, dt=dt, v=v, w=w)
-                info = pf.step(control, observation)
+                if seed_from_landmarks and marks is not None and pf.init_from_landmarks(marks):
+                    seed_from_landmarks, control = False, None  # particles drawn for this very time
+                info = pf.step(control, observation, landmarks=marks)
                 last_odom, last_t = odom, scan.t
                 mean, cov = info.mean, info.cov
                 writer.append(scan.t, mean[0], mean[1], mean[2])
@@ -253,7 +301,8 @@ def run(
                         stats["error/position"] = float(math.hypot(mean[0] - ref[0], mean[1] - ref[1]))
                         stats["error/heading"] = abs(float(wrap_angle(mean[2] - ref[2])))
                     scan_world = None
-                    endpoints = beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose)
+                    endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose)
+                                 if scan is not marks else np.zeros((2, 0)))
                     if cfg.rerun.scan and endpoints.shape[1]:
                         c, s = math.cos(mean[2]), math.sin(mean[2])
                         scan_world = np.vstack(
@@ -271,6 +320,10 @@ def run(
                         truth_pose=ref,
                         stats=stats,
                     )
+                    if landmark_map is not None:
+                        from mcl.viz import log_landmark_observations
+
+                        log_landmark_observations(viz, mean, marks, landmark_map)
                     stage_totals["viz"] += time.perf_counter() - tv
     except KeyboardInterrupt:
         interrupted = True
@@ -290,6 +343,7 @@ def run(
         "truth": cfg.truth,
         "seed": cfg.seed,
         "scans": len(scans),
+        "landmark_lines": len(marks_all),
         "updates": counts["updates"],
         "particles": pf.n,
         "particles_mean": float(np.mean(n_used)) if n_used else float(pf.n),

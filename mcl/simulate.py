@@ -631,6 +631,90 @@ def _flaser_ok(n_beams, fov):
 
 
 # --------------------------------------------------------------------------
+# Landmarks (mcl extension: LANDMARK lines, landmarks.yaml)
+# --------------------------------------------------------------------------
+
+def _place_landmarks(world: World, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """ids 1..k and (2, k) positions: cell centres of free cells 0.15-0.3 m from a wall (a beacon on a
+    wall, a pillar or in a corner), corners preferred (more occupied cells within 0.5 m), at least
+    2 m apart (1 m, then any, if the building has too few such places)."""
+    from scipy.ndimage import uniform_filter
+
+    cand = (world.occupancy == 0) & (world.distance >= 0.15) & (world.distance <= 0.3)
+    iy, ix = np.nonzero(cand)
+    score = uniform_filter(world.blocked.astype(np.float64), size=21, mode="constant")[iy, ix]
+    w = score ** 2
+    x = world.origin[0] + (ix + 0.5) * world.resolution
+    y = world.origin[1] + (iy + 0.5) * world.resolution
+    chosen: list[int] = []
+    for sep in (2.0, 1.0, 0.0):
+        alive = np.ones(x.size, dtype=bool)
+        for c in chosen:
+            alive &= np.hypot(x - x[c], y - y[c]) >= sep
+        while len(chosen) < k and np.any(alive & (w > 0)):
+            p = np.where(alive, w, 0.0)
+            c = int(rng.choice(x.size, p=p / p.sum()))
+            chosen.append(c)
+            alive &= np.hypot(x - x[c], y - y[c]) >= max(sep, 1e-9)
+        if len(chosen) == k:
+            break
+    c = np.array(chosen, dtype=np.int64)
+    return np.arange(1, c.size + 1, dtype=np.int64), np.vstack([x[c], y[c]])
+
+
+def _landmark_observations(world: World, poses: np.ndarray, ids: np.ndarray, xy: np.ndarray,
+                           rng: np.random.Generator, range_max: float, sigma: tuple[float, float],
+                           p_miss: float, p_fp: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(ids, ranges, bearings) seen from each pose of ``poses`` (S, 3).
+
+    A landmark is seen when it is within ``range_max`` and the ray cast from
+    the pose towards it meets no occupied cell before it
+    (``mcl.kernels.raycast.cast_rays``); each seen one is missed with
+    probability ``p_miss``; its range and bearing get Gaussian noise
+    ``sigma`` = (m, rad). With probability ``p_fp`` a pose also reports a
+    false positive: a random id of the map at a range uniform in
+    [0.5, range_max] and a bearing uniform in [-pi, pi).
+    """
+    from mcl.kernels.raycast import cast_rays
+
+    s = poses.shape[0]
+    k = ids.size
+    dx = xy[0][None, :] - poses[:, 0:1]
+    dy = xy[1][None, :] - poses[:, 1:2]
+    d = np.hypot(dx, dy)
+    heading = np.arctan2(dy, dx)
+    hit = np.empty((s, k))
+    for j in range(k):  # one parallel cast over all poses per landmark
+        rays = np.ascontiguousarray(np.vstack([poses[:, 0], poses[:, 1], heading[:, j]]))
+        col = np.empty((s, 1))
+        cast_rays(rays, np.zeros(1), world.blocked, world.origin[0], world.origin[1], world.resolution,
+                  range_max, col)
+        hit[:, j] = col[:, 0]
+    seen = (d <= range_max) & (hit >= d)
+    seen &= rng.random((s, k)) >= p_miss
+    r = d + sigma[0] * rng.standard_normal((s, k))
+    b = _wrap(heading - poses[:, 2:3] + sigma[1] * rng.standard_normal((s, k)))
+    fp = rng.random(s) < p_fp
+    fp_id = ids[rng.integers(0, k, s)]
+    fp_r = rng.uniform(0.5, range_max, s)
+    fp_b = rng.uniform(-math.pi, math.pi, s)
+    out = []
+    for i in range(s):
+        m = seen[i]
+        oi, orr, ob = ids[m], np.abs(r[i, m]), b[i, m]
+        if fp[i]:
+            oi, orr, ob = np.append(oi, fp_id[i]), np.append(orr, fp_r[i]), np.append(ob, fp_b[i])
+        out.append((oi, orr, ob))
+    return out
+
+
+def _landmark_line(obs: tuple[np.ndarray, np.ndarray, np.ndarray], ts: str) -> str:
+    ids, r, b = obs
+    body = "".join(f" {int(i)} {rr:.4f} {bb:.5f}" for i, rr, bb in zip(ids, r, b))
+    return f"LANDMARK {ids.size}{body} {ts}\n"
+
+
+# --------------------------------------------------------------------------
 # Entry point
 # --------------------------------------------------------------------------
 
@@ -643,7 +727,9 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
              range_max: float = 12.0, range_sigma: float = 0.02, p_short: float = 0.03, p_max: float = 0.01,
              odom_alphas=(0.05, 0.05, 0.05, 0.02), odom_scale: float = 1.01, odom_yaw_drift: float = 0.01,
              kidnap_at: float | None = None, speed: float = 0.5, turn_rate: float = 0.6,
-             robot_radius: float = 0.2, dynamic_obstacles: int = 0) -> dict:
+             robot_radius: float = 0.2, dynamic_obstacles: int = 0, landmarks: int = 0,
+             landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
+             landmark_fp: float = 0.03) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``range_sigma``,
@@ -657,7 +743,12 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     adds that many obstacles the saved map does not show (``_unmapped_obstacles``):
     half of them boxes standing near the path, half people walking to and fro;
     the laser sees them, the map does not. The world, path and noise stay those
-    of the same seed without them.
+    of the same seed without them. ``landmarks`` = K > 0 places K point
+    landmarks near walls (``landmarks.yaml``) and writes a ``LANDMARK`` line
+    after each scan: the landmarks within ``landmark_range`` in line of sight,
+    range/bearing noise ``landmark_sigma`` (m, rad), missed with probability
+    ``landmark_miss``, plus a false positive (random id) with probability
+    ``landmark_fp``. K = 0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap.
     """
@@ -677,6 +768,13 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     _check(0.1 <= speed <= 2.0 and 0.1 <= turn_rate <= 3.0, "speed/turn_rate", "out of range")
     _check(isinstance(dynamic_obstacles, (int, np.integer)) and 0 <= dynamic_obstacles <= 200, "dynamic_obstacles",
            f"expected 0..200, got {dynamic_obstacles!r}")
+    _check(isinstance(landmarks, (int, np.integer)) and 0 <= landmarks <= 1000, "landmarks",
+           f"expected 0..1000, got {landmarks!r}")
+    _check(math.isfinite(landmark_range) and 0.5 <= landmark_range <= 100.0, "landmark_range",
+           f"expected 0.5..100 m, got {landmark_range}")
+    _check(len(landmark_sigma) == 2 and all(v >= 0 for v in landmark_sigma) and 0 <= landmark_miss <= 1
+           and 0 <= landmark_fp <= 1, "landmark_sigma/landmark_miss/landmark_fp",
+           "noise must be >= 0 and the probabilities in [0, 1]")
     n_ticks = int(round(duration * _ODOM_RATE)) + 1
     kidnap_tick = None
     if kidnap_at is not None:
@@ -715,6 +813,13 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     ranges[(u >= p_short) & (u < p_short + p_max)] = range_max
     ranges[exact >= range_max] = range_max
     ranges = np.clip(ranges, 0.0, range_max)
+    lm_obs = None
+    if landmarks:
+        # A sixth child stream: the others (world, drive, odometry, laser, obstacles) are unchanged.
+        rng_lm = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(6)[5])
+        lm_ids, lm_xy = _place_landmarks(world, int(landmarks), rng_lm)
+        lm_obs = _landmark_observations(world, truth[scan_ticks], lm_ids, lm_xy, rng_lm, float(landmark_range),
+                                        tuple(map(float, landmark_sigma)), float(landmark_miss), float(landmark_fp))
 
     # --- write
     out = Path(outdir)
@@ -743,7 +848,13 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
             lines.append(f"ROBOTLASER1 0 {angles[0]:.9f} {fov:.9f} {fov / (angles.size - 1):.9f} "
                          f"{range_max:g} 0.01 0 {angles.size} {rs} 0 {pose} {pose} "
                          f"{tv[k]:.6f} {rv[k]:.6f} 0.0 0.0 0.0 {ts}\n")
+        if lm_obs is not None:
+            lines.append(_landmark_line(lm_obs[i], ts))
     atomic_write_text(out / "log.clf", "".join(lines))
+    if lm_obs is not None:
+        from mcl.landmarks import save_landmarks
+
+        save_landmarks(out / "landmarks.yaml", lm_ids, lm_xy)
     write_tum(out / "truth.tum", t[scan_ticks], truth[scan_ticks].T)
 
     import yaml
@@ -768,6 +879,11 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
         "path_length": round(length, 3),
         "dynamic_obstacles": int(dynamic_obstacles),
     }
+    if lm_obs is not None:
+        params["landmarks"] = {"count": int(lm_ids.size), "range_max": float(landmark_range),
+                               "sigma_range": float(landmark_sigma[0]), "sigma_bearing": float(landmark_sigma[1]),
+                               "p_miss": float(landmark_miss), "p_false_positive": float(landmark_fp),
+                               "observations": int(sum(o[0].size for o in lm_obs))}
     atomic_write_text(out / "sim.yaml", yaml.safe_dump(params, sort_keys=False))
     return {"outdir": str(out), "scans": int(scan_ticks.size), "duration": float(t[-1]),
             "path_length": round(length, 3), "start_pose": _pose_list(start), "kidnap": kidnap}
@@ -857,12 +973,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="teleport the robot at time T s (odometry does not see it)")
     parser.add_argument("--dynamic-obstacles", type=int, default=0, metavar="N",
                         help="N obstacles the map does not show (boxes near the path, walking people); default 0")
+    parser.add_argument("--landmarks", type=int, default=0, metavar="K",
+                        help="K point landmarks near walls: landmarks.yaml and a LANDMARK line per scan; default 0")
+    parser.add_argument("--landmark-range", type=float, default=8.0, metavar="M",
+                        help="range of the landmark detector in m; default 8")
 
 
 def run_from_args(args: argparse.Namespace) -> int:
     """Run ``mcl simulate`` from parsed arguments; prints a one-line summary."""
     s = simulate(args.outdir, seed=args.seed, duration=args.duration, range_max=args.range_max,
-                 n_beams=args.beams, kidnap_at=args.kidnap_at, dynamic_obstacles=args.dynamic_obstacles)
+                 n_beams=args.beams, kidnap_at=args.kidnap_at, dynamic_obstacles=args.dynamic_obstacles,
+                 landmarks=args.landmarks, landmark_range=args.landmark_range)
     x, y, th = s["start_pose"]
     msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
            f"start pose {x:.3f} {y:.3f} {th:.3f}")

@@ -503,3 +503,65 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = ()) -> rrb.Bluepri
         rrb.Horizontal(world, rrb.Vertical(*views), column_shares=[3, 2]),
         collapse_panels=False,
     )
+
+
+# -- landmarks (mcl.landmarks) ---------------------------------------------------------------
+#   world/landmarks           static Points2D: the landmark map, labelled with the ids
+#   world/landmarks/observed  LineStrips2D per step: from the estimate to where each observation
+#                             (range, bearing) puts its landmark; empty when the update had none
+
+_LANDMARK_COLOR = [250, 200, 40]
+_OBSERVED_COLOR = [255, 120, 30]
+
+
+def log_landmark_map(logger: RerunLogger, landmark_map: Any) -> None:
+    """Static points of the landmark map (``ids`` (K,), ``xy`` (2, K)) with the ids as labels."""
+    rec = logger._live()
+    if rec is None:
+        return
+    xy = np.ascontiguousarray(np.asarray(landmark_map.xy, dtype=np.float64).T, dtype=np.float32)
+    rec.log(
+        "world/landmarks",
+        rr.Points2D(
+            xy,
+            labels=[str(int(i)) for i in np.asarray(landmark_map.ids)],
+            colors=[_LANDMARK_COLOR],
+            radii=rr.Radius.ui_points(5.0),
+            draw_order=_DRAW_ORDER["estimate"] + 1.0,
+        ),
+        static=True,
+    )
+
+
+def landmark_rays(estimate: np.ndarray, ranges: np.ndarray, bearings: np.ndarray) -> np.ndarray:
+    """(J, 2, 2) segments from the estimate (x, y, theta) to estimate + range at heading theta + bearing."""
+    e = np.asarray(estimate, dtype=np.float64)
+    r = np.asarray(ranges, dtype=np.float64).ravel()
+    a = e[2] + np.asarray(bearings, dtype=np.float64).ravel()
+    seg = np.empty((r.size, 2, 2))
+    seg[:, 0, 0], seg[:, 0, 1] = e[0], e[1]
+    seg[:, 1, 0] = e[0] + r * np.cos(a)
+    seg[:, 1, 1] = e[1] + r * np.sin(a)
+    return seg
+
+
+def log_landmark_observations(logger: RerunLogger, estimate: np.ndarray, marks: Any, landmark_map: Any = None) -> None:
+    """This step's landmark observations (``marks``: ids, ranges, bearings; None: none) as rays from the
+    estimate, labelled with the ids. Call after ``log_step`` (it uses that step's time)."""
+    rec = logger._live()
+    if rec is None:
+        return
+    if marks is None or len(marks.ids) == 0:
+        rec.log("world/landmarks/observed", rr.LineStrips2D(np.zeros((0, 2, 2), dtype=np.float32)))
+        return
+    seg = landmark_rays(estimate, marks.ranges, marks.bearings).astype(np.float32)
+    rec.log(
+        "world/landmarks/observed",
+        rr.LineStrips2D(
+            list(seg),
+            labels=[str(int(i)) for i in np.asarray(marks.ids)],
+            colors=[_OBSERVED_COLOR],
+            radii=rr.Radius.ui_points(1.0),
+            draw_order=_DRAW_ORDER["scan"],
+        ),
+    )
