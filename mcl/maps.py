@@ -148,10 +148,18 @@ def _num(doc: dict, key: str, where: str) -> float:
     v = doc[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise DataError(f"{where}: {key}: expected a number, got {type(v).__name__} {_short(v)}")
-    v = float(v)
+    try:
+        v = float(v)
+    except OverflowError:  # a YAML integer beyond the float range
+        raise DataError(f"{where}: {key}: expected a finite number, got {_short(v)}") from None
     if not math.isfinite(v):
         raise DataError(f"{where}: {key}: expected a finite number, got {v}")
     return v
+
+
+def _printable(s: str) -> str:
+    """``s`` for a one-line message: control characters (a newline in a file name) escaped."""
+    return s if s.isprintable() else repr(s)[1:-1]
 
 
 def _short(v) -> str:
@@ -163,7 +171,7 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | No
     """Return (value (H, W) int, alpha (H, W) uint8 | None), image row 0 = top."""
     from PIL import Image
 
-    label = f"{where}: image: {img_path}"
+    label = f"{where}: image: {_printable(str(img_path))}"
     try:
         with open(img_path, "rb") as f:
             data = f.read()
@@ -238,7 +246,11 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
         raise DataError(f"{where}: origin: expected [x, y, yaw], got {_short(origin)}")
     vals = []
     for v in origin:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        try:
+            ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(float(v))
+        except OverflowError:  # a YAML integer beyond the float range
+            ok = False
+        if not ok:
             raise DataError(f"{where}: origin: expected finite numbers [x, y, yaw], got {_short(origin)}")
         vals.append(float(v))
     if len(vals) == 3 and vals[2] != 0.0:

@@ -188,12 +188,17 @@ def _timestamp(parts: list[str], kind: str) -> float:
     return float(ts[0])
 
 
-def _offset(laser: np.ndarray, robot: np.ndarray) -> np.ndarray:
+def _offset(laser: np.ndarray, robot: np.ndarray, kind: str) -> np.ndarray:
     """robot^-1 ∘ laser: the laser pose expressed in the robot frame."""
-    dx, dy = laser[0] - robot[0], laser[1] - robot[1]
+    # Python floats: finite poses ~1e308 apart overflow to inf quietly, caught below.
+    dx, dy = float(laser[0]) - float(robot[0]), float(laser[1]) - float(robot[1])
     c, s = math.cos(robot[2]), math.sin(robot[2])
-    dth = laser[2] - robot[2]
-    return np.array([c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(dth), math.cos(dth))])
+    # Wrap each heading first: the plain difference of two finite headings may overflow.
+    dth = math.remainder(float(laser[2]), math.tau) - math.remainder(float(robot[2]), math.tau)
+    out = np.array([c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(dth), math.cos(dth))])
+    if not np.isfinite(out).all():
+        raise _Bad(f"{kind}: laser pose too far from the robot pose (offset not finite)")
+    return out
 
 
 def _parse_odom(parts: list[str]) -> list[float]:
@@ -217,7 +222,7 @@ def _parse_flaser(parts: list[str], kind: str, lineno: int) -> Scan:
     t = _timestamp(parts, kind)
     laser, robot = poses[:3], poses[3:].copy()
     return Scan(t, ranges, -math.pi / 2, flaser_angle_increment(n), None, robot,
-                _offset(laser, robot), 0.0, 0.0, kind, lineno)
+                _offset(laser, robot, kind), 0.0, 0.0, kind, lineno)
 
 
 def _parse_laser_config(parts: list[str], kind: str, extra: int) -> tuple[np.ndarray, np.ndarray, int]:
@@ -250,7 +255,7 @@ def _parse_robotlaser(parts: list[str], kind: str, lineno: int) -> Scan:
     t = _timestamp(parts, kind)
     laser, robot = rest[0:3], rest[3:6].copy()
     return Scan(t, ranges, float(config[1]), float(config[3]), float(config[4]), robot,
-                _offset(laser, robot), float(rest[6]), float(rest[7]), kind, lineno)
+                _offset(laser, robot, kind), float(rest[6]), float(rest[7]), kind, lineno)
 
 
 def _parse_rawlaser(parts: list[str], kind: str, lineno: int) -> Scan:
