@@ -138,6 +138,30 @@ def _add_simulate(sub) -> None:
     p.set_defaults(func=simulate.run_from_args)
 
 
+def _add_calibrate(sub) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="fit model parameters from a log with reference poses; print YAML to paste into a config",
+        description="Learn model parameters from a logged dataset whose reference trajectory is known.",
+    )
+    csub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
+    from mcl import calibrate_sensor
+
+    s = csub.add_parser(
+        "sensor",
+        help="EM fit of the range sensor mixture (Prob. Rob. Table 6.2): beam or likelihood field",
+        description=(
+            "Fit z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short (beam model) or z_hit, z_rand, sigma_hit "
+            "(likelihood field) by expectation-maximisation, from the scans at the reference poses (truth "
+            "timestamps matched to scans within 1 ms). Prints a sensor: block ready to paste into a config."
+        ),
+        epilog="example:\n  mcl calibrate sensor --config configs/intel_lab.yaml --model likelihood_field",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    calibrate_sensor.add_arguments(s)
+    s.set_defaults(func=calibrate_sensor.run_from_args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mcl",
@@ -152,6 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run(sub)
     _add_eval(sub)
     _add_simulate(sub)
+    _add_calibrate(sub)
     return parser
 
 
