@@ -284,7 +284,7 @@ def _odometry_pair(u):
     return odom_prev, odom_now
 
 
-def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "hypothesis",
+def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "odometry",
                               jacobian: bool = True, min_trans: float = ROT1_MIN_TRANS) -> np.ndarray:
     """log p(x_new | u, x_prev) of the odometry model (Prob. Rob. Table 5.5, motion_model_odometry), (N,).
 
@@ -292,11 +292,16 @@ def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "hypot
     of u and of each hypothesis (x_prev -> x_new) follow ``odometry_deltas``;
     the differences delta - delta_hat are wrapped into (-pi, pi]
     (``odometry_residuals``, which also folds a backward creep).
-    sigma_from: "hypothesis" takes the noise stds from the hypothesis' deltas
-    (the book's Table 5.5: the true motion makes the noise, as in
-    ``mcl.simulate``); "odometry" takes them from the odometry's deltas (the
-    Spanish slides, seed 002), which is exactly the density the sampler
-    ``OdometryMotionModel`` draws from. jacobian: see the section comment.
+    sigma_from: "odometry" (default) takes the noise stds from the
+    odometry's deltas (the Spanish slides, seed 002): exactly the density the
+    sampler ``OdometryMotionModel`` draws from, which integrates to 1 over
+    poses. "hypothesis" takes them from each hypothesis' deltas (the book's
+    Table 5.5: the true motion makes the noise, as in ``mcl.simulate``); that
+    is a density of the odometry *reading* given the true motion (normalised
+    over the odometry deltas, what ``mcl calibrate motion`` maximises), but
+    over poses it integrates only to about 1 (1.17 for the variance form in
+    tests/test_motion_density.py). ``sigma_from="hypothesis", jacobian=False``
+    is Table 5.5 literally. jacobian: see the section comment.
     """
     rot1, trans, rot2 = odometry_deltas(*_odometry_pair(u))
     h1, ht, h2 = odometry_deltas_array(x_prev, x_new, min_trans)

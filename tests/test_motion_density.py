@@ -1,0 +1,239 @@
+"""Closed-form motion densities (Prob. Rob. Tables 5.1, 5.5, section 5.5) against their samplers.
+
+* Normalisation: the pose densities (``jacobian=True``) integrate to 1 within
+  1 % over a grid in (x', y', theta') around a small motion (the issue's
+  requirement); the midpoint rule on these grids is accurate to about 0.1 %.
+* Sampler vs density: 10^6 samples of the sampler binned into 6 x 6 x 6 boxes
+  (in whitened coordinates, see ``chi2_samples_vs_density``) plus one
+  "outside" bin; expected counts from the density integrated over each box
+  (7^3 midpoints per box: with 5^3 the quadrature error alone, about 1 %,
+  already fails the test at this sample size). Chi-square, fixed seed,
+  threshold p > 1e-3; the same test rejects alphas 10 % off with p < 1e-10.
+* The book's value (``jacobian=False``) against a literal scalar transcription
+  of Table 5.5.
+"""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from mcl.maps import OccupancyGrid
+from mcl.motion import (OdometryMotionModel, VelocityMotionModel, allowed_mask, log_motion_model_odometry,
+                        log_motion_model_velocity, motion_model_odometry, motion_model_velocity,
+                        motion_model_with_map)
+from mcl.noise import prob_normal
+
+
+def cfg(model="odometry", noise_form="variance", noise="normal", alphas=(0.05, 0.02, 0.05, 0.02, 0.01, 0.005)):
+    return SimpleNamespace(model=model, noise_form=noise_form, noise=noise, max_tries=10, robot_radius=0.0,
+                           map_rejection=False, **{f"alpha{k + 1}": a for k, a in enumerate(alphas)})
+
+
+ODOM = (np.array([1.0, 2.0, 0.3]), np.array([1.0 + 0.25 * math.cos(0.35), 2.0 + 0.25 * math.sin(0.35), 0.45]))
+X0 = np.array([-0.5, 0.4, 1.2])  # the particle: the odometry step is applied in its frame
+VEL = (0.5, 0.3, 1.0)  # v, w, dt
+
+
+def box_grid(center, half, n):
+    axes = [np.linspace(c - h, c + h, n) for c, h in zip(center, half)]
+    step = [a[1] - a[0] for a in axes]
+    g = np.meshgrid(*axes, indexing="ij")
+    return np.stack([x.ravel() for x in g]), float(np.prod(step))
+
+
+def ideal_odometry():
+    rot1 = math.atan2(ODOM[1][1] - ODOM[0][1], ODOM[1][0] - ODOM[0][0]) - ODOM[0][2]
+    trans = math.hypot(ODOM[1][0] - ODOM[0][0], ODOM[1][1] - ODOM[0][1])
+    h = X0[2] + rot1
+    return np.array([X0[0] + trans * math.cos(h), X0[1] + trans * math.sin(h), X0[2] + ODOM[1][2] - ODOM[0][2]])
+
+
+def ideal_velocity():
+    v, w, dt = VEL
+    r = v / w
+    return np.array([X0[0] - r * math.sin(X0[2]) + r * math.sin(X0[2] + w * dt),
+                     X0[1] + r * math.cos(X0[2]) - r * math.cos(X0[2] + w * dt), X0[2] + w * dt])
+
+
+# ----------------------------------------------------------------------- normalisation
+
+
+@pytest.mark.parametrize("noise", ["normal", "normal_twelve", "triangular"])
+@pytest.mark.parametrize("noise_form", ["variance", "std"])
+def test_odometry_density_integrates_to_one(noise, noise_form):
+    c = cfg(noise_form=noise_form, noise=noise, alphas=(0.05, 0.02, 0.05, 0.02, 0, 0) if noise_form == "variance"
+            else (0.1, 0.08, 0.1, 0.05, 0, 0))
+    pts, vol = box_grid(ideal_odometry(), (0.3, 0.3, 0.35), 161)
+    p = motion_model_odometry(pts, ODOM, X0, c)
+    total = p.sum() * vol
+    assert total == pytest.approx(1.0, abs=0.01), total
+    # the book's value (no Jacobian) integrates to about the travelled distance instead
+    q = motion_model_odometry(pts, ODOM, X0, c, jacobian=False)
+    assert q.sum() * vol == pytest.approx(0.25, rel=0.05)
+    # With the stds from the hypothesis (Table 5.5) the value is a density of the odometry reading,
+    # not of x': over poses it integrates to 1.17 (variance) / 1.035 (std) here, not to 1.
+    h = motion_model_odometry(pts, ODOM, X0, c, sigma_from="hypothesis").sum() * vol
+    assert 1.02 < h < 1.25, h
+
+
+@pytest.mark.parametrize("noise", ["normal", "normal_twelve", "triangular"])
+@pytest.mark.parametrize("noise_form", ["variance", "std"])
+def test_velocity_density_integrates_to_one(noise, noise_form):
+    alphas = (0.01, 0.005, 0.01, 0.005, 0.002, 0.001) if noise_form == "variance" else (0.1, 0.05, 0.1, 0.05, 0.04, 0.02)
+    c = cfg("velocity", noise_form, noise, alphas)
+    pts, vol = box_grid(ideal_velocity(), (0.2, 0.2, 0.3), 121)
+    total = motion_model_velocity(pts, VEL, X0, c).sum() * vol
+    assert total == pytest.approx(1.0, abs=0.01), total
+
+
+# ----------------------------------------------------------------------- samplers vs densities
+
+
+def chi2_samples_vs_density(samples, logpdf, center, nb=6, sub=7, half=2.0):
+    """Chi-square p of samples (3, n) against a pose density, and the expected fraction outside the boxes.
+
+    The clouds are thin and curved (theta' is strongly correlated with the
+    lateral position), so the boxes are laid out in whitened coordinates
+    z = L^-1 (x - center), L the Cholesky factor of the sample covariance:
+    nb^3 boxes over [-half, half]^3 in z plus one bin for everything outside;
+    the density of z is the pose density times det L.
+    """
+    L = np.linalg.cholesky(np.cov(samples))
+    z = np.linalg.solve(L, samples - center[:, None])
+    edges = np.linspace(-half, half, nb + 1)
+    idx = [np.digitize(z[k], edges) - 1 for k in range(3)]
+    inside = np.all([(i >= 0) & (i < nb) for i in idx], axis=0)
+    flat = (idx[0] * nb + idx[1]) * nb + idx[2]
+    counts = np.bincount(flat[inside], minlength=nb ** 3).astype(float)
+    w = edges[1] - edges[0]
+    fine = (edges[:-1, None] + (np.arange(sub) + 0.5)[None, :] * w / sub).ravel()  # midpoints, box-major
+    g = np.meshgrid(fine, fine, fine, indexing="ij")
+    zf = np.stack([x.ravel() for x in g])
+    dens = np.exp(logpdf(center[:, None] + L @ zf)) * np.linalg.det(L)
+    probs = dens.reshape(nb, sub, nb, sub, nb, sub).sum(axis=(1, 3, 5)).ravel() * (w / sub) ** 3
+    n = samples.shape[1]
+    obs = np.append(counts, n - counts.sum())
+    exp = np.append(probs, 1.0 - probs.sum()) * n
+    assert np.all(exp > 5), exp.min()
+    return stats.chisquare(obs, exp * n / exp.sum()).pvalue, exp[-1] / n
+
+
+@pytest.mark.parametrize("noise_form", ["variance", "std"])
+def test_odometry_sampler_matches_the_closed_form(noise_form):
+    c = cfg(noise_form=noise_form, alphas=(0.05, 0.02, 0.05, 0.02, 0, 0) if noise_form == "variance"
+            else (0.1, 0.08, 0.1, 0.05, 0, 0))
+    n = 1_000_000
+    x = np.tile(X0[:, None], (1, n))
+    s, ok, _ = OdometryMotionModel(c).sample(x, *ODOM, np.random.default_rng(42))
+    mean = ideal_odometry()
+    p, outside = chi2_samples_vs_density(
+        s, lambda pts: log_motion_model_odometry(pts, ODOM, X0, c, sigma_from="odometry"), mean)
+    assert p > 1e-3, p
+    # the same test detects a density with 10 % wrong alphas (so it can fail)
+    c2 = cfg(noise_form=noise_form, alphas=tuple(1.1 * getattr(c, f"alpha{k}") for k in range(1, 7)))
+    p2, _ = chi2_samples_vs_density(
+        s, lambda pts: log_motion_model_odometry(pts, ODOM, X0, c2, sigma_from="odometry"), mean)
+    assert p2 < 1e-10
+
+
+def test_velocity_sampler_matches_the_closed_form():
+    c = cfg("velocity", alphas=(0.01, 0.005, 0.01, 0.005, 0.002, 0.001))
+    n = 1_000_000
+    x = np.tile(X0[:, None], (1, n))
+    s, ok, _ = VelocityMotionModel(c).sample(x, *VEL, np.random.default_rng(43))
+    p, _ = chi2_samples_vs_density(s, lambda pts: log_motion_model_velocity(pts, VEL, X0, c), ideal_velocity())
+    assert p > 1e-3, p
+    c2 = cfg("velocity", alphas=(0.011, 0.0055, 0.011, 0.0055, 0.0022, 0.0011))
+    p2, _ = chi2_samples_vs_density(s, lambda pts: log_motion_model_velocity(pts, VEL, X0, c2), ideal_velocity())
+    assert p2 < 1e-10
+
+
+# ----------------------------------------------------------------------- the book's value, angles, options
+
+
+def book_table_5_5(xn, u, xp, a):
+    """Table 5.5 for one hypothesis, literally (variance form, stds from the hypothesis), normal noise."""
+    (ox, oy, ot), (ox2, oy2, ot2) = u
+
+    def wrap(q):
+        return math.atan2(math.sin(q), math.cos(q))
+
+    r1 = wrap(math.atan2(oy2 - oy, ox2 - ox) - ot)
+    tr = math.hypot(ox - ox2, oy - oy2)
+    r2 = wrap(ot2 - ot - r1)
+    h1 = wrap(math.atan2(xn[1] - xp[1], xn[0] - xp[0]) - xp[2])
+    ht = math.hypot(xp[0] - xn[0], xp[1] - xn[1])
+    h2 = wrap(xn[2] - xp[2] - h1)
+    p1 = prob_normal(wrap(r1 - h1), math.sqrt(a[0] * h1 ** 2 + a[1] * ht ** 2))
+    p2 = prob_normal(tr - ht, math.sqrt(a[2] * ht ** 2 + a[3] * (h1 ** 2 + h2 ** 2)))
+    p3 = prob_normal(wrap(r2 - h2), math.sqrt(a[0] * h2 ** 2 + a[1] * ht ** 2))
+    return p1 * p2 * p3
+
+
+def test_book_value_against_a_literal_transcription():
+    c = cfg()
+    rng = np.random.default_rng(5)
+    hyp = ideal_odometry()[:, None] + rng.normal(0, [[0.03], [0.03], [0.05]], (3, 200))
+    got = motion_model_odometry(hyp, ODOM, X0, c, sigma_from="hypothesis", jacobian=False)
+    ref = [book_table_5_5(hyp[:, i], ODOM, X0, (0.05, 0.02, 0.05, 0.02)) for i in range(200)]
+    np.testing.assert_allclose(got, ref, rtol=1e-10)
+    # the pose density is the book's value over the hypothesised translation
+    trans = np.hypot(hyp[0] - X0[0], hyp[1] - X0[1])
+    np.testing.assert_allclose(motion_model_odometry(hyp, ODOM, X0, c, sigma_from="hypothesis"), np.array(ref) / trans,
+                               rtol=1e-10)
+
+
+def test_angles_are_wrapped():
+    c = cfg()
+    h = ideal_odometry()[:, None] + np.array([[0.01], [-0.01], [0.02]])
+    base = log_motion_model_odometry(h, ODOM, X0, c)
+    for k in (-1, 1, 3):
+        shifted = h + np.array([[0.0], [0.0], [2 * math.pi * k]])
+        np.testing.assert_allclose(log_motion_model_odometry(shifted, ODOM, X0 + [0, 0, -2 * math.pi * k], c), base,
+                                   rtol=1e-9)
+    hv = ideal_velocity()[:, None] + np.array([[0.01], [-0.01], [0.02]])
+    np.testing.assert_allclose(log_motion_model_velocity(hv + [[0], [0], [2 * math.pi]], VEL, X0, c),
+                               log_motion_model_velocity(hv, VEL, X0, c), rtol=1e-9)
+
+
+def test_backward_creep_costs_translation_not_pi():
+    # turning on the spot; odometry crept 1.5 cm backwards, so its rot1 reads pi
+    c = cfg()
+    u = (np.zeros(3), np.array([-0.015, 0.0, 0.3]))
+    hyp = np.array([[0.0], [0.0], [0.3]])
+    lp = log_motion_model_odometry(hyp, u, np.zeros(3), c, jacobian=False)
+    assert np.isfinite(lp[0]) and lp[0] > -50
+
+
+def test_vectorised_equals_one_by_one_and_log_equals_log_of_density():
+    c = cfg()
+    rng = np.random.default_rng(8)
+    hyp = ideal_odometry()[:, None] + rng.normal(0, 0.05, (3, 50))
+    xp = X0[:, None] + rng.normal(0, 0.01, (3, 50))
+    allv = log_motion_model_odometry(hyp, ODOM, xp, c)
+    one = [log_motion_model_odometry(hyp[:, i], ODOM, xp[:, i], c)[0] for i in range(50)]
+    np.testing.assert_allclose(allv, one, rtol=1e-12)
+    np.testing.assert_allclose(np.exp(allv), motion_model_odometry(hyp, ODOM, xp, c), rtol=1e-12)
+
+
+def test_map_based_density():
+    occ = np.zeros((60, 60), dtype=np.int8)
+    occ[:, 35:] = 100  # wall from x = 1.75 m
+    grid = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
+    c = cfg()
+    u = (np.zeros(3), np.array([0.5, 0.0, 0.0]))
+    xp = np.array([1.3, 1.5, 0.0])
+    hyp = np.array([[1.6, 1.8, 1.7, 1.85, 10.0], [1.5, 1.5, 1.52, 1.5, 1.5], [0.0, 0.0, 0.05, 0.0, 0.0]])
+    p = motion_model_with_map(hyp, u, xp, grid, c)
+    assert p.sum() == pytest.approx(1.0)
+    assert p[1] == 0.0 and p[3] == 0.0 and p[4] == 0.0  # in the wall, and off the map
+    free = motion_model_odometry(hyp[:, [0, 2]], u, xp, c)
+    np.testing.assert_allclose(p[[0, 2]], free / free.sum(), rtol=1e-12)
+    # a robot radius shrinks the free space; nothing allowed -> all zeros
+    mask = allowed_mask(grid, 1.0)
+    assert np.all(motion_model_with_map(hyp[:, :2], u, xp, grid, c, allowed=np.zeros_like(mask)) == 0.0)
+    pv = motion_model_with_map(hyp, (0.5, 0.0, 1.0), xp, grid, cfg("velocity"))
+    assert pv.sum() == pytest.approx(1.0) and pv[1] == 0.0
