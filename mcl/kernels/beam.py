@@ -47,7 +47,12 @@ def beam_prob(z, zs, zmax, params):
     p = 0.0
     if z_hit > 0.0 and z >= 0.0 and z <= zmax:
         u = (z - zs) / sigma
-        eta = 0.5 * (math.erf((zmax - zs) / (sigma * _SQRT2)) - math.erf(-zs / (sigma * _SQRT2)))
+        # eta = Phi((zmax - z*)/sigma) - Phi(-z*/sigma); it differs from 1 by < 1e-15 when z* is over
+        # 8.3 sigma inside [0, zmax] (the common case), so the two erf calls are skipped there.
+        if zs > 8.3 * sigma and zmax - zs > 8.3 * sigma:
+            eta = 1.0
+        else:
+            eta = 0.5 * (math.erf((zmax - zs) / (sigma * _SQRT2)) - math.erf(-zs / (sigma * _SQRT2)))
         if eta > 0.0:
             p += z_hit * _INV_SQRT_2PI / sigma * math.exp(-0.5 * u * u) / eta
     if z_short > 0.0 and z >= 0.0 and z <= zs and zs > 0.0:
