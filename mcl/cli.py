@@ -160,6 +160,45 @@ def _add_calibrate(sub) -> None:
     )
     calibrate_sensor.add_arguments(s)
     s.set_defaults(func=calibrate_sensor.run_from_args)
+    from mcl import calibrate_motion
+
+    m = csub.add_parser(
+        "motion",
+        help="maximum-likelihood fit of the odometry model's alpha1..alpha4 (Prob. Rob. Table 5.5)",
+        description=(
+            "Fit alpha1..alpha4 of the odometry motion model by maximum likelihood of the closed-form density over "
+            "consecutive reference poses, with the log's odometry at the reference timestamps. The alphas describe "
+            "the odometry error over the reference spacing. Prints a motion: block ready to paste into a config."
+        ),
+        epilog="example:\n  mcl calibrate motion --log data/demo/log.clf --truth data/demo/truth.tum",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    calibrate_motion.add_arguments(m)
+    m.set_defaults(func=calibrate_motion.run_from_args)
+
+
+def _add_explore(sub) -> None:
+    p = sub.add_parser(
+        "explore",
+        help="look at a model: draw samples of the motion models into a PNG or a Rerun recording",
+        description="Draw samples of a model for a given pose and control, to see how its parameters shape it.",
+    )
+    esub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
+    from mcl import explore
+
+    m = esub.add_parser(
+        "motion",
+        help="sample the odometry or velocity model from one pose (the banana-shaped clouds)",
+        description="Sample the odometry or velocity motion model from --pose; one panel per --alphas setting.",
+        epilog=(
+            "examples:\n"
+            "  mcl explore motion --odom 0 0 0 1 0.2 0.5 --alphas 0.1,0.01,0.01,0.01 --alphas 0.01,0.1,0.01,0.01 --out m.png\n"
+            "  mcl explore motion --velocity 1 0.5 1 --steps 5 --out v.rrd"
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    explore.add_arguments(m)
+    m.set_defaults(func=explore.run_from_args)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -177,6 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_eval(sub)
     _add_simulate(sub)
     _add_calibrate(sub)
+    _add_explore(sub)
     return parser
 
 

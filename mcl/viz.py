@@ -565,3 +565,27 @@ def log_landmark_observations(logger: RerunLogger, estimate: np.ndarray, marks: 
             draw_order=_DRAW_ORDER["scan"],
         ),
     )
+
+
+def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) -> None:
+    """Write samples of a motion model (``mcl explore motion``) to a Rerun recording at ``path``.
+
+    panels: [(label, [cloud (3, N) per step])]. Each alpha setting goes under
+    ``motion/<k>``, offset along x so the panels sit side by side; the
+    start pose is ``motion/<k>/start``; one ``step`` per application.
+    """
+    rec = rr.RecordingStream("mcl_explore_motion", recording_id=str(uuid.uuid4()))
+    rec.save(str(path))
+    allp = np.concatenate([c for _, clouds in panels for c in clouds], axis=1)
+    span = float(max(np.ptp(allp[0]), np.ptp(allp[1]), 1e-3)) * 1.3
+    for k, (label, clouds) in enumerate(panels):
+        dx = k * span
+        rec.log(f"motion/{k}", rr.TextDocument(label), static=True)
+        rec.log(f"motion/{k}/start", rr.Arrows2D(origins=[[pose[0] + dx, pose[1]]],
+                                                 vectors=[[0.1 * span * np.cos(pose[2]), 0.1 * span * np.sin(pose[2])]],
+                                                 colors=[[220, 0, 0]], labels=[label]), static=True)
+        for j, c in enumerate(clouds):
+            rec.set_time("step", sequence=j)
+            rec.log(f"motion/{k}/samples", rr.Points2D(np.stack([c[0] + dx, c[1]], axis=1), radii=0.003 * span,
+                                                       colors=[[40, 40, 160]]))
+    rec.flush()
