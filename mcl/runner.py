@@ -58,22 +58,76 @@ def default_out_dir(root: Path | None = None) -> Path:
     return out
 
 
-@contextmanager
-def _sigterm_as_interrupt():
-    """Turn SIGTERM into KeyboardInterrupt for the duration of the run, so both stop the same way."""
+class _Interrupts:
+    """SIGINT and SIGTERM during a run, both handled as Ctrl-C.
 
-    def handler(signum, frame):
-        raise KeyboardInterrupt
+    While loading (before any output exists) a signal raises KeyboardInterrupt at
+    once. From :meth:`defer` on, a signal is only noted, except inside
+    :meth:`live` (the filter loop), where it raises KeyboardInterrupt, and there
+    not inside :meth:`held` blocks (one update's bookkeeping: the pose written
+    and counted together), which raise it as they end. So the closing of the
+    outputs and the summary are never cut short, and a second Ctrl-C is noted
+    rather than raised.
+    """
 
-    try:
-        old = signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.caught = False  # a signal arrived
+        self._raise = True  # raise at once (else note it)
+        self._pending = False  # noted inside a held() block, to raise as it ends
+        self._old: dict = {}
+
+    def __enter__(self) -> "_Interrupts":
+        try:
+            for sig in self.SIGNALS:
+                self._old[sig] = signal.signal(sig, self._handler)
+        except ValueError:  # not the main thread: the default handling stays
+            pass
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old.clear()
+
+    def _handler(self, signum, frame) -> None:
+        first = not self.caught
+        self.caught = True
+        if self._raise and first:
+            self._raise = False
+            raise KeyboardInterrupt
+        if first:
+            self._pending = True
+
+    def defer(self) -> None:
+        """From now on only note signals (outside :meth:`live`)."""
+        self._raise = False
+
+    @contextmanager
+    def live(self):
+        """A block a signal stops with KeyboardInterrupt (at entry, if one came already)."""
+        if self.caught:
+            self._pending = False
+            raise KeyboardInterrupt
+        self._raise = True
+        try:
+            yield
+        finally:
+            self._raise = False
+
+    @contextmanager
+    def held(self):
+        """Inside :meth:`live`, a block a signal does not cut: KeyboardInterrupt comes as it ends."""
+        was, self._raise = self._raise, False
+        try:
+            yield
+        finally:
+            self._raise = was
+        if was and self._pending:
+            self._pending = False
+            self._raise = False
+            raise KeyboardInterrupt
 
 
 class Truth:
@@ -146,9 +200,20 @@ def _particles_text(summary: dict) -> str:
     return f"{summary['particles_mean']:.0f} particles on average, {lo}..{hi}"
 
 
-def run(
+def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
+    """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
+
+    Keywords: ``progress``, ``initial_pose_override``, ``echo`` (see :func:`_run`). SIGINT and
+    SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true.
+    """
+    with _Interrupts() as signals:
+        return _run(cfg, out_dir, signals, **kwargs)
+
+
+def _run(
     cfg: Config,
     out_dir: Path,
+    signals: _Interrupts,
     *,
     progress: bool | None = None,
     initial_pose_override: bool = False,
@@ -187,6 +252,7 @@ def run(
     updates = _updates(scans, marks_all)
     load_time = time.perf_counter() - wall0
 
+    signals.defer()  # outputs from here on: a signal stops the loop only, and everything is closed
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "config.yaml", dump_config(cfg))
@@ -237,7 +303,7 @@ def run(
     bar = tqdm(total=len(updates), unit="scan", disable=(None if progress is None else not progress), leave=False, dynamic_ncols=True)
     loop0 = time.perf_counter()
     try:
-        with _sigterm_as_interrupt():
+        with signals.live():
             for scan, marks in updates:  # scan is marks: an update from a LANDMARK line alone
                 bar.update(1)
                 odom = scan.odom
@@ -255,6 +321,9 @@ def run(
                 control = None
                 if last_odom is not None:
                     dt = scan.t - last_t
+                    if not dt >= 0.0:  # time ran backwards (intel_lab: 4 times by < 1 s): counted, dt taken as 0
+                        pf.time_backwards(dt)
+                        dt = 0.0
                     v, w = scan.tv, scan.rv
                     if v == 0.0 and w == 0.0:  # no velocities in the log: from the odometry pair
                         v, w, dt = velocities_from_odometry(last_odom, odom, dt)
@@ -264,10 +333,11 @@ def run(
                 info = pf.step(control, observation, landmarks=marks)
                 last_odom, last_t = odom, scan.t
                 mean, cov = info.mean, info.cov
-                writer.append(scan.t, mean[0], mean[1], mean[2])
-                traj_t.append(scan.t)
-                traj_p.append(mean)
-                counts["updates"] += 1
+                with signals.held():  # the pose in the file <=> counted in the summary
+                    writer.append(scan.t, mean[0], mean[1], mean[2])
+                    traj_t.append(scan.t)
+                    traj_p.append(mean)
+                    counts["updates"] += 1
                 counts["resamples"] += int(info.resampled)
                 counts["rejected"] += info.rejected
                 counts["degenerate"] += int(info.degenerate)
@@ -333,6 +403,7 @@ def run(
         if viz is not None:
             viz.close()
     loop_time = time.perf_counter() - loop0
+    interrupted = interrupted or signals.caught  # also a signal while the outputs were closed
 
     n_up = max(counts["updates"], 1)
     summary: dict = {
