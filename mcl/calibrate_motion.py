@@ -79,15 +79,18 @@ SIGMA_FLOOR = 1e-3  # m or rad: no noise std below this in the fit (logged poses
 
 
 def pair_log_likelihood(alphas, odom_prev, odom_now, x_prev, x_now, noise_form="variance", noise="normal",
-                        sigma_floor=SIGMA_FLOOR):
+                        sigma_floor=SIGMA_FLOOR, min_trans=None):
     """sum over pairs of log p(x_now | (odom_prev, odom_now), x_prev), Table 5.5 without the Jacobian."""
     from mcl.motion import SIGMA_MIN, noise_sigmas_array, odometry_deltas_array, odometry_residuals
     from mcl.noise import log_density
 
     cfg = SimpleNamespace(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
                           noise_form=noise_form)
-    r1, tr, r2 = odometry_deltas_array(odom_prev, odom_now)
-    h1, ht, h2 = odometry_deltas_array(x_prev, x_now)
+    from mcl.motion import ROT1_MIN_TRANS
+
+    mt = ROT1_MIN_TRANS if min_trans is None else float(min_trans)
+    r1, tr, r2 = odometry_deltas_array(odom_prev, odom_now, mt)
+    h1, ht, h2 = odometry_deltas_array(x_prev, x_now, mt)
     s1, st, s2 = noise_sigmas_array(h1, ht, h2, cfg)
     d1, dtr, d2 = odometry_residuals(r1, tr, r2, h1, ht, h2)
     f = max(float(sigma_floor), SIGMA_MIN)
@@ -98,7 +101,7 @@ def pair_log_likelihood(alphas, odom_prev, odom_now, x_prev, x_now, noise_form="
 
 
 def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance", noise="normal",
-                        x0=(0.05, 0.05, 0.05, 0.05)) -> dict:
+                        x0=(0.05, 0.05, 0.05, 0.05), min_trans=None) -> dict:
     """Maximum-likelihood alpha1..alpha4 of the odometry model from matched pairs (see the module docstring).
 
     Returns {"alphas": [a1..a4], "log_likelihood", "pairs" (used), "skipped" (still), "converged", "message"}.
@@ -110,6 +113,12 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     poses to about 1e-6 m, so the direction of a 1 cm step is known to only
     about 1e-4 rad, and a turn on the spot (zero modelled rot1 noise) would
     otherwise make one rounding error outweigh the whole log.
+
+    min_trans (default the filter's 1 cm, ``ROT1_MIN_TRANS``): below this
+    translation rot1 = 0 and rot2 carries the turn, for the odometry and the
+    reference alike. With a reference that jitters by centimetres (intel_lab),
+    a reference step of 2-5 cm where the odometry turned on the spot reads as
+    rot1 = +-pi/2 and inflates alpha1/alpha2; raise min_trans above the jitter.
     """
     from scipy.optimize import minimize
 
@@ -123,7 +132,7 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     lo, hi = (math.log(b) for b in ALPHA_BOUNDS)
 
     def nll(z):
-        v = -pair_log_likelihood(np.exp(z), op, on, xp, xn, noise_form, noise) / m
+        v = -pair_log_likelihood(np.exp(z), op, on, xp, xn, noise_form, noise, min_trans=min_trans) / m
         return v if np.isfinite(v) else 1e300
 
     z0 = np.log(np.asarray(x0, dtype=np.float64))
@@ -157,6 +166,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", required=True, help="reference trajectory (TUM) at (a subset of) the log's times")
     p.add_argument("--config", help="config whose motion.noise_form and motion.noise the fit uses (default: the defaults)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override, e.g. motion.noise_form=std")
+    p.add_argument("--min-trans", type=float, default=None, metavar="M",
+                   help="below this step (m) rot1 = 0 for odometry and reference (default 0.01, the filter's); "
+                        "raise it above the reference's jitter")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of YAML")
 
 
@@ -167,7 +179,8 @@ def run_from_args(args) -> int:
 
     cfg = load_config(args.config, list(args.set))
     pairs = pairs_from_log(args.log, args.truth)
-    res = fit_odometry_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise)
+    res = fit_odometry_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise,
+                              min_trans=args.min_trans)
     if args.json:
         print(json.dumps(res, indent=2))
     else:
