@@ -22,9 +22,10 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
 * ``degenerate_weights``: every weight is zero after the correction (no pose
   explains the scan): the particles are re-spread by ``respread_std`` around
   the last estimate moved by the odometry step, twice wider each consecutive
-  time, and scored again; after three consecutive failures, or with no
-  estimate yet, the filter reinitialises globally. If the fresh particles do
-  not explain the scan either, their weights stay uniform.
+  time; after three consecutive failures, or with no estimate yet, the
+  filter reinitialises globally. The fresh particles get equal weights: the
+  scan that explained nothing is not scored again (that would collapse the
+  new cloud onto the few poses that happen to fit a bad scan).
 
 Re-spreading rather than reinitialising first: a scan no pose explains is
 far more often a bad scan or a short glitch than a kidnapping (augmented MCL
@@ -128,6 +129,7 @@ class ParticleFilter:
         # the free space the motion model allows unless replaced (e.g. by a landmark-based pose sampler).
         self.recovery_sampler = self.sample_uniform
         self._observation = None
+        self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
         self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
@@ -207,10 +209,24 @@ class ParticleFilter:
             return
         loglik = self.landmarks.log_likelihood(self.particles, prepared)
         if self.recovery is not None and self._observation is None:  # landmark-only: they drive w_slow / w_fast
-            self.recovery.update(Recovery.log_mean_likelihood(self.logw, loglik / prepared.shape[1]))
+            self._update_recovery(loglik / prepared.shape[1])
         self.logw += loglik
 
+    def _update_recovery(self, loglik_per_beam: np.ndarray) -> None:
+        """Augmented MCL: fold the per-beam mean likelihood of the tracked particles into w_slow, w_fast.
+
+        The particles injected at the last resample are left out (see mcl.adaptive); if every
+        particle was injected, all count.
+        """
+        keep = self._injected
+        if keep is not None and keep.size == loglik_per_beam.size and not keep.all():
+            keep = ~keep
+            self.recovery.update(Recovery.log_mean_likelihood(self.logw[keep], loglik_per_beam[keep]))
+        else:
+            self.recovery.update(Recovery.log_mean_likelihood(self.logw, loglik_per_beam))
+
     def _set(self, particles: np.ndarray) -> None:
+        self._injected = None
         self.particles = particles
         n = particles.shape[1]
         self.logw = np.full(n, -np.log(n))
@@ -261,8 +277,7 @@ class ParticleFilter:
         if not np.isfinite(loglik).all():
             loglik = np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
         if self.recovery is not None:
-            k = max(measurement_count(observation), 1)  # per-beam (geometric mean) likelihood: see mcl.adaptive
-            self.recovery.update(Recovery.log_mean_likelihood(self.logw, loglik / k))
+            self._update_recovery(loglik / max(measurement_count(observation), 1))
         self._observation = observation
         self.logw += loglik
 
@@ -294,7 +309,7 @@ class ParticleFilter:
             return
         obs = self._observation
         if self.kld_counter is not None:
-            new, info.injected, _ = kld_resample(
+            new, fresh, _ = kld_resample(
                 self.particles, self.logw, self.rng, self.kld_counter, scheme=fc.resampling,
                 min_particles=fc.min_particles, max_particles=fc.particles, epsilon=fc.kld_epsilon, z=self.kld_z,
                 inject_p=p, sampler=lambda n: self.recovery_sampler(n, self.rng, obs),
@@ -305,8 +320,10 @@ class ParticleFilter:
             new = self.particles[:, idx]
             if n_inj:
                 new = np.concatenate([new, self.recovery_sampler(n_inj, self.rng, obs)], axis=1)
-            info.injected = n_inj
+            fresh = np.arange(new.shape[1]) >= new.shape[1] - n_inj
+        info.injected = int(np.count_nonzero(fresh))
         self._set(np.ascontiguousarray(new))
+        self._injected = fresh if info.injected else None
         info.resampled = True
 
     def estimate(self) -> tuple[np.ndarray, np.ndarray]:
@@ -349,6 +366,11 @@ class ParticleFilter:
             return None
         return self.sensor.prepare(scan, laser_pose)
 
+    def time_backwards(self, dt: float) -> None:
+        """Count (and warn once about) time running backwards between updates, dt < 0 or not finite."""
+        self._event("time_backwards", f"time ran backwards (dt = {dt:.3f} s); dt taken as 0, the odometry step "
+                    "still applied")
+
     def _check_control(self, control: Control) -> Control | None:
         """The control to apply: dt < 0 made 0; None for an odometry jump (or non-finite odometry)."""
         a = np.asarray(control.odom_prev, dtype=np.float64)[:3]
@@ -361,9 +383,8 @@ class ParticleFilter:
             self._event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> filter.max_odom_step = "
                         f"{self.cfg.filter.max_odom_step} m); the step is not applied, the particles are re-spread")
             return None
-        if not (math.isfinite(control.dt) and control.dt >= 0.0):
-            self._event("time_backwards", f"time ran backwards (dt = {control.dt:.3f} s); dt taken as 0, the "
-                        "odometry step still applied")
+        if not control.dt >= 0.0:
+            self.time_backwards(control.dt)
             control = dataclasses.replace(control, dt=0.0)
         c, s_ = math.cos(a[2]), math.sin(a[2])
         dx, dy = b[0] - a[0], b[1] - a[1]
@@ -399,9 +420,9 @@ class ParticleFilter:
         p[2] = wrap_angle(p[2])
         return np.ascontiguousarray(p)
 
-    def recover_degenerate(self, observation, info: StepInfo) -> None:
+    def recover_degenerate(self, info: StepInfo) -> None:
         """Every weight was zero: re-spread around the last estimate (moved by the odometry step), or reinitialise
-        globally after _MAX_DEGENERATE_RUN consecutive failures, then score the scan again."""
+        globally after _MAX_DEGENERATE_RUN consecutive failures; the new particles get equal weights."""
         self._event("degenerate_weights", "every particle weight is zero (no pose explains the scan); the "
                     "particles are re-spread around the last estimate")
         self._degenerate_run += 1
@@ -415,17 +436,9 @@ class ParticleFilter:
             c, s_ = math.cos(m[2]), math.sin(m[2])
             centre = np.array([m[0] + c * d[0] - s_ * d[1], m[1] + s_ * d[0] + c * d[1], m[2] + d[2]])
             self._set(self._draw_around(centre, np.asarray(self.cfg.filter.respread_std) * 2.0 ** (k - 1)))
-        if observation is not None:
-            loglik = self.sensor.log_likelihood(self.particles, observation)
-            self.logw = self.logw + np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
-        w, log_norm = normalize_log_weights(self.logw)
-        if np.isfinite(log_norm):
-            self.logw -= log_norm
-        else:
-            w = np.full(self.n, 1.0 / self.n)
-            self.logw = np.full(self.n, -np.log(self.n))
-        self.weights = w
-        info.ess = float(effective_sample_size(w))
+        # Equal weights: the scan that explained nothing is not scored again (re-scoring a bad scan would
+        # collapse the fresh cloud onto the few poses that happen to fit it); the next scan decides.
+        info.ess = float(self.n)
 
     def step(self, control: Control | None, observation, landmarks=None) -> StepInfo:
         """One MCL update: predict -> correct -> normalise -> estimate -> resample. Returns what it did."""
@@ -440,7 +453,7 @@ class ParticleFilter:
         t2 = time.perf_counter()
         self.normalize(info)
         if info.degenerate:
-            self.recover_degenerate(observation, info)
+            self.recover_degenerate(info)
         else:
             self._degenerate_run = 0
         t3 = time.perf_counter()

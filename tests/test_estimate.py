@@ -1,0 +1,144 @@
+"""Estimates: weighted circular mean, heaviest-cluster mean on multi-modal clouds, the full set's spread."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mcl.clusters import MAX_CELLS, cluster_estimate, cluster_labels
+from mcl.estimate import estimate, wrap_angle
+
+
+def _blob(rng, centre, std, n):
+    p = rng.standard_normal((3, n)) * np.asarray(std)[:, None] + np.asarray(centre, dtype=float)[:, None]
+    p[2] = wrap_angle(p[2])
+    return p
+
+
+def _bimodal(seed=0, n_a=3000, n_b=2000, a=(1.0, 2.0, 0.3), b=(6.0, -1.0, -2.0)):
+    rng = np.random.default_rng(seed)
+    p = np.ascontiguousarray(np.hstack([_blob(rng, a, (0.1, 0.1, 0.05), n_a), _blob(rng, b, (0.1, 0.1, 0.05), n_b)]))
+    return p, np.full(p.shape[1], 1.0 / p.shape[1])
+
+
+def test_heavier_mode_wins_not_the_midpoint():
+    p, w = _bimodal()
+    est = cluster_estimate(p, w, 0.5, math.pi / 6)
+    assert est.n_clusters == 2
+    assert est.weight == pytest.approx(0.6, abs=1e-12)
+    # the heavier mode's mean within 4 standard errors (0.1 / sqrt(3000) = 0.0018 m)
+    np.testing.assert_allclose(est.mean[:2], [1.0, 2.0], atol=0.01)
+    assert abs(wrap_angle(est.mean[2] - 0.3)) < 0.01
+    # the whole set's mean is near the weighted midpoint, 3 m away from either mode
+    np.testing.assert_allclose(est.full_mean[:2], [0.6 * 1 + 0.4 * 6, 0.6 * 2 - 0.4 * 1], atol=0.02)
+    assert math.hypot(*(est.mean[:2] - est.full_mean[:2])) > 1.5
+    # the cluster's covariance is the blob's (0.1^2), the full set's spread is metres
+    assert est.cov[0, 0] == pytest.approx(0.01, rel=0.1) and est.cov[1, 1] == pytest.approx(0.01, rel=0.1)
+    assert est.full_cov[0, 0] > 5.0
+
+
+def test_weights_not_counts_decide_the_heaviest_cluster():
+    p, w = _bimodal(n_a=3000, n_b=2000)
+    w = np.where(np.arange(p.shape[1]) < 3000, 1.0, 2.0)
+    w /= w.sum()  # mode b: 4000 / 7000 of the weight with fewer particles
+    est = cluster_estimate(p, w, 0.5, math.pi / 6)
+    np.testing.assert_allclose(est.mean[:2], [6.0, -1.0], atol=0.01)
+    assert est.weight == pytest.approx(4000 / 7000, rel=1e-12)
+
+
+def test_unimodal_cloud_gives_the_plain_weighted_mean():
+    rng = np.random.default_rng(1)
+    p = _blob(rng, (3.0, 4.0, 1.0), (0.2, 0.2, 0.1), 5000)
+    w = rng.random(5000)
+    w /= w.sum()
+    est = cluster_estimate(p, w, 0.5, math.pi / 6)
+    mean, cov = estimate(p, w)
+    assert est.n_clusters == 1 and est.weight == 1.0
+    np.testing.assert_array_equal(est.mean, mean)
+    np.testing.assert_array_equal(est.cov, cov)
+
+
+def test_theta_seam_joins_one_cluster_and_the_circular_mean_is_pi():
+    # Headings around +-pi straddle the histogram's first and last theta cells: still one cluster.
+    rng = np.random.default_rng(2)
+    p = _blob(rng, (0.0, 0.0, math.pi), (0.1, 0.1, 0.1), 4000)
+    assert (p[2] > 3.0).any() and (p[2] < -3.0).any()
+    labels, n = cluster_labels(p, 0.5, math.pi / 6)
+    assert n == 1 and (labels == 0).all()
+    est = cluster_estimate(p, np.full(4000, 1 / 4000), 0.5, math.pi / 6)
+    assert abs(wrap_angle(est.mean[2] - math.pi)) < 0.01
+    assert est.cov[2, 2] == pytest.approx(0.01, rel=0.1)  # wrapped differences, not 2*pi jumps
+
+
+def test_same_place_opposite_headings_are_two_clusters():
+    rng = np.random.default_rng(3)
+    p = np.ascontiguousarray(np.hstack([_blob(rng, (0, 0, 0.0), (0.1, 0.1, 0.05), 1000),
+                                        _blob(rng, (0, 0, math.pi), (0.1, 0.1, 0.05), 600)]))
+    w = np.full(1600, 1 / 1600)
+    est = cluster_estimate(p, w, 0.5, math.pi / 6)
+    assert est.n_clusters == 2
+    assert abs(est.mean[2]) < 0.02 and est.weight == pytest.approx(1000 / 1600)
+
+
+def test_labels_match_a_numpy_flood_fill_oracle():
+    # Random sparse clouds: the clusters are the connected components (26-neighbourhood, theta periodic) of the
+    # occupied histogram cells, computed here with a plain breadth-first search over cells.
+    rng = np.random.default_rng(4)
+    for trial in range(20):
+        n = int(rng.integers(5, 200))
+        p = np.vstack([rng.uniform(-3, 3, n), rng.uniform(-3, 3, n), rng.uniform(-math.pi, math.pi, n)])
+        labels, n_c = cluster_labels(p, 0.5, math.pi / 6)
+        n_th = 12
+        cells = np.stack([np.floor(p[0] / 0.5), np.floor(p[1] / 0.5),
+                          np.floor((p[2] + math.pi) / (2 * math.pi / n_th)) % n_th]).astype(int).T
+        occ = {tuple(c) for c in cells}
+        comp, k = {}, 0
+        for c in sorted(occ):
+            if c in comp:
+                continue
+            stack, comp[c] = [c], k
+            while stack:
+                x, y, t = stack.pop()
+                for dx in (-1, 0, 1):
+                    for dy in (-1, 0, 1):
+                        for dt in (-1, 0, 1):
+                            q = (x + dx, y + dy, (t + dt) % n_th)
+                            if q in occ and q not in comp:
+                                comp[q] = k
+                                stack.append(q)
+            k += 1
+        assert n_c == k, trial
+        oracle = np.array([comp[tuple(c)] for c in cells])
+        # same partition (label numbering may differ)
+        pairs = set(zip(labels.tolist(), oracle.tolist()))
+        assert len(pairs) == k == len({a for a, _ in pairs}) == len({b for _, b in pairs}), trial
+
+
+def test_huge_spread_coarsens_instead_of_allocating():
+    rng = np.random.default_rng(5)
+    p = np.vstack([rng.uniform(-5000, 5000, 1000), rng.uniform(-5000, 5000, 1000), rng.uniform(-3, 3, 1000)])
+    labels, n = cluster_labels(p, 0.05, 0.1)  # 200,000 x 200,000 cells at full resolution
+    assert labels.shape == (1000,) and 1 <= n <= 1000
+    assert MAX_CELLS < 200_000**2
+
+
+def test_filter_estimate_uses_the_heaviest_cluster(tmp_path):
+    from mcl.config import load_config
+    from mcl.filter import ParticleFilter
+    from mcl.maps import OccupancyGrid
+
+    occ = np.zeros((200, 200), dtype=np.int8)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 100
+    grid = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
+    p, w = _bimodal(a=(3.0, 3.0, 0.3), b=(7.0, 6.0, -2.0))
+    for mode, expect in (("cluster", (3.0, 3.0)), ("mean", (0.6 * 3 + 0.4 * 7, 0.6 * 3 + 0.4 * 6))):
+        cfg = load_config(None, [f"filter.estimate={mode}", "filter.particles=5000", "filter.kld=false"])
+        pf = ParticleFilter(cfg, grid)
+        pf.particles, pf.weights, pf.logw = p.copy(), w.copy(), np.log(w)
+        info = pf.step(None, None)
+        np.testing.assert_allclose(info.mean[:2], expect, atol=0.02)
+        np.testing.assert_allclose(info.full_mean[:2], [0.6 * 3 + 0.4 * 7, 0.6 * 3 + 0.4 * 6], atol=0.02)
+        assert info.clusters == (2 if mode == "cluster" else 1)
+        assert info.full_cov[0, 0] > 3.0
