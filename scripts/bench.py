@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -133,6 +134,50 @@ def timed(fn, reps, idle=0.0):
     return float(np.median(out)), float(np.min(out))
 
 
+def bench_beam(grid, mask, ranges, angles, max_range, laser_pose, rng, quick):
+    """Casts per second of the beam model (exact DDA casting and the lookup table), 1 and 2 threads.
+
+    One cast = one (particle, beam) expected range plus its mixture term; 10,000 particles
+    uniform over free cells near the map centre with random headings, the scan's 60 beams.
+    """
+    from mcl.config import SensorConfig
+    from mcl.sensors import BeamModel
+
+    cfg = SensorConfig(model="beam", z_hit=0.8, z_short=0.1, z_max=0.05, z_rand=0.05, max_beams=60,
+                       beam_lut_bins=120)
+    exact = BeamModel(grid, cfg)
+    t = time.perf_counter()
+    lut = BeamModel(grid, SensorConfig(**{**{f: getattr(cfg, f) for f in cfg.__slots__}, "beam_lut": True}))
+    build = time.perf_counter() - t
+    obs = exact.prepare(SimpleNamespace(ranges=ranges, angles=angles, max_range=max_range), laser_pose)
+    n, k = 10_000, obs[0].size
+    p = particles_near_centre(grid, mask, n, rng)
+    out = np.empty(n)
+    exact.log_likelihood(p[:, :10], obs)  # warm-up (compile or load from cache)
+    lut.log_likelihood(p[:, :10], obs)
+    print(f"# beam model: {n} particles x {k} beams, range_max {cfg.range_max:g} m; lookup table "
+          f"{lut.table.shape} uint16 = {lut.table.nbytes / 2**20:.0f} MiB, built in {build:.1f} s "
+          f"({lut.table.size / build / 1e6:.1f} M casts/s, {numba.get_num_threads()} threads)")
+    print("# M casts/s: wall clock (median call); per CPU-s: casts / process CPU time over all calls, which a\n"
+          "# loaded machine does not distort (with 2 threads it is per core: x2 for the ideal 2-core figure)")
+    print(f"{'beam model':<20}{'thr':>4}{'ms/call':>9}{'M casts/s':>11}{'per CPU-s':>11}{'load':>6}")
+    saved = numba.get_num_threads()
+    reps = 5 if quick else 20
+    try:
+        for threads in [t for t in (1, 2) if t <= numba.config.NUMBA_NUM_THREADS]:
+            numba.set_num_threads(threads)
+            for name, m in (("exact (DDA)", exact), ("lookup table", lut)):
+                c0 = time.process_time()
+                ms = timed(lambda m=m: m.log_likelihood(p, obs, out), reps)[0] * 1e3
+                cpu = (time.process_time() - c0) / reps
+                load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+                print(f"{name:<20}{threads:>4}{ms:9.2f}{n * k / (ms * 1e3):11.2f}{n * k / cpu / 1e6:11.2f}{load:6.1f}",
+                      flush=True)
+    finally:
+        numba.set_num_threads(saved)
+    print()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="fewer repetitions, no idle-latency column")
@@ -220,6 +265,7 @@ def main(argv=None) -> int:
             print()
     finally:
         numba.set_num_threads(saved)
+    bench_beam(grid, mask, ranges, angles, max_range, laser_pose, rng, args.quick)
     return 0
 
 
