@@ -305,7 +305,9 @@ class ParticleFilter:
         fc = self.cfg.filter
         p = self.recovery.inject_probability if self.recovery is not None else 0.0
         info.inject_p = p
-        if info.ess >= fc.resample_threshold * self.n:
+        # Recovery resamples whenever it injects: a lost filter whose particles all explain the scan
+        # equally badly has a high ESS and would otherwise never inject.
+        if info.ess >= fc.resample_threshold * self.n and p == 0.0:
             return
         obs = self._observation
         if self.kld_counter is not None:

@@ -86,7 +86,7 @@ def test_particle_count_grows_with_occupied_bins_and_stays_in_bounds(seed):
         logw = np.zeros(p.shape[1])
         out, inj, k = kld_resample(p, logw, rng, counter, scheme="systematic", min_particles=100,
                                    max_particles=20_000, epsilon=0.05, z=z)
-        assert inj == 0 and out.shape[0] == 3 and out.flags.c_contiguous
+        assert not inj.any() and inj.size == out.shape[1] and out.shape[0] == 3 and out.flags.c_contiguous
         assert 100 <= out.shape[1] <= 20_000
         # The stopping rule: M >= bound(k) for the bins of the drawn set (or M at a bound).
         assert k == bins_occupied(out, 0.5, math.radians(10))  # k counts the bins of the set drawn
@@ -122,8 +122,10 @@ def test_injection_follows_the_binomial_and_counts_in_the_bins():
     p = _cloud(rng, 5000, 0.01)
     counter = BinCounter((0.0, 0.0), (10.0, 10.0), 0.5, math.radians(10))
     far = lambda n: np.vstack([rng.uniform(0, 10, n), rng.uniform(0, 10, n), rng.uniform(-3, 3, n)])  # noqa: E731
-    out, inj, k = kld_resample(p, np.zeros(5000), rng, counter, scheme="systematic", min_particles=200,
-                               max_particles=5000, epsilon=0.05, z=kld_quantile(0.01), inject_p=0.3, sampler=far)
+    out, mask, k = kld_resample(p, np.zeros(5000), rng, counter, scheme="systematic", min_particles=200,
+                                max_particles=5000, epsilon=0.05, z=kld_quantile(0.01), inject_p=0.3, sampler=far)
+    inj = int(mask.sum())
+    assert np.all(np.hypot(out[0, ~mask] - 5.25, out[1, ~mask] - 5.25) < 0.2)  # the mask marks the sampler's poses
     # Injected poses spread over many bins, so the set grows well beyond the point mass's minimum.
     assert k > 50 and out.shape[1] > 1000
     m = out.shape[1]
@@ -147,17 +149,20 @@ def test_mean_likelihood_is_a_stable_log_sum_exp():
 def test_averages_follow_the_book_recursion_in_log_space():
     r = Recovery(0.1, 0.5)
     xs = [1e-300, 3e-300, 2e-301, 5e-300]  # near the float floor: logs keep them exact
-    ws = wf = None
-    for x in xs:
+    ws = wf = 0.0  # the book's recursion from 0, read bias-corrected: w / (1 - (1 - alpha)^t)
+    for t, x in enumerate(xs, start=1):
         r.update(math.log(x))
-        if ws is None:
-            ws = wf = x
-        else:
-            ws += 0.1 * (x - ws)
-            wf += 0.5 * (x - wf)
-    assert math.exp(r.log_w_slow) == pytest.approx(ws, rel=1e-9)
-    assert math.exp(r.log_w_fast) == pytest.approx(wf, rel=1e-9)
-    assert r.inject_probability == pytest.approx(max(0.0, 1.0 - wf / ws), abs=1e-9)
+        ws += 0.1 * (x - ws)
+        wf += 0.5 * (x - wf)
+        assert math.exp(r.log_w_slow) == pytest.approx(ws / (1 - 0.9**t), rel=1e-9)
+        assert math.exp(r.log_w_fast) == pytest.approx(wf / (1 - 0.5**t), rel=1e-9)
+    cs, cf = ws / (1 - 0.9**4), wf / (1 - 0.5**4)
+    assert r.inject_probability == pytest.approx(max(0.0, 1.0 - cf / cs), abs=1e-9)
+    # corrected, a constant input reads back exactly (no lag from the start at 0)
+    c = Recovery(0.001, 0.1)
+    for _ in range(5):
+        c.update(-123.0)
+        assert c.log_w_slow == pytest.approx(-123.0, abs=1e-9) and c.inject_probability == pytest.approx(0.0, abs=1e-9)
 
 
 def test_no_injection_while_w_fast_is_at_least_w_slow():
