@@ -246,6 +246,7 @@ def kld_resample(
     z: float,
     inject_p: float = 0.0,
     sampler: Callable[[int], np.ndarray] | None = None,
+    move: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """KLD-sampling resample (with optional injection): (new particles (3, M), injected (M,) bool, bins k).
 
@@ -253,6 +254,10 @@ def kld_resample(
     them; with ``inject_p > 0`` a Binomial(b, inject_p) of the batch's slots,
     at random positions, take poses from ``sampler(n)`` instead. Injected
     poses count in the bins too (as in AMCL): a lost filter grows its set.
+    ``move(batch) -> moved`` (the motion model) is applied to each batch before
+    its poses are binned, as Table 8.4 does: without it, bins are counted on
+    the resampled ancestors, which after a peaked correction are copies of a
+    few poses (AMCL does this, and its sets shrink to the minimum too early).
     """
     counter.reset()
     k = 0
@@ -270,6 +275,8 @@ def kld_resample(
             slots = rng.choice(b, size=n_inj, replace=False)
             batch[:, slots] = sampler(n_inj)
             mask[slots] = True
+        if move is not None:
+            batch = move(batch)
         ks = counter.add(batch)
         drawn = total + np.arange(1, b + 1)
         need = np.clip(kld_bound(ks, epsilon, z), min_particles, max_particles)

@@ -83,6 +83,7 @@ class StepInfo:
     particles: int = 0  # N weighted in this update (KLD sampling changes it at resampling)
     injected: int = 0  # particles drawn from the recovery sampler at this resampling (augmented MCL)
     inject_p: float = 0.0  # max(0, 1 - w_fast / w_slow) after this update's scan
+    kld_moved: tuple | None = None  # (moved, ok, tries) of a KLD resample done with this update's motion
     mean: np.ndarray | None = None  # the estimate (x, y, theta), from the weighted set before resampling
     cov: np.ndarray | None = None  # its 3x3 covariance
     full_mean: np.ndarray | None = None  # the whole weighted set's mean (= mean when the cloud is one cluster)
@@ -130,6 +131,7 @@ class ParticleFilter:
         self.recovery_sampler = self.sample_uniform
         self._observation = None
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
+        self._kld_pending = None  # (inject_p, observation) of a KLD resample deferred to the next motion
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
         self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
@@ -212,6 +214,44 @@ class ParticleFilter:
             self._update_recovery(loglik / prepared.shape[1])
         self.logw += loglik
 
+    def _kld_draw(self, control: Control | None, info: StepInfo) -> None:
+        """The deferred KLD resample: draw ancestors (and injected poses) batch by batch, move each batch
+        with ``control`` when there is one, and count the bins of the moved poses (Prob. Rob. Table 8.4)."""
+        fc = self.cfg.filter
+        p, obs = self._kld_pending
+        self._kld_pending = None
+        moves: list = []
+
+        def move(batch):
+            new, ok, tries = self.motion.sample_control(batch, control, self.rng, allowed=self.allowed, grid=self.grid)
+            fin = np.isfinite(new).all(axis=0)
+            if not fin.all():  # keep the ancestor's pose, weight zero (as predict does)
+                new[:, ~fin] = batch[:, ~fin]
+                ok = fin if ok is None else ok & fin
+            moves.append((ok, tries, batch.shape[1]))
+            return new
+
+        new, fresh, _ = kld_resample(
+            self.particles, self.logw, self.rng, self.kld_counter, scheme=fc.resampling,
+            min_particles=fc.min_particles, max_particles=fc.particles, epsilon=fc.kld_epsilon, z=self.kld_z,
+            inject_p=p, sampler=lambda n: self.recovery_sampler(n, self.rng, obs),
+            move=move if control is not None else None,
+        )
+        info.injected = int(np.count_nonzero(fresh))
+        if control is not None:
+            m = new.shape[1]
+            ok = None
+            if any(o is not None for o, _, _ in moves):
+                ok = np.concatenate([np.ones(n, bool) if o is None else o for o, _, n in moves])[:m]
+            tries = sum(t * n for _, t, n in moves) / max(sum(n for _, _, n in moves), 1)
+            info.kld_moved = (new, ok, tries)
+            # The motion is applied: predict keeps these poses (particles hold the pre-motion ancestors
+            # only to supply the fallback pose of non-finite motion samples).
+            self._set(np.ascontiguousarray(new))
+        else:
+            self._set(np.ascontiguousarray(new))
+        self._injected = fresh if info.injected else None
+
     def _update_recovery(self, loglik_per_beam: np.ndarray) -> None:
         """Augmented MCL: fold the per-beam mean likelihood of the tracked particles into w_slow, w_fast.
 
@@ -242,12 +282,19 @@ class ParticleFilter:
         keep their previous pose with weight zero.
         """
         control = self._check_control(control)
+        if control is None and self._kld_pending is not None:
+            self._kld_draw(None, info)
         if control is None:
             self._delta = np.zeros(3)
             self.particles = self._draw_around(self.particles, np.asarray(self.cfg.filter.respread_std))
             return
+        if self._kld_pending is not None:  # KLD sampling draws and moves in one loop (Table 8.4)
+            self._kld_draw(control, info)
         prev = self.particles
-        new, ok, tries = self.motion.sample_control(self.particles, control, self.rng, allowed=self.allowed, grid=self.grid)
+        if info.kld_moved is not None:
+            new, ok, tries = info.kld_moved
+        else:
+            new, ok, tries = self.motion.sample_control(self.particles, control, self.rng, allowed=self.allowed, grid=self.grid)
         finite = np.isfinite(new).all(axis=0)
         if not finite.all():
             new[:, ~finite] = prev[:, ~finite]
@@ -311,11 +358,10 @@ class ParticleFilter:
             return
         obs = self._observation
         if self.kld_counter is not None:
-            new, fresh, _ = kld_resample(
-                self.particles, self.logw, self.rng, self.kld_counter, scheme=fc.resampling,
-                min_particles=fc.min_particles, max_particles=fc.particles, epsilon=fc.kld_epsilon, z=self.kld_z,
-                inject_p=p, sampler=lambda n: self.recovery_sampler(n, self.rng, obs),
-            )
+            # Table 8.4 bins each particle after its motion update: the resample waits for the next control.
+            self._kld_pending = (p, obs)
+            info.resampled = True
+            return
         else:
             n_inj = draw_injected(self.n, p, self.rng)
             idx = resample(fc.resampling, self.logw, self.rng, n=self.n - n_inj)
@@ -447,8 +493,11 @@ class ParticleFilter:
         info = StepInfo(particles=self.n)
         self._delta = None
         t0 = time.perf_counter()
+        if control is None and self._kld_pending is not None:
+            self._kld_draw(None, info)
         if control is not None:
             self.predict(control, info)
+        info.particles = self.n
         t1 = time.perf_counter()
         self.correct(observation, info)
         self.correct_landmarks(landmarks, info)
