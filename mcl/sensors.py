@@ -94,6 +94,9 @@ def point_log_likelihood(d, cfg) -> np.ndarray:
         return np.log(float(cfg.z_hit) * gauss + float(cfg.z_rand) / float(cfg.range_max))
 
 
+SKIP_SUPPORT_PARTICLES = 2000  # beam skipping estimates each beam's support from at most this many particles
+
+
 class LikelihoodField:
     """Likelihood field sensor model over an ``OccupancyGrid``.
 
@@ -140,8 +143,20 @@ class LikelihoodField:
 
     def beam_support(self, particles, weights, endpoints) -> np.ndarray:
         """(K,) for each beam, the weight of the particles that explain it (endpoint within beam_skip_distance
-        of a mapped obstacle). One numba kernel, parallel over beams."""
+        of a mapped obstacle). One numba kernel, parallel over beams.
+
+        Above SKIP_SUPPORT_PARTICLES particles, every k-th particle is used (weights renormalised): the
+        fraction is then estimated to about 0.01 (standard error of a 2,000-sample proportion is at most
+        0.011), plenty for a threshold like 0.3, at a fixed cost whatever N.
+        """
         p = np.asarray(particles, dtype=np.float64)
+        n = p.shape[1]
+        if n > SKIP_SUPPORT_PARTICLES:
+            step = -(-n // SKIP_SUPPORT_PARTICLES)
+            p = p[:, ::step]
+            weights = np.asarray(weights, dtype=np.float64)[::step]
+            total = float(weights.sum())
+            weights = weights / total if total > 0 else np.full(p.shape[1], 1.0 / p.shape[1])
         e_cells = np.ascontiguousarray(np.asarray(endpoints, dtype=np.float64) * self.inv_res)
         out = np.empty(e_cells.shape[1])
         if self.dist is None:

@@ -186,3 +186,22 @@ def test_beam_skipping_keeps_tracking_with_unmapped_obstacles(tmp_path):
             res[skip] = run(cfg, tmp_path / f"run{skip}", progress=False, echo=lambda *_: None)
     assert res[True]["skipped_beams"] > 0 and res[False]["skipped_beams"] == 0
     assert res[True]["eval"]["ate_rmse"] < 0.5 * res[False]["eval"]["ate_rmse"], (res[True]["eval"], res[False]["eval"])
+
+
+def test_support_from_a_subsample_above_the_cap_is_within_its_standard_error():
+    from mcl.sensors import SKIP_SUPPORT_PARTICLES
+
+    g = _grid()
+    model, cfg = _model()
+    rng = np.random.default_rng(6)
+    n = 10 * SKIP_SUPPORT_PARTICLES
+    p = np.vstack([rng.uniform(0, 10, n), rng.uniform(-1, 7, n), rng.uniform(-math.pi, math.pi, n)])
+    w = rng.random(n)
+    w /= w.sum()
+    e = rng.uniform(-3, 3, (2, 40))
+    full = _support_numpy(p, w, e, np.asarray(g.distance, dtype=np.float32), -1.0, -2.0, 0.05, 0.5)
+    sub = model.beam_support(p, w, e)
+    # every 10th particle: a 2,000-sample weighted proportion, standard error <= 0.5 * sqrt(1.33 / 2000) = 0.013
+    # (the weights' second moment adds a third); 4 standard errors
+    assert np.abs(sub - full).max() < 0.05
+    assert 0.03 < full.min() and full.max() < 0.97  # proportions away from 0 and 1 (measured 0.044..0.14)
