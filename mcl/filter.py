@@ -296,8 +296,8 @@ class ParticleFilter:
         else:
             new, ok, tries = self.motion.sample_control(self.particles, control, self.rng, allowed=self.allowed, grid=self.grid)
         finite = np.isfinite(new).all(axis=0)
-        if not finite.all():
-            new[:, ~finite] = prev[:, ~finite]
+        if not finite.all():  # weight zero; any finite pose will do (the previous one when it is known)
+            new[:, ~finite] = prev[:, ~finite] if prev.shape == new.shape else 0.0
             self.logw[~finite] = -np.inf
         self.particles = new
         info.tries = float(tries)

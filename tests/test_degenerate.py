@@ -245,3 +245,19 @@ def test_runner_counts_every_event_and_keeps_tracking(tmp_path):
     # tracked through all of it: the 10 m jump is ignored, the bad scans do not derail the filter
     assert s["eval"]["ate_max"] < 0.5, s["eval"]
     assert s["eval"]["ate_rmse"] < 0.1, s["eval"]
+
+
+def test_motion_model_output_that_is_not_finite_never_reaches_the_particles():
+    pf = _pf()
+    real = pf.motion.sample_control
+
+    def broken(particles, control, rng, allowed=None, grid=None):
+        new, ok, tries = real(particles, control, rng, allowed=allowed, grid=grid)
+        new = new.copy()
+        new[:, ::7] = np.nan
+        return new, ok, tries
+
+    pf.motion.sample_control = broken
+    info = pf.step(Control(np.zeros(3), np.array([0.2, 0.0, 0.0]), dt=0.2), pf.prepare(_true_scan(pf), np.zeros(3)))
+    _ok(pf)
+    assert np.isfinite(info.mean).all()
