@@ -46,6 +46,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--particles", type=int, default=2000)
     ap.add_argument("--no-fr079", action="store_true")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="extra config overrides for every run, e.g. sensor.beam_skip_distance=0.25")
     args = ap.parse_args()
 
     default = PROJECT_ROOT / "configs" / "default.yaml"
@@ -60,7 +62,7 @@ def main() -> None:
                 start = yaml.safe_load((d / "sim.yaml").read_text())["start_pose"]
                 base = [f"map={d / 'map.yaml'}", f"log={d / 'log.clf'}", f"truth={d / 'truth.tum'}",
                         "filter.global_localization=false", f"filter.initial_pose={start}",
-                        "filter.initial_std=[0.05,0.05,0.05]", f"filter.particles={args.particles}"]
+                        "filter.initial_std=[0.05,0.05,0.05]", f"filter.particles={args.particles}", *args.set]
                 for rec in ((True, False) if n_obst else (True,)):
                     for skip in (False, True):
                         ev, skipped, ups = track(default, base + [f"sensor.beam_skip={str(skip).lower()}",
@@ -77,7 +79,7 @@ def main() -> None:
         if not args.no_fr079 and (SHARED / "fr079").is_dir():
             for skip in (False, True):
                 ev, skipped, ups = track(PROJECT_ROOT / "configs" / "fr079.yaml",
-                                         [f"sensor.beam_skip={str(skip).lower()}"], tmp / f"fr079_{skip}")
+                                         [f"sensor.beam_skip={str(skip).lower()}", *args.set], tmp / f"fr079_{skip}")
                 print(f"{'fr079':<26} {'config':>8} {('on' if skip else 'off'):>9} {ev['ate_rmse']:9.3f} {ev['ate_max']:8.3f} "
                       f"{skipped / max(ups, 1):11.1f}", flush=True)
 
