@@ -177,7 +177,10 @@ class Recovery:
     @staticmethod
     def log_mean_likelihood(logw_prior: np.ndarray, loglik: np.ndarray) -> float:
         """log sum_i w_i p(z | x_i) with w = normalised prior weights (log-sum-exp, never overflows)."""
-        lp = logw_prior - np.logaddexp.reduce(logw_prior) if logw_prior.size else logw_prior
+        top = float(np.max(logw_prior)) if logw_prior.size else -np.inf
+        if not np.isfinite(top):  # no prior weight left (or none at all): no information
+            return -np.inf
+        lp = logw_prior - (top + float(np.log(np.sum(np.exp(logw_prior - top)))))
         s = lp + loglik
         m = float(np.max(s)) if s.size else -np.inf
         if not np.isfinite(m):  # every particle has zero likelihood (or NaN crept in): no information
