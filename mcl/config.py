@@ -57,7 +57,8 @@ class FilterConfig:
     respread_std: tuple[float, float, float] = (0.5, 0.5, 0.5)  # std x, y (m), theta (rad) of a re-spread
     # KLD sampling (Fox 2003, Prob. Rob. Table 8.4; mcl.adaptive): with kld on, `particles` is the
     # maximum (and the count drawn at initialisation, as AMCL's max_particles) and each resample draws
-    # between min_particles and particles, as many as the occupied histogram bins call for.
+    # between min(min_particles, particles) and particles, as many as the occupied histogram bins call
+    # for (so `--particles 100` on a config with min_particles 250 runs a fixed 100).
     kld: bool = False
     min_particles: int = field(default=500, metadata=_rng(1, 10_000_000))
     kld_epsilon: float = field(default=0.05, metadata=_rng(0.0, 1.0, lo_open=True))  # bound on the KL error
@@ -314,10 +315,6 @@ def _cross_checks(cfg: Config) -> None:
     if any(not v > 0 for v in cfg.filter.respread_std):
         raise ConfigError("filter.respread_std: standard deviations must be > 0")
     f = cfg.filter
-    if f.kld and f.min_particles > f.particles:
-        raise ConfigError(
-            f"filter.min_particles: {f.min_particles} must be <= filter.particles ({f.particles}, the maximum with kld on)"
-        )
     if f.recovery and f.recovery_alpha_slow >= f.recovery_alpha_fast:
         raise ConfigError(
             f"filter.recovery_alpha_slow: {f.recovery_alpha_slow} must be below filter.recovery_alpha_fast "

@@ -233,7 +233,7 @@ class ParticleFilter:
 
         new, fresh, _ = kld_resample(
             self.particles, self.logw, self.rng, self.kld_counter, scheme=fc.resampling,
-            min_particles=fc.min_particles, max_particles=fc.particles, epsilon=fc.kld_epsilon, z=self.kld_z,
+            min_particles=min(fc.min_particles, fc.particles), max_particles=fc.particles, epsilon=fc.kld_epsilon, z=self.kld_z,
             inject_p=p, sampler=lambda n: self.recovery_sampler(n, self.rng, obs),
             move=move if control is not None else None,
         )

@@ -68,7 +68,8 @@ def test_run_writes_every_output_and_a_recording_with_one_row_per_update(tmp_pat
     summary = json.loads((out / "summary.json").read_text())
     t, poses = read_tum(out / "trajectory.tum")
     assert t.size == summary["updates"] > 0
-    assert summary["particles"] == 500
+    assert summary["particles_max"] == 500  # the most KLD sampling may use (mit_csail has it on)
+    assert summary["particles_min"] <= summary["particles_mean"] <= 500
     for stage in ("predict", "correct", "resample", "estimate", "viz"):
         assert summary["wall_time_s"][stage] >= 0
     # The resolved config repeats the run: same trajectory, byte for byte.
