@@ -66,7 +66,8 @@ class FilterConfig:
     kld_bin_xy: float = field(default=0.5, metadata=_rng(0.0, lo_open=True))  # histogram bin side (m)
     kld_bin_theta: float = field(default=0.1745, metadata=_rng(0.0, 6.2832, lo_open=True))  # bin width (rad)
     # Augmented MCL (Prob. Rob. Table 8.3): inject poses from free space with p = max(0, 1 - w_fast/w_slow).
-    recovery: bool = False
+    # auto: on for global localization (initial_pose null or global_localization), off when tracking from a pose.
+    recovery: bool | Literal["auto"] = False
     recovery_alpha_slow: float = field(default=0.001, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_alpha_fast: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
 

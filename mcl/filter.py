@@ -125,7 +125,7 @@ class ParticleFilter:
             size = (w * grid.resolution, h * grid.resolution)
             self.kld_counter = BinCounter(grid.origin, size, fc.kld_bin_xy, fc.kld_bin_theta)
             self.kld_z = kld_quantile(fc.kld_delta)
-        self.recovery = Recovery(fc.recovery_alpha_slow, fc.recovery_alpha_fast) if fc.recovery else None
+        self.recovery = Recovery(fc.recovery_alpha_slow, fc.recovery_alpha_fast) if fc.recovery is True else None
         # Augmented MCL draws injected poses from this: sampler(n, rng, observation) -> (3, n). Uniform over
         # the free space the motion model allows unless replaced (e.g. by a landmark-based pose sampler).
         self.recovery_sampler = self.sample_uniform
@@ -152,10 +152,19 @@ class ParticleFilter:
         p += np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
+        if self.cfg.filter.recovery == "auto":
+            self.recovery = None  # tracking from a known pose: no injections
 
     def init_global(self) -> None:
         """Particles uniform over the poses the map allows (global localization)."""
         self._set(self.sample_uniform(self.cfg.filter.particles, self.rng))
+        self._auto_recovery()
+
+    def _auto_recovery(self) -> None:
+        """``filter.recovery: auto`` turns augmented MCL on for global localization."""
+        fc = self.cfg.filter
+        if fc.recovery == "auto" and self.recovery is None:
+            self.recovery = Recovery(fc.recovery_alpha_slow, fc.recovery_alpha_fast)
 
     def sample_uniform(self, n: int, rng: np.random.Generator, observation=None) -> np.ndarray:
         """(3, n) poses uniform over free space, with the robot-radius clearance when map rejection is on."""
@@ -199,6 +208,7 @@ class ParticleFilter:
         if self.landmarks is None or not np.any(self.landmarks.map.index_of(marks.ids) >= 0):
             return False
         self._set(self.sample_from_landmarks(self.cfg.filter.particles, self.rng, marks=marks))
+        self._auto_recovery()
         return True
 
     def correct_landmarks(self, marks, info: StepInfo | None = None) -> None:

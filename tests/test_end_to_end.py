@@ -30,21 +30,39 @@ def _quiet(*_a, **_k):
 @needs_shared
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["intel_lab", "mit_csail"])
-def test_tracking_accuracy_on_real_logs(tmp_path, name):
-    # Issue 1: ATE RMSE <= 0.06 m with the dataset config, seed 1, 5,000 particles.
-    # Measured 0.057 (intel_lab) and 0.043 (mit_csail); the bound is the issue's.
-    cfg = load_config(CONFIGS / f"{name}.yaml", ["rerun.mode=off"])
-    # With KLD sampling on (intel_lab: 2,000..10,000) the mean particle count must drop >= 3x from the maximum.
-    assert cfg.seed == 1 and (cfg.filter.particles == 5000 or cfg.filter.kld)
+@pytest.mark.parametrize("kld", [False, True], ids=["fixed5000", "kld"])
+def test_tracking_accuracy_on_real_logs(tmp_path, name, kld):
+    # Issue 1: ATE RMSE <= 0.06 m with the dataset config, seed 1 and a fixed 5,000 particles
+    # (measured 0.057 on intel_lab, 0.043 on mit_csail). Issue 3: with KLD sampling on, as the
+    # dataset configs have it, the same bound holds while the mean particle count drops at least
+    # 3x from the maximum (measured intel_lab 0.0597 at 2,009 of 10,000; mit_csail 0.050 at 254 of 5,000).
+    overrides = ["rerun.mode=off"] + ([] if kld else ["filter.kld=false", "filter.particles=5000"])
+    cfg = load_config(CONFIGS / f"{name}.yaml", overrides)
+    assert cfg.seed == 1 and cfg.filter.kld == kld
     s = run(cfg, tmp_path, progress=False, echo=_quiet)
     assert not s["interrupted"]
     ev = s["eval"]
     assert ev["ate_rmse"] <= 0.06, ev
     assert ev["ate_max"] < 0.5, ev  # never lost
-    if cfg.filter.kld:
+    if kld:
         assert s["particles_mean"] <= cfg.filter.particles / 3, s["particles_mean"]
+    else:
+        assert s["particles_mean"] == 5000
     if name == "mit_csail":
         assert ev["scored"] == 406  # the truth covers 406 scans, all inside the run
+
+
+@needs_shared
+@pytest.mark.slow
+def test_global_localization_with_kld_on_intel_lab(tmp_path):
+    # Issue 3: `mcl run configs/intel_lab.yaml --global` is within 0.5 m before the end of the first
+    # 25 % of the log (662 s of 2651 s) and stays (measured: 67.7 s with seed 1, recovery auto -> on).
+    cfg = load_config(CONFIGS / "intel_lab.yaml", ["rerun.mode=off", "filter.global_localization=true",
+                                                     "eval.converged_within=0.5"])
+    s = run(cfg, tmp_path, progress=False, echo=_quiet)
+    ev = s["eval"]
+    assert ev["convergence_time"] is not None and ev["convergence_time"] < 0.25 * 2651.0, ev
+    assert s["particles_max"] == 10000 and s["particles_mean"] < 10000
 
 
 @needs_shared
