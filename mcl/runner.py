@@ -390,6 +390,12 @@ def _run(
                         truth_pose=ref,
                         stats=stats,
                     )
+                    if cfg.rerun.lines and scan is not marks:
+                        from mcl.features import extract_scan_lines, line_segments_world
+                        from mcl.viz import log_line_features
+
+                        lines = extract_scan_lines(scan, max_range=scan.max_range or cfg.sensor.range_max)
+                        log_line_features(viz, line_segments_world(lines, mean, laser_pose))
                     if landmark_map is not None:
                         from mcl.viz import log_landmark_observations
 

@@ -567,6 +567,19 @@ def log_landmark_observations(logger: RerunLogger, estimate: np.ndarray, marks: 
     )
 
 
+def log_line_features(logger: RerunLogger, segments: np.ndarray) -> None:
+    """This step's line features (``mcl.features``: (M, 2, 2) world-frame segments) at ``world/lines``.
+    Call after ``log_step`` (it uses that step's time)."""
+    rec = logger._live()
+    if rec is None:
+        return
+    rec.log(
+        "world/lines",
+        rr.LineStrips2D(np.ascontiguousarray(segments, dtype=np.float32).reshape(-1, 2, 2), colors=[[220, 40, 200]],
+                        radii=rr.Radius.ui_points(2.0), draw_order=_DRAW_ORDER["scan"]),
+    )
+
+
 def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) -> None:
     """Write samples of a motion model (``mcl explore motion``) to a Rerun recording at ``path``.
 

@@ -160,3 +160,35 @@ def test_global_localization_on_the_bundled_demo(tmp_path):
     ev = s["eval"]
     assert ev["convergence_time"] is not None and ev["convergence_time"] < 15.0, ev
     assert ev["scored"] >= 290
+
+
+def test_line_features_are_drawn_in_the_recording(tmp_path):
+    # rerun.lines: the split-and-merge lines of every scan, at world/lines, one row per update,
+    # lying on the map's walls (the demo world is made of straight walls).
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    from mcl.maps import load_map
+
+    out = tmp_path / "run"
+    assert main(["run", "--no-progress", "--out", str(out), "--particles", "300", "--set", "filter.kld=false",
+                 "--set", "rerun.lines=true", "--set", "rerun.particles_max=10", "--set", "filter.initial_pose=[18.961318, 9.225, 3.0954]",
+                 "--set", "filter.global_localization=false"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    grid = load_map(DEMO / "map.yaml")
+    steps, points = [], []
+    for c in RrdReader(out / "recording.rrd").stream().to_chunks():
+        if c.entity_path != "/world/lines" or c.is_static:
+            continue
+        batch = c.to_record_batch()
+        steps += batch.column("step").cast(pa.int64()).to_pylist()
+        for strips in batch.column("LineStrips2D:strips").to_pylist():
+            for strip in strips or []:
+                points += [p for p in strip]
+    assert sorted(steps) == list(range(summary["updates"]))
+    pts = np.array(points, dtype=np.float64)
+    assert len(pts) > 2 * summary["updates"]  # several lines per scan
+    ix, iy = grid.world_to_cell(pts[:, 0], pts[:, 1])
+    ok = grid.contains(ix, iy)
+    d = grid.distance[iy[ok], ix[ok]]
+    assert ok.mean() > 0.99 and np.median(d) < 0.1, (ok.mean(), np.median(d))
