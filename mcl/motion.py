@@ -147,33 +147,16 @@ class OdometryMotionModel:
         rot1, trans, rot2 = odometry_deltas(odom_prev, odom_now)
         s1, st, s2 = noise_sigmas(rot1, trans, rot2, self.cfg)
         noise, idx_all = self._buffers(n)
-        standard_noise(getattr(self.cfg, "noise", "normal"), rng, out=noise)  # normal: rng.standard_normal
+        kind = getattr(self.cfg, "noise", "normal")
+        standard_noise(kind, rng, out=noise)  # normal: rng.standard_normal
 
-        if allowed is None:
-            _k.sample_odometry(p, noise, rot1, trans, rot2, s1, st, s2, out)
-            return out, np.ones(n, dtype=bool), 1.0
+        def move(nz, o):
+            _k.sample_odometry(p, nz, rot1, trans, rot2, s1, st, s2, o)
 
-        if grid is None:
-            raise ValueError("a map mask (allowed) needs grid (origin, resolution) to place it")
-        mask = allowed if (allowed.dtype == np.uint8 and allowed.flags.c_contiguous) \
-            else np.ascontiguousarray(allowed, dtype=np.uint8)
-        ox, oy = float(grid.origin[0]), float(grid.origin[1])
-        inv_res = 1.0 / float(grid.resolution)
-        ok = np.empty(n, dtype=bool)
-        n_ok = _k.sample_odometry_map(p, noise, idx_all, rot1, trans, rot2, s1, st, s2,
-                                      mask, ox, oy, inv_res, out, ok)
-        draws = n
-        idx = None
-        for _ in range(self.max_tries - 1):
-            if n_ok == n:
-                break
-            # the particles still out: from the whole array once, then from the shrinking set
-            idx = np.flatnonzero(~ok) if idx is None else idx[~ok[idx]]
-            draws += idx.size
-            fresh = standard_noise(getattr(self.cfg, "noise", "normal"), rng, (3, idx.size))
-            n_ok += _k.sample_odometry_map(p, fresh, idx, rot1, trans, rot2, s1, st, s2,
-                                           mask, ox, oy, inv_res, out, ok)
-        return out, ok, draws / n if n else 0.0
+        def move_map(nz, idx, mask, ox, oy, inv_res, o, ok):
+            return _k.sample_odometry_map(p, nz, idx, rot1, trans, rot2, s1, st, s2, mask, ox, oy, inv_res, o, ok)
+
+        return _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, self.max_tries, allowed, grid, out)
 
 
 def make_motion_model(cfg):
