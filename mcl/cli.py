@@ -72,9 +72,15 @@ def cmd_run(args) -> int:
     from mcl.runner import default_out_dir, run
 
     config_path = args.config
-    if config_path is None and not (args.map or args.log):
-        config_path = _project_default_config()
     overrides = []
+    if config_path is None:
+        # No config: the documented defaults of configs/default.yaml, with the user's data instead of the demo's.
+        config_path = _project_default_config()
+        if args.map or args.log:
+            if not (args.map and args.log):
+                raise MclError("--map and --log go together when no config file is given")
+            if args.truth is None:
+                overrides.append("truth=null")
     for key, value in (("map", args.map), ("log", args.log), ("truth", args.truth)):
         if value is not None:
             overrides.append(f"{key}={str(Path(value).resolve())}")

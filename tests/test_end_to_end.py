@@ -192,3 +192,17 @@ def test_line_features_are_drawn_in_the_recording(tmp_path):
     ok = grid.contains(ix, iy)
     d = grid.distance[iy[ok], ix[ok]]
     assert ok.mean() > 0.99 and np.median(d) < 0.1, (ok.mean(), np.median(d))
+
+
+def test_map_and_log_without_a_config_use_the_documented_defaults(tmp_path, capsys):
+    # `mcl run --map M --log L` takes configs/default.yaml's values (not the demo's truth file).
+    out = tmp_path / "o"
+    assert main(["run", "--map", str(DEMO / "map.yaml"), "--log", str(DEMO / "log.clf"), "--out", str(out),
+                 "--rerun", "off", "--no-progress", "--particles", "800"]) == 0
+    cfg = load_config(out / "config.yaml")
+    default = load_config(CONFIGS / "default.yaml")
+    assert cfg.truth is None and "eval" not in json.loads((out / "summary.json").read_text())
+    assert cfg.filter.kld == default.filter.kld and cfg.filter.recovery == default.filter.recovery
+    assert cfg.motion == default.motion and cfg.sensor == default.sensor
+    assert main(["run", "--map", str(DEMO / "map.yaml"), "--rerun", "off"]) == 2
+    assert "--map and --log go together" in capsys.readouterr().err
