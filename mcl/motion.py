@@ -136,14 +136,8 @@ class OdometryMotionModel:
         is then the last try); mean_tries = motion samples drawn / N (1.0
         without a map).
         """
-        p = np.ascontiguousarray(particles, dtype=np.float64)
-        if p.ndim != 2 or p.shape[0] != 3:
-            raise ValueError(f"particles: expected shape (3, N), got {p.shape}")
+        p, out = _particles_and_out(particles, out)
         n = p.shape[1]
-        if out is None:
-            out = np.empty_like(p)
-        elif out is p or np.shares_memory(out, p):
-            raise ValueError("out must not share memory with particles")
         rot1, trans, rot2 = odometry_deltas(odom_prev, odom_now)
         s1, st, s2 = noise_sigmas(rot1, trans, rot2, self.cfg)
         noise, idx_all = self._buffers(n)
@@ -429,6 +423,18 @@ def velocities_from_odometry(odom_prev, odom_now, dt: float) -> tuple[float, flo
     return sign * trans / dt, angle_diff(t1, t0) / dt, dt
 
 
+def _particles_and_out(particles, out):
+    """(3, N) float64 C-contiguous particles, and an output array of the same shape not sharing their memory."""
+    p = np.ascontiguousarray(particles, dtype=np.float64)
+    if p.ndim != 2 or p.shape[0] != 3:
+        raise ValueError(f"particles: expected shape (3, N), got {p.shape}")
+    if out is None:
+        out = np.empty_like(p)
+    elif out is p or np.shares_memory(out, p):
+        raise ValueError("out must not share memory with particles")
+    return p, out
+
+
 def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, allowed, grid, out):
     """Map-based sampling (seed 5.5) shared by the models: move all, then redraw the rejected.
 
@@ -484,14 +490,8 @@ class VelocityMotionModel:
         """Move every particle by the command (v, w) for dt, with noise. Returns (new, ok, mean_tries)."""
         from mcl.kernels import velocity as _kv
 
-        p = np.ascontiguousarray(particles, dtype=np.float64)
-        if p.ndim != 2 or p.shape[0] != 3:
-            raise ValueError(f"particles: expected shape (3, N), got {p.shape}")
+        p, out = _particles_and_out(particles, out)
         n = p.shape[1]
-        if out is None:
-            out = np.empty_like(p)
-        elif out is p or np.shares_memory(out, p):
-            raise ValueError("out must not share memory with particles")
         v, w, dt = float(v), float(w), max(float(dt), 0.0)
         sv, sw, sg = velocity_sigmas(v, w, self.cfg)
         if self._noise.shape[1] != n:
