@@ -26,6 +26,7 @@ from typing import Any, Literal
 import yaml
 
 from mcl.errors import ConfigError
+from mcl.yamlfile import read_yaml
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
@@ -383,19 +384,7 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
     if path is not None:
         path = Path(path)
         base = path.resolve().parent
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as e:
-            raise ConfigError(f"{path}: cannot read ({e.strerror or e})") from None
-        except UnicodeDecodeError:
-            raise ConfigError(f"{path}: not a UTF-8 text file") from None
-        try:
-            loaded = yaml.safe_load(text)
-        except yaml.YAMLError as e:
-            mark = getattr(e, "problem_mark", None)
-            where = f":{mark.line + 1}" if mark is not None else ""
-            problem = getattr(e, "problem", None) or "invalid YAML"
-            raise ConfigError(f"{path}{where}: {problem}") from None
+        loaded = read_yaml(path, ConfigError)
         if loaded is None:
             loaded = {}
         if not isinstance(loaded, dict):

@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from mcl.errors import DataError
+from mcl.yamlfile import read_yaml
 
 __all__ = [
     "LandmarkMap",
@@ -100,22 +101,8 @@ def _num(v, where: str, *, integer: bool = False):
 
 def load_landmarks(path: str | os.PathLike) -> LandmarkMap:
     """Read a landmark map YAML; DataError naming the file and the key on any problem."""
-    import yaml
-
     name = str(path)
-    try:
-        with open(path, encoding="utf-8") as f:
-            text = f.read()
-    except OSError as e:
-        raise DataError(f"{name}: cannot read: {e.strerror or type(e).__name__}") from None
-    except UnicodeDecodeError:
-        raise DataError(f"{name}: not a UTF-8 text file") from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f":{mark.line + 1}" if mark is not None else ""
-        raise DataError(f"{name}{where}: {getattr(e, 'problem', None) or 'invalid YAML'}") from None
+    doc = read_yaml(path, DataError)
     if not isinstance(doc, dict) or "landmarks" not in doc:
         raise DataError(f"{name}: landmarks: missing (expected a mapping with a 'landmarks' list)")
     unknown = sorted(str(k) for k in doc if k != "landmarks")

@@ -74,9 +74,10 @@ def test_odometry_density_integrates_to_one(noise, noise_form):
     q = motion_model_odometry(pts, ODOM, X0, c, jacobian=False)
     assert q.sum() * vol == pytest.approx(0.25, rel=0.05)
     # With the stds from the hypothesis (Table 5.5) the value is a density of the odometry reading,
-    # not of x': over poses it integrates to 1.17 (variance) / 1.035 (std) here, not to 1.
+    # not of x': over poses it integrates to 1.17-1.18 (variance) / 1.034-1.037 (std) here, not to 1
+    # (a deterministic grid sum: the tolerance only covers the three noise kinds).
     h = motion_model_odometry(pts, ODOM, X0, c, sigma_from="hypothesis").sum() * vol
-    assert 1.02 < h < 1.25, h
+    assert h == pytest.approx(1.175 if noise_form == "variance" else 1.035, abs=0.01), h
 
 
 @pytest.mark.parametrize("noise", ["normal", "normal_twelve", "triangular"])

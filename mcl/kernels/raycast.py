@@ -25,6 +25,17 @@ from numba import njit, prange
 
 
 @njit(cache=True, nogil=True)
+def _dda_axis(d, i, g):
+    """One axis of the traversal: (cell step, ray parameter of the next cell boundary, parameter
+    between boundaries) for direction component d from position g in cell i (cell units)."""
+    if d > 0.0:
+        return 1, (i + 1 - g) / d, 1.0 / d
+    if d < 0.0:
+        return -1, (i - g) / d, -1.0 / d
+    return 0, np.inf, np.inf
+
+
+@njit(cache=True, nogil=True)
 def cast_ray(x, y, angle, blocked, ox, oy, res, max_range):
     """Range from ``(x, y)`` along world ``angle`` to the first blocked cell.
 
@@ -84,30 +95,8 @@ def cast_ray(x, y, angle, blocked, ox, oy, res, max_range):
 
     # Ray parameter at which the ray crosses the next vertical / horizontal
     # cell boundary, and the parameter step between successive crossings.
-    if dx > 0.0:
-        step_x = 1
-        t_max_x = (ix + 1 - gx) / dx
-        t_delta_x = 1.0 / dx
-    elif dx < 0.0:
-        step_x = -1
-        t_max_x = (ix - gx) / dx
-        t_delta_x = -1.0 / dx
-    else:
-        step_x = 0
-        t_max_x = np.inf
-        t_delta_x = np.inf
-    if dy > 0.0:
-        step_y = 1
-        t_max_y = (iy + 1 - gy) / dy
-        t_delta_y = 1.0 / dy
-    elif dy < 0.0:
-        step_y = -1
-        t_max_y = (iy - gy) / dy
-        t_delta_y = -1.0 / dy
-    else:
-        step_y = 0
-        t_max_y = np.inf
-        t_delta_y = np.inf
+    step_x, t_max_x, t_delta_x = _dda_axis(dx, ix, gx)
+    step_y, t_max_y, t_delta_y = _dda_axis(dy, iy, gy)
 
     while True:
         if t_max_x < t_max_y:
