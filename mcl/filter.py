@@ -130,6 +130,7 @@ class ParticleFilter:
         # the free space the motion model allows unless replaced (e.g. by a landmark-based pose sampler).
         self.recovery_sampler = self.sample_uniform
         self._observation = None
+        self._laser_pose = np.zeros(3)  # of the scan last prepared (beam skipping walks its beams from there)
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
         self._kld_pending = None  # (inject_p, observation) of a KLD resample deferred to the next motion
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
@@ -327,7 +328,8 @@ class ParticleFilter:
         if observation is None:
             return
         if self.cfg.sensor.beam_skip and self.converged and hasattr(self.sensor, "skip_beams"):
-            observation, skipped = self.sensor.skip_beams(self.particles, self.weights, observation)
+            observation, skipped = self.sensor.skip_beams(self.particles, self.weights, observation,
+                                                          pose=self._moved_estimate(), laser_xy=self._laser_pose[:2])
             if info is not None:
                 info.skipped_beams = skipped
         loglik = self.sensor.log_likelihood(self.particles, observation)
@@ -422,6 +424,7 @@ class ParticleFilter:
         if not np.any(finite & (r > 0.0)):
             self._event("empty_scans", f"a scan at t={scan.t} has no usable reading; the update only predicts")
             return None
+        self._laser_pose = np.asarray(laser_pose, dtype=np.float64)
         return self.sensor.prepare(scan, laser_pose)
 
     def time_backwards(self, dt: float) -> None:
@@ -478,6 +481,13 @@ class ParticleFilter:
         p[2] = wrap_angle(p[2])
         return np.ascontiguousarray(p)
 
+    def _moved_estimate(self) -> np.ndarray:
+        """The last estimate moved by this update's odometry step (the estimate itself before any motion)."""
+        m = np.asarray(self.last_estimate.mean, dtype=np.float64)
+        d = self._delta if self._delta is not None else np.zeros(3)
+        c, s_ = math.cos(m[2]), math.sin(m[2])
+        return np.array([m[0] + c * d[0] - s_ * d[1], m[1] + s_ * d[0] + c * d[1], m[2] + d[2]])
+
     def recover_degenerate(self, info: StepInfo) -> None:
         """Every weight was zero: re-spread around the last estimate (moved by the odometry step), or reinitialise
         globally after _MAX_DEGENERATE_RUN consecutive failures; the new particles get equal weights."""
@@ -489,10 +499,7 @@ class ParticleFilter:
             self.init_global()
             self._degenerate_run = 0
         else:
-            m = np.asarray(self.last_estimate.mean, dtype=np.float64)
-            d = self._delta if self._delta is not None else np.zeros(3)
-            c, s_ = math.cos(m[2]), math.sin(m[2])
-            centre = np.array([m[0] + c * d[0] - s_ * d[1], m[1] + s_ * d[0] + c * d[1], m[2] + d[2]])
+            centre = self._moved_estimate()
             self._set(self._draw_around(centre, np.asarray(self.cfg.filter.respread_std) * 2.0 ** (k - 1)))
         # Equal weights: the scan that explained nothing is not scored again (re-scoring a bad scan would
         # collapse the fresh cloud onto the few poses that happen to fit it); the next scan decides.

@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik
+from mcl.kernels.raycast import segments_blocked
 
 
 def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -115,8 +116,9 @@ class LikelihoodField:
         self.resolution = float(grid.resolution)
         self.inv_res = 1.0 / self.resolution
         self.exponent = float(getattr(cfg, "exponent", 1.0))
-        self._grid_distance = grid.distance  # float32 copy made on first use by beam skipping
+        self._grid = grid  # beam skipping: float32 distances and the occupied mask, made on first use
         self.dist = None
+        self.blocked = None
 
     def prepare(self, scan, laser_pose) -> np.ndarray:
         """The observation this model scores, made once per scan: robot-frame beam endpoints (2, K)."""
@@ -160,30 +162,51 @@ class LikelihoodField:
         e_cells = np.ascontiguousarray(np.asarray(endpoints, dtype=np.float64) * self.inv_res)
         out = np.empty(e_cells.shape[1])
         if self.dist is None:
-            self.dist = np.ascontiguousarray(self._grid_distance, dtype=np.float32)
+            self.dist = np.ascontiguousarray(self._grid.distance, dtype=np.float32)
         beam_explained_weight(np.ascontiguousarray((p[0] - self.origin[0]) * self.inv_res),
                               np.ascontiguousarray((p[1] - self.origin[1]) * self.inv_res),
                               np.cos(p[2]), np.sin(p[2]), np.ascontiguousarray(weights, dtype=np.float64),
                               e_cells, self.dist, float(self.cfg.beam_skip_distance), out)
         return out
 
-    def skip_beams(self, particles, weights, endpoints) -> tuple[np.ndarray, int]:
-        """Beam skipping (AMCL ``likelihood_field_prob``): (the endpoints to score, how many were skipped).
+    def see_through(self, pose, laser_xy, endpoints) -> np.ndarray:
+        """(K,) bool: seen from ``pose`` (x, y, theta), does beam k's reading cross a mapped obstacle before its
+        endpoint? ``laser_xy``: the laser's position in the robot frame. One exact ray walk per beam."""
+        if self.blocked is None:
+            self.blocked = np.ascontiguousarray(self._grid.occupied, dtype=np.uint8)
+        e = np.ascontiguousarray(endpoints, dtype=np.float64)
+        out = np.zeros(e.shape[1], dtype=np.bool_)
+        segments_blocked(float(pose[0]), float(pose[1]), float(pose[2]), float(laser_xy[0]), float(laser_xy[1]), e,
+                         self.blocked, self.origin[0], self.origin[1], self.resolution, out)
+        return out
 
-        A beam is kept when the particles explaining it weigh more than
-        ``beam_skip_threshold``; if that would skip ``beam_skip_error_threshold``
-        of the beams or more, the filter (not the world) is probably wrong and
-        every beam is kept. Call only once the filter has converged.
+    def skip_beams(self, particles, weights, endpoints, pose=None, laser_xy=(0.0, 0.0)) -> tuple[np.ndarray, int]:
+        """Beam skipping (after AMCL ``likelihood_field_prob``): (the endpoints to score, how many were skipped).
+
+        A beam is *unexplained* when the particles whose view puts its endpoint
+        within ``beam_skip_distance`` of a mapped obstacle weigh no more than
+        ``beam_skip_threshold``. With ``beam_skip_rule: amcl`` every unexplained
+        beam is skipped. With ``short`` (the default) only those that, seen from
+        ``pose`` (the filter's estimate), end in free space in front of the
+        mapped surface: an unmapped obstacle (a person, a box) can only make a
+        reading *shorter*, so a reading that went through a mapped wall is
+        evidence that the pose is wrong and is always scored. Without ``pose``
+        the rule falls back to AMCL's. If the skipped beams would reach
+        ``beam_skip_error_threshold`` of the scan, the filter (not the world) is
+        probably wrong and every beam is kept. Call only once the filter has converged.
         """
         e = np.asarray(endpoints, dtype=np.float64)
         k = e.shape[1]
         if k == 0:
             return e, 0
-        keep = self.beam_support(particles, weights, e) > float(self.cfg.beam_skip_threshold)
-        skipped = k - int(np.count_nonzero(keep))
+        skip = self.beam_support(particles, weights, e) <= float(self.cfg.beam_skip_threshold)
+        if skip.any() and pose is not None and getattr(self.cfg, "beam_skip_rule", "amcl") == "short":
+            idx = np.flatnonzero(skip)
+            skip[idx[self.see_through(pose, laser_xy, e[:, idx])]] = False
+        skipped = int(np.count_nonzero(skip))
         if skipped == 0 or skipped >= float(self.cfg.beam_skip_error_threshold) * k:
             return e, 0
-        return np.ascontiguousarray(e[:, keep]), skipped
+        return np.ascontiguousarray(e[:, ~skip]), skipped
 
 
 def make_sensor_model(grid, cfg):

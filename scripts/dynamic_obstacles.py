@@ -1,5 +1,9 @@
 """ATE with and without beam skipping on logs with obstacles the map does not show.
 
+Beam skipping here is the config's (the default: rule ``short``, 0.25 m / 0.5;
+``--set sensor.beam_skip_rule=amcl --set sensor.beam_skip_distance=0.5
+--set sensor.beam_skip_threshold=0.3`` gives AMCL's).
+
 Synthetic: ``mcl simulate --dynamic-obstacles N`` worlds (boxes near the path and
 walking people that block the laser but are not in the saved map), tracked from
 the true start pose with the default config, beam skipping off and on, and each

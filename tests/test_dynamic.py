@@ -1,4 +1,5 @@
-"""Dynamic (unmapped) obstacles: beam skipping (AMCL likelihood_field_prob) and the simulator's unmapped obstacles."""
+"""Dynamic (unmapped) obstacles: beam skipping (after AMCL likelihood_field_prob, with its `amcl` rule and the
+default `short` rule) and the simulator's unmapped obstacles."""
 
 from __future__ import annotations
 
@@ -58,8 +59,11 @@ def _cast(grid_occupied, pose, angles, origin, res):
     return out[0]
 
 
+AMCL_SKIP = {"beam_skip_distance": 0.5, "beam_skip_threshold": 0.3, "beam_skip_rule": "amcl"}  # AMCL's settings
+
+
 def _model(**kw):
-    cfg = SensorConfig(max_beams=181, beam_skip=True, **kw)
+    cfg = SensorConfig(max_beams=181, beam_skip=True, **(AMCL_SKIP | kw))
     return LikelihoodField(_grid(), cfg), cfg
 
 
@@ -127,16 +131,76 @@ def test_filter_skips_beams_only_once_converged():
     pf2 = ParticleFilter(off, g)
     pf2.init_gaussian(pose, (0.05, 0.05, 0.02))
     pf2.estimate()
-    assert pf2.step(None, e).skipped_beams == 0  # beam_skip: false (the default) never skips
+    assert pf2.step(None, e).skipped_beams == 22  # the same step with the default config (beam_skip on)
+    off = load_config(None, ["filter.particles=2000", "filter.kld=false", "filter.recovery=false",
+                             "sensor.max_beams=181", "sensor.beam_skip=false"])
+    pf3 = ParticleFilter(off, g)
+    pf3.init_gaussian(pose, (0.05, 0.05, 0.02))
+    pf3.estimate()
+    assert pf3.step(None, e).skipped_beams == 0  # beam_skip: false never skips
+
+
+def test_segments_blocked_finds_mapped_obstacles_between_the_laser_and_the_endpoint():
+    from mcl.kernels.raycast import segments_blocked
+
+    g = _grid()  # pillar at x 2..3, y 4..5; walls at the map's edges (x -1..-0.85 and 10.85..11, ...)
+    blocked = np.ascontiguousarray(g.occupied, dtype=np.uint8)
+    # robot at (1, 4.5) facing +x, laser 0.2 m ahead of its centre; endpoints in the robot frame
+    e = np.array([[0.7, 1.5, 2.5, -1.5, 12.0, 0.1],
+                  [0.0, 0.0, 0.0, 0.0, 0.0, 3.0]])
+    out = np.zeros(e.shape[1], dtype=np.bool_)
+    segments_blocked(1.0, 4.5, 0.0, 0.2, 0.0, e, blocked, g.origin[0], g.origin[1], g.resolution, out)
+    # ends before the pillar; ends inside it; passes through it; ends 0.35 m short of the west wall (x = -0.85)
+    # from a laser 0.2 m ahead; passes through the pillar and off the map; goes up (y 4.5 -> 7.5) in free space
+    assert out.tolist() == [False, True, True, False, True, False]
+    # the same segments seen from the robot turned by pi (laser at x = 0.8, pointing -x): x = 0.3 and x = -0.5
+    # stop before the west wall, x = -1.5 crosses it, the fourth (x = 2.5) now ends in the pillar
+    segments_blocked(1.0, 4.5, math.pi, 0.2, 0.0, e, blocked, g.origin[0], g.origin[1], g.resolution, out)
+    assert out.tolist() == [False, False, True, True, True, False]
+
+
+def test_short_rule_scores_readings_through_mapped_walls_that_amcl_rule_skips():
+    # The particles sit 0.6 m east of the true pose (a wrong, converged cloud). Seen from them, the beams that
+    # point east end 0.6 m beyond the east wall (through it), those that point west end 0.6 m before the west
+    # wall: both are unexplained. An unmapped obstacle can only shorten a reading, so rule `short` keeps the
+    # through-wall beams (they say the pose is wrong) and skips only the short ones; rule `amcl` skips all.
+    g = _grid()
+    true_pose = (5.0, 3.0, 0.0)
+    angles = np.linspace(-math.pi, math.pi, 181, endpoint=False)
+    ranges = _cast(g.occupied, true_pose, angles, g.origin, g.resolution)
+    rng = np.random.default_rng(3)
+    n = 1000
+    p = np.array([5.6, 3.0, 0.0])[:, None] + rng.standard_normal((3, n)) * np.array([0.03, 0.03, 0.005])[:, None]
+    w = np.full(n, 1 / n)
+    east = np.abs(angles) < 0.2  # the east wall is 5.85 m away: these end 0.6 m beyond it
+    west = np.abs(np.abs(angles) - math.pi) < 0.2  # the west wall: 0.6 m short of it (and clear of the pillar)
+    res = {}
+    for rule in ("amcl", "short"):
+        model, cfg = _model(beam_skip_rule=rule, beam_skip_error_threshold=1.0)
+        e = beam_endpoints(ranges, angles, None, cfg)
+        support = model.beam_support(p, w, e)
+        assert (support[east] < 0.3).all() and (support[west] < 0.3).all()
+        kept, skipped = model.skip_beams(p, w, e, pose=(5.6, 3.0, 0.0), laser_xy=(0.0, 0.0))
+        kept_set = {tuple(np.round(c, 9)) for c in kept.T}
+        res[rule] = (np.array([tuple(np.round(c, 9)) in kept_set for c in e.T]), skipped)
+    amcl_kept, short_kept = res["amcl"][0], res["short"][0]
+    assert not amcl_kept[east].any() and not amcl_kept[west].any()
+    assert short_kept[east].all() and not short_kept[west].any()
+    assert res["short"][1] < res["amcl"][1]
+    # without a pose the short rule cannot tell and falls back to AMCL's
+    model, cfg = _model(beam_skip_rule="short", beam_skip_error_threshold=1.0)
+    e = beam_endpoints(ranges, angles, None, cfg)
+    assert model.skip_beams(p, w, e)[1] == res["amcl"][1]
 
 
 def test_every_beam_skip_key_is_documented_in_default_yaml():
     text = (PROJECT_ROOT / "configs" / "default.yaml").read_text()
     for key in ("beam_skip", "beam_skip_distance", "beam_skip_threshold", "beam_skip_error_threshold",
-                "estimate", "cluster_size", "cluster_angle", "max_odom_step", "respread_std"):
+                "beam_skip_rule", "estimate", "cluster_size", "cluster_angle", "max_odom_step", "respread_std"):
         assert re.search(rf"^\s+{key}:[^#\n]+#", text, re.M), key
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml")
-    assert cfg.sensor.beam_skip is False  # off by default, as AMCL
+    assert cfg.sensor.beam_skip is True and cfg.sensor.beam_skip_rule == "short"  # on by default (unlike AMCL)
+    assert cfg.sensor == SensorConfig()  # default.yaml shows the dataclass defaults
 
 
 def test_simulated_unmapped_obstacles_only_shorten_beams_and_leave_map_and_truth(tmp_path):
@@ -158,14 +222,13 @@ def test_simulated_unmapped_obstacles_only_shorten_beams_and_leave_map_and_truth
 
 
 @pytest.mark.slow
-def test_beam_skipping_is_active_and_harmless_with_unmapped_obstacles(tmp_path):
-    # A 60 s world (seed 1) with 30 unmapped obstacles (boxes and walking people), tracked from the true start
-    # pose with 2,000 particles and augmented MCL off. Measured (scripts/dynamic_obstacles.py): ATE RMSE
-    # 0.077 m without beam skipping, 0.079 m with it, 7.4 beams of 60 skipped per update; the likelihood field's
-    # z_rand floor already bounds what an unexplained beam costs. (With recovery on, both get lost: the
-    # unexplained beams lower the likelihood, which augmented MCL takes for a kidnapping.) A tighter setting,
-    # beam_skip_distance 0.25 / threshold 0.5, gives 0.060 m here (0.146 vs 0.427 on seed 0) but loses fr079,
-    # so the defaults stay AMCL's.
+def test_default_config_keeps_track_through_unmapped_clutter_with_recovery_on(tmp_path):
+    # A 60 s world (seed 0) with 30 unmapped obstacles (boxes near the path, walking people), tracked from the
+    # true start pose with the default config (augmented MCL on) and 2,000 particles. Without beam skipping the
+    # cluttered scans fit poses up to 1 m off better than the true one, the likelihood drops, augmented MCL
+    # injects, and an injected pose that fits the clutter takes the weight: lost (measured 4.2 m ATE RMSE).
+    # With the default beam skipping (rule short, 0.25 m / 0.5) it keeps track (measured 0.130 m, max 0.41 m,
+    # in scripts/dynamic_obstacles.py). Bounds: 0.25 m RMSE and 0.5 m max for on, > 1 m for off.
     import warnings
 
     import yaml
@@ -174,22 +237,23 @@ def test_beam_skipping_is_active_and_harmless_with_unmapped_obstacles(tmp_path):
     from mcl.simulate import simulate
 
     d = tmp_path / "sim"
-    simulate(d, seed=1, duration=60.0, dynamic_obstacles=30)
+    simulate(d, seed=0, duration=60.0, dynamic_obstacles=30)
     start = yaml.safe_load((d / "sim.yaml").read_text())["start_pose"]
     res = {}
     for skip in (False, True):
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
             f"map={d / 'map.yaml'}", f"log={d / 'log.clf'}", f"truth={d / 'truth.tum'}", "rerun.mode=off",
             "filter.global_localization=false", f"filter.initial_pose={start}",
-            "filter.initial_std=[0.05,0.05,0.05]", "filter.particles=2000", "filter.recovery=false",
-            f"sensor.beam_skip={str(skip).lower()}"])
+            "filter.initial_std=[0.05,0.05,0.05]", "filter.particles=2000", f"sensor.beam_skip={str(skip).lower()}"])
+        assert cfg.filter.recovery is True
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res[skip] = run(cfg, tmp_path / f"run{skip}", progress=False, echo=lambda *_: None)
     on, off = res[True], res[False]
     assert off["skipped_beams"] == 0 and on["skipped_beams"] > 2 * on["updates"]
-    assert on["eval"]["ate_rmse"] < 0.12 and on["eval"]["ate_max"] < 0.5, on["eval"]
-    assert on["eval"]["ate_rmse"] <= off["eval"]["ate_rmse"] + 0.02, (on["eval"], off["eval"])
+    assert on["eval"]["ate_rmse"] < 0.25 and on["eval"]["ate_max"] < 0.5, on["eval"]
+    assert off["eval"]["ate_rmse"] > 1.0, off["eval"]
+
 
 def test_support_from_a_subsample_above_the_cap_is_within_its_standard_error():
     from mcl.sensors import SKIP_SUPPORT_PARTICLES

@@ -133,3 +133,29 @@ def cast_rays(poses, angles, blocked, ox, oy, res, max_range, out):
         for j in range(k):
             out[i, j] = cast_ray(x, y, th + angles[j], blocked, ox, oy, res, max_range)
     return out
+
+
+@njit(cache=True)
+def segments_blocked(x, y, theta, lx, ly, endpoints, blocked, ox, oy, res, out):
+    """out[k] = True when the segment from the laser to beam k's endpoint crosses a blocked cell.
+
+    Seen from the robot pose ``(x, y, theta)``: the laser sits at ``(lx, ly)``
+    and ``endpoints`` ``(2, K)`` are the beam endpoints, both in the robot
+    frame (m). The segment is walked with :func:`cast_ray` up to its own
+    length, so a crossing is a blocked cell met before the endpoint (a
+    reading that went through a mapped obstacle, or that ends inside one).
+    Serial: K is one scan's beams. Returns ``out``.
+    """
+    c = math.cos(theta)
+    s = math.sin(theta)
+    sx = x + c * lx - s * ly
+    sy = y + s * lx + c * ly
+    for j in range(endpoints.shape[1]):
+        ex = x + c * endpoints[0, j] - s * endpoints[1, j]
+        ey = y + s * endpoints[0, j] + c * endpoints[1, j]
+        length = math.hypot(ex - sx, ey - sy)
+        if not length > 0.0:
+            out[j] = False
+            continue
+        out[j] = cast_ray(sx, sy, math.atan2(ey - sy, ex - sx), blocked, ox, oy, res, length) < length
+    return out
