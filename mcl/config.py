@@ -315,7 +315,8 @@ def _cross_checks(cfg: Config) -> None:
         if abs(total - 1.0) > 1e-6:
             raise ConfigError(
                 f"sensor.z_hit: with sensor.model=beam the mixture weights z_hit + z_short + z_max + z_rand must sum "
-                f"to 1, got {s.z_hit:g} + {s.z_short:g} + {s.z_max:g} + {s.z_rand:g} = {total:g}"
+                f"to 1, got {s.z_hit:g} + {s.z_short:g} + {s.z_max:g} + {s.z_rand:g} = {total:g} (e.g. z_hit 0.8, "
+                f"z_short 0.1, z_max 0.05, z_rand 0.05 as in configs/mit_csail_beam.yaml)"
             )
     if any(v < 0 for v in cfg.filter.initial_std):
         raise ConfigError("filter.initial_std: standard deviations must be >= 0")
