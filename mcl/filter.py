@@ -91,6 +91,7 @@ class StepInfo:
     clusters: int = 1  # clusters in the cloud (filter.estimate = cluster)
     cluster_weight: float = 1.0  # weight of the heaviest cluster, whose mean is the estimate
     skipped_beams: int = 0  # beams ignored by beam skipping
+    skipped_endpoints: np.ndarray | None = None  # (2, skipped_beams) their robot-frame endpoints (None: none skipped)
     events: tuple[str, ...] = ()  # degenerate-input events of this update (kinds of ParticleFilter.events)
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
 
@@ -322,16 +323,19 @@ class ParticleFilter:
         """w_t = w_{t-1} * p(z_t | x_t, m), in log space. `observation` comes from ``self.sensor.prepare``.
 
         With ``sensor.beam_skip`` and a converged filter, the beams most
-        particles cannot explain are dropped first (``skip_beams`` of the sensor
+        particles cannot explain are dropped first (``skip_mask`` of the sensor
         model). A NaN or +inf log-likelihood counts as weight zero.
         """
         if observation is None:
             return
-        if self.cfg.sensor.beam_skip and self.converged and hasattr(self.sensor, "skip_beams"):
-            observation, skipped = self.sensor.skip_beams(self.particles, self.weights, observation,
-                                                          pose=self._moved_estimate(), laser_xy=self._laser_pose[:2])
-            if info is not None:
-                info.skipped_beams = skipped
+        if self.cfg.sensor.beam_skip and self.converged and hasattr(self.sensor, "skip_mask"):
+            skip = self.sensor.skip_mask(self.particles, self.weights, observation,
+                                         pose=self._moved_estimate(), laser_xy=self._laser_pose[:2])
+            if skip.any():
+                if info is not None:
+                    info.skipped_beams = int(np.count_nonzero(skip))
+                    info.skipped_endpoints = observation[:, skip]
+                observation = np.ascontiguousarray(observation[:, ~skip])
         loglik = self.sensor.log_likelihood(self.particles, observation)
         if not np.isfinite(loglik).all():
             loglik = np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)

@@ -41,6 +41,12 @@ def inverse(a: np.ndarray) -> np.ndarray:
     return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
 
 
+def _to_world(pose, points) -> np.ndarray:
+    """(2, K) robot-frame points seen from ``pose`` (x, y, theta), in the world frame."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return np.vstack([pose[0] + c * points[0] - s * points[1], pose[1] + s * points[0] + c * points[1]])
+
+
 def _spread(cov) -> float:
     """sqrt of the larger x/y variance of a 3x3 pose covariance: the cloud's spread in metres."""
     return float(math.sqrt(max(float(cov[0, 0]), float(cov[1, 1]), 0.0)))
@@ -374,10 +380,7 @@ def _run(
                     endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose)
                                  if scan is not marks else np.zeros((2, 0)))
                     if cfg.rerun.scan and endpoints.shape[1]:
-                        c, s = math.cos(mean[2]), math.sin(mean[2])
-                        scan_world = np.vstack(
-                            [mean[0] + c * endpoints[0] - s * endpoints[1], mean[1] + s * endpoints[0] + c * endpoints[1]]
-                        )
+                        scan_world = _to_world(mean, endpoints)
                     viz.log_step(
                         counts["updates"] - 1,
                         scan.t,
@@ -386,6 +389,8 @@ def _run(
                         estimate=mean,
                         cov=cov,
                         scan_world=scan_world,
+                        skipped_world=(_to_world(mean, info.skipped_endpoints)
+                                       if cfg.rerun.scan and info.skipped_endpoints is not None else None),
                         odom_pose=compose(odom_to_map, odom),
                         truth_pose=ref,
                         stats=stats,

@@ -180,8 +180,8 @@ class LikelihoodField:
                          self.blocked, self.origin[0], self.origin[1], self.resolution, out)
         return out
 
-    def skip_beams(self, particles, weights, endpoints, pose=None, laser_xy=(0.0, 0.0)) -> tuple[np.ndarray, int]:
-        """Beam skipping (after AMCL ``likelihood_field_prob``): (the endpoints to score, how many were skipped).
+    def skip_mask(self, particles, weights, endpoints, pose=None, laser_xy=(0.0, 0.0)) -> np.ndarray:
+        """Beam skipping (after AMCL ``likelihood_field_prob``): (K,) bool, True for the beams to ignore.
 
         A beam is *unexplained* when the particles whose view puts its endpoint
         within ``beam_skip_distance`` of a mapped obstacle weigh no more than
@@ -193,18 +193,26 @@ class LikelihoodField:
         evidence that the pose is wrong and is always scored. Without ``pose``
         the rule falls back to AMCL's. If the skipped beams would reach
         ``beam_skip_error_threshold`` of the scan, the filter (not the world) is
-        probably wrong and every beam is kept. Call only once the filter has converged.
+        probably wrong and no beam is skipped. Call only once the filter has converged.
         """
         e = np.asarray(endpoints, dtype=np.float64)
         k = e.shape[1]
         if k == 0:
-            return e, 0
+            return np.zeros(0, dtype=bool)
         skip = self.beam_support(particles, weights, e) <= float(self.cfg.beam_skip_threshold)
         if skip.any() and pose is not None and getattr(self.cfg, "beam_skip_rule", "amcl") == "short":
             idx = np.flatnonzero(skip)
             skip[idx[self.see_through(pose, laser_xy, e[:, idx])]] = False
+        if np.count_nonzero(skip) >= float(self.cfg.beam_skip_error_threshold) * k:
+            skip[:] = False
+        return skip
+
+    def skip_beams(self, particles, weights, endpoints, pose=None, laser_xy=(0.0, 0.0)) -> tuple[np.ndarray, int]:
+        """(the endpoints to score, how many were skipped): ``skip_mask`` applied to ``endpoints``."""
+        e = np.asarray(endpoints, dtype=np.float64)
+        skip = self.skip_mask(particles, weights, e, pose, laser_xy)
         skipped = int(np.count_nonzero(skip))
-        if skipped == 0 or skipped >= float(self.cfg.beam_skip_error_threshold) * k:
+        if skipped == 0:
             return e, 0
         return np.ascontiguousarray(e[:, ~skip]), skipped
 

@@ -7,6 +7,7 @@ Entity paths name things, not steps::
     world/particles       Points2D, at most ``particles_max`` (evenly strided), coloured by weight
     world/estimate        Points2D + Arrows2D (heading) + LineStrips2D (2-sigma ellipse of x, y)
     world/scan            Points2D, scan endpoints in the world frame
+    world/scan/skipped    Points2D, the endpoints beam skipping ignored at this step (empty when none)
     world/truth           Points2D (current true pose); optional static LineStrips2D full path
     world/truth/trail     LineStrips2D, one segment per step (only when no static path was logged)
     world/odometry        Points2D (current odometry pose, in the map frame)
@@ -195,6 +196,7 @@ class RerunLogger:
         self._rec: rr.RecordingStream | None = None
         self._closed = False
         self._calls = 0
+        self._skipped_shown = False  # world/scan/skipped holds points (a step without must clear them)
         self._time_kind: str | None = None
         self._stat_names: list[str] = []
         self._blueprint_key: tuple[str, ...] | None = None
@@ -247,6 +249,13 @@ class RerunLogger:
             "world/scan",
             rr.Points2D.from_fields(
                 radii=rr.Radius.ui_points(2.0), colors=[230, 60, 60], draw_order=_DRAW_ORDER["scan"]
+            ),
+            static=True,
+        )
+        rec.log(
+            "world/scan/skipped",
+            rr.Points2D.from_fields(
+                radii=rr.Radius.ui_points(3.0), colors=[250, 200, 40], draw_order=_DRAW_ORDER["scan"] + 0.5
             ),
             static=True,
         )
@@ -320,11 +329,16 @@ class RerunLogger:
         estimate: np.ndarray,
         cov: np.ndarray,
         scan_world: np.ndarray | None = None,
+        skipped_world: np.ndarray | None = None,
         odom_pose: np.ndarray | None = None,
         truth_pose: np.ndarray | None = None,
         stats: Mapping[str, float] | None = None,
     ) -> None:
-        """Log one filter step. ``weights`` are normalized linear weights (N,)."""
+        """Log one filter step. ``weights`` are normalized linear weights (N,).
+
+        ``skipped_world`` (2, S): the endpoints beam skipping ignored, drawn in yellow over the scan; a step
+        without any clears the previous step's (only once skipping has shown something, to keep recordings small).
+        """
         rec = self._live()
         if rec is None:
             return
@@ -339,6 +353,10 @@ class RerunLogger:
         if self.log_scan and scan_world is not None:
             s = np.asarray(scan_world, dtype=np.float64)
             rec.log("world/scan", rr.Points2D(np.ascontiguousarray(s[:2].T, dtype=np.float32)))
+        if self.log_scan and (skipped_world is not None or self._skipped_shown):
+            k = np.asarray(skipped_world, dtype=np.float64) if skipped_world is not None else np.zeros((2, 0))
+            rec.log("world/scan/skipped", rr.Points2D(np.ascontiguousarray(k[:2].T, dtype=np.float32)))
+            self._skipped_shown = k.shape[1] > 0
         if truth_pose is not None:
             self._prev_truth = self._log_pose(
                 rec, "world/truth", truth_pose, self._prev_truth, [40, 170, 40], trail=not self._truth_path_logged

@@ -126,6 +126,9 @@ def test_filter_skips_beams_only_once_converged():
     assert pf.converged
     info = pf.step(None, e)
     assert 5 < info.skipped_beams < 30
+    # the skipped beams are the ones the unmapped box shortened (2 m ahead, the map's wall is 5.85 m ahead)
+    assert info.skipped_endpoints.shape == (2, info.skipped_beams)
+    assert (np.hypot(*info.skipped_endpoints) < 2.6).all()
     off = load_config(None, ["filter.particles=2000", "filter.kld=false", "filter.recovery=false",
                              "sensor.max_beams=181"])
     pf2 = ParticleFilter(off, g)
@@ -272,3 +275,32 @@ def test_support_from_a_subsample_above_the_cap_is_within_its_standard_error():
     # (the weights' second moment adds a third); 4 standard errors
     assert np.abs(sub - full).max() < 0.05
     assert 0.03 < full.min() and full.max() < 0.97  # proportions away from 0 and 1 (measured 0.044..0.14)
+
+
+def test_recording_shows_exactly_the_skipped_beams(tmp_path):
+    # A 20 s world with 20 unmapped obstacles, tracked from the start with the default config and a recording:
+    # world/scan/skipped holds, step by step, as many points as the summary counts skipped beams.
+    import warnings
+
+    import yaml
+    from rerun.chunk import RrdReader
+
+    from mcl.runner import run
+    from mcl.simulate import simulate
+
+    d = tmp_path / "sim"
+    simulate(d, seed=1, duration=20.0, dynamic_obstacles=20)
+    start = yaml.safe_load((d / "sim.yaml").read_text())["start_pose"]
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={d / 'map.yaml'}", f"log={d / 'log.clf'}", f"truth={d / 'truth.tum'}", "rerun.particles_max=10",
+        "filter.global_localization=false", f"filter.initial_pose={start}", "filter.initial_std=[0.05,0.05,0.05]",
+        "filter.particles=1000"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
+    shown = 0
+    for c in RrdReader(tmp_path / "out" / "recording.rrd").stream().to_chunks():
+        if c.entity_path == "/world/scan/skipped" and not c.is_static:
+            col = c.to_record_batch().column("Points2D:positions").to_pylist()
+            shown += sum(len(v) for v in col if v is not None)
+    assert s["skipped_beams"] > 20 and shown == s["skipped_beams"]

@@ -321,3 +321,18 @@ def test_stat_groups():
     assert viz.stat_group("error_xy") == "error"
     assert viz.stat_group("tries") == "tries"
     assert viz.stat_group("foo") == "other"
+
+
+def test_skipped_beams_are_drawn_over_the_scan_and_cleared_when_none(tmp_path):
+    path = tmp_path / "skip.rrd"
+    skipped = {1: np.array([[1.0, 2.0, 3.0], [0.5, 0.5, 0.5]]), 2: np.array([[4.0], [1.0]])}
+    with RerunLogger("save", path) as log:
+        for k in range(5):
+            log.log_step(k, 1.0 + k, particles=np.zeros((3, 4)), weights=np.full(4, 0.25), estimate=np.zeros(3),
+                         cov=np.eye(3), scan_world=np.zeros((2, 6)), skipped_world=skipped.get(k))
+    r = rows(path, "/world/scan/skipped", "step")
+    # nothing before skipping first shows; the step after the last skipped one clears; then nothing more
+    assert [(t, len(c["Points2D:positions"])) for t, c in r] == [(1, 3), (2, 1), (3, 0)]
+    assert r[0][1]["Points2D:positions"][2] == pytest.approx([3.0, 0.5])
+    style = rows(path, "/world/scan/skipped", None)
+    assert style and style[0][1]["Points2D:colors"] == [0xFAC828FF]
