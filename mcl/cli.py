@@ -132,29 +132,37 @@ def cmd_eval(args) -> int:
     return 0
 
 
+def _command(sub, name: str, module, help: str, description: str, epilog: str | None = None) -> None:
+    """A leaf command whose options come from ``module.add_arguments`` and which runs ``module.run_from_args``."""
+    p = sub.add_parser(name, help=help, description=description, epilog=epilog,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    module.add_arguments(p)
+    p.set_defaults(func=module.run_from_args)
+
+
+def _group(sub, name: str, help: str, description: str):
+    """A command with sub-commands (``mcl calibrate WHAT``); returns their subparsers."""
+    p = sub.add_parser(name, help=help, description=description)
+    return p.add_subparsers(dest="what", metavar="WHAT", required=True)
+
+
 def _add_simulate(sub) -> None:
     from mcl import simulate
 
-    p = sub.add_parser(
-        "simulate",
-        help="make a synthetic world: map + noisy CARMEN log + exact truth",
-        description="Draw an indoor world, drive a robot through it, and write map.yaml/map.pgm, log.clf, truth.tum and sim.yaml into OUTDIR.",
-    )
-    simulate.add_arguments(p)
-    p.set_defaults(func=simulate.run_from_args)
+    _command(sub, "simulate", simulate,
+             help="make a synthetic world: map + noisy CARMEN log + exact truth",
+             description="Draw an indoor world, drive a robot through it, and write map.yaml/map.pgm, log.clf,\n"
+             "truth.tum and sim.yaml into OUTDIR.")
 
 
 def _add_calibrate(sub) -> None:
-    p = sub.add_parser(
-        "calibrate",
-        help="fit model parameters from a log with reference poses; print YAML to paste into a config",
-        description="Learn model parameters from a logged dataset whose reference trajectory is known.",
-    )
-    csub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
-    from mcl import calibrate_sensor
+    from mcl import calibrate_motion, calibrate_sensor
 
-    s = csub.add_parser(
-        "sensor",
+    csub = _group(sub, "calibrate",
+                  help="fit model parameters from a log with reference poses; print YAML to paste into a config",
+                  description="Learn model parameters from a logged dataset whose reference trajectory is known.")
+    _command(
+        csub, "sensor", calibrate_sensor,
         help="EM fit of the range sensor mixture (Prob. Rob. Table 6.2): beam or likelihood field",
         description=(
             "Fit z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short (beam model) or z_hit, z_rand, sigma_hit "
@@ -162,14 +170,9 @@ def _add_calibrate(sub) -> None:
             "timestamps matched to scans within 1 ms). Prints a sensor: block ready to paste into a config."
         ),
         epilog="example:\n  mcl calibrate sensor --config configs/intel_lab.yaml --model likelihood_field",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    calibrate_sensor.add_arguments(s)
-    s.set_defaults(func=calibrate_sensor.run_from_args)
-    from mcl import calibrate_motion
-
-    m = csub.add_parser(
-        "motion",
+    _command(
+        csub, "motion", calibrate_motion,
         help="maximum-likelihood fit of the odometry model's alpha1..alpha4 (Prob. Rob. Table 5.5)",
         description=(
             "Fit alpha1..alpha4 of the odometry motion model by maximum likelihood of the closed-form density over "
@@ -177,23 +180,17 @@ def _add_calibrate(sub) -> None:
             "the odometry error over the reference spacing. Prints a motion: block ready to paste into a config."
         ),
         epilog="example:\n  mcl calibrate motion --log data/demo/log.clf --truth data/demo/truth.tum",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    calibrate_motion.add_arguments(m)
-    m.set_defaults(func=calibrate_motion.run_from_args)
 
 
 def _add_explore(sub) -> None:
-    p = sub.add_parser(
-        "explore",
-        help="look at a model: draw samples of the motion models into a PNG or a Rerun recording",
-        description="Draw samples of a model for a given pose and control, to see how its parameters shape it.",
-    )
-    esub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
     from mcl import explore
 
-    m = esub.add_parser(
-        "motion",
+    esub = _group(sub, "explore",
+                  help="look at a model: draw samples of the motion models into a PNG or a Rerun recording",
+                  description="Draw samples of a model for a given pose and control, to see how its parameters shape it.")
+    _command(
+        esub, "motion", explore,
         help="sample the odometry or velocity model from one pose (the banana-shaped clouds)",
         description="Sample the odometry or velocity motion model from --pose; one panel per --alphas setting.",
         epilog=(
@@ -201,10 +198,7 @@ def _add_explore(sub) -> None:
             "  mcl explore motion --odom 0 0 0 1 0.2 0.5 --alphas 0.1,0.01,0.01,0.01 --alphas 0.01,0.1,0.01,0.01 --out m.png\n"
             "  mcl explore motion --velocity 1 0.5 1 --steps 5 --out v.rrd"
         ),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    explore.add_arguments(m)
-    m.set_defaults(func=explore.run_from_args)
 
 
 def build_parser() -> argparse.ArgumentParser:

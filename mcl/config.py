@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import math
 import types
 import typing
 from dataclasses import dataclass, field
@@ -26,7 +25,7 @@ from typing import Any, Literal
 import yaml
 
 from mcl.errors import ConfigError
-from mcl.yamlfile import read_yaml
+from mcl.yamlfile import finite_number, read_yaml
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
@@ -245,15 +244,7 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
             raise ConfigError(f"{key}: expected an integer, got {value!r}")
         return value
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{key}: expected a number, got {value!r}")
-        try:
-            value = float(value)
-        except OverflowError:  # a YAML integer beyond the float range
-            raise ConfigError(f"{key}: expected a finite number, got an integer of {len(str(value))} digits") from None
-        if not math.isfinite(value):
-            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
-        return value
+        return finite_number(value, key, ConfigError)
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"{key}: expected a string, got {value!r}")

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from mcl.errors import DataError
-from mcl.yamlfile import read_yaml
+from mcl.yamlfile import finite_number, read_yaml
 
 __all__ = [
     "LandmarkMap",
@@ -90,13 +90,7 @@ def _num(v, where: str, *, integer: bool = False):
         if v < 0:
             raise DataError(f"{where}: expected an integer >= 0, got {v}")
         return v
-    try:
-        v = float(v)
-    except OverflowError:
-        raise DataError(f"{where}: expected a finite number") from None
-    if not math.isfinite(v):
-        raise DataError(f"{where}: expected a finite number, got {v}")
-    return v
+    return finite_number(v, where, DataError)
 
 
 def load_landmarks(path: str | os.PathLike) -> LandmarkMap:

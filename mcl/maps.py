@@ -28,10 +28,10 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from mcl.errors import DataError
 from mcl.trajectory import atomic_write_bytes, atomic_write_text
+from mcl.yamlfile import finite_number, read_yaml, short_repr
 
 __all__ = ["OccupancyGrid", "load_map", "save_map"]
 
@@ -145,26 +145,12 @@ class OccupancyGrid:
 # --- loading ------------------------------------------------------------
 
 def _num(doc: dict, key: str, where: str) -> float:
-    v = doc[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise DataError(f"{where}: {key}: expected a number, got {type(v).__name__} {_short(v)}")
-    try:
-        v = float(v)
-    except OverflowError:  # a YAML integer beyond the float range
-        raise DataError(f"{where}: {key}: expected a finite number, got {_short(v)}") from None
-    if not math.isfinite(v):
-        raise DataError(f"{where}: {key}: expected a finite number, got {v}")
-    return v
+    return finite_number(doc[key], f"{where}: {key}", DataError)
 
 
 def _printable(s: str) -> str:
     """``s`` for a one-line message: control characters (a newline in a file name) escaped."""
     return s if s.isprintable() else repr(s)[1:-1]
-
-
-def _short(v) -> str:
-    s = repr(v).replace("\n", " ")
-    return s if len(s) <= 40 else s[:37] + "..."
 
 
 def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | None]:
@@ -215,19 +201,7 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | No
 def load_map(path: str | os.PathLike) -> OccupancyGrid:
     """Load a ROS map_server map (YAML + PGM/PNG) into an :class:`OccupancyGrid`."""
     where = str(path)
-    try:
-        with open(path, "rb") as f:
-            raw = f.read()
-    except OSError as e:
-        raise DataError(f"{where}: cannot read map YAML: {e.strerror or type(e).__name__}") from None
-    try:
-        doc = yaml.safe_load(raw)
-    except yaml.MarkedYAMLError as e:
-        line = e.problem_mark.line + 1 if e.problem_mark is not None else "?"
-        problem = (e.problem or "invalid YAML").replace("\n", " ")
-        raise DataError(f"{where}:{line}: invalid YAML: {problem}") from None
-    except Exception as e:  # YAMLError, decoding errors, recursion on hostile input
-        raise DataError(f"{where}: invalid YAML ({type(e).__name__})") from None
+    doc = read_yaml(path, DataError)
     if not isinstance(doc, dict):
         raise DataError(f"{where}: expected a YAML mapping with keys image, resolution, origin, ...")
     for key in ("image", "resolution", "origin", "occupied_thresh", "free_thresh"):
@@ -236,14 +210,14 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
 
     image = doc["image"]
     if not isinstance(image, str) or not image.strip():
-        raise DataError(f"{where}: image: expected a file name, got {_short(image)}")
+        raise DataError(f"{where}: image: expected a file name, got {short_repr(image)}")
     resolution = _num(doc, "resolution", where)
     if resolution <= 0:
         raise DataError(f"{where}: resolution: must be positive, got {resolution}")
 
     origin = doc["origin"]
     if not isinstance(origin, list) or len(origin) not in (2, 3):
-        raise DataError(f"{where}: origin: expected [x, y, yaw], got {_short(origin)}")
+        raise DataError(f"{where}: origin: expected [x, y, yaw], got {short_repr(origin)}")
     vals = []
     for v in origin:
         try:
@@ -251,7 +225,7 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
         except OverflowError:  # a YAML integer beyond the float range
             ok = False
         if not ok:
-            raise DataError(f"{where}: origin: expected finite numbers [x, y, yaw], got {_short(origin)}")
+            raise DataError(f"{where}: origin: expected finite numbers [x, y, yaw], got {short_repr(origin)}")
         vals.append(float(v))
     if len(vals) == 3 and vals[2] != 0.0:
         raise DataError(f"{where}: origin: non-zero yaw not supported (got {vals[2]})")
@@ -268,16 +242,16 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     if isinstance(negate, bool):
         negate = int(negate)
     if not isinstance(negate, (int, float)) or negate not in (0, 1):
-        raise DataError(f"{where}: negate: expected 0 or 1, got {_short(negate)}")
+        raise DataError(f"{where}: negate: expected 0 or 1, got {short_repr(negate)}")
 
     mode = doc.get("mode", "trinary")
     if not isinstance(mode, str) or mode not in _MODES:
-        raise DataError(f"{where}: mode: expected one of {', '.join(_MODES)}, got {_short(mode)}")
+        raise DataError(f"{where}: mode: expected one of {', '.join(_MODES)}, got {short_repr(mode)}")
 
     try:
         img_path = Path(path).parent / image
     except (ValueError, TypeError):
-        raise DataError(f"{where}: image: invalid file name {_short(image)}") from None
+        raise DataError(f"{where}: image: invalid file name {short_repr(image)}") from None
     value, alpha = _read_image(img_path, where)
 
     occupancy = _classify(value, alpha, mode, bool(negate), occ_th, free_th)

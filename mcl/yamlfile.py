@@ -1,7 +1,8 @@
-"""Reading a YAML file with one-line errors (config files, landmark maps)."""
+"""Reading a YAML file with one-line errors (config files, landmark maps, map YAML)."""
 
 from __future__ import annotations
 
+import math
 import os
 
 import yaml
@@ -25,4 +26,27 @@ def read_yaml(path: str | os.PathLike, error: type[MclError]):
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f":{mark.line + 1}" if mark is not None else ""
-        raise error(f"{name}{where}: {getattr(e, 'problem', None) or 'invalid YAML'}") from None
+        problem = (getattr(e, "problem", None) or "").replace("\n", " ")
+        raise error(f"{name}{where}: invalid YAML" + (f": {problem}" if problem else "")) from None
+    except (RecursionError, MemoryError) as e:  # hostile input: deeply nested or huge documents
+        raise error(f"{name}: invalid YAML ({type(e).__name__})") from None
+
+
+def short_repr(v, limit: int = 40) -> str:
+    """``repr(v)`` on one line, cut to ``limit`` characters, for an error message."""
+    s = repr(v).replace("\n", " ")
+    return s if len(s) <= limit else s[: limit - 3] + "..."
+
+
+def finite_number(value, label: str, error: type[MclError]) -> float:
+    """``value`` (a parsed YAML scalar) as a finite float, else ``error`` with one line starting ``label: ``.
+    Booleans and strings are not numbers; an integer too large for a float is reported by its length."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise error(f"{label}: expected a number, got {short_repr(value)}")
+    try:
+        v = float(value)
+    except OverflowError:  # a YAML integer beyond the float range
+        raise error(f"{label}: expected a finite number, got an integer of {len(str(value))} digits") from None
+    if not math.isfinite(v):
+        raise error(f"{label}: expected a finite number, got {v!r}")
+    return v
