@@ -193,16 +193,7 @@ class ParticleFilter:
 
     def _free_at(self, p: np.ndarray) -> np.ndarray:
         """(N,) bool: poses on free cells of the map (off the map: False)."""
-        res = float(self.grid.resolution)
-        with np.errstate(invalid="ignore"):
-            fx = np.floor((p[0] - self.grid.origin[0]) / res)
-            fy = np.floor((p[1] - self.grid.origin[1]) / res)
-        free = np.asarray(self.grid.free)
-        h, w = free.shape
-        inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
-        out = np.zeros(p.shape[1], dtype=bool)
-        out[inside] = free[fy[inside].astype(np.int64), fx[inside].astype(np.int64)]
-        return out
+        return self.grid.mask_at(np.asarray(self.grid.free), p[0], p[1])
 
     def init_from_landmarks(self, marks) -> bool:
         """Global localization seeded by landmarks: particles drawn from the observations of ``marks`` (a
@@ -460,15 +451,7 @@ class ParticleFilter:
         """(N,) bool: the poses the motion model allows (all True without map rejection)."""
         if self.allowed is None:
             return np.ones(p.shape[1], dtype=bool)
-        res = float(self.grid.resolution)
-        with np.errstate(invalid="ignore"):
-            fx = np.floor((p[0] - self.grid.origin[0]) / res)
-            fy = np.floor((p[1] - self.grid.origin[1]) / res)
-            h, w = self.allowed.shape
-            inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
-        out = np.zeros(p.shape[1], dtype=bool)
-        out[inside] = self.allowed[fy[inside].astype(np.int64), fx[inside].astype(np.int64)] != 0
-        return out
+        return self.grid.mask_at(self.allowed, p[0], p[1])
 
     def _draw_around(self, centres: np.ndarray, std: np.ndarray) -> np.ndarray:
         """(3, N) poses ~ N(centres, diag(std^2)) (centres (3,) or (3, N)), drawn again (up to max_tries) where

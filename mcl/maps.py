@@ -123,6 +123,20 @@ class OccupancyGrid:
         iy = np.asarray(iy)
         return (ix >= 0) & (ix < self.width) & (iy >= 0) & (iy < self.height)
 
+    def mask_at(self, mask: np.ndarray, x, y) -> np.ndarray:
+        """bool per world point (x, y): ``mask`` (an (H, W) per-cell array, True/nonzero = set) at the point's
+        cell; False off the map and for non-finite coordinates."""
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            fx = np.floor((x - self.origin[0]) / self.resolution)
+            fy = np.floor((y - self.origin[1]) / self.resolution)
+        h, w = mask.shape
+        inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)  # NaN fails every comparison
+        out = np.zeros(x.shape, dtype=bool)
+        out[inside] = mask[fy[inside].astype(np.int64), fx[inside].astype(np.int64)] != 0
+        return out
+
     # --- sampling --------------------------------------------------------
     def sample_free(self, n: int, rng: np.random.Generator, clearance: float = 0.0) -> np.ndarray:
         """(3, n) float64 poses uniform over free cells farther than ``clearance`` from obstacles.

@@ -306,3 +306,13 @@ def test_real_intel_lab_map():
     ix, iy = grid.world_to_cell(0.600266, -0.032033)
     assert grid.free[iy, ix]
     assert grid.distance.max() > 1.0
+
+
+def test_mask_at_reads_the_cell_of_each_world_point_and_is_false_off_the_map():
+    occ = np.zeros((4, 5), dtype=np.int8)
+    grid = OccupancyGrid.from_occupancy(occ, 0.5, (-1.0, 2.0))
+    mask = np.zeros((4, 5), dtype=np.uint8)
+    mask[1, 3] = 1  # x in [0.5, 1.0), y in [2.5, 3.0)
+    x = np.array([0.5, 0.99, 0.49, 0.7, -1.01, 1.5, np.nan, 0.7])
+    y = np.array([2.5, 2.99, 2.7, 3.0, 2.2, 2.2, 2.7, np.inf])
+    assert grid.mask_at(mask, x, y).tolist() == [True, True, False, False, False, False, False, False]
