@@ -386,12 +386,14 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: expected a mapping of sections at the top level")
         data = loaded
+    set_by: dict[str, str] = {}  # dotted key -> the --set text that gave it its value
     for text in overrides:
         keys, value = parse_override(text)
         try:
             _apply(data, keys, value)
         except ConfigError as e:
             raise ConfigError(f"--set {_printable(text)}: {e}") from None
+        set_by[".".join(keys)] = text
     for k in PATH_KEYS:
         if isinstance(data.get(k), str):
             try:
@@ -407,6 +409,11 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
     try:
         cfg = _build(Config, data, "")
     except ConfigError as e:
+        # a bad value names where it came from: the --set that gave it, else the file
+        key = str(e).split(":", 1)[0]
+        text = next((t for k, t in set_by.items() if key == k or key.startswith(k + ".")), None)
+        if text is not None:
+            raise ConfigError(f"--set {_printable(text)}: {e}") from None
         raise ConfigError(f"{path}: {e}" if path is not None else str(e)) from None
     try:
         _cross_checks(cfg)

@@ -207,16 +207,6 @@ class LikelihoodField:
             skip[:] = False
         return skip
 
-    def skip_beams(self, particles, weights, endpoints, pose=None, laser_xy=(0.0, 0.0)) -> tuple[np.ndarray, int]:
-        """(the endpoints to score, how many were skipped): ``skip_mask`` applied to ``endpoints``."""
-        e = np.asarray(endpoints, dtype=np.float64)
-        skip = self.skip_mask(particles, weights, e, pose, laser_xy)
-        skipped = int(np.count_nonzero(skip))
-        if skipped == 0:
-            return e, 0
-        return np.ascontiguousarray(e[:, ~skip]), skipped
-
-
 def make_sensor_model(grid, cfg):
     """The range sensor model named by ``sensor.model``."""
     if cfg.model == "likelihood_field":

@@ -235,7 +235,7 @@ def main(argv=None) -> int:
                 w_skip = np.full(n, 1.0 / n)
                 centre = p.mean(axis=1)
                 for b, e in beams.items():  # beam skipping (default rule short): support + ray walks from the estimate
-                    rows.append(("beam skip", b, lambda f=fields[b], e=e: f.skip_beams(p, w_skip, e, pose=centre)))
+                    rows.append(("beam skip", b, lambda f=fields[b], e=e: f.skip_mask(p, w_skip, e, pose=centre)))
                 logw = rng.normal(0, 3, n)
 
                 def resamp():

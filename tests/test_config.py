@@ -93,6 +93,20 @@ def test_override_errors():
         load_config(None, ["sensor.sigma=1"])
 
 
+def test_a_bad_value_names_the_set_that_gave_it_else_the_file(tmp_path):
+    p = tmp_path / "c.yaml"
+    p.write_text("sensor:\n  sigma_hit: 0.1\n  z_hit: abc\n")
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["sensor.sigma_hit=-1"])
+    assert str(e.value).startswith("--set sensor.sigma_hit=-1: sensor.sigma_hit: ") and "c.yaml" not in str(e.value)
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["sensor.sigma_hit=0.2"])  # the file's own bad value
+    assert str(e.value).startswith(f"{p}: sensor.z_hit: expected a number")
+    with pytest.raises(ConfigError) as e:
+        load_config(None, ["filter.initial_std=[1, 2]"])
+    assert str(e.value).startswith("--set filter.initial_std=[1, 2]: filter.initial_std: ")
+
+
 def test_missing_file_is_a_config_error(tmp_path):
     with pytest.raises(ConfigError, match="nope.yaml: cannot read"):
         load_config(tmp_path / "nope.yaml")

@@ -337,6 +337,7 @@ def test_laser_offset_composes_with_pose():
 
 
 @needs_intel
+@pytest.mark.skipif(not (INTEL / "truth.tum").is_file(), reason=f"{INTEL / 'truth.tum'} absent (see ../shared/data/README)")
 def test_real_intel_scan_lines_lie_on_the_map():
     """One real FLASER scan: several lines, small residuals, and on the map's walls at the truth pose."""
     from mcl.datasets.carmen import read_carmen
@@ -351,10 +352,7 @@ def test_real_intel_scan_lines_lie_on_the_map():
     assert np.all(lines.rms < cfg.split_threshold) and np.median(lines.rms) < 0.02, lines.rms
     assert np.all(np.isfinite(lines.cov)) and np.all(np.linalg.eigvalsh(lines.cov) > 0)
     assert sum(len(b) for b in lines.beams) >= 0.5 * np.count_nonzero(scan.ranges < 80.0)
-    truth_path = INTEL / "truth.tum"
-    if not truth_path.is_file():
-        pytest.skip(f"{truth_path} absent: map check skipped")
-    t, poses = read_tum(truth_path)
+    t, poses = read_tum(INTEL / "truth.tum")
     k = int(np.argmin(np.abs(t - scan.t)))
     assert abs(t[k] - scan.t) < 0.5
     seg = line_segments_world(lines, poses[:, k], scan.laser_offset)

@@ -36,6 +36,21 @@ def _dda_axis(d, i, g):
 
 
 @njit(cache=True, nogil=True)
+def _slab(g, d, size, t_enter, t_exit):
+    """One axis of the slab clip: [t_enter, t_exit] narrowed to where g + t*d lies in [0, size]
+    (empty, t_enter > t_exit, when the ray runs parallel to the axis outside that range)."""
+    if d != 0.0:
+        ta = (0.0 - g) / d
+        tb = (size - g) / d
+        if ta > tb:
+            ta, tb = tb, ta
+        return max(t_enter, ta), min(t_exit, tb)
+    if g < 0.0 or g >= size:
+        return np.inf, -np.inf
+    return t_enter, t_exit
+
+
+@njit(cache=True, nogil=True)
 def cast_ray(x, y, angle, blocked, ox, oy, res, max_range):
     """Range from ``(x, y)`` along world ``angle`` to the first blocked cell.
 
@@ -54,26 +69,8 @@ def cast_ray(x, y, angle, blocked, ox, oy, res, max_range):
 
     # Clip the ray to the grid box (slab method) so that a start outside the
     # grid still works. t is the ray parameter in cell units.
-    t_enter = 0.0
-    t_exit = t_limit
-    if dx != 0.0:
-        ta = (0.0 - gx) / dx
-        tb = (w - gx) / dx
-        if ta > tb:
-            ta, tb = tb, ta
-        t_enter = max(t_enter, ta)
-        t_exit = min(t_exit, tb)
-    elif gx < 0.0 or gx >= w:
-        return max_range
-    if dy != 0.0:
-        ta = (0.0 - gy) / dy
-        tb = (h - gy) / dy
-        if ta > tb:
-            ta, tb = tb, ta
-        t_enter = max(t_enter, ta)
-        t_exit = min(t_exit, tb)
-    elif gy < 0.0 or gy >= h:
-        return max_range
+    t_enter, t_exit = _slab(gx, dx, w, 0.0, t_limit)
+    t_enter, t_exit = _slab(gy, dy, h, t_enter, t_exit)
     if t_enter > t_exit:
         return max_range
 
