@@ -247,6 +247,8 @@ def _run(
     log = read_carmen(cfg.log)
     for w in log.warnings:
         echo(f"warning: {w}")
+    for note in log.notes:
+        echo(note)
     truth = Truth(*read_tum(cfg.truth)) if cfg.truth else None
     scans = _choose_scans(log, cfg.laser) if cfg.sensor.use else []
     marks_all = _landmark_records(log, cfg)

@@ -101,6 +101,7 @@ class Log:
     skipped: dict[str, int] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     landmarks: list[Landmarks] = field(default_factory=list)  # LANDMARK lines in file order
+    notes: list[str] = field(default_factory=list)  # what the reader found by itself (e.g. the no-return value)
 
     def scans_of(self, kind: str) -> list[Scan]:
         """Scans of one message type, in file order."""
@@ -384,8 +385,10 @@ def read_carmen(path: str | os.PathLike) -> Log:
     odometry = np.array(odom_rows, dtype=np.float64).reshape(-1, 6)
     scans = _fill_odom(scans, odometry, name)
     scans = _param_max_range(scans, params)
+    notes: list[str] = []
+    scans = _detected_max_range(scans, name, notes)
     landmarks = _landmark_odom(landmarks, odometry, name)
-    return Log(name, scans, odometry, skipped, warnings, landmarks)
+    return Log(name, scans, odometry, skipped, warnings, landmarks, notes)
 
 
 def _landmark_odom(records: list[Landmarks], odometry: np.ndarray, name: str) -> list[Landmarks]:
@@ -423,6 +426,28 @@ def _param_max_range(scans: list[Scan], params: dict[str, str]) -> list[Scan]:
         dataclasses.replace(s, max_range=limits[s.kind]) if (s.max_range is None and s.kind in limits) else s
         for s in scans
     ]
+
+
+def _detected_max_range(scans: list[Scan], name: str, notes: list[str]) -> list[Scan]:
+    """Give FLASER/RLASER scans still without a maximum range the no-return threshold found in their readings
+    (``mcl.datasets.noreturn``), and say what was found in ``notes``."""
+    from mcl.datasets.noreturn import detect_no_return
+
+    out = scans
+    for kind in _MAX_RANGE_PARAMS:
+        idx = [k for k, s in enumerate(scans) if s.kind == kind and s.max_range is None]
+        if not idx:
+            continue
+        nr = detect_no_return(np.concatenate([scans[k].ranges for k in idx]))
+        if nr is None:
+            notes.append(f"{name}: {kind}: no no-return value found in the readings; sensor.range_max decides")
+            continue
+        notes.append(f"{name}: {kind}: {nr.describe()}: readings >= {nr.threshold:.2f} m are taken as no return")
+        if out is scans:
+            out = list(scans)
+        for k in idx:
+            out[k] = dataclasses.replace(scans[k], max_range=nr.threshold)
+    return out
 
 
 def interpolate_odometry(odometry: np.ndarray, t) -> np.ndarray:

@@ -1,0 +1,91 @@
+"""Find a laser log's no-return value from its readings.
+
+Old CARMEN ``FLASER`` lines do not say the sensor's maximum range, and logs
+mark a beam without an echo by a fixed value near the sensor's maximum:
+81.83 or 81.91 m (SICK), 50.00 m, or a narrow band such as 51.05-51.16 m. A
+reader that takes these for real readings scores phantom walls 50 m away.
+
+A no-return value shows as a *spike* in the histogram of readings: thousands
+of beams share one centimetre value at the top of the log's range, where real
+readings are few and spread out (a real reading never repeats to the
+centimetre that often: the sensor's noise spreads it). So:
+
+1. histogram the finite positive readings in 1 cm bins;
+2. a bin is a spike when it holds at least ``min_share`` of all readings
+   (and at least ``min_count``) and ``spike_ratio`` times more than the
+   median bin of the 2 m around it (the median, so that a band of
+   neighbouring spikes such as 51.05-51.25 m does not hide itself);
+3. only spikes at the top of the range count (at or above ``top_fraction`` of
+   the largest reading): a robot standing still in front of a wall repeats a
+   short reading, never one near the sensor's maximum;
+4. there must be real readings to tell the marker from (5 % of all at least);
+5. readings at or above ``(1 - margin)`` times the lowest such spike are no
+   return (the 1 % margin takes in the stray readings just below the marker
+   that some logs have, e.g. 81.83 m beside 81.91 m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["NoReturn", "detect_no_return"]
+
+
+@dataclass(frozen=True)
+class NoReturn:
+    """A log's no-return marker: readings >= ``threshold`` mean no echo."""
+
+    threshold: float  # m
+    spikes: tuple[float, ...]  # the spike values found (m, 1 cm bins), ascending
+    count: int  # readings >= threshold
+    total: int  # finite positive readings looked at
+
+    def describe(self) -> str:
+        """e.g. 'no-return readings at 50.00 m and 51.14-51.15 m (13,213 of 155,841, 8.5 %)'."""
+        lo, hi = self.spikes[0], self.spikes[-1]
+        if len(self.spikes) == 1:
+            at = f"{lo:.2f} m"
+        else:
+            # consecutive centimetre bins read as a band
+            groups, start, prev = [], self.spikes[0], self.spikes[0]
+            for v in self.spikes[1:]:
+                if v - prev > 0.015:
+                    groups.append((start, prev))
+                    start = v
+                prev = v
+            groups.append((start, prev))
+            at = " and ".join(f"{a:.2f} m" if a == b else f"{a:.2f}-{b:.2f} m" for a, b in groups)
+        share = 100.0 * self.count / max(self.total, 1)
+        return f"no-return readings at {at} ({self.count:,} of {self.total:,} readings, {share:.1f} %)"
+
+
+def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, spike_ratio: float = 20.0,
+                     top_fraction: float = 0.9, margin: float = 0.01) -> NoReturn | None:
+    """The no-return marker of a set of readings (any shape, metres), or None when there is no spike.
+
+    See the module docstring for the rule and its parameters.
+    """
+    r = np.asarray(ranges, dtype=np.float64).ravel()
+    with np.errstate(invalid="ignore"):
+        r = r[np.isfinite(r) & (r > 0.0)]
+    total = int(r.size)
+    if total == 0:
+        return None
+    cm = np.rint(r * 100.0).astype(np.int64)
+    hist = np.bincount(cm).astype(np.float64)
+    top = int(cm.max())
+    cand = np.flatnonzero((hist >= max(min_count, min_share * total)) & (np.arange(hist.size) >= top_fraction * top))
+    if cand.size == 0:
+        return None
+    # the median bin of the 2 m around each candidate: robust to a band of spikes narrower than the window
+    around = np.array([np.median(hist[max(v - 100, 0):v + 101]) for v in cand])  # a few candidates, not beams
+    spikes = cand[hist[cand] >= spike_ratio * np.maximum(around, 1.0)]
+    if spikes.size == 0:
+        return None
+    threshold = (1.0 - margin) * spikes[0] / 100.0
+    count = int(np.count_nonzero(r >= threshold))
+    if total - count < max(min_count, 0.05 * total):  # hardly any real reading: nothing to tell the marker from
+        return None
+    return NoReturn(float(threshold), tuple(float(v) / 100.0 for v in spikes), count, total)

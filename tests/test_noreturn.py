@@ -1,0 +1,100 @@
+"""No-return detection (mcl.datasets.noreturn): each marker of ../shared/data/README.md, and the real logs."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mcl.datasets.carmen import read_carmen
+from mcl.datasets.noreturn import detect_no_return
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def _readings(rng, markers, share=0.03, n=60_000, top=None):
+    """Real readings (a mixture of short indoor ranges and a long tail, all below the marker) plus ``share`` of
+    no-return readings spread evenly over ``markers``."""
+    top = top if top is not None else 0.985 * min(markers)  # real readings within 1 % of the marker are rare
+    real = np.concatenate([rng.gamma(2.0, 1.2, size=int(0.8 * n)), rng.uniform(0.1, top, size=int(0.2 * n))])
+    real = np.round(np.clip(real, 0.02, top), 2)  # loggers write centimetres
+    k = int(share * n)
+    marks = np.asarray(markers)[rng.integers(0, len(markers), size=k)]
+    r = np.concatenate([real, marks])
+    rng.shuffle(r)
+    return r, real.max()
+
+
+@pytest.mark.parametrize("markers", [
+    [81.83],  # SICK (intel_lab)
+    [81.91],  # SICK (mit_csail, fr079, fr101, belgioioso)
+    [50.00],  # aces, part of acapulco
+    [50.00, 51.14, 51.15],  # acapulco
+    list(np.round(np.arange(51.00, 51.255, 0.01), 2)),  # a band 51.00-51.25 (infinite_corridor style), evenly spread
+])
+def test_each_marker_is_found(markers):
+    rng = np.random.default_rng(7)
+    r, real_max = _readings(rng, markers)
+    nr = detect_no_return(r)
+    assert nr is not None
+    # every marker reading is at or above the threshold, every real reading below it
+    assert nr.threshold <= min(markers)
+    assert nr.threshold > real_max
+    assert nr.count == int(np.count_nonzero(np.isin(r, markers)))
+    assert min(markers) == pytest.approx(nr.spikes[0], abs=0.015)  # the band's lowest bin may have few
+
+
+def test_a_marker_with_real_readings_just_below_it():
+    # long real readings up to 49.45 m (a convention hall): the threshold stays above them (the 1 % margin)
+    rng = np.random.default_rng(3)
+    r, real_max = _readings(rng, [50.0], top=49.45)
+    nr = detect_no_return(r)
+    assert nr is not None and real_max < nr.threshold <= 50.0
+
+
+def test_no_spike_no_marker():
+    rng = np.random.default_rng(1)
+    real = np.round(rng.gamma(2.0, 2.0, size=50_000), 2)
+    assert detect_no_return(real) is None
+    # a robot standing still in front of a wall repeats a short reading: not at the top of the range
+    still = np.concatenate([real, np.full(5_000, 3.20)])
+    assert detect_no_return(still) is None
+    # every reading the same: nothing to tell a marker from
+    assert detect_no_return(np.full(181, 1.0)) is None
+    assert detect_no_return(np.array([np.nan, np.inf, -1.0])) is None
+
+
+def test_reader_sets_the_flaser_max_range_and_says_so(tmp_path):
+    rng = np.random.default_rng(5)
+    lines = []
+    for k in range(60):
+        r = np.round(rng.uniform(0.5, 20.0, size=180), 2)
+        r[rng.random(180) < 0.1] = 50.0
+        lines.append(f"FLASER 180 {' '.join(f'{v:.2f}' for v in r)} 0 0 0 0 0 0 {k:.1f} host {k:.1f}\n")
+    p = tmp_path / "nr.clf"
+    p.write_text("".join(lines))
+    log = read_carmen(p)
+    assert all(s.max_range == pytest.approx(49.5) for s in log.scans)
+    assert len(log.notes) == 1 and "50.00 m" in log.notes[0] and "49.50" in log.notes[0] and "FLASER" in log.notes[0]
+
+
+# Each newer folder's meta.json gives the threshold measured for its log (readings >= it mean no return); the
+# README gives the marker values of the others (81.83 m for intel_lab, 81.91 m for mit_csail and fr079).
+REAL = {"intel_lab": 81.83, "mit_csail": 81.91, "fr079": 81.91}
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not DATA.is_dir(), reason=f"real datasets not found at {DATA}")
+@pytest.mark.parametrize("name", ["intel_lab", "mit_csail", "fr079", "aces", "acapulco", "fr101", "belgioioso",
+                                  "infinite_corridor"])
+def test_real_logs(name):
+    log = read_carmen(DATA / name / "log.clf")
+    r = np.concatenate([s.ranges for s in log.scans])
+    meta = DATA / name / "meta.json"
+    marker = json.loads(meta.read_text())["no_return_m"] if meta.exists() else REAL[name]
+    thr = {s.max_range for s in log.scans}
+    assert len(thr) == 1
+    thr = thr.pop()
+    # the reader's threshold takes every reading the data set calls no-return, and at most 0.1 % more
+    assert np.count_nonzero(r >= thr) >= np.count_nonzero(r >= marker)
+    assert np.count_nonzero(r >= thr) - np.count_nonzero(r >= marker) <= 1e-3 * r.size
