@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mcl.clusters import MAX_CELLS, cluster_estimate, cluster_labels
+from mcl.clusters import cluster_estimate, cluster_labels
 from mcl.estimate import estimate, wrap_angle
 
 
@@ -116,12 +116,15 @@ def test_labels_match_a_numpy_flood_fill_oracle():
         assert len(pairs) == k == len({a for a, _ in pairs}) == len({b for _, b in pairs}), trial
 
 
-def test_huge_spread_coarsens_instead_of_allocating():
+def test_huge_spread_keeps_full_resolution_without_a_dense_grid():
+    # 1,000 particles over 10 km: 200,000 x 200,000 x 63 cells at full resolution (a dense grid could not be
+    # allocated); only the occupied cells are stored, so every particle is its own cluster, and two particles
+    # in neighbouring cells across the grid are one.
     rng = np.random.default_rng(5)
     p = np.vstack([rng.uniform(-5000, 5000, 1000), rng.uniform(-5000, 5000, 1000), rng.uniform(-3, 3, 1000)])
-    labels, n = cluster_labels(p, 0.05, 0.1)  # 200,000 x 200,000 cells at full resolution
-    assert labels.shape == (1000,) and 1 <= n <= 1000
-    assert MAX_CELLS < 200_000**2
+    p[:, 1] = p[:, 0] + [0.03, -0.03, 0.05]  # at most one cell over from particle 0 in x, y and theta
+    labels, n = cluster_labels(p, 0.05, 0.1)
+    assert n == 999 and labels[0] == labels[1] and len(set(labels.tolist())) == 999
 
 
 def test_filter_estimate_uses_the_heaviest_cluster(tmp_path):
