@@ -298,3 +298,126 @@ def kld_resample(
         b = total  # double
     out = np.ascontiguousarray(np.concatenate(batches, axis=1))
     return out, np.concatenate(masks), k
+
+
+# ----------------------------------------------------------------------------- the filter's policies
+
+
+class KLDSampling:
+    """KLD-sampling resampling as a policy of the filter (Prob. Rob. Table 8.4).
+
+    Table 8.4 bins each particle *after* its motion update, so a resample is
+    only scheduled (``schedule``) after the correction and drawn
+    (``draw``) with the next control: ancestors drawn batch by batch, moved
+    by ``move`` and binned until M_chi(k) is reached (``kld_resample``).
+    """
+
+    def __init__(self, fc, grid):
+        h, w = grid.occupancy.shape
+        size = (w * grid.resolution, h * grid.resolution)
+        self.counter = BinCounter(grid.origin, size, fc.kld_bin_xy, fc.kld_bin_theta)
+        self.z = kld_quantile(fc.kld_delta)
+        self.epsilon = fc.kld_epsilon
+        self.scheme = fc.resampling
+        self.min_particles = min(fc.min_particles, fc.particles)
+        self.max_particles = fc.particles
+        self.pending = None  # (inject_p, sampler) of the resample waiting for the next motion
+
+    def schedule(self, inject_p: float, sampler: Callable[[int], np.ndarray]) -> None:
+        self.pending = (inject_p, sampler)
+
+    def draw(self, particles, logw, rng, move=None):
+        """The scheduled resample: (new (3, M), injected (M,) bool, ok (M,) bool | None, mean tries).
+
+        ``move(batch) -> (moved, ok | None, tries)`` applies the motion model to each batch before it
+        is binned (None: no motion, the ancestors are binned).
+        """
+        inject_p, sampler = self.pending
+        self.pending = None
+        moves: list = []
+
+        def moved(batch):
+            new, ok, tries = move(batch)
+            moves.append((ok, tries, batch.shape[1]))
+            return new
+
+        new, fresh, _ = kld_resample(
+            particles, logw, rng, self.counter, scheme=self.scheme, min_particles=self.min_particles,
+            max_particles=self.max_particles, epsilon=self.epsilon, z=self.z, inject_p=inject_p, sampler=sampler,
+            move=moved if move is not None else None,
+        )
+        m = new.shape[1]
+        ok = None
+        if any(o is not None for o, _, _ in moves):
+            ok = np.concatenate([np.ones(n, bool) if o is None else o for o, _, n in moves])[:m]
+        tries = sum(t * n for _, t, n in moves) / max(sum(n for _, _, n in moves), 1) if moves else 1.0
+        return np.ascontiguousarray(new), fresh, ok, tries
+
+
+class AugmentedMCL:
+    """The book's recovery (Prob. Rob. Table 8.3): inject with p = max(0, 1 - w_fast / w_slow).
+
+    ``observe_likelihood`` folds the per-beam mean likelihood of the tracked
+    particles into w_slow and w_fast (``Recovery``); the particles injected at
+    the last resample are left out (if every particle was injected, all count).
+    """
+
+    name = "augmented"
+
+    def __init__(self, alpha_slow: float, alpha_fast: float):
+        self.averages = Recovery(alpha_slow, alpha_fast)
+
+    def observe_likelihood(self, logw_prior: np.ndarray, loglik_per_beam: np.ndarray, injected) -> None:
+        keep = injected
+        if keep is not None and keep.size == loglik_per_beam.size and not keep.all():
+            keep = ~keep
+            self.averages.update(Recovery.log_mean_likelihood(logw_prior[keep], loglik_per_beam[keep]))
+        else:
+            self.averages.update(Recovery.log_mean_likelihood(logw_prior, loglik_per_beam))
+
+    def observe_lost(self, lost: bool) -> None:
+        pass
+
+    @property
+    def inject_probability(self) -> float:
+        return self.averages.inject_probability
+
+
+class LostRecovery:
+    """Recovery only when lost: ``fraction`` of N from the recovery sampler at each resample while the quality
+    signal (``mcl.quality``) says the filter is lost, none otherwise.
+
+    The w_fast / w_slow ratio of augmented MCL reacts to the scene as much as to
+    being lost (open halls, long corridors and many no-return beams lower the
+    mean likelihood at the true pose), and injected poses in look-alike places
+    then hijack a correct track. The quality signal asks instead whether the
+    scan fits the map at the estimate, which does not depend on the scene.
+    """
+
+    name = "lost"
+
+    def __init__(self, fraction: float):
+        self.fraction = float(fraction)
+        self.lost = False
+
+    def observe_likelihood(self, logw_prior, loglik_per_beam, injected) -> None:
+        pass
+
+    def observe_lost(self, lost: bool) -> None:
+        self.lost = bool(lost)
+
+    @property
+    def inject_probability(self) -> float:
+        return self.fraction if self.lost else 0.0
+
+
+def make_recovery(fc, global_start: bool):
+    """The recovery policy ``filter.recovery`` names (None: no recovery) for a run that starts globally or not."""
+    mode = fc.recovery
+    if mode == "auto":
+        mode = "augmented" if global_start else False
+    if mode is True or mode == "augmented":
+        return AugmentedMCL(fc.recovery_alpha_slow, fc.recovery_alpha_fast)
+    if mode == "lost":
+        return LostRecovery(fc.recovery_fraction)
+    return None

@@ -62,6 +62,9 @@ def _add_run(sub) -> None:
         "serve: serve to a web viewer; off: no recording",
     )
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override any config key, e.g. sensor.sigma_hit=0.1 (repeatable)")
+    p.add_argument("--threads", type=int, metavar="N",
+                   help="numba threads for the large parallel kernels (default: every core; 1 = serial). The result "
+                   "is the same whatever N; on a machine another job keeps busy, 1 avoids waiting for its core")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     p.set_defaults(func=cmd_run)
@@ -96,11 +99,23 @@ def cmd_run(args) -> int:
     if args.rerun is not None:
         overrides.append(f"rerun.mode={args.rerun}")
     cfg = load_config(config_path, overrides + list(args.set))
+    if args.threads is not None:
+        set_threads(args.threads)
     out = Path(args.out) if args.out else default_out_dir()
     summary = run(cfg, out, progress=False if args.no_progress else None)
     if args.json:
         print(json.dumps(summary, indent=2))
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
+
+
+def set_threads(n: int) -> None:
+    """numba's thread count for parallel kernels (MclError naming --threads when out of range)."""
+    import numba
+
+    top = numba.config.NUMBA_NUM_THREADS
+    if not 1 <= n <= top:
+        raise MclError(f"--threads: expected 1..{top} (the cores numba may use here), got {n}")
+    numba.set_num_threads(n)
 
 
 def _add_eval(sub) -> None:

@@ -65,9 +65,12 @@ class FilterConfig:
     kld_delta: float = field(default=0.01, metadata=_rng(0.0, 1.0, lo_open=True, hi_open=True))  # P(error > eps)
     kld_bin_xy: float = field(default=0.5, metadata=_rng(0.0, lo_open=True))  # histogram bin side (m)
     kld_bin_theta: float = field(default=0.1745, metadata=_rng(0.0, 6.2832, lo_open=True))  # bin width (rad)
-    # Augmented MCL (Prob. Rob. Table 8.3): inject poses from free space with p = max(0, 1 - w_fast/w_slow).
-    # auto: on for global localization (initial_pose null or global_localization), off when tracking from a pose.
-    recovery: bool | Literal["auto"] = False
+    # Recovery (mcl.adaptive): poses drawn from free space instead of the weighted set at resampling.
+    # lost: recovery_fraction of N while the quality signal says the filter is lost (mcl.quality);
+    # augmented: the book's augmented MCL (Table 8.3), p = max(0, 1 - w_fast/w_slow); true is augmented;
+    # auto: augmented for global localization, off when tracking from a pose; false: never.
+    recovery: bool | Literal["lost", "augmented", "auto"] = False
+    recovery_fraction: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_alpha_slow: float = field(default=0.001, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_alpha_fast: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
 
@@ -165,6 +168,16 @@ class LandmarkConfig:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class QualityConfig:
+    """The localization-quality signal and the lost belief (mcl.quality)."""
+
+    distance: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m: a beam matches the map within this
+    lost_below: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # an update is bad when match < this ...
+    contradiction_above: float = field(default=0.2, metadata=_rng(0.0, 1.0))  # ... or contradiction > this
+    lost_after: int = field(default=3, metadata=_rng(1, 1_000_000))  # consecutive bad (good) updates to turn lost (back)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Config:
     """A whole run: the data, the seed and each part of the filter."""
 
@@ -179,6 +192,7 @@ class Config:
     rerun: RerunConfig = field(default_factory=RerunConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
+    quality: QualityConfig = field(default_factory=QualityConfig)
 
 
 LASER_KINDS = ("auto", "FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
@@ -314,7 +328,7 @@ def _cross_checks(cfg: Config) -> None:
     if any(not v > 0 for v in cfg.filter.respread_std):
         raise ConfigError("filter.respread_std: standard deviations must be > 0")
     f = cfg.filter
-    if f.recovery and f.recovery_alpha_slow >= f.recovery_alpha_fast:
+    if f.recovery in (True, "augmented", "auto") and f.recovery_alpha_slow >= f.recovery_alpha_fast:
         raise ConfigError(
             f"filter.recovery_alpha_slow: {f.recovery_alpha_slow} must be below filter.recovery_alpha_fast "
             f"({f.recovery_alpha_fast})"

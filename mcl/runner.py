@@ -2,7 +2,12 @@
 
 Outputs, all in one folder and none left half-written under its final name:
 
-- ``trajectory.tum``: one pose per filter update, ``t x y 0 qx qy qz qw``;
+- ``trajectory.tum``: one pose per scan, ``t x y 0 qx qy qz qw``: the estimate of each filter update, and for
+  a scan that update gating skips (the robot moved less than ``update_min_d`` / ``update_min_a``) the last
+  estimate moved by the odometry since;
+- ``quality.csv``: one row per pose: whether the filter updated, the quality signal (``mcl.quality``: the
+  fraction of beams matching the map at the estimate, and of beams contradicting it), the lost belief, the
+  particle count and the cloud's spread;
 - ``recording.rrd``: the Rerun recording (when ``rerun.mode`` is save, or spawn without a display);
 - ``config.yaml``: the resolved config, enough to repeat the run exactly;
 - ``summary.json``: counts, wall time per stage, and the ``mcl eval`` figures when a truth file is given.
@@ -199,6 +204,38 @@ def _updates(scans: list, marks: list) -> list[tuple]:
     return out
 
 
+QUALITY_HEADER = "t,updated,match,contradiction,beams,lost,particles,spread_m"
+
+
+def _quality_line(t: float, updated: bool, fit, lost: bool, particles: int, spread: float) -> str:
+    """One row of quality.csv (mcl.quality): empty match/contradiction/beams for a pose without an update or
+    without a laser scan."""
+    if fit is None or fit.beams == 0:
+        m = c = b = ""
+    else:
+        m, c, b = f"{fit.match:.4f}", f"{fit.contradiction:.4f}", str(fit.beams)
+    return f"{t:.6f},{int(updated)},{m},{c},{b},{int(lost)},{particles},{spread:.4f}"
+
+
+def _quality_summary(rows: list[tuple]) -> dict:
+    """summary.json "quality": the fit at the estimate over the updates with a scan, and the lost belief."""
+    if not rows:
+        return {"updates": 0}
+    a = np.array(rows, dtype=np.float64)
+    lost = a[:, 2] > 0
+    return {
+        "updates": int(a.shape[0]),
+        "match_mean": float(a[:, 0].mean()),
+        "match_p5": float(np.percentile(a[:, 0], 5)),
+        "match_min": float(a[:, 0].min()),
+        "contradiction_mean": float(a[:, 1].mean()),
+        "lost_updates": int(lost.sum()),
+        "lost_fraction": float(lost.mean()),
+        "lost_episodes": int(np.count_nonzero(np.diff(np.r_[0, lost.astype(np.int8)]) == 1)),
+        "lost_at_end": bool(lost[-1]),
+    }
+
+
 def _particles_text(summary: dict) -> str:
     lo, hi = summary["particles_min"], summary["particles_max"]
     if lo == hi:
@@ -235,7 +272,7 @@ def _run(
     from mcl.maps import load_map
     from mcl.motion import velocities_from_odometry
     from mcl.sensors import beam_endpoints
-    from mcl.trajectory import TumWriter, atomic_write_text, read_tum
+    from mcl.trajectory import LineWriter, TumWriter, atomic_write_text, read_tum
 
     echo = echo or (lambda msg: print(msg, file=sys.stderr))
     if cfg.map is None:
@@ -296,7 +333,7 @@ def _run(
             viz.log_truth_path(truth.poses)
 
     stage_totals = {"predict": 0.0, "correct": 0.0, "estimate": 0.0, "resample": 0.0, "viz": 0.0}
-    counts = {"updates": 0, "resamples": 0, "rejected": 0, "degenerate": 0}
+    counts = {"updates": 0, "predicted": 0, "resamples": 0, "rejected": 0, "degenerate": 0}
     tries_sum = 0.0
     spread_sum, spread_max, multimodal, skipped_beams = 0.0, 0.0, 0, 0
     n_used: list[int] = []  # particles weighted at each update (KLD sampling varies it)
@@ -308,6 +345,9 @@ def _run(
     last_t = 0.0
     odom_to_map = None
     writer = TumWriter(out_dir / "trajectory.tum")
+    quality_out = LineWriter(out_dir / "quality.csv", header=QUALITY_HEADER)
+    quality_rows: list[tuple] = []  # (match, contradiction, lost) of each filter update, for the summary
+    last_mean, last_lost, last_spread = None, False, math.nan
     bar = tqdm(total=len(updates), unit="scan", disable=(None if progress is None else not progress), leave=False, dynamic_ncols=True)
     loop0 = time.perf_counter()
     try:
@@ -319,6 +359,15 @@ def _run(
                     d = math.hypot(odom[0] - last_odom[0], odom[1] - last_odom[1])
                     a = abs(float(wrap_angle(odom[2] - last_odom[2])))
                     if d < fc.update_min_d and a < fc.update_min_a:
+                        # Update gating: no filter update, but the trajectory still gets this scan's pose, the
+                        # last estimate moved by the odometry since that update (one pose per scan).
+                        pose = compose(last_mean, compose(inverse(last_odom), odom))
+                        with signals.held():
+                            writer.append(scan.t, pose[0], pose[1], pose[2])
+                            quality_out.write_line(_quality_line(scan.t, False, None, last_lost, pf.n, last_spread))
+                            traj_t.append(scan.t)
+                            traj_p.append(pose)
+                            counts["predicted"] += 1
                         continue
                 laser_pose = (
                     np.asarray(cfg.sensor.laser_pose)
@@ -341,15 +390,20 @@ def _run(
                 info = pf.step(control, observation, landmarks=marks)
                 last_odom, last_t = odom, scan.t
                 mean, cov = info.mean, info.cov
+                spread_full = _spread(info.full_cov)
+                last_mean, last_lost, last_spread = mean, info.lost, spread_full
                 with signals.held():  # the pose in the file <=> counted in the summary
                     writer.append(scan.t, mean[0], mean[1], mean[2])
+                    quality_out.write_line(_quality_line(scan.t, True, info.fit, info.lost, info.particles,
+                                                         spread_full))
                     traj_t.append(scan.t)
                     traj_p.append(mean)
                     counts["updates"] += 1
+                    if info.fit is not None and info.fit.beams:
+                        quality_rows.append((info.fit.match, info.fit.contradiction, info.lost))
                 counts["resamples"] += int(info.resampled)
                 counts["rejected"] += info.rejected
                 counts["degenerate"] += int(info.degenerate)
-                spread_full = _spread(info.full_cov)
                 spread_sum += spread_full
                 spread_max = max(spread_max, spread_full)
                 multimodal += int(info.clusters > 1)
@@ -373,6 +427,9 @@ def _run(
                         "spread/estimate": _spread(cov),
                         "clusters": float(info.clusters),
                         "skipped_beams": float(info.skipped_beams),
+                        "quality/match": info.quality,
+                        "quality/contradiction": info.fit.contradiction if info.fit is not None else math.nan,
+                        "quality/lost": float(info.lost),
                         **{f"time_ms/{k}": 1e3 * v for k, v in info.timings.items()},
                     }
                     if ref is not None:
@@ -413,6 +470,7 @@ def _run(
     finally:
         bar.close()
         writer.close()
+        quality_out.close()
         if viz is not None:
             viz.close()
     loop_time = time.perf_counter() - loop0
@@ -429,6 +487,7 @@ def _run(
         "scans": len(scans),
         "landmark_lines": len(marks_all),
         "updates": counts["updates"],
+        "predicted_poses": counts["predicted"],
         "particles": pf.n,
         "particles_mean": float(np.mean(n_used)) if n_used else float(pf.n),
         "particles_min": int(min(n_used)) if n_used else pf.n,
@@ -445,6 +504,7 @@ def _run(
             "multimodal_updates": multimodal,
         },
         "skipped_beams": skipped_beams,
+        "quality": _quality_summary(quality_rows),
         "skipped_messages": dict(log.skipped),
         "wall_time_s": {"load": load_time, "loop": loop_time, **stage_totals},
         "ms_per_update": {k: 1e3 * v / n_up for k, v in stage_totals.items()},
@@ -452,6 +512,7 @@ def _run(
             "trajectory": str(out_dir / "trajectory.tum"),
             "recording": str(viz.path) if (viz is not None and viz.path is not None and Path(viz.path).exists()) else None,
             "config": str(out_dir / "config.yaml"),
+            "quality": str(out_dir / "quality.csv"),
         },
     }
     if truth is not None and traj_t:

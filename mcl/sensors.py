@@ -124,6 +124,11 @@ class LikelihoodField:
         """The observation this model scores, made once per scan: robot-frame beam endpoints (2, K)."""
         return beam_endpoints(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose)
 
+    @staticmethod
+    def endpoints(observation) -> np.ndarray:
+        """(2, K) robot-frame endpoints of the beams with a return (for the quality signal): the observation."""
+        return observation
+
     def log_likelihood(self, particles, endpoints, out=None) -> np.ndarray:
         """(N,) float64: exponent * sum over beams of the table value at each rotated endpoint.
 
@@ -206,6 +211,33 @@ class LikelihoodField:
         if np.count_nonzero(skip) >= float(self.cfg.beam_skip_error_threshold) * k:
             skip[:] = False
         return skip
+
+class BeamSkipping:
+    """Beam skipping as a policy of the filter (``sensor.beam_skip``; ``LikelihoodField.skip_mask``).
+
+    It acts only once the filter has converged: the heaviest cluster holds at
+    least half the weight and its x/y spread is below ``beam_skip_distance``
+    (``observe_estimate``, after each update's estimate).
+    """
+
+    def __init__(self, sensor, cfg):
+        self.sensor = sensor
+        self.cfg = cfg
+        self.converged = False
+
+    def observe_estimate(self, est) -> None:
+        spread = math.sqrt(max(est.cov[0, 0], est.cov[1, 1], 0.0))
+        self.converged = est.weight >= 0.5 and spread < self.cfg.beam_skip_distance
+
+    def select(self, particles, weights, observation, pose, laser_xy):
+        """(the observation to score, the skipped robot-frame endpoints (2, k) or None)."""
+        if not self.converged:
+            return observation, None
+        skip = self.sensor.skip_mask(particles, weights, observation, pose=pose, laser_xy=laser_xy)
+        if not skip.any():
+            return observation, None
+        return np.ascontiguousarray(observation[:, ~skip]), observation[:, skip]
+
 
 def make_sensor_model(grid, cfg):
     """The range sensor model named by ``sensor.model``."""
@@ -300,6 +332,14 @@ class BeamModel:
     def prepare(self, scan, laser_pose):
         """The observation, made once per scan: ``beam_observation`` of the scan."""
         return beam_observation(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose)
+
+    @staticmethod
+    def endpoints(observation) -> np.ndarray:
+        """(2, K) robot-frame endpoints of the beams with a return (readings below zmax), for the quality signal."""
+        ranges, angles, lp, zmax = observation
+        keep = ranges < zmax
+        r, a = ranges[keep], angles[keep] + lp[2]
+        return np.vstack([lp[0] + r * np.cos(a), lp[1] + r * np.sin(a)])
 
     def log_likelihood(self, particles, observation, out=None) -> np.ndarray:
         """(N,) float64 log p(z | x, m) per particle; no beams gives zeros."""

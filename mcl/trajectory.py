@@ -115,26 +115,28 @@ def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     return t, poses
 
 
-class TumWriter:
-    """Incremental TUM writer for long runs.
+class LineWriter:
+    """Incremental text writer for long runs (one line per update).
 
-    Poses go to ``<path>.partial`` (flushed after each line); :meth:`close`
+    Lines go to ``<path>.partial`` (flushed after each line); :meth:`close`
     renames it to ``path``. Call ``close()`` also after an exception or an
-    interrupt (the context manager does): every pose written so far then
+    interrupt (the context manager does): every line written so far then
     lands under the final name, and the final name never holds a
     half-written file.
     """
 
-    def __init__(self, path: str | os.PathLike):
+    def __init__(self, path: str | os.PathLike, header: str | None = None):
         self.path = Path(path)
         self.partial = self.path.with_name(self.path.name + ".partial")
         self._f = open(self.partial, "w", encoding="utf-8")
         self.count = 0
+        if header is not None:
+            self._f.write(header if header.endswith("\n") else header + "\n")
 
-    def append(self, t: float, x: float, y: float, theta: float) -> None:
+    def write_line(self, line: str) -> None:
         if self._f is None:
-            raise ValueError(f"TumWriter({self.path}): append after close")
-        self._f.write(_tum_line(float(t), float(x), float(y), float(theta)))
+            raise ValueError(f"{type(self).__name__}({self.path}): append after close")
+        self._f.write(line if line.endswith("\n") else line + "\n")
         self._f.flush()
         self.count += 1
 
@@ -154,8 +156,18 @@ class TumWriter:
     def closed(self) -> bool:
         return self._f is None
 
-    def __enter__(self) -> "TumWriter":
+    def __enter__(self):
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self.close()
+
+
+class TumWriter(LineWriter):
+    """Incremental TUM writer: ``append(t, x, y, theta)`` writes one pose (see :class:`LineWriter`)."""
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(path)
+
+    def append(self, t: float, x: float, y: float, theta: float) -> None:
+        self.write_line(_tum_line(float(t), float(x), float(y), float(theta)))

@@ -80,12 +80,18 @@ def test_run_writes_every_output_and_a_recording_with_one_row_per_update(tmp_pat
          "--no-progress", "--set", "rerun.particles_max=100"]
     )
     assert code == 0
-    for f in ("trajectory.tum", "recording.rrd", "config.yaml", "summary.json"):
+    for f in ("trajectory.tum", "quality.csv", "recording.rrd", "config.yaml", "summary.json"):
         assert (out / f).is_file(), f
     assert not list(out.glob("*.partial")) and not list(out.glob("*.tmp*"))
     summary = json.loads((out / "summary.json").read_text())
     t, poses = read_tum(out / "trajectory.tum")
-    assert t.size == summary["updates"] > 0
+    # one pose per scan: the filter's updates and the scans update gating skipped (predicted by odometry)
+    assert t.size == summary["scans"] == summary["updates"] + summary["predicted_poses"] == 151
+    assert summary["predicted_poses"] > 0
+    q = np.genfromtxt(out / "quality.csv", delimiter=",", names=True)
+    np.testing.assert_array_equal(q["t"], np.round(t, 6))
+    assert int(q["updated"].sum()) == summary["updates"]
+    assert np.isnan(q["match"][q["updated"] == 0]).all() and (q["match"][q["updated"] == 1] > 0.5).all()
     assert summary["particles_max"] == 500  # the most KLD sampling may use (mit_csail has it on)
     assert summary["particles_min"] <= summary["particles_mean"] <= 500
     for stage in ("predict", "correct", "resample", "estimate", "viz"):

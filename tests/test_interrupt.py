@@ -35,7 +35,7 @@ CONFIG = PROJECT_ROOT / "configs" / "mit_csail.yaml"
 needs_data = pytest.mark.skipif(not (MIT / "log.clf").is_file(), reason=f"MIT CSAIL data not found at {MIT}")
 
 SIGNALS = [pytest.param(signal.SIGINT, id="SIGINT"), pytest.param(signal.SIGTERM, id="SIGTERM")]
-FINAL_NAMES = {"trajectory.tum", "recording.rrd", "config.yaml", "summary.json"}
+FINAL_NAMES = {"trajectory.tum", "quality.csv", "recording.rrd", "config.yaml", "summary.json"}
 
 
 def _env() -> dict:
@@ -66,8 +66,13 @@ def check_outputs(out: Path, *, interrupted: bool, rrd: bool = True) -> dict:
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is interrupted
     t, poses = read_tum(out / "trajectory.tum")
-    assert t.shape[0] == summary["updates"] == poses.shape[1], (t.shape, summary["updates"])
-    assert (out / "trajectory.tum").read_bytes().endswith(b"\n") or summary["updates"] == 0
+    n = summary["updates"] + summary["predicted_poses"]
+    assert t.shape[0] == n == poses.shape[1], (t.shape, n)
+    assert (out / "trajectory.tum").read_bytes().endswith(b"\n") or n == 0
+    # quality.csv: a header and one row per pose, the same times
+    rows = (out / "quality.csv").read_text().splitlines()
+    assert rows[0].startswith("t,updated,") and len(rows) == n + 1
+    assert [float(r.split(",")[0]) for r in rows[1:]] == [round(v, 6) for v in t.tolist()]
     load_config(out / "config.yaml")  # the resolved config reads back
     if rrd:
         from rerun.chunk import RrdReader
@@ -204,7 +209,8 @@ def test_signal_at_exact_points(tmp_path, sig, where, full_updates):
         assert proc.returncode == 130, (proc.returncode, proc.stderr)
         summary = check_outputs(out, interrupted=True)
     if where in ("after_append", "twice"):
-        assert summary["updates"] == 3  # the pose written before the signal is counted, nothing after it
+        # the pose written before the signal is counted, nothing after it
+        assert summary["updates"] + summary["predicted_poses"] == 3
     else:
         assert summary["updates"] == full_updates  # the signal came after the last update
 

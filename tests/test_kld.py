@@ -209,6 +209,7 @@ def test_filter_injects_from_the_hook_sampler():
     pf.recovery_sampler = lambda n, rng, obs: np.repeat(marker, n, axis=1)
     near = np.array([[0.5, 0.0, -0.5], [0.0, 0.5, 0.0]])
     pf.sensor.log_likelihood = lambda parts, obs: np.full(parts.shape[1], float(obs))  # stub: one value per scan
+    pf.sensor.endpoints = lambda obs: np.zeros((2, 0))  # ... and no beams for the quality signal
     for _ in range(20):
         info = pf.step(None, -10.0)
         assert info.injected == 0

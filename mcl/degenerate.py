@@ -1,0 +1,92 @@
+"""Degenerate input: what the filter does with data it cannot use as given.
+
+Degenerate input never puts a NaN into the particles. Each kind warns once
+(``RuntimeWarning``) and is counted in ``InputGuard.events`` (summary.json
+``events``):
+
+* ``nan_ranges``: a scan with NaN or infinite readings (those beams are dropped);
+* ``empty_scans``: a scan with no usable reading (zero beams, or none finite
+  and positive): the update only predicts;
+* ``time_backwards``: a control with dt < 0 (or not finite): dt is taken as 0;
+  the odometry step itself is still applied (the odometry model does not use dt);
+* ``odometry_jumps``: an odometry step longer than ``filter.max_odom_step`` or
+  not finite: the step is a glitch, not motion; it is not applied and the
+  particles are re-spread by ``filter.respread_std`` where they were (poses off
+  the allowed map are drawn again), so the scan decides;
+* ``degenerate_weights``: every weight is zero after the correction (no pose
+  explains the scan): the filter re-spreads the particles around the last
+  estimate moved by the odometry step, twice wider each consecutive time, and
+  reinitialises globally after three consecutive failures (``ParticleFilter``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+
+import numpy as np
+
+from mcl.estimate import wrap_angle
+
+EVENT_KINDS = ("degenerate_weights", "nan_ranges", "odometry_jumps", "time_backwards", "empty_scans")
+
+
+class InputGuard:
+    """Checks scans and controls before the filter uses them; counts and warns once per kind."""
+
+    def __init__(self, max_odom_step: float):
+        self.max_odom_step = float(max_odom_step)
+        self.events = dict.fromkeys(EVENT_KINDS, 0)
+        self._warned: set[str] = set()
+        self._step: list[str] = []  # kinds seen in the current update
+
+    def event(self, kind: str, message: str) -> None:
+        """Count one event; warn the first time of each kind."""
+        self.events[kind] += 1
+        self._step.append(kind)
+        if kind not in self._warned:
+            self._warned.add(kind)
+            warnings.warn(f"{message} (warned once; summary.json counts every {kind} event)", RuntimeWarning,
+                          stacklevel=4)
+
+    def take_step_events(self) -> tuple[str, ...]:
+        """The kinds seen since the last call (one update's events)."""
+        out, self._step = tuple(self._step), []
+        return out
+
+    def usable_scan(self, scan) -> bool:
+        """Whether ``scan`` has a usable reading; counts ``nan_ranges`` and ``empty_scans``."""
+        r = np.asarray(scan.ranges, dtype=np.float64)
+        finite = np.isfinite(r)
+        if not finite.all():
+            self.event("nan_ranges", f"a scan at t={scan.t} has NaN or infinite ranges; those beams are ignored")
+        if not np.any(finite & (r > 0.0)):
+            self.event("empty_scans", f"a scan at t={scan.t} has no usable reading; the update only predicts")
+            return False
+        return True
+
+    def time_backwards(self, dt: float) -> None:
+        """Count (and warn once about) time running backwards between updates, dt < 0 or not finite."""
+        self.event("time_backwards", f"time ran backwards (dt = {dt:.3f} s); dt taken as 0, the odometry step "
+                   "still applied")
+
+    def check_control(self, control):
+        """(control to apply, odometry step in the robot frame (3,)): dt < 0 made 0; (None, None) for an
+        odometry jump or non-finite odometry."""
+        a = np.asarray(control.odom_prev, dtype=np.float64)[:3]
+        b = np.asarray(control.odom_now, dtype=np.float64)[:3]
+        if not (np.isfinite(a).all() and np.isfinite(b).all()):
+            self.event("odometry_jumps", "odometry is not finite; the step is not applied, the particles are re-spread")
+            return None, None
+        step = math.hypot(b[0] - a[0], b[1] - a[1])
+        if step > self.max_odom_step:
+            self.event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> filter.max_odom_step = "
+                       f"{self.max_odom_step} m); the step is not applied, the particles are re-spread")
+            return None, None
+        if not control.dt >= 0.0:
+            self.time_backwards(control.dt)
+            control = dataclasses.replace(control, dt=0.0)
+        c, s = math.cos(a[2]), math.sin(a[2])
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        return control, np.array([c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(b[2] - a[2]))])
