@@ -24,8 +24,9 @@ import math
 
 import numpy as np
 
-from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik
+from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik, likelihood_field_loglik_serial
 from mcl.kernels.raycast import segments_blocked
+from mcl.parallel import choose
 
 
 def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -144,8 +145,8 @@ class LikelihoodField:
         e_cells = np.ascontiguousarray(e * self.inv_res)
         if out is None:
             out = np.empty(p.shape[1])
-        likelihood_field_loglik(p, e_cells, self.table, self.origin[0], self.origin[1],
-                                self.inv_res, self.offmap, self.exponent, out)
+        kernel = choose(likelihood_field_loglik, likelihood_field_loglik_serial, p.shape[1] * e_cells.shape[1])
+        kernel(p, e_cells, self.table, self.origin[0], self.origin[1], self.inv_res, self.offmap, self.exponent, out)
         return out
 
     def beam_support(self, particles, weights, endpoints) -> np.ndarray:
@@ -343,7 +344,7 @@ class BeamModel:
 
     def log_likelihood(self, particles, observation, out=None) -> np.ndarray:
         """(N,) float64 log p(z | x, m) per particle; no beams gives zeros."""
-        from mcl.kernels.beam import beam_loglik, beam_loglik_lut
+        from mcl.kernels.beam import beam_loglik, beam_loglik_lut, beam_loglik_lut_serial, beam_loglik_serial
 
         p = np.ascontiguousarray(particles, dtype=np.float64)
         if p.ndim != 2 or p.shape[0] != 3:
@@ -352,10 +353,13 @@ class BeamModel:
         if out is None:
             out = np.empty(p.shape[1])
         ox, oy = self.origin
+        work = p.shape[1] * ranges.shape[0]
         if self.table is not None:
-            beam_loglik_lut(p, ranges, angles, lp[0], lp[1], lp[2], self.table, self.unit, ox, oy, self.resolution,
-                            zmax, self.params, self.exponent, out)
-        else:
-            beam_loglik(p, ranges, angles, lp[0], lp[1], lp[2], self.blocked, ox, oy, self.resolution, zmax,
-                        self.params, self.exponent, out)
+            kernel = choose(beam_loglik_lut, beam_loglik_lut_serial, work)
+            kernel(p, ranges, angles, lp[0], lp[1], lp[2], self.table, self.unit, ox, oy, self.resolution, zmax,
+                   self.params, self.exponent, out)
+        else:  # a ray cast walks some tens of cells: count it as 30 steps
+            kernel = choose(beam_loglik, beam_loglik_serial, 30 * work)
+            kernel(p, ranges, angles, lp[0], lp[1], lp[2], self.blocked, ox, oy, self.resolution, zmax, self.params,
+                   self.exponent, out)
         return out

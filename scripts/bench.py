@@ -1,5 +1,9 @@
 #!/usr/bin/env python
-"""Time the filter's stages on the intel_lab map, after warm-up.
+"""Time the filter: its kernels, whole updates on small and huge maps, and whole runs on a busy machine.
+
+Sections (``--section``, default all):
+
+``kernels``
 
 Stages: prediction with map rejection (noise drawing included), likelihood
 field, normalisation + systematic resampling, and the whole update
@@ -10,7 +14,18 @@ Each figure is the median of consecutive calls (threads stay awake). A
 parallel call after the threads have idled pays an OpenMP wake-up; the
 "idle" column is the median when every call follows a 50 ms sleep.
 
-    .venv/bin/python scripts/bench.py [--quick] [--data DIR]
+``maps``
+    Whole filter updates (``ParticleFilter.step`` through ``mcl.runner.run``,
+    default config, a fixed N) on the bundled 20 m demo map, intel_lab and the
+    250 m x 245 m infinite_corridor map, tracking and global: the median ms of
+    predict + correct + estimate per update must not grow with the map.
+
+``load``
+    A whole ``mcl run`` (default config, tracking, the first scans of a log) on an
+    idle machine and with a spinning process on every other core: the ratio of
+    the loop times is the price of a shared machine.
+
+    .venv/bin/python scripts/bench.py [--section kernels|maps|load|all] [--quick] [--data DIR]
 """
 
 from __future__ import annotations
@@ -178,12 +193,137 @@ def bench_beam(grid, mask, ranges, angles, max_range, laser_pose, rng, quick):
     print()
 
 
+def _short_log(src: Path, n_scans: int, dest: Path) -> Path:
+    """The first ``n_scans`` laser lines of a CARMEN log (and the lines between them), written to ``dest``."""
+    lines, k = [], 0
+    with open(src, encoding="utf-8") as f:
+        for line in f:
+            lines.append(line)
+            if line.startswith(("FLASER", "ROBOTLASER1")):
+                k += 1
+                if k == n_scans:
+                    break
+    dest.write_text("".join(lines), encoding="utf-8")
+    return dest
+
+
+def _datasets(data: Path) -> dict:
+    """name -> (folder, start pose) for the maps section: the bundled demo and the real logs present."""
+    import json
+
+    out = {"demo (20 m)": (ROOT / "data" / "demo", None)}
+    for name, start in (("intel_lab", [0.600266, -0.032033, -0.354665]), ("infinite_corridor", None)):
+        d = data / name
+        if (d / "map.yaml").exists():
+            if start is None:
+                start = json.loads((d / "meta.json").read_text())["start"]
+            out[name] = (d, start)
+    return out
+
+
+def _run(folder: Path, start, overrides, n_scans: int, tmp: Path, threads: int | None = None) -> dict:
+    """``mcl.runner.run`` on the first ``n_scans`` of a data folder; returns the summary."""
+    from mcl.config import load_config
+    from mcl.runner import run
+
+    log = _short_log(folder / "log.clf", n_scans, tmp / f"{folder.name}-{n_scans}.clf")
+    pose = ["filter.global_localization=true"] if start is None else [
+        f"filter.initial_pose={list(start)}", "filter.global_localization=false"]
+    if (folder / "sim.yaml").exists() and start is None and "global" not in str(overrides):
+        import yaml
+        pose = [f"filter.initial_pose={yaml.safe_load((folder / 'sim.yaml').read_text())['start_pose']}",
+                "filter.global_localization=false"]
+    cfg = load_config(ROOT / "configs" / "default.yaml",
+                      [f"map={folder / 'map.yaml'}", f"log={log}", "truth=null", "rerun.mode=off", *pose, *overrides])
+    saved = numba.get_num_threads()
+    try:
+        if threads is not None:
+            numba.set_num_threads(threads)
+        return run(cfg, tmp / "out", progress=False, echo=lambda *_: None)
+    finally:
+        numba.set_num_threads(saved)
+
+
+def bench_maps(data: Path, quick: bool) -> None:
+    """Per-update cost of the whole filter on maps of 20 m to 250 m, for the same N."""
+    import tempfile
+
+    n, scans = 5000, (60 if quick else 200)
+    fixed = [f"filter.particles={n}", "filter.kld=false"]
+    print(f"# whole updates, default config with a fixed N = {n} (kld off), the first {scans} scans of each log;\n"
+          "# ms per update (mean over the run, after a warm-up run): predict, correct, estimate (clusters + quality),\n"
+          "# resample; 'global' starts uniform over the map's free space (recovery keeps injecting while lost)")
+    print(f"{'map':<22}{'cells':>12}{'mode':>9}{'predict':>9}{'correct':>9}{'estimate':>9}{'resample':>9}{'p+c+e':>8}")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for name, (folder, start) in _datasets(data).items():
+            from mcl.maps import load_map
+
+            g = load_map(folder / "map.yaml")
+            for mode in ("tracking", "global"):
+                extra = fixed + (["filter.global_localization=true"] if mode == "global" else [])
+                st = start if mode == "tracking" else None
+                _run(folder, st, extra, 5, tmp)  # warm-up: kernels, map tables
+                ms = _run(folder, st, extra, scans, tmp)["ms_per_update"]
+                pce = ms["predict"] + ms["correct"] + ms["estimate"]
+                print(f"{name:<22}{g.width * g.height:>12,}{mode:>9}{ms['predict']:9.2f}{ms['correct']:9.2f}"
+                      f"{ms['estimate']:9.2f}{ms['resample']:9.2f}{pce:8.2f}", flush=True)
+    print()
+
+
+def bench_load(data: Path, quick: bool) -> None:
+    """A whole run idle, and with a spinning process on every other core."""
+    import subprocess
+    import tempfile
+
+    sets = _datasets(data)
+    name = "infinite_corridor" if "infinite_corridor" in sets else "demo (20 m)"
+    folder, start = sets[name]
+    scans = 150 if quick else 500
+    cores = os.cpu_count() or 1
+    print(f"# whole run on {name} (first {scans} scans, default config, tracking), loop wall time;\n"
+          f"# busy: {max(cores - 1, 0)} spinning process(es) keep the other core(s) busy")
+    print(f"{'machine':<10}{'threads':>8}{'loop s':>9}{'ms/update':>10}{'ratio':>7}")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        _run(folder, start, [], 5, tmp)  # warm-up
+        base = {}
+        for threads in [None, 1]:
+            label = "all" if threads is None else str(threads)
+            for busy in (False, True):
+                spin = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(cores - 1)] \
+                    if busy else []
+                try:
+                    time.sleep(0.5 if busy else 0.0)
+                    s = _run(folder, start, [], scans, tmp, threads=threads)
+                finally:
+                    for p in spin:
+                        p.kill()
+                        p.wait()
+                loop = s["wall_time_s"]["loop"]
+                base.setdefault(label, loop)
+                per = 1e3 * loop / max(s["updates"], 1)
+                print(f"{'busy' if busy else 'idle':<10}{label:>8}{loop:9.2f}{per:10.2f}{loop / base[label]:7.2f}",
+                      flush=True)
+    print()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--section", choices=["kernels", "maps", "load", "all"], default="all")
     ap.add_argument("--quick", action="store_true", help="fewer repetitions, no idle-latency column")
     ap.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data", help="folder holding intel_lab/")
     args = ap.parse_args(argv)
+    if args.section in ("maps", "all"):
+        bench_maps(args.data, args.quick)
+    if args.section in ("load", "all"):
+        bench_load(args.data, args.quick)
+    if args.section in ("kernels", "all"):
+        bench_kernels(args)
+    return 0
 
+
+def bench_kernels(args) -> None:
     grid, ranges, angles, max_range, laser_pose, note = load_world(args.data)
     mcfg = motion_cfg()
     mask = allowed_mask(grid, mcfg.robot_radius)
@@ -270,7 +410,6 @@ def main(argv=None) -> int:
     finally:
         numba.set_num_threads(saved)
     bench_beam(grid, mask, ranges, angles, max_range, laser_pose, rng, args.quick)
-    return 0
 
 
 if __name__ == "__main__":

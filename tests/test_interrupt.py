@@ -120,7 +120,7 @@ def test_signal_mid_run_keeps_every_update(tmp_path, sig):
     _no_traceback(stderr)
     assert "Interrupted after" in stderr
     summary = check_outputs(out, interrupted=True)
-    assert 5 <= summary["updates"] < summary["scans"] == 1988
+    assert 5 <= summary["updates"] + summary["predicted_poses"] < summary["scans"] == 1988
 
 
 # --------------------------------------------------------------------------- a signal at exact points

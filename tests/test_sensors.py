@@ -162,7 +162,7 @@ def test_same_result_with_one_and_two_threads():
     g = box_grid()
     lf = LikelihoodField(g, sensor_cfg())
     rng = np.random.default_rng(3)
-    n = 50_000
+    n = 70_000  # x 61 beams: above PARALLEL_MIN_WORK, so two threads do run the parallel kernel
     p = np.stack([rng.uniform(-1, 5, n), rng.uniform(-2, 2, n), rng.uniform(-np.pi, np.pi, n)])
     e = np.stack([np.linspace(-3, 3, 61), np.linspace(2, -2, 61)])
     saved = numba.get_num_threads()
@@ -174,6 +174,36 @@ def test_same_result_with_one_and_two_threads():
     finally:
         numba.set_num_threads(saved)
     assert np.array_equal(a, b)
+
+
+def test_serial_twin_gives_the_parallel_kernels_result_and_choose_picks_by_work():
+    from mcl.kernels.likelihood import likelihood_field_loglik_serial
+    from mcl.parallel import PARALLEL_MIN_WORK, choose
+
+    g = box_grid()
+    lf = LikelihoodField(g, sensor_cfg())
+    rng = np.random.default_rng(4)
+    n = 5000
+    p = np.ascontiguousarray(np.stack([rng.uniform(-1, 5, n), rng.uniform(-2, 2, n), rng.uniform(-np.pi, np.pi, n)]))
+    e = np.ascontiguousarray(np.stack([np.linspace(-3, 3, 61), np.linspace(2, -2, 61)]) / g.resolution)
+    a, b = np.empty(n), np.empty(n)
+    args = (p, e, lf.table, g.origin[0], g.origin[1], lf.inv_res, lf.offmap, 1.0)
+    likelihood_field_loglik(*args, a)
+    likelihood_field_loglik_serial(*args, b)
+    assert np.array_equal(a, b)
+    assert not likelihood_field_loglik_serial.targetoptions.get("parallel")
+    assert likelihood_field_loglik.targetoptions.get("parallel")
+    saved = numba.get_num_threads()
+    try:
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        big = choose(likelihood_field_loglik, likelihood_field_loglik_serial, PARALLEL_MIN_WORK)
+        assert big is (likelihood_field_loglik if numba.get_num_threads() > 1 else likelihood_field_loglik_serial)
+        assert choose(likelihood_field_loglik, likelihood_field_loglik_serial, PARALLEL_MIN_WORK - 1) \
+            is likelihood_field_loglik_serial
+        numba.set_num_threads(1)
+        assert choose(likelihood_field_loglik, likelihood_field_loglik_serial, 10**12) is likelihood_field_loglik_serial
+    finally:
+        numba.set_num_threads(saved)
 
 
 def test_kernel_direct_call_writes_out():

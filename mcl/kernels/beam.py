@@ -25,6 +25,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from mcl.kernels import serial_twin
 from mcl.kernels.raycast import cast_ray
 
 _SQRT2 = math.sqrt(2.0)
@@ -149,3 +150,7 @@ def beam_loglik_lut(particles, ranges, angles, lx, ly, lth, table, unit, ox, oy,
                 zs = zmax
             acc += math.log(beam_prob(ranges[j], zs, zmax, params))
         out[i] = scale * acc
+
+
+beam_loglik_serial = serial_twin(beam_loglik)
+beam_loglik_lut_serial = serial_twin(beam_loglik_lut)

@@ -1,6 +1,6 @@
 """Landmark model kernel: log p(z | x, m) of J range-bearing observations for N poses.
 
-One pass over the particles (parallel), the J observations in an inner loop,
+One serial pass over the particles (J is small: threads would not pay), the J observations in an inner loop,
 all in registers: the NumPy version (``mcl.landmarks.landmark_log_likelihood_numpy``,
 the oracle) makes about ten (N,) temporaries per observation.
 """
@@ -8,10 +8,10 @@ the oracle) makes about ten (N,) temporaries per observation.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def landmark_loglik(particles, obs, sigma_r, sigma_b, z_det, c_fp, out):
     """out[n] = sum_j log(z_det * N(er_nj; sigma_r) * N(eb_nj; sigma_b) + c_fp).
 
@@ -27,7 +27,7 @@ def landmark_loglik(particles, obs, sigma_r, sigma_b, z_det, c_fp, out):
     inv_r = 1.0 / sigma_r
     inv_b = 1.0 / sigma_b
     two_pi = 2.0 * math.pi
-    for i in prange(n):
+    for i in range(n):
         x = particles[0, i]
         y = particles[1, i]
         th = particles[2, i]

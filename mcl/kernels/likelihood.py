@@ -9,6 +9,8 @@ import math
 
 from numba import njit, prange
 
+from mcl.kernels import serial_twin
+
 
 @njit(cache=True, parallel=True)
 def likelihood_field_loglik(particles, endpoints_cells, table, ox, oy, inv_res, offmap, scale, out):
@@ -51,7 +53,10 @@ def likelihood_field_loglik(particles, endpoints_cells, table, ox, oy, inv_res, 
         out[i] = scale * acc
 
 
-@njit(cache=True, parallel=True)
+likelihood_field_loglik_serial = serial_twin(likelihood_field_loglik)
+
+
+@njit(cache=True)
 def beam_explained_weight(px, py, cos_th, sin_th, weights, endpoints_cells, dist, max_d, out):
     """out[k] = sum of weights[i] over the particles i whose endpoint k lies within max_d of an obstacle.
 
@@ -62,14 +67,14 @@ def beam_explained_weight(px, py, cos_th, sin_th, weights, endpoints_cells, dist
     endpoints_cells (2, K): robot-frame endpoints in cell units (as
     ``likelihood_field_loglik``); dist (H, W) float32 metres to the nearest
     occupied cell centre, row 0 at the origin. Endpoints off the map are not
-    explained. Parallel over beams; each beam's sum runs over the particles
-    in order, so the result does not depend on the thread count.
+    explained. Serial: it sees at most 2,000 particles (``mcl.sensors``), too
+    little work to pay for waking threads.
     """
     n = px.shape[0]
     k = endpoints_cells.shape[1]
     h_cells = dist.shape[0]
     w_cells = dist.shape[1]
-    for j in prange(k):
+    for j in range(k):
         bx = endpoints_cells[0, j]
         by = endpoints_cells[1, j]
         acc = 0.0

@@ -2,12 +2,14 @@
 
 Pure functions over arrays. The caller draws the standard normal noise with
 its ``numpy.random.Generator`` and passes it in, so a kernel's result does not
-depend on the numba thread count. Angles come out in (-pi, pi].
+depend on the numba thread count. Angles come out in (-pi, pi]. Serial: one
+motion step is a few arithmetic operations per particle (0.1 us), far below what
+waking threads costs.
 """
 
 import math
 
-from numba import njit, prange
+from numba import njit
 
 _TWO_PI = 2.0 * math.pi
 
@@ -34,7 +36,7 @@ def allowed_at(allowed, x, y, ox, oy, inv_res):
     return False
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def sample_odometry(particles, noise, drot1, dtrans, drot2, s_rot1, s_trans, s_rot2, out):
     """Apply one noisy odometry step to every particle.
 
@@ -47,7 +49,7 @@ def sample_odometry(particles, noise, drot1, dtrans, drot2, s_rot1, s_trans, s_r
         theta' = wrap(theta + rot1_hat + rot2_hat)
     """
     n = particles.shape[1]
-    for i in prange(n):
+    for i in range(n):
         r1 = drot1 + s_rot1 * noise[0, i]
         tr = dtrans + s_trans * noise[1, i]
         r2 = drot2 + s_rot2 * noise[2, i]
@@ -58,7 +60,7 @@ def sample_odometry(particles, noise, drot1, dtrans, drot2, s_rot1, s_trans, s_r
         out[2, i] = wrap(h + r2)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def sample_odometry_map(particles, noise, idx, drot1, dtrans, drot2, s_rot1, s_trans, s_rot2,
                         allowed, ox, oy, inv_res, out, ok):
     """Noisy odometry step for the particles idx, plus the map check, in one pass.
@@ -73,7 +75,7 @@ def sample_odometry_map(particles, noise, idx, drot1, dtrans, drot2, s_rot1, s_t
     """
     m = idx.shape[0]
     n_ok = 0
-    for j in prange(m):
+    for j in range(m):
         i = idx[j]
         r1 = drot1 + s_rot1 * noise[0, j]
         tr = dtrans + s_trans * noise[1, j]

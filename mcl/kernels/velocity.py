@@ -2,7 +2,9 @@
 
 Pure functions over arrays. The caller draws the unit-std noise with its
 ``numpy.random.Generator`` (rows v, omega, gamma) and passes it in, so a
-kernel's result does not depend on the numba thread count.
+kernel's result does not depend on the numba thread count. Serial: one motion
+step is a few arithmetic operations per particle (0.1 us), far below what waking
+threads costs.
 
 The arc (book lines 5-6)
 
@@ -21,7 +23,7 @@ the cancellation of two nearly equal sines.
 
 import math
 
-from numba import njit, prange
+from numba import njit
 
 from mcl.kernels.motion import allowed_at, wrap
 
@@ -40,7 +42,7 @@ def _move(x, y, th, v_hat, w_hat, g_hat, dt):
     return x + d * math.cos(h), y + d * math.sin(h), wrap(th + w_hat * dt + g_hat * dt)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def sample_velocity(particles, noise, v, w, dt, s_v, s_w, s_g, out):
     """Apply one noisy velocity command (v, w) for dt to every particle.
 
@@ -50,7 +52,7 @@ def sample_velocity(particles, noise, v, w, dt, s_v, s_w, s_g, out):
         theta' = wrap(theta + w_hat dt + g_hat dt)
     """
     n = particles.shape[1]
-    for i in prange(n):
+    for i in range(n):
         x, y, th = _move(particles[0, i], particles[1, i], particles[2, i],
                          v + s_v * noise[0, i], w + s_w * noise[1, i], s_g * noise[2, i], dt)
         out[0, i] = x
@@ -58,7 +60,7 @@ def sample_velocity(particles, noise, v, w, dt, s_v, s_w, s_g, out):
         out[2, i] = th
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def sample_velocity_map(particles, noise, idx, v, w, dt, s_v, s_w, s_g, allowed, ox, oy, inv_res, out, ok):
     """sample_velocity for the particles idx (noise[:, j] moves particle idx[j]) plus the map check.
 
@@ -67,7 +69,7 @@ def sample_velocity_map(particles, noise, idx, v, w, dt, s_v, s_w, s_g, allowed,
     """
     m = idx.shape[0]
     n_ok = 0
-    for j in prange(m):
+    for j in range(m):
         i = idx[j]
         x, y, th = _move(particles[0, i], particles[1, i], particles[2, i],
                          v + s_v * noise[0, j], w + s_w * noise[1, j], s_g * noise[2, j], dt)
