@@ -382,42 +382,71 @@ class AugmentedMCL:
     def inject_probability(self) -> float:
         return self.averages.inject_probability
 
+    global_share = 1.0  # every injected pose from the recovery sampler (uniform over free space)
+    local_std = None
+
 
 class LostRecovery:
-    """Recovery only when lost: ``fraction`` of N from the recovery sampler at each resample while the quality
-    signal (``mcl.quality``) says the filter is lost, none otherwise.
+    """Recovery only when lost, local before global.
 
-    The w_fast / w_slow ratio of augmented MCL reacts to the scene as much as to
-    being lost (open halls, long corridors and many no-return beams lower the
-    mean likelihood at the true pose), and injected poses in look-alike places
-    then hijack a correct track. The quality signal asks instead whether the
-    scan fits the map at the estimate, which does not depend on the scene.
+    While the quality signal (``mcl.quality``) says the filter is lost, a
+    ``fraction`` of N is drawn at each resample instead of from the weighted
+    set: first around the estimate, from a Gaussian whose std starts at
+    ``local_std`` and doubles every ``lost_after`` lost updates (up to 8x),
+    then, once the filter has been lost for ``global_after`` updates, half of
+    them uniformly over free space. None while it is not lost.
+
+    The w_fast / w_slow ratio of augmented MCL reacts to the scene as much as
+    to being lost (open halls, long corridors and many no-return beams lower
+    the mean likelihood at the true pose), and injected poses in look-alike
+    places then hijack a correct track. The quality signal asks instead
+    whether the scan fits the map at the estimate, which does not depend on
+    the scene. And a track that slipped is far more often a few metres off
+    than kidnapped: a uniform draw over a 250 m map of similar corridors finds
+    a look-alike pose that fits one scan better than the slipped cloud does
+    (measured on infinite_corridor: the estimate jumped 134 m), while a local
+    spread finds the true pose within a few updates.
     """
 
     name = "lost"
 
-    def __init__(self, fraction: float):
+    def __init__(self, fraction: float, local_std, global_after: int, lost_after: int):
         self.fraction = float(fraction)
-        self.lost = False
+        self.base_std = np.asarray(local_std, dtype=np.float64)
+        self.global_after = int(global_after)
+        self.lost_after = max(int(lost_after), 1)
+        self.lost_updates = 0  # consecutive updates the filter has believed it is lost
 
     def observe_likelihood(self, logw_prior, loglik_per_beam, injected) -> None:
         pass
 
     def observe_lost(self, lost: bool) -> None:
-        self.lost = bool(lost)
+        self.lost_updates = self.lost_updates + 1 if lost else 0
 
     @property
     def inject_probability(self) -> float:
-        return self.fraction if self.lost else 0.0
+        return self.fraction if self.lost_updates else 0.0
+
+    @property
+    def global_share(self) -> float:
+        """The share of the injected poses drawn uniformly over free space (the rest around the estimate)."""
+        return 0.5 if self.lost_updates >= self.global_after else 0.0
+
+    @property
+    def local_std(self) -> np.ndarray:
+        """Std (x, y, theta) of the poses drawn around the estimate: doubling every lost_after lost updates."""
+        k = max(self.lost_updates - 1, 0) // self.lost_after
+        return self.base_std * 2.0 ** min(k, 3)
 
 
-def make_recovery(fc, global_start: bool):
-    """The recovery policy ``filter.recovery`` names (None: no recovery) for a run that starts globally or not."""
+def make_recovery(fc, global_start: bool, lost_after: int = 3):
+    """The recovery policy ``filter.recovery`` names (None: no recovery) for a run that starts globally or not;
+    ``lost_after`` is the quality section's (the local spread doubles at that pace)."""
     mode = fc.recovery
     if mode == "auto":
         mode = "augmented" if global_start else False
     if mode is True or mode == "augmented":
         return AugmentedMCL(fc.recovery_alpha_slow, fc.recovery_alpha_fast)
     if mode == "lost":
-        return LostRecovery(fc.recovery_fraction)
+        return LostRecovery(fc.recovery_fraction, fc.recovery_local_std, fc.recovery_global_after, lost_after)
     return None

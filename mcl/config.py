@@ -71,6 +71,8 @@ class FilterConfig:
     # auto: augmented for global localization, off when tracking from a pose; false: never.
     recovery: bool | Literal["lost", "augmented", "auto"] = False
     recovery_fraction: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
+    recovery_local_std: tuple[float, float, float] = (0.5, 0.5, 0.3)  # lost: std x, y (m), theta (rad) around the estimate
+    recovery_global_after: int = field(default=10, metadata=_rng(0, 1_000_000))  # lost updates before uniform draws
     recovery_alpha_slow: float = field(default=0.001, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_alpha_fast: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
 
@@ -172,9 +174,8 @@ class QualityConfig:
     """The localization-quality signal and the lost belief (mcl.quality)."""
 
     distance: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m: a beam matches the map within this
-    lost_below: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # an update is bad when match < this ...
-    contradiction_above: float = field(default=0.2, metadata=_rng(0.0, 1.0))  # ... or contradiction > this
-    lost_after: int = field(default=3, metadata=_rng(1, 1_000_000))  # consecutive bad (good) updates to turn lost (back)
+    lost_below: float = field(default=0.6, metadata=_rng(-2.0, 1.0))  # an update is bad when match - 2 contradiction < this
+    lost_after: int = field(default=3, metadata=_rng(1, 10_000))  # lost when this many of the last 2k-1 updates were bad
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -327,6 +328,8 @@ def _cross_checks(cfg: Config) -> None:
         raise ConfigError("filter.initial_std: standard deviations must be >= 0")
     if any(not v > 0 for v in cfg.filter.respread_std):
         raise ConfigError("filter.respread_std: standard deviations must be > 0")
+    if any(not v > 0 for v in cfg.filter.recovery_local_std):
+        raise ConfigError("filter.recovery_local_std: standard deviations must be > 0")
     f = cfg.filter
     if f.recovery in (True, "augmented", "auto") and f.recovery_alpha_slow >= f.recovery_alpha_fast:
         raise ConfigError(

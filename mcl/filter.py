@@ -112,7 +112,7 @@ class ParticleFilter:
         # the policies
         self.guard = InputGuard(fc.max_odom_step)
         self.kld = KLDSampling(fc, grid) if fc.kld else None
-        self.recovery = make_recovery(fc, global_start=True)  # set again by init_gaussian / init_global
+        self.recovery = make_recovery(fc, True, cfg.quality.lost_after)  # set again by init_gaussian / init_global
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
         self.quality = ScanQuality(grid, cfg.quality)
@@ -175,7 +175,7 @@ class ParticleFilter:
         p += np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
-        self.recovery = make_recovery(self.cfg.filter, global_start=False)
+        self.recovery = make_recovery(self.cfg.filter, False, self.cfg.quality.lost_after)
         self.quality.reset(lost=False)
 
     def init_global(self) -> None:
@@ -185,7 +185,7 @@ class ParticleFilter:
 
     def _start_global(self) -> None:
         if self.cfg.filter.recovery == "auto" and self.recovery is None:
-            self.recovery = make_recovery(self.cfg.filter, global_start=True)
+            self.recovery = make_recovery(self.cfg.filter, True, self.cfg.quality.lost_after)
         self.quality.reset(lost=True)
 
     def sample_uniform(self, n: int, rng: np.random.Generator, observation=None) -> np.ndarray:
@@ -278,11 +278,11 @@ class ParticleFilter:
             if control is None:  # a jump: not motion
                 self._delta = np.zeros(3)
                 if self.kld is not None and self.kld.pending is not None:
-                    self._kld_draw(None)
+                    self._kld_draw(None, info)
                 self.particles = self._draw_around(self.particles, np.asarray(self.cfg.filter.respread_std))
                 return
         if self.kld is not None and self.kld.pending is not None:
-            new, ok, tries = self._kld_draw(control)
+            new, ok, tries = self._kld_draw(control, info)
             if control is None:
                 return
         elif control is None:
@@ -307,13 +307,14 @@ class ParticleFilter:
             ok = fin if ok is None else ok & fin
         return new, ok, tries
 
-    def _kld_draw(self, control: Control | None):
+    def _kld_draw(self, control: Control | None, info: StepInfo):
         """Draw the scheduled KLD resample (moved by ``control`` when there is one); the new set replaces the
         particles with equal weights. Returns (particles, ok, tries) of the motion."""
         move = (lambda batch: self._move(batch, control)) if control is not None else None
         new, fresh, ok, tries = self.kld.draw(self.particles, self.logw, self.rng, move=move)
         self._set(new)
-        self._injected = fresh if fresh.any() else None
+        info.injected = int(np.count_nonzero(fresh))
+        self._injected = fresh if info.injected else None
         return new, ok, tries
 
     def correct(self, observation, info: StepInfo | None = None) -> None:
@@ -416,22 +417,42 @@ class ParticleFilter:
         # equally badly has a high ESS and would otherwise never inject.
         if info.ess >= fc.resample_threshold * self.n and p == 0.0:
             return
-        obs = self._observation
         info.resampled = True
+        inject = self._injection_sampler()
         if self.kld is not None:
-            self.kld.schedule(p, lambda n: self.recovery_sampler(n, self.rng, obs))
+            self.kld.schedule(p, inject)
             return
         n_inj = draw_injected(self.n, p, self.rng)
         idx = resample(fc.resampling, self.logw, self.rng, n=self.n - n_inj)
         new = self.particles[:, idx]
         if n_inj:
-            new = np.concatenate([new, self.recovery_sampler(n_inj, self.rng, obs)], axis=1)
+            new = np.concatenate([new, inject(n_inj)], axis=1)
         fresh = np.arange(new.shape[1]) >= new.shape[1] - n_inj
         info.injected = n_inj
         self._set(np.ascontiguousarray(new))
         self._injected = fresh if n_inj else None
 
     maybe_resample = resample  # the name of earlier versions
+
+    def _injection_sampler(self):
+        """sampler(n) -> (3, n): the poses recovery injects now. The policy's ``global_share`` of them (a binomial
+        draw) from ``recovery_sampler`` (uniform over free space, or from landmarks), the rest around this update's
+        estimate with the policy's ``local_std`` (LostRecovery spreads locally before it searches the map)."""
+        obs = self._observation
+        share = float(getattr(self.recovery, "global_share", 1.0)) if self.recovery is not None else 1.0
+        std = getattr(self.recovery, "local_std", None) if self.recovery is not None else None
+        centre = self.last_estimate.mean if self.last_estimate is not None else None
+
+        def sample(n: int) -> np.ndarray:
+            if std is None or centre is None or share >= 1.0:
+                return self.recovery_sampler(n, self.rng, obs)
+            n_glob = int(self.rng.binomial(n, share)) if share > 0.0 else 0
+            local = self._draw_around(centre, std, n - n_glob)
+            if n_glob == 0:
+                return local
+            return np.ascontiguousarray(np.concatenate([local, self.recovery_sampler(n_glob, self.rng, obs)], axis=1))
+
+        return sample
 
     # ------------------------------------------------------------------ degenerate weights
 
@@ -464,10 +485,10 @@ class ParticleFilter:
         """(N,) bool: poses on free cells of the map (off the map: False)."""
         return self.grid.mask_at(np.asarray(self.grid.free), p[0], p[1])
 
-    def _draw_around(self, centres: np.ndarray, std: np.ndarray) -> np.ndarray:
-        """(3, N) poses ~ N(centres, diag(std^2)) (centres (3,) or (3, N)), drawn again (up to max_tries) where
-        the map does not allow them; those never allowed keep the last draw. Always finite."""
-        n = self.n
+    def _draw_around(self, centres: np.ndarray, std: np.ndarray, n: int | None = None) -> np.ndarray:
+        """(3, n) poses ~ N(centres, diag(std^2)) (centres (3,) or (3, n); n defaults to N), drawn again (up to
+        max_tries) where the map does not allow them; those never allowed keep the last draw. Always finite."""
+        n = self.n if n is None else int(n)
         c = np.broadcast_to(np.asarray(centres, dtype=np.float64).reshape(3, -1), (3, n))
         std = np.asarray(std, dtype=np.float64)[:, None]
         p = c + self.rng.standard_normal((3, n)) * std
