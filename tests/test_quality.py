@@ -1,0 +1,115 @@
+"""The localization-quality signal (mcl.quality): scan-to-map fit and the lost belief."""
+
+from __future__ import annotations
+
+import csv
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from mcl.config import PROJECT_ROOT, load_config
+from mcl.quality import Fit, ScanQuality
+
+
+def _box_grid(size=10.0, res=0.05):
+    """A closed 10 m x 10 m room (walls one cell thick) with its distance field."""
+    from scipy.ndimage import distance_transform_edt
+
+    n = int(round(size / res))
+    occ = np.zeros((n, n), dtype=bool)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    dist = distance_transform_edt(~occ) * res
+    return SimpleNamespace(distance=dist, occupied=occ, origin=(0.0, 0.0), resolution=res)
+
+
+def _scan_from(pose, grid, n=90):
+    """Exact robot-frame endpoints (2, n) of a 360-degree scan from ``pose`` in the box room."""
+    x, y, th = pose
+    a = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    wx, wy = np.cos(a + th), np.sin(a + th)
+    lo, hi = 0.05 + 1e-3, 10.0 - 0.05 - 1e-3  # inner faces of the walls
+    with np.errstate(divide="ignore"):
+        tx = np.where(wx > 0, (hi - x) / wx, (lo - x) / wx)
+        ty = np.where(wy > 0, (hi - y) / wy, (lo - y) / wy)
+    r = np.minimum(np.abs(tx), np.abs(ty))
+    return np.vstack([r * np.cos(a), r * np.sin(a)])
+
+
+T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
+QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3)
+
+
+def test_fit_is_high_at_the_true_pose_and_low_away_from_it():
+    g = _box_grid()
+    q = ScanQuality(g, QCFG)
+    truth = (3.0, 4.0, 0.3)
+    e = _scan_from(truth, g)
+    at = q.fit(truth, e)
+    assert at.beams == 90 and at.match == pytest.approx(1.0) and at.contradiction == 0.0
+    # 1.5 m off along x: the beams towards +x end beyond the east wall (through it), the rest short of walls.
+    off = q.fit((4.5, 4.0, 0.3), e)
+    assert off.match < 0.5 and off.contradiction > 0.1 and off.score < QCFG.lost_below
+    assert q.bad(off) and not q.bad(at)
+
+
+def test_no_beam_is_no_evidence():
+    q = ScanQuality(_box_grid(), QCFG)
+    f = q.fit((3.0, 3.0, 0.0), np.zeros((2, 0)))
+    assert f.beams == 0 and np.isnan(f.match)
+    q.update(Fit(10, 0.0, 1.0))
+    q.update(Fit(10, 0.0, 1.0))
+    assert not q.lost
+    assert q.update(f) is False  # does not count as bad
+    assert q.update(Fit(10, 0.0, 1.0)) is True
+
+
+def test_lost_belief_needs_three_bad_of_five_and_clears_at_one_of_five():
+    q = ScanQuality(_box_grid(), QCFG)
+    good, bad = Fit(60, 0.95, 0.0), Fit(60, 0.2, 0.3)
+    seq = [good, bad, good, bad, good]  # 2 bad of 5: not lost
+    assert [q.update(f) for f in seq] == [False] * 5
+    assert q.update(bad) is True  # bad, good, bad, good, bad: 3 of 5
+    assert q.update(good) is True  # good, bad, good, bad, good: still 2 bad
+    assert q.update(good) is True  # bad, good, bad, good, good: 2
+    assert q.update(good) is False  # good, bad, good, good, good: 1 of 5 -> no longer lost
+
+
+@pytest.fixture(scope="module")
+def kidnapped_world(tmp_path_factory):
+    from mcl.simulate import simulate
+
+    out = tmp_path_factory.mktemp("kidnap")
+    sim = simulate(out, seed=3, duration=40.0, kidnap_at=20.0)
+    return out, sim
+
+
+def _run(data, sim, out, *sets):
+    from mcl.runner import run
+
+    x, y, th = sim["start_pose"]
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={data / 'map.yaml'}", f"log={data / 'log.clf'}", f"truth={data / 'truth.tum'}", "rerun.mode=off",
+        "filter.global_localization=false", f"filter.initial_pose=[{x}, {y}, {th}]", "filter.particles=3000", *sets])
+    s = run(cfg, out, progress=False, echo=lambda m: None)
+    with open(out / "quality.csv") as f:
+        rows = [r for r in csv.DictReader(f)]
+    return s, rows
+
+
+def test_quality_drops_and_says_lost_when_the_robot_is_kidnapped(kidnapped_world, tmp_path):
+    # Recovery off, so the filter stays where it was while the robot is elsewhere: the signal must
+    # say so within a second of the jump (3 bad updates of 5 at 5 Hz), and never before it.
+    data, sim = kidnapped_world
+    t_jump = sim["kidnap"]["t"]
+    s, rows = _run(data, sim, tmp_path / "off", "filter.recovery=false")
+    rel = np.array([float(r["t"]) for r in rows]) - T0
+    match = np.array([float(r["match"]) if r["match"] not in ("", "nan") else np.nan for r in rows])
+    lost = np.array([int(r["lost"]) for r in rows])
+    before, after = rel < t_jump - 0.01, (rel >= t_jump + 0.01) & (rel < t_jump + 10.0)
+    assert lost[before].sum() == 0
+    assert np.nanmean(match[before]) > 0.85
+    first_lost = rel[(lost == 1) & (rel >= t_jump - 0.01)]
+    assert first_lost.size and first_lost[0] - t_jump < 1.5, first_lost[:3]
+    assert np.nanmedian(match[after]) < 0.5
+    assert s["quality"]["lost_updates"] > 0
