@@ -38,6 +38,7 @@ import math
 import os
 import statistics
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -238,6 +239,7 @@ class Job:
     world: tuple[str, dict] | None = None  # (folder, simulate kwargs) to generate first
     kidnap_t: float | None = None  # synthetic kidnap time (from sim.yaml, once generated)
     kidnap_filter: bool = False  # real log: kidnap the filter at mid-truth
+    sim_start: bool = False  # track from the synthetic world's start pose (sim.yaml)
     fingerprint: str = ""
 
     @property
@@ -289,7 +291,7 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: 
                 wdir = _world_dir(cache, d, mode == "kidnapped")
                 world = (str(wdir), _sim_kwargs(d, mode == "kidnapped"))
                 data = {"map": str(wdir / "map.yaml"), "log": str(wdir / "log.clf"), "truth": str(wdir / "truth.tum")}
-                pose = None  # from sim.yaml once generated
+                pose = d.initial_pose  # None: from sim.yaml once generated
             else:
                 data = {"map": d.map, "log": d.log, "truth": d.truth}
                 pose = d.initial_pose or _truth_start(d.truth)
@@ -312,7 +314,8 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: 
                         raise ConfigError(f"{suite.path}: {d.name} ({clabel}): {e}") from None
                     run_dir = out / "runs" / d.name / mode / clabel / f"seed{seed}"
                     jobs.append(Job(d.name, mode, clabel, seed, cfg, str(run_dir), d.lost_m, world=world,
-                                    kidnap_t=kidnap_t, kidnap_filter=(mode == "kidnapped" and d.simulate is None)))
+                                    kidnap_t=kidnap_t, kidnap_filter=(mode == "kidnapped" and d.simulate is None),
+                                    sim_start=pose is None))
     return jobs
 
 
@@ -327,7 +330,7 @@ def _finish_plan(jobs: list[Job]) -> None:
     for j in jobs:
         if j.world is not None:
             sim = yaml.safe_load(Path(j.world[0], "sim.yaml").read_text())
-            if j.mode != "global":
+            if j.mode != "global" and j.sim_start:
                 f = dataclasses.replace(j.cfg.filter, initial_pose=tuple(float(v) for v in sim["start_pose"]))
                 j.cfg = dataclasses.replace(j.cfg, filter=f)
             if j.mode == "kidnapped":
@@ -409,8 +412,10 @@ def run_job(job: Job) -> dict:
     out = Path(job.run_dir)
     t0 = time.perf_counter()
     try:
-        summary = run(job.cfg, out, progress=False, echo=lambda msg: None,
-                      kidnap_filter_at=(_mid_truth(job.cfg.truth), KIDNAP_M) if job.kidnap_filter else None)
+        with warnings.catch_warnings(record=True) as caught:  # the log's warnings go into the row
+            warnings.simplefilter("always")
+            summary = run(job.cfg, out, progress=False, echo=lambda msg: None,
+                          kidnap_filter_at=(_mid_truth(job.cfg.truth), KIDNAP_M) if job.kidnap_filter else None)
     except KeyboardInterrupt:
         return {**row, "interrupted": True}
     except MclError as e:
@@ -430,6 +435,7 @@ def run_job(job: Job) -> dict:
         "ate_rmse": ate["ate_rmse"], "ate_max": ate["ate_max"], "lost_m": job.lost_m, "kidnap_t": kidnap_t,
         "wall_s": wall, "particles": float(summary["particles_mean"]), "updates": summary["updates"],
         "scans": summary["scans"], "scored": int(np.size(tq)), "run_dir": str(out), "fingerprint": job.fingerprint,
+        "warnings": sorted({str(w.message) for w in caught}),
     })
     atomic_write_text(out / "row.json", json.dumps(row, indent=1) + "\n")
     return row
