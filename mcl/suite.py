@@ -410,7 +410,7 @@ def run_job(job: Job) -> dict:
 
     row = {"dataset": job.dataset, "mode": job.mode, "config": job.config, "seed": job.seed}
     out = Path(job.run_dir)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         with warnings.catch_warnings(record=True) as caught:  # the log's warnings go into the row
             warnings.simplefilter("always")
@@ -420,7 +420,7 @@ def run_job(job: Job) -> dict:
         return {**row, "interrupted": True}
     except MclError as e:
         return {**row, "error": str(e)}
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     if summary["interrupted"]:
         return {**row, "interrupted": True}
     te, pe = read_tum(out / "trajectory.tum")
@@ -433,7 +433,7 @@ def run_job(job: Job) -> dict:
     row.update(s)
     row.update({
         "ate_rmse": ate["ate_rmse"], "ate_max": ate["ate_max"], "lost_m": job.lost_m, "kidnap_t": kidnap_t,
-        "wall_s": wall, "particles": float(summary["particles_mean"]), "updates": summary["updates"],
+        "wall_s": wall, "cpu_s": cpu, "particles": float(summary["particles_mean"]), "updates": summary["updates"],
         "scans": summary["scans"], "scored": int(np.size(tq)), "run_dir": str(out), "fingerprint": job.fingerprint,
         "warnings": sorted({str(w.message) for w in caught}),
     })
@@ -452,9 +452,10 @@ def _mid_truth(truth: str) -> float:
 
 
 RUN_FIELDS = ("dataset", "mode", "config", "seed", "rmse", "max", "lost", "conv_s", "ok", "ate_rmse", "ate_max",
-              "lost_m", "kidnap_t", "wall_s", "particles", "updates", "scans", "scored", "run_dir")
+              "lost_m", "kidnap_t", "wall_s", "cpu_s", "particles", "updates", "scans", "scored", "run_dir")
 TABLE_FIELDS = ("dataset", "mode", "config", "runs", "rmse_median", "rmse_worst", "max_median", "max_worst",
-                "lost", "conv_median", "conv_worst", "wall_median", "wall_worst", "particles_median",
+                "lost", "conv_median", "conv_worst", "wall_median", "wall_worst", "cpu_median", "cpu_worst",
+                "particles_median",
                 "particles_worst")
 
 
@@ -494,6 +495,7 @@ def aggregate(rows: list[dict]) -> list[dict]:
             "lost": sum(bool(r["lost"]) for r in rs),
             "conv_median": _median(col("conv_s")), "conv_worst": _worst(col("conv_s")),
             "wall_median": statistics.median(col("wall_s")), "wall_worst": max(col("wall_s")),
+            "cpu_median": _median([r.get("cpu_s") for r in rs]), "cpu_worst": _worst([r.get("cpu_s") for r in rs]),
             "particles_median": statistics.median(col("particles")), "particles_worst": max(col("particles")),
         })
     return table
@@ -505,7 +507,7 @@ def _f(v, fmt: str, none: str = "never") -> str:
 
 def format_table(table: list[dict]) -> str:
     """The table for the terminal: median / worst over seeds."""
-    head = ["dataset", "mode", "config", "RMSE m", "max m", "lost", "conv s", "wall s", "particles"]
+    head = ["dataset", "mode", "config", "RMSE m", "max m", "lost", "conv s", "wall s", "cpu s", "particles"]
     lines = []
     for r in table:
         lines.append([
@@ -515,12 +517,13 @@ def format_table(table: list[dict]) -> str:
             f"{r['lost']}/{r['runs']}",
             f"{_f(r['conv_median'], '.1f')} / {_f(r['conv_worst'], '.1f')}",
             f"{r['wall_median']:.1f} / {r['wall_worst']:.1f}",
+            f"{_f(r.get('cpu_median'), '.1f', '-')} / {_f(r.get('cpu_worst'), '.1f', '-')}",
             f"{r['particles_median']:.0f} / {r['particles_worst']:.0f}",
         ])
-    widths = [max(len(x) for x in col) for col in zip(head, *lines)]
+    sub = ["", "", "", "med / worst", "med / worst", "runs"] + ["med / worst"] * 4
+    widths = [max(len(x) for x in col) for col in zip(head, sub, *lines)]
     fmt = lambda cells: "  ".join(c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
-    out = [fmt(head), fmt(["", "", "", "med / worst", "med / worst", "runs", "med / worst", "med / worst",
-                           "med / worst"]), "  ".join("-" * w for w in widths)]
+    out = [fmt(head), fmt(sub), "  ".join("-" * w for w in widths)]
     out += [fmt(c) for c in lines]
     return "\n".join(out)
 
