@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -127,17 +128,47 @@ def _add_eval(sub) -> None:
             "The estimate is interpolated at each reference time inside its span; no alignment is applied."
         ),
     )
-    p.add_argument("estimate", help="estimated trajectory (TUM), e.g. runs/x/trajectory.tum")
-    p.add_argument("reference", help="reference trajectory (TUM)")
+    p.add_argument("estimate", nargs="?", help="estimated trajectory (TUM), e.g. runs/x/trajectory.tum")
+    p.add_argument("reference", nargs="?", help="reference trajectory (TUM)")
     p.add_argument("--converged-within", type=float, default=0.3, metavar="M", help="error bound (m) for the convergence time (default 0.3)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    _add_suite_options(p)
     p.set_defaults(func=cmd_eval)
+
+
+def _add_suite_options(p) -> None:
+    """``mcl eval --suite``: a config over a corpus of datasets (mcl.suite)."""
+    g = p.add_argument_group(
+        "corpus evaluation (--suite)",
+        "mcl eval --suite suites/real.yaml [--config C] [--seeds K] [--jobs J]: every dataset of the suite in each "
+        "of its modes (tracking, global, kidnapped) with seeds 1..K, for the config and configs/baseline.yaml; "
+        "prints the median and the worst over seeds; resumable (a rerun with the same --out skips finished runs)")
+    g.add_argument("--suite", metavar="SUITE.yaml", help="suite file (see suites/); replaces ESTIMATE REFERENCE")
+    g.add_argument("--config", help="config under test (default: configs/default.yaml)")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key of the config under test (repeatable)")
+    g.add_argument("--seeds", type=int, default=1, metavar="K", help="seeds 1..K per run (default 1)")
+    g.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="J", help="parallel runs (default: the cores)")
+    g.add_argument("--out", help="output folder (default runs/suite-NAME); a rerun with the same folder resumes")
+    g.add_argument("--cache", help="folder of the generated synthetic worlds (default OUT/worlds)")
+    g.add_argument("--modes", metavar="M,...", help="only these modes: tracking,global,kidnapped")
+    g.add_argument("--only", metavar="NAME,...", help="only these datasets")
+    g.add_argument("--baseline", action=argparse.BooleanOptionalAction, default=True,
+                   help="also run configs/baseline.yaml, the plain fixed-N filter (default on)")
+    g.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def cmd_eval(args) -> int:
     from mcl.evaluate import evaluate, format_eval
     from mcl.trajectory import read_tum
 
+    if args.suite is not None:
+        if args.estimate is not None:
+            raise MclError("eval: --suite takes no ESTIMATE REFERENCE")
+        from mcl.suite import run_from_args
+
+        return run_from_args(args)
+    if args.estimate is None or args.reference is None:
+        raise MclError("eval: expected ESTIMATE REFERENCE (two TUM files) or --suite SUITE.yaml")
     if not args.converged_within > 0:
         raise MclError(f"--converged-within: must be positive, got {args.converged_within}")
     t_est, p_est = read_tum(args.estimate)

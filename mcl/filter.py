@@ -178,6 +178,14 @@ class ParticleFilter:
         self.recovery = make_recovery(self.cfg.filter, False, self.cfg.quality.lost_after)
         self.quality.reset(lost=False)
 
+    def kidnap(self, mean, std) -> None:
+        """Particles replaced by N(mean, diag(std^2)) with the policies untouched (recovery averages, lost
+        belief): the filter is not told. The kidnapping test of ``mcl eval --suite`` on real logs."""
+        p = self.rng.standard_normal((3, self.n)) * np.asarray(std, dtype=np.float64)[:, None]
+        p += np.asarray(mean, dtype=np.float64)[:, None]
+        p[2] = wrap_angle(p[2])
+        self._set(np.ascontiguousarray(p))
+
     def init_global(self) -> None:
         """Particles uniform over the poses the map allows (global localization)."""
         self._set(self.sample_uniform(self.cfg.filter.particles, self.rng))

@@ -243,10 +243,31 @@ def _particles_text(summary: dict) -> str:
     return f"{summary['particles_mean']:.0f} particles on average, {lo}..{hi}"
 
 
+def _kidnap(pf, truth, t: float, estimate, min_distance: float) -> dict:
+    """Replace the particles by a cloud around a free pose >= min_distance from the truth at t (the estimate
+    when there is no truth); the pose is the first of a batch of uniform free-space draws that is far enough."""
+    if truth is not None and truth.t.size:
+        ref = np.array([np.interp(t, truth.t, truth.poses[0]), np.interp(t, truth.t, truth.poses[1])])
+    elif estimate is not None:
+        ref = np.asarray(estimate[:2])
+    else:
+        ref = np.zeros(2)
+    for _ in range(20):
+        cand = pf.sample_uniform(512, pf.rng)
+        far = np.flatnonzero(np.hypot(cand[0] - ref[0], cand[1] - ref[1]) >= min_distance)
+        if far.size:
+            pose = cand[:, far[0]]
+            pf.kidnap(pose, pf.cfg.filter.initial_std)
+            return {"t": float(t), "to": [float(v) for v in pose], "from_xy": [float(v) for v in ref],
+                    "distance_m": float(math.hypot(pose[0] - ref[0], pose[1] - ref[1]))}
+    raise DataError(f"{pf.grid.path}: no free pose {min_distance:g} m away from ({ref[0]:.2f}, {ref[1]:.2f}) "
+                    "to kidnap the filter to")
+
+
 def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
-    Keywords: ``progress``, ``initial_pose_override``, ``echo`` (see :func:`_run`). SIGINT and
+    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at`` (see :func:`_run`). SIGINT and
     SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true.
     """
     with _Interrupts() as signals:
@@ -261,8 +282,15 @@ def _run(
     progress: bool | None = None,
     initial_pose_override: bool = False,
     echo=None,
+    kidnap_filter_at: tuple[float, float] | None = None,
 ) -> dict:
-    """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary."""
+    """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
+
+    ``kidnap_filter_at=(t, d)``: at the first update at or after time t, the particles are replaced by a cloud
+    (filter.initial_std) around a free pose at least d metres from the truth there (from the estimate without
+    truth), drawn with the filter's generator: a kidnapping test on a real log (``mcl eval --suite``).
+    ``summary["kidnap"]`` says when, where to and how far.
+    """
     # Heavy imports here so `mcl --help` stays fast.
     from tqdm import tqdm
 
@@ -348,6 +376,7 @@ def _run(
     quality_out = LineWriter(out_dir / "quality.csv", header=QUALITY_HEADER)
     quality_rows: list[tuple] = []  # (match, contradiction, lost) of each filter update, for the summary
     last_mean, last_lost, last_spread = None, False, math.nan
+    kidnap = None  # kidnap_filter_at: what was done
     bar = tqdm(total=len(updates), unit="scan", disable=(None if progress is None else not progress), leave=False, dynamic_ncols=True)
     loop0 = time.perf_counter()
     try:
@@ -387,6 +416,8 @@ def _run(
                     control = Control(last_odom, odom, dt=dt, v=v, w=w)
                 if seed_from_landmarks and marks is not None and pf.init_from_landmarks(marks):
                     seed_from_landmarks, control = False, None  # particles drawn for this very time
+                if kidnap_filter_at is not None and kidnap is None and scan.t >= kidnap_filter_at[0]:
+                    kidnap = _kidnap(pf, truth, scan.t, last_mean, kidnap_filter_at[1])
                 info = pf.step(control, observation, landmarks=marks)
                 last_odom, last_t = odom, scan.t
                 mean, cov = info.mean, info.cov
@@ -515,6 +546,8 @@ def _run(
             "quality": str(out_dir / "quality.csv"),
         },
     }
+    if kidnap is not None:
+        summary["kidnap"] = kidnap
     if truth is not None and traj_t:
         try:
             summary["eval"] = evaluate(

@@ -1,0 +1,733 @@
+"""Evaluating a config over a corpus of datasets: ``mcl eval --suite SUITE.yaml``.
+
+A suite file lists datasets (a map, a log and a truth, or a synthetic world
+``mcl.simulate`` generates once into a cache folder) and the modes to run each
+in:
+
+- ``tracking``: from the start pose with the config's ``filter.initial_std``; scored by the ATE over the
+  whole run; *lost* when the maximum error exceeds the dataset's ``lost_m`` (default 1 m);
+- ``global``: global localization (particles uniform over free space); scored by the convergence time,
+  from the first scored pose until the error falls below ``SETTLE_M`` and stays there; *lost* unless it
+  converged within ``WITHIN_S``; RMSE and max from the convergence on;
+- ``kidnapped``: tracking, then the robot (a synthetic world made again with ``kidnap_at`` = half its
+  duration) or the filter (a real log: the particles moved at mid-truth to a cloud around a free pose
+  >= ``KIDNAP_M`` away, the runner's ``kidnap_filter_at``) is kidnapped; scored by the recovery time, from
+  the kidnap until the error falls below ``SETTLE_M`` and stays; *lost* unless it recovered within
+  ``WITHIN_S`` (or the maximum error before the kidnap exceeds ``lost_m``); RMSE and max over the poses
+  before the kidnap and after the recovery.
+
+Every run goes through :func:`mcl.runner.run` in a worker process (``concurrent.futures``, one numba
+thread each, no recording) with seeds 1..K, for the config under test and, unless ``--no-baseline``, for
+``configs/baseline.yaml`` (a plain fixed-N filter). Outputs in ``--out``: one folder per run
+(``runs/DATASET/MODE/CONFIG/seedK``, with the runner's outputs, ``errors.csv`` and ``row.json``),
+``results.json`` and ``results.csv`` (one row per run), ``table.csv`` and ``table.txt`` (the median and
+the worst over seeds of each dataset x mode x config) and ``plots/DATASET.png`` (error over time). The
+results are rewritten, atomically, after every run; a run whose ``row.json`` holds the same config
+fingerprint is not run again, so an interrupted evaluation resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import hashlib
+import inspect
+import io
+import json
+import math
+import os
+import statistics
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mcl.errors import ConfigError, MclError
+
+MODES = ("tracking", "global", "kidnapped")
+SETTLE_M = 0.5  # m: converged / recovered once the error falls below this and stays
+WITHIN_S = 30.0  # s: ... within this long (global: from the start; kidnapped: from the kidnap)
+KIDNAP_M = 5.0  # m: a real log's filter is kidnapped at least this far from the truth
+LOST_M = 1.0  # m: default lost threshold of a dataset (tracking: max error above it)
+
+SUITE_KEYS = ("name", "root", "modes", "datasets")
+DATASET_KEYS = ("name", "map", "config", "log", "truth", "initial_pose", "lost_m", "set", "modes", "simulate")
+BASELINE = "baseline"
+
+
+# ----------------------------------------------------------------------------- the suite file
+
+
+@dataclass
+class Dataset:
+    """One entry of a suite: real files or a synthetic world (``simulate`` kwargs)."""
+
+    name: str
+    map: str | None = None
+    log: str | None = None
+    truth: str | None = None
+    laser: str | None = None  # from a dataset config
+    initial_pose: tuple[float, float, float] | None = None
+    lost_m: float = LOST_M
+    set: dict = field(default_factory=dict)
+    modes: tuple[str, ...] = ("tracking",)
+    simulate: dict | None = None
+
+
+@dataclass
+class Suite:
+    name: str
+    path: Path
+    datasets: list[Dataset]
+
+
+def _unknown(where: str, key, allowed) -> ConfigError:
+    hint = difflib.get_close_matches(str(key), list(allowed), n=1)
+    return ConfigError(f"{where}{key}: unknown key" + (f" (did you mean {hint[0]}?)" if hint else ""))
+
+
+def _modes(value, where: str) -> tuple[str, ...]:
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not value:
+        raise ConfigError(f"{where}: expected a list of modes ({', '.join(MODES)}), got {value!r}")
+    for m in value:
+        if m not in MODES:
+            hint = difflib.get_close_matches(str(m), MODES, n=1)
+            raise ConfigError(f"{where}: unknown mode {m!r}" + (f" (did you mean {hint[0]}?)" if hint else ""))
+    return tuple(dict.fromkeys(value))
+
+
+def load_suite(path: str | os.PathLike) -> Suite:
+    """Read and check a suite file: every key known, every file present, every simulate keyword one of
+    :func:`mcl.simulate.simulate`'s. Errors name the file and the key (ConfigError)."""
+    from mcl.config import load_config
+    from mcl.simulate import simulate
+    from mcl.yamlfile import finite_number, read_yaml
+
+    path = Path(path)
+    doc = read_yaml(path, ConfigError)
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{path}: expected a mapping with datasets: [...]")
+    for k in doc:
+        if k not in SUITE_KEYS:
+            raise _unknown(f"{path}: ", k, SUITE_KEYS)
+    base = path.resolve().parent
+    root = base / str(doc["root"]) if doc.get("root") is not None else base
+    modes = _modes(doc["modes"], f"{path}: modes") if "modes" in doc else ("tracking",)
+    entries = doc.get("datasets")
+    if not isinstance(entries, list) or not entries:
+        raise ConfigError(f"{path}: datasets: expected a non-empty list")
+    sim_keys = [k for k in inspect.signature(simulate).parameters if k != "outdir"]
+    out, names = [], set()
+    for i, e in enumerate(entries):
+        if not isinstance(e, dict):
+            raise ConfigError(f"{path}: datasets[{i}]: expected a mapping, got {e!r}")
+        label = f"{path}: datasets[{i}]" + (f" ({e['name']})" if isinstance(e.get("name"), str) else "")
+        for k in e:
+            if k not in DATASET_KEYS:
+                raise _unknown(f"{label}: ", k, DATASET_KEYS)
+        name = e.get("name")
+        if not isinstance(name, str) or not name or "/" in name or name.startswith("."):
+            raise ConfigError(f"{label}: name: expected a plain name (no '/'), got {name!r}")
+        if name in names:
+            raise ConfigError(f"{label}: name: {name!r} appears twice")
+        names.add(name)
+        d = Dataset(name=name, modes=modes)
+        if "modes" in e:
+            d.modes = _modes(e["modes"], f"{label}: modes")
+        if "lost_m" in e:
+            d.lost_m = finite_number(e["lost_m"], f"{label}: lost_m", ConfigError)
+            if not d.lost_m > 0:
+                raise ConfigError(f"{label}: lost_m: must be positive, got {d.lost_m}")
+        if "set" in e:
+            if not isinstance(e["set"], dict):
+                raise ConfigError(f"{label}: set: expected a mapping of config keys, got {e['set']!r}")
+            d.set = {str(k): v for k, v in e["set"].items()}
+        if "initial_pose" in e:
+            p = e["initial_pose"]
+            if not isinstance(p, list) or len(p) != 3:
+                raise ConfigError(f"{label}: initial_pose: expected [x, y, theta], got {p!r}")
+            d.initial_pose = tuple(finite_number(v, f"{label}: initial_pose[{j}]", ConfigError) for j, v in enumerate(p))
+        if "simulate" in e:
+            kw = e["simulate"] if e["simulate"] is not None else {}
+            if not isinstance(kw, dict):
+                raise ConfigError(f"{label}: simulate: expected a mapping of mcl.simulate keywords, got {kw!r}")
+            for k in kw:
+                if k not in sim_keys:
+                    raise _unknown(f"{label}: simulate.", k, sim_keys)
+            for k in ("map", "log", "truth", "config"):
+                if k in e:
+                    raise ConfigError(f"{label}: {k}: not with simulate (the world gives map, log and truth)")
+            d.simulate = dict(kw)
+        else:
+            if "config" in e:  # the data of a dataset config (its tuned parameters are not used)
+                cpath = base / str(e["config"])
+                if not cpath.is_file():
+                    raise ConfigError(f"{label}: config: no such file {cpath}")
+                dc = load_config(cpath)
+                d.map, d.log, d.truth, d.laser = dc.map, dc.log, dc.truth, dc.laser
+                if d.initial_pose is None and dc.filter.initial_pose is not None:
+                    d.initial_pose = tuple(dc.filter.initial_pose)
+            for k in ("map", "log", "truth"):
+                if k in e:
+                    setattr(d, k, str((root / str(e[k])).resolve()))
+            for k in ("map", "log", "truth"):
+                v = getattr(d, k)
+                if v is None:
+                    raise ConfigError(f"{label}: {k}: missing (give map, log and truth, a config or simulate)")
+                if not Path(v).is_file():
+                    raise ConfigError(f"{label}: {k}: no such file {v}")
+        out.append(d)
+    return Suite(name=str(doc.get("name") or path.stem), path=path, datasets=out)
+
+
+# ----------------------------------------------------------------------------- synthetic worlds
+
+
+def _world_dir(cache: Path, d: Dataset, kidnapped: bool) -> Path:
+    kw = _sim_kwargs(d, kidnapped)
+    h = hashlib.sha1(json.dumps(kw, sort_keys=True).encode()).hexdigest()[:10]
+    return cache / f"{d.name}-{'kidnap-' if kidnapped else ''}{h}"
+
+
+def _sim_kwargs(d: Dataset, kidnapped: bool) -> dict:
+    from mcl.simulate import simulate
+
+    kw = dict(d.simulate)
+    if kidnapped and kw.get("kidnap_at") is None:
+        duration = kw.get("duration", inspect.signature(simulate).parameters["duration"].default)
+        kw["kidnap_at"] = float(duration) / 2
+    return kw
+
+
+def make_world(outdir: str, kw: dict) -> str:
+    """Generate one synthetic world into ``outdir`` (written beside it, then renamed: never half there)."""
+    import shutil
+    import tempfile
+
+    from mcl.simulate import simulate
+
+    out = Path(outdir)
+    if (out / "sim.yaml").is_file():
+        return str(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
+    try:
+        simulate(tmp, **kw)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return str(out)
+
+
+# ----------------------------------------------------------------------------- the plan
+
+
+@dataclass
+class Job:
+    """One run: a dataset in a mode with a config and a seed."""
+
+    dataset: str
+    mode: str
+    config: str  # label: default (or the --config file's stem) or baseline
+    seed: int
+    cfg: object  # mcl.config.Config
+    run_dir: str
+    lost_m: float
+    world: tuple[str, dict] | None = None  # (folder, simulate kwargs) to generate first
+    kidnap_t: float | None = None  # synthetic kidnap time (from sim.yaml, once generated)
+    kidnap_filter: bool = False  # real log: kidnap the filter at mid-truth
+    sim_start: bool = False  # track from the synthetic world's start pose (sim.yaml)
+    fingerprint: str = ""
+
+    @property
+    def key(self) -> str:
+        return f"{self.dataset}/{self.mode}/{self.config}/seed{self.seed}"
+
+
+def _value_text(v) -> str:
+    import yaml
+
+    return yaml.safe_dump(v, default_flow_style=True, width=10**9).strip().removesuffix("...").strip()
+
+
+def _truth_start(truth: str) -> tuple[float, float, float]:
+    from mcl.trajectory import read_tum
+
+    t, p = read_tum(truth)
+    if t.size == 0:
+        raise ConfigError(f"{truth}: empty truth: give initial_pose in the suite")
+    i = int(t.argmin())
+    return float(p[0, i]), float(p[1, i]), float(p[2, i])
+
+
+def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: Path, cache: Path,
+         modes: tuple[str, ...] | None = None, only: list[str] | None = None, baseline: bool = True) -> list[Job]:
+    """Every run of the suite, each with its validated Config (ConfigError naming the suite, the dataset
+    and the key when a dataset's ``set`` or a --set is wrong)."""
+    from mcl.config import PROJECT_ROOT, load_config
+
+    default_cfg = Path(config) if config else PROJECT_ROOT / "configs" / "default.yaml"
+    label = "default" if config is None else default_cfg.stem
+    configs = [(label, default_cfg, list(sets))]
+    if baseline and label != BASELINE:
+        configs.append((BASELINE, PROJECT_ROOT / "configs" / "baseline.yaml", []))
+    datasets = suite.datasets
+    if only:
+        names = {d.name for d in datasets}
+        for n in only:
+            if n not in names:
+                hint = difflib.get_close_matches(n, sorted(names), n=1)
+                raise ConfigError(f"--only: no dataset {n!r} in {suite.path}" + (f" (did you mean {hint[0]}?)" if hint else ""))
+        datasets = [d for d in datasets if d.name in only]
+    jobs: list[Job] = []
+    for d in datasets:
+        for mode in (m for m in d.modes if modes is None or m in modes):
+            world = None
+            kidnap_t = None
+            if d.simulate is not None:
+                wdir = _world_dir(cache, d, mode == "kidnapped")
+                world = (str(wdir), _sim_kwargs(d, mode == "kidnapped"))
+                data = {"map": str(wdir / "map.yaml"), "log": str(wdir / "log.clf"), "truth": str(wdir / "truth.tum")}
+                pose = d.initial_pose  # None: from sim.yaml once generated
+            else:
+                data = {"map": d.map, "log": d.log, "truth": d.truth}
+                pose = d.initial_pose or _truth_start(d.truth)
+            for clabel, cpath, extra in configs:
+                overrides = [f"{k}={v}" for k, v in data.items()]
+                if d.laser is not None:
+                    overrides.append(f"laser={d.laser}")
+                overrides += [f"{k}={_value_text(v)}" for k, v in d.set.items()]
+                overrides += extra
+                if mode == "global":
+                    overrides.append("filter.global_localization=true")
+                else:
+                    p = pose if pose is not None else (0.0, 0.0, 0.0)
+                    overrides += [f"filter.initial_pose=[{p[0]!r}, {p[1]!r}, {p[2]!r}]", "filter.global_localization=false"]
+                overrides.append("rerun.mode=off")
+                for seed in range(1, seeds + 1):
+                    try:
+                        cfg = load_config(cpath, overrides + [f"seed={seed}"])
+                    except ConfigError as e:
+                        raise ConfigError(f"{suite.path}: {d.name} ({clabel}): {e}") from None
+                    run_dir = out / "runs" / d.name / mode / clabel / f"seed{seed}"
+                    jobs.append(Job(d.name, mode, clabel, seed, cfg, str(run_dir), d.lost_m, world=world,
+                                    kidnap_t=kidnap_t, kidnap_filter=(mode == "kidnapped" and d.simulate is None),
+                                    sim_start=pose is None))
+    return jobs
+
+
+def _finish_plan(jobs: list[Job]) -> None:
+    """Once the worlds exist: their start poses and kidnap times; then every job's fingerprint."""
+    import dataclasses
+
+    import yaml
+
+    from mcl.config import dump_config
+
+    for j in jobs:
+        if j.world is not None:
+            sim = yaml.safe_load(Path(j.world[0], "sim.yaml").read_text())
+            if j.mode != "global" and j.sim_start:
+                f = dataclasses.replace(j.cfg.filter, initial_pose=tuple(float(v) for v in sim["start_pose"]))
+                j.cfg = dataclasses.replace(j.cfg, filter=f)
+            if j.mode == "kidnapped":
+                j.kidnap_t = float(sim["kidnap"]["t"])
+        text = dump_config(j.cfg) + f"\nmode: {j.mode}\nlost_m: {j.lost_m}\nkidnap: {j.kidnap_t} {j.kidnap_filter}\n"
+        j.fingerprint = hashlib.sha1(text.encode()).hexdigest()
+
+
+# ----------------------------------------------------------------------------- scoring
+
+
+def settle_time(t, e, t0: float, below: float = SETTLE_M):
+    """Seconds from t0 until the error e (at times t >= t0) falls below ``below`` and stays; None if it
+    does not (it is above at the last pose); 0 if it never rises above."""
+    import numpy as np
+
+    t, e = np.asarray(t), np.asarray(e)
+    above = np.flatnonzero(e >= below)
+    if above.size == 0:
+        return 0.0
+    if above[-1] == e.size - 1:
+        return None
+    return float(t[above[-1] + 1] - t0)
+
+
+def score(mode: str, t, e, *, lost_m: float, kidnap_t: float | None = None) -> dict:
+    """A run's figures from its position errors e (m) at times t (see the module doc)."""
+    import numpy as np
+
+    t, e = np.asarray(t, dtype=float), np.asarray(e, dtype=float)
+    if e.size == 0:
+        return {"rmse": None, "max": None, "lost": True, "conv_s": None, "ok": False}
+    keep = np.ones(e.size, bool)
+    if mode == "tracking":
+        conv = settle_time(t, e, t[0])
+        ok = None
+        lost = bool(e.max() > lost_m)
+    elif mode == "global":
+        conv = settle_time(t, e, t[0])
+        ok = conv is not None and conv <= WITHIN_S
+        if conv is not None:
+            keep = t >= t[0] + conv
+        lost = not ok
+    elif mode == "kidnapped":
+        before = t < kidnap_t
+        conv = settle_time(t[~before], e[~before], kidnap_t) if (~before).any() else None
+        ok = conv is not None and conv <= WITHIN_S
+        keep = (before | (t >= kidnap_t + conv)) if conv is not None else keep  # never recovered: every pose
+        lost = (not ok) or bool(before.any() and e[before].max() > lost_m)
+    else:  # pragma: no cover
+        raise ValueError(mode)
+    ek = e[keep] if keep.any() else e
+    return {"rmse": float(math.sqrt(np.mean(ek**2))), "max": float(ek.max()), "lost": bool(lost),
+            "conv_s": conv, "ok": ok}
+
+
+# ----------------------------------------------------------------------------- a run (in a worker)
+
+
+def _worker_init() -> None:
+    """A worker: one numba thread (the runs are the parallelism), Ctrl-C left to the runs."""
+    import signal
+
+    import numba
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # between runs; a run catches it (runner._Interrupts)
+    numba.set_num_threads(1)
+
+
+def run_job(job: Job) -> dict:
+    """Run one job with :func:`mcl.runner.run`; return its row (``interrupted`` or ``error`` when not done)."""
+    import numpy as np
+
+    from mcl.evaluate import evaluate, position_errors
+    from mcl.runner import run
+    from mcl.trajectory import atomic_write_text, read_tum
+
+    row = {"dataset": job.dataset, "mode": job.mode, "config": job.config, "seed": job.seed}
+    out = Path(job.run_dir)
+    t0, c0 = time.perf_counter(), time.process_time()
+    try:
+        with warnings.catch_warnings(record=True) as caught:  # the log's warnings go into the row
+            warnings.simplefilter("always")
+            summary = run(job.cfg, out, progress=False, echo=lambda msg: None,
+                          kidnap_filter_at=(_mid_truth(job.cfg.truth), KIDNAP_M) if job.kidnap_filter else None)
+    except KeyboardInterrupt:
+        return {**row, "interrupted": True}
+    except MclError as e:
+        return {**row, "error": str(e)}
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if summary["interrupted"]:
+        return {**row, "interrupted": True}
+    te, pe = read_tum(out / "trajectory.tum")
+    tr, pr = read_tum(job.cfg.truth)
+    tq, e_pos, _ = position_errors(te, pe, tr, pr)
+    kidnap_t = job.kidnap_t if job.kidnap_t is not None else summary.get("kidnap", {}).get("t")
+    atomic_write_text(out / "errors.csv", "t,error_m\n" + "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(tq, e_pos)))
+    s = score(job.mode, tq, e_pos, lost_m=job.lost_m, kidnap_t=kidnap_t)
+    ate = evaluate(te, pe, tr, pr)
+    row.update(s)
+    row.update({
+        "ate_rmse": ate["ate_rmse"], "ate_max": ate["ate_max"], "lost_m": job.lost_m, "kidnap_t": kidnap_t,
+        "wall_s": wall, "cpu_s": cpu, "particles": float(summary["particles_mean"]), "updates": summary["updates"],
+        "scans": summary["scans"], "scored": int(np.size(tq)), "run_dir": str(out), "fingerprint": job.fingerprint,
+        "warnings": sorted({str(w.message) for w in caught}),
+    })
+    atomic_write_text(out / "row.json", json.dumps(row, indent=1) + "\n")
+    return row
+
+
+def _mid_truth(truth: str) -> float:
+    from mcl.trajectory import read_tum
+
+    t, _ = read_tum(truth)
+    return float(0.5 * (t.min() + t.max()))
+
+
+# ----------------------------------------------------------------------------- aggregation and outputs
+
+
+RUN_FIELDS = ("dataset", "mode", "config", "seed", "rmse", "max", "lost", "conv_s", "ok", "ate_rmse", "ate_max",
+              "lost_m", "kidnap_t", "wall_s", "cpu_s", "particles", "updates", "scans", "scored", "run_dir")
+TABLE_FIELDS = ("dataset", "mode", "config", "runs", "rmse_median", "rmse_worst", "max_median", "max_worst",
+                "lost", "conv_median", "conv_worst", "wall_median", "wall_worst", "cpu_median", "cpu_worst",
+                "particles_median",
+                "particles_worst")
+
+
+def _worst(values, none_is_worst: bool = True):
+    if any(v is None for v in values):
+        return None if none_is_worst else max((v for v in values if v is not None), default=None)
+    return max(values)
+
+
+def _median(values):
+    """Median with None (never converged) counting as +infinity; None when the median is such a run."""
+    v = sorted(values, key=lambda x: math.inf if x is None else x)
+    n = len(v)
+    if n == 0:
+        return None
+    lo, hi = v[(n - 1) // 2], v[n // 2]
+    if lo is None or hi is None:
+        return None
+    return 0.5 * (lo + hi)
+
+
+def aggregate(rows: list[dict]) -> list[dict]:
+    """The table: one row per dataset x mode x config, the median and the worst over seeds (the worst
+    convergence time of a set where a run never converged is None, 'never'); lost counts the lost runs."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["dataset"], r["mode"], r["config"]), []).append(r)
+    table = []
+    for (ds, mode, cfg), rs in groups.items():
+        def col(k):
+            return [r[k] for r in rs]
+
+        table.append({
+            "dataset": ds, "mode": mode, "config": cfg, "runs": len(rs),
+            "rmse_median": _median(col("rmse")), "rmse_worst": _worst(col("rmse")),
+            "max_median": _median(col("max")), "max_worst": _worst(col("max")),
+            "lost": sum(bool(r["lost"]) for r in rs),
+            "conv_median": _median(col("conv_s")), "conv_worst": _worst(col("conv_s")),
+            "wall_median": statistics.median(col("wall_s")), "wall_worst": max(col("wall_s")),
+            "cpu_median": _median([r.get("cpu_s") for r in rs]), "cpu_worst": _worst([r.get("cpu_s") for r in rs]),
+            "particles_median": statistics.median(col("particles")), "particles_worst": max(col("particles")),
+        })
+    return table
+
+
+def _f(v, fmt: str, none: str = "never") -> str:
+    return none if v is None else format(v, fmt)
+
+
+def format_table(table: list[dict]) -> str:
+    """The table for the terminal: median / worst over seeds."""
+    head = ["dataset", "mode", "config", "RMSE m", "max m", "lost", "conv s", "wall s", "cpu s", "particles"]
+    lines = []
+    for r in table:
+        lines.append([
+            r["dataset"], r["mode"], r["config"],
+            f"{_f(r['rmse_median'], '.3f', '-')} / {_f(r['rmse_worst'], '.3f', '-')}",
+            f"{_f(r['max_median'], '.2f', '-')} / {_f(r['max_worst'], '.2f', '-')}",
+            f"{r['lost']}/{r['runs']}",
+            f"{_f(r['conv_median'], '.1f')} / {_f(r['conv_worst'], '.1f')}",
+            f"{r['wall_median']:.1f} / {r['wall_worst']:.1f}",
+            f"{_f(r.get('cpu_median'), '.1f', '-')} / {_f(r.get('cpu_worst'), '.1f', '-')}",
+            f"{r['particles_median']:.0f} / {r['particles_worst']:.0f}",
+        ])
+    sub = ["", "", "", "med / worst", "med / worst", "runs"] + ["med / worst"] * 4
+    widths = [max(len(x) for x in col) for col in zip(head, sub, *lines)]
+    fmt = lambda cells: "  ".join(c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+    out = [fmt(head), fmt(sub), "  ".join("-" * w for w in widths)]
+    out += [fmt(c) for c in lines]
+    return "\n".join(out)
+
+
+def _csv(rows: list[dict], fields) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(fields), extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in fields})
+    return buf.getvalue()
+
+
+def write_results(out: Path, suite: Suite, rows: list[dict], planned: int) -> list[dict]:
+    """results.json, results.csv, table.csv, table.txt (each written atomically); returns the table."""
+    from mcl.trajectory import atomic_write_text
+
+    table = aggregate(rows)
+    legend = (f"lost: tracking max error > lost_m; global / kidnapped: not below {SETTLE_M} m within "
+              f"{WITHIN_S:g} s of the start / kidnap. conv: s until the error stays below {SETTLE_M} m "
+              "(kidnapped: from the kidnap).")
+    doc = {"suite": suite.name, "suite_file": str(suite.path), "planned_runs": planned, "finished_runs": len(rows),
+           "settle_m": SETTLE_M, "within_s": WITHIN_S, "runs": rows, "table": table}
+    atomic_write_text(out / "results.json", json.dumps(doc, indent=1) + "\n")
+    atomic_write_text(out / "results.csv", _csv(rows, RUN_FIELDS))
+    atomic_write_text(out / "table.csv", _csv(table, TABLE_FIELDS))
+    atomic_write_text(out / "table.txt", format_table(table) + "\n" + legend + "\n")
+    return table
+
+
+def plot_errors(out: Path, rows: list[dict]) -> list[Path]:
+    """plots/DATASET.png: the position error over time of every run, one panel per mode."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from mcl.trajectory import atomic_write_bytes
+
+    colors = {}
+    written = []
+    for ds in dict.fromkeys(r["dataset"] for r in rows):
+        rs = [r for r in rows if r["dataset"] == ds]
+        modes = list(dict.fromkeys(r["mode"] for r in rs))
+        fig, axes = plt.subplots(len(modes), 1, figsize=(9, 2.8 * len(modes)), squeeze=False)
+        for ax, mode in zip(axes[:, 0], modes):
+            for r in (r for r in rs if r["mode"] == mode):
+                path = Path(r["run_dir"]) / "errors.csv"
+                if not path.is_file():
+                    continue
+                a = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+                c = colors.setdefault(r["config"], f"C{len(colors)}")
+                ax.plot(a[:, 0], np.maximum(a[:, 1], 1e-3), color=c, lw=0.8, alpha=0.8,
+                        label=f"{r['config']} seed {r['seed']}")
+                if r.get("kidnap_t") is not None:
+                    ax.axvline(r["kidnap_t"], color="k", ls=":", lw=0.8)
+            ax.axhline(SETTLE_M, color="gray", ls="--", lw=0.6)
+            ax.set_yscale("log")
+            ax.set_ylabel("position error (m)")
+            ax.set_title(f"{ds}: {mode}", fontsize=9)
+            ax.legend(fontsize=6, ncol=4, loc="upper right")
+        axes[-1, 0].set_xlabel("time (s)")
+        fig.tight_layout()
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=90)
+        plt.close(fig)
+        (out / "plots").mkdir(parents=True, exist_ok=True)
+        p = out / "plots" / f"{ds}.png"
+        atomic_write_bytes(p, buf.getvalue())
+        written.append(p)
+    return written
+
+
+# ----------------------------------------------------------------------------- the command
+
+
+def _finished(job: Job) -> dict | None:
+    p = Path(job.run_dir) / "row.json"
+    try:
+        row = json.loads(p.read_text())
+    except (OSError, ValueError):
+        return None
+    return row if row.get("fingerprint") == job.fingerprint else None
+
+
+def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=None, cache=None, modes=None,
+                   only=None, baseline=True, progress=None, echo=print) -> int:
+    """``mcl eval --suite``: plan, generate the worlds, run what is not finished, write and print the table.
+    Returns the exit status (0, 130 interrupted, 2 when a run failed)."""
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    import multiprocessing
+
+    from tqdm import tqdm
+
+    suite = load_suite(suite_path)
+    out = Path(out) if out else Path.cwd() / "runs" / f"suite-{suite.name}"
+    cache = Path(cache) if cache else out / "worlds"
+    job_list = plan(suite, config=config, sets=list(sets), seeds=seeds, out=out, cache=cache, modes=modes,
+                    only=only, baseline=baseline)
+    if not job_list:
+        raise ConfigError(f"{suite.path}: no run left (modes {', '.join(modes or ())} not in any selected dataset)")
+    out.mkdir(parents=True, exist_ok=True)
+    ctx = multiprocessing.get_context("spawn")  # fresh workers: no numba threads inherited from a fork
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init) if jobs > 1 else None
+    results: dict[str, dict] = {}
+    errors: list[str] = []
+    interrupted = False
+    try:
+        worlds = {j.world[0]: j.world[1] for j in job_list if j.world is not None}
+        todo_worlds = {w: kw for w, kw in worlds.items() if not Path(w, "sim.yaml").is_file()}
+        if todo_worlds:
+            echo(f"generating {len(todo_worlds)} synthetic world(s) into {cache}")
+            try:
+                if pool is None:
+                    for w, kw in todo_worlds.items():
+                        make_world(w, kw)
+                else:
+                    list(pool.map(make_world, todo_worlds.keys(), todo_worlds.values()))
+            except (MclError, RuntimeError) as e:
+                raise MclError(f"{suite.path}: simulate: {e}") from None
+        _finish_plan(job_list)
+        todo = []
+        for j in job_list:
+            row = _finished(j)
+            if row is not None:
+                results[j.key] = row
+            else:
+                todo.append(j)
+        if results:
+            echo(f"{len(results)} of {len(job_list)} runs already finished in {out}: not run again")
+        order = {j.key: i for i, j in enumerate(job_list)}
+
+        def save():
+            rows = sorted(results.values(), key=lambda r: order[f"{r['dataset']}/{r['mode']}/{r['config']}/seed{r['seed']}"])
+            return rows, write_results(out, suite, rows, len(job_list))
+
+        bar = tqdm(total=len(todo), unit="run", disable=(None if progress is None else not progress), dynamic_ncols=True)
+
+        def take(job: Job, row: dict) -> None:
+            nonlocal interrupted
+            if row.get("interrupted"):
+                interrupted = True
+                return
+            if "error" in row:
+                errors.append(f"{job.key}: {row['error']}")
+                return
+            results[job.key] = row
+            save()
+            bar.update(1)
+
+        try:
+            if pool is None:
+                for j in todo:
+                    take(j, run_job(j))
+                    if interrupted:
+                        break
+            else:
+                futures = {pool.submit(run_job, j): j for j in todo}
+                pending = set(futures)
+                try:
+                    while pending:
+                        done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                        for f in done:
+                            take(futures[f], f.result())
+                except KeyboardInterrupt:
+                    interrupted = True
+                    for f in pending:
+                        f.cancel()
+                    pool.shutdown(wait=True, cancel_futures=True)
+                    for f in pending:
+                        if f.done() and not f.cancelled() and f.exception() is None:
+                            take(futures[f], f.result())
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            bar.close()
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+    rows, table = save()
+    if rows:
+        plot_errors(out, rows)
+    echo(format_table(table))
+    echo(f"lost: tracking max error > lost_m; global / kidnapped: not below {SETTLE_M} m within {WITHIN_S:g} s. "
+         f"{len(rows)} of {len(job_list)} runs; results in {out} (results.json, results.csv, table.csv, plots/)")
+    for e in errors:
+        echo(f"error: {e}")
+    if interrupted:
+        echo("interrupted: the finished runs are saved; run the same command again to resume")
+        return 130
+    return 2 if errors else 0
+
+
+def run_from_args(args) -> int:
+    """``mcl eval --suite`` from the parsed command line (mcl.cli)."""
+    if args.seeds < 1:
+        raise MclError(f"--seeds: expected >= 1, got {args.seeds}")
+    if args.jobs < 1:
+        raise MclError(f"--jobs: expected >= 1, got {args.jobs}")
+    modes = None
+    if args.modes:
+        modes = _modes([m.strip() for m in args.modes.split(",") if m.strip()], "--modes")
+    only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
+    return evaluate_suite(args.suite, config=args.config, sets=args.set, seeds=args.seeds, jobs=args.jobs,
+                          out=args.out, cache=args.cache, modes=modes, only=only, baseline=args.baseline,
+                          progress=False if args.no_progress else None)

@@ -1,0 +1,249 @@
+"""``mcl eval --suite``: a config over a corpus (mcl.suite), the baseline config, the runner's kidnap hook."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from mcl.cli import main
+from mcl.config import PROJECT_ROOT, load_config, to_dict
+from mcl.runner import run
+from mcl.simulate import simulate
+from mcl.suite import aggregate, load_suite, plan, score
+from mcl.evaluate import position_errors
+from mcl.trajectory import read_tum
+
+CONFIGS = PROJECT_ROOT / "configs"
+
+# configs/baseline.yaml is configs/default.yaml with exactly these keys changed: the plain fixed-N filter.
+# When default.yaml changes another key, baseline.yaml follows it (this test says which key drifted).
+BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.estimate", "sensor.beam_skip",
+                 "motion.map_rejection"}
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def test_baseline_differs_from_default_only_in_the_plain_filter_keys():
+    default = _flat(to_dict(load_config(CONFIGS / "default.yaml")))
+    baseline = _flat(to_dict(load_config(CONFIGS / "baseline.yaml")))
+    assert default.keys() == baseline.keys()
+    differ = {k for k in default if default[k] != baseline[k]}
+    assert differ == BASELINE_KEYS, f"unexpected: {differ - BASELINE_KEYS}, missing: {BASELINE_KEYS - differ}"
+    assert baseline["filter.particles"] == 5000 and baseline["filter.kld"] is False
+    assert baseline["filter.recovery"] is False and baseline["filter.estimate"] == "mean"
+    assert baseline["sensor.beam_skip"] is False and baseline["motion.map_rejection"] is False
+
+
+# ----------------------------------------------------------------------------- scoring and the table
+
+
+def test_score_per_mode():
+    t = np.arange(0.0, 60.0, 1.0)
+    # tracking: max 1.2 m > lost_m 1.0 -> lost; settles below 0.5 m after the spike at t = 10
+    e = np.full(t.size, 0.1)
+    e[10] = 1.2
+    s = score("tracking", t, e, lost_m=1.0)
+    assert s["lost"] and s["max"] == pytest.approx(1.2) and s["conv_s"] == pytest.approx(11.0)
+    assert not score("tracking", t, e, lost_m=1.5)["lost"]
+    # global: 5 m for 20 s, then 0.1 m: converged after 20 s (< 30 s), RMSE from then on only
+    e = np.where(t < 20, 5.0, 0.1)
+    s = score("global", t, e, lost_m=1.0)
+    assert s["conv_s"] == pytest.approx(20.0) and s["ok"] and not s["lost"]
+    assert s["rmse"] == pytest.approx(0.1) and s["max"] == pytest.approx(0.1)
+    e = np.where(t < 40, 5.0, 0.1)  # converged after 40 s: too late
+    assert score("global", t, e, lost_m=1.0)["lost"]
+    # kidnapped at 30 s: 7 m until 35 s -> recovered after 5 s; RMSE over before + after the recovery
+    e = np.where((t >= 30) & (t < 35), 7.0, 0.2)
+    s = score("kidnapped", t, e, lost_m=1.0, kidnap_t=30.0)
+    assert s["conv_s"] == pytest.approx(5.0) and s["ok"] and not s["lost"] and s["max"] == pytest.approx(0.2)
+    e = np.where(t >= 30, 7.0, 0.2)  # never recovers: lost, and the RMSE covers every pose
+    s = score("kidnapped", t, e, lost_m=1.0, kidnap_t=30.0)
+    assert s["lost"] and s["conv_s"] is None and s["max"] == pytest.approx(7.0)
+
+
+def test_table_median_and_worst():
+    def row(seed, rmse, mx, lost, conv, wall, n, config="default"):
+        return {"dataset": "a", "mode": "tracking", "config": config, "seed": seed, "rmse": rmse, "max": mx,
+                "lost": lost, "conv_s": conv, "wall_s": wall, "particles": n}
+
+    rows = [row(1, 0.10, 0.5, False, 1.0, 3.0, 900), row(2, 0.30, 2.5, True, None, 5.0, 1100),
+            row(3, 0.20, 0.4, False, 2.0, 4.0, 1000), row(1, 0.05, 0.2, False, 0.0, 1.0, 5000, "baseline"),
+            row(2, 0.07, 0.3, False, 0.0, 2.0, 5000, "baseline")]
+    table = {r["config"]: r for r in aggregate(rows)}
+    d = table["default"]
+    assert d["runs"] == 3 and d["lost"] == 1
+    assert d["rmse_median"] == pytest.approx(0.20) and d["rmse_worst"] == pytest.approx(0.30)
+    assert d["max_median"] == pytest.approx(0.5) and d["max_worst"] == pytest.approx(2.5)
+    assert d["conv_median"] == pytest.approx(2.0) and d["conv_worst"] is None  # a run that never settled is worst
+    assert d["wall_median"] == pytest.approx(4.0) and d["wall_worst"] == pytest.approx(5.0)
+    assert d["particles_median"] == 1000 and d["particles_worst"] == 1100
+    b = table["baseline"]  # an even count: the median is the mean of the middle two
+    assert b["rmse_median"] == pytest.approx(0.06) and b["rmse_worst"] == pytest.approx(0.07) and b["lost"] == 0
+
+
+# ----------------------------------------------------------------------------- bad suite files
+
+
+def _write(path: Path, doc) -> Path:
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def test_bad_suite_files_exit_2_naming_file_and_key(tmp_path, capsys):
+    demo = PROJECT_ROOT / "data" / "demo"
+    good = {"name": "demo", "map": str(demo / "map.yaml"), "log": str(demo / "log.clf"),
+            "truth": str(demo / "truth.tum")}
+    cases = [
+        ({"datasets": [{**good, "trth": "x"}]}, "datasets[0] (demo): trth: unknown key (did you mean truth?)"),
+        ({"datasets": [{**good, "log": "nowhere/log.clf"}]}, "datasets[0] (demo): log: no such file"),
+        ({"datsets": []}, "datsets: unknown key (did you mean datasets?)"),
+        ({"datasets": [{**good, "modes": ["tracking", "globl"]}]}, "modes: unknown mode 'globl' (did you mean global?)"),
+        ({"datasets": [{"name": "s", "simulate": {"seed": 1, "durations": 5}}]},
+         "datasets[0] (s): simulate.durations: unknown key (did you mean duration?)"),
+        ({"datasets": [{**good, "set": {"filter.particle": 10}}]}, "filter.particle: unknown key"),
+    ]
+    for i, (doc, expected) in enumerate(cases):
+        path = _write(tmp_path / f"bad{i}.yaml", doc)
+        code = main(["eval", "--suite", str(path), "--out", str(tmp_path / f"out{i}"), "--jobs", "1"])
+        err = capsys.readouterr().err
+        assert code == 2, (doc, err)
+        assert err.count("\n") == 1 and str(path) in err and expected in err, err
+        assert not (tmp_path / f"out{i}" / "results.json").exists()
+
+
+def test_plan_modes_only_and_configs(tmp_path):
+    demo = PROJECT_ROOT / "data" / "demo"
+    path = _write(tmp_path / "s.yaml", {"name": "s", "root": str(demo), "modes": ["tracking", "global"], "datasets": [
+        {"name": "a", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum", "modes": ["tracking", "kidnapped"]},
+        {"name": "b", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum", "set": {"sensor.sigma_hit": 0.3}},
+    ]})
+    suite = load_suite(path)
+    jobs = plan(suite, config=None, sets=["filter.particles=100"], seeds=2, out=tmp_path, cache=tmp_path / "w")
+    assert [(j.dataset, j.mode) for j in jobs[::4]] == [("a", "tracking"), ("a", "kidnapped"), ("b", "tracking"),
+                                                         ("b", "global")]
+    assert len(jobs) == 4 * 2 * 2  # dataset-modes x (default, baseline) x seeds
+    by = {(j.dataset, j.mode, j.config, j.seed): j for j in jobs}
+    t0, p0 = read_tum(demo / "truth.tum")
+    assert by["a", "tracking", "default", 2].cfg.filter.initial_pose == pytest.approx(tuple(p0[:, 0]))  # truth start
+    assert by["a", "tracking", "default", 2].cfg.seed == 2
+    assert by["a", "tracking", "default", 1].cfg.filter.particles == 100  # --set: the config under test only
+    assert by["a", "tracking", "baseline", 1].cfg.filter.particles == 5000
+    assert by["b", "global", "baseline", 1].cfg.sensor.sigma_hit == 0.3  # a dataset's set: both configs
+    assert by["b", "global", "default", 1].cfg.filter.global_localization
+    assert by["a", "kidnapped", "default", 1].kidnap_filter
+    only = plan(suite, config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", modes=("global",),
+                only=["b"], baseline=False)
+    assert [(j.dataset, j.mode, j.config) for j in only] == [("b", "global", "default")]
+
+
+# ----------------------------------------------------------------------------- end to end
+
+
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory):
+    """Two tiny datasets on one 15 s synthetic world (the second planted bad: started 3 m off), tracking,
+    default (2,000 particles) and baseline, seeds 1-2, two worker processes."""
+    tmp = tmp_path_factory.mktemp("suite")
+    sim = {"seed": 4, "duration": 15}
+    world = tmp / "w0"
+    start = simulate(world, **sim)["start_pose"]
+    suite = _write(tmp / "tiny.yaml", {"name": "tiny", "modes": ["tracking"], "datasets": [
+        {"name": "good", "simulate": sim},
+        {"name": "planted", "simulate": sim, "initial_pose": [start[0] + 3.0, start[1], start[2]], "lost_m": 1.0},
+    ]})
+    out = tmp / "out"
+    code = main(["eval", "--suite", str(suite), "--out", str(out), "--seeds", "2", "--jobs", "2",
+                 "--set", "filter.particles=2000", "--no-progress"])
+    return {"code": code, "out": out, "suite": suite, "world": world, "start": start, "tmp": tmp}
+
+
+def _rows(out: Path) -> list[dict]:
+    return json.loads((out / "results.json").read_text())["runs"]
+
+
+def test_suite_end_to_end_rows_table_and_lost(evaluated):
+    out = evaluated["out"]
+    assert evaluated["code"] == 0
+    rows = _rows(out)
+    assert len(rows) == 2 * 2 * 2  # datasets x configs x seeds
+    with open(out / "results.csv") as f:
+        assert len(list(csv.DictReader(f))) == 8
+    table = json.loads((out / "results.json").read_text())["table"]
+    assert [(r["dataset"], r["config"], r["runs"]) for r in table] == [
+        ("good", "default", 2), ("good", "baseline", 2), ("planted", "default", 2), ("planted", "baseline", 2)]
+    for r in rows:
+        assert r["lost"] == (r["max"] > r["lost_m"])
+        assert r["rmse"] == pytest.approx(r["ate_rmse"], abs=1e-12)  # tracking: the whole run's ATE
+    # the good world is tracked within 0.2 m (measured ~0.05 m); the planted run starts 3 m off: lost
+    assert all(not r["lost"] and r["rmse"] < 0.2 for r in rows if r["dataset"] == "good")
+    assert all(r["lost"] and r["max"] > 2.0 for r in rows if r["dataset"] == "planted")
+    assert {r["particles"] for r in rows if r["config"] == "baseline"} == {5000.0}
+    assert (out / "plots" / "good.png").stat().st_size > 1000
+    assert (out / "table.txt").read_text().startswith("dataset")
+
+
+def test_suite_rmse_matches_a_direct_run_and_eval(evaluated, tmp_path, capsys):
+    row = next(r for r in _rows(evaluated["out"]) if (r["dataset"], r["config"], r["seed"]) == ("good", "default", 2))
+    w, (x, y, th) = evaluated["world"], evaluated["start"]
+    run_dir = tmp_path / "direct"
+    assert main(["run", "--map", str(w / "map.yaml"), "--log", str(w / "log.clf"), "--truth", str(w / "truth.tum"),
+                 "--initial-pose", repr(x), repr(y), repr(th), "--seed", "2", "--rerun", "off",
+                 "--set", "filter.particles=2000", "--out", str(run_dir), "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(run_dir / "trajectory.tum"), str(w / "truth.tum"), "--json"]) == 0
+    direct = json.loads(capsys.readouterr().out)
+    assert row["rmse"] == pytest.approx(direct["ate_rmse"], rel=1e-9)
+    assert row["max"] == pytest.approx(direct["ate_max"], rel=1e-9)
+
+
+def test_suite_resumes_and_skips_finished_runs(evaluated, capsys):
+    out, suite = evaluated["out"], evaluated["suite"]
+    row_files = sorted(out.glob("runs/*/*/*/seed*/row.json"))
+    assert len(row_files) == 8
+    before = {p: p.stat().st_mtime_ns for p in row_files}
+    removed = out / "runs" / "planted" / "tracking" / "baseline" / "seed1" / "row.json"
+    removed.unlink()
+    args = ["eval", "--suite", str(suite), "--out", str(out), "--seeds", "2", "--jobs", "1",
+            "--set", "filter.particles=2000", "--no-progress"]
+    assert main(args) == 0
+    assert "7 of 8 runs already finished" in capsys.readouterr().out
+    assert removed.exists() and len(_rows(out)) == 8
+    assert all(p.stat().st_mtime_ns == m for p, m in before.items() if p != removed)  # not run again
+    # a changed config is a different run: nothing is skipped for it
+    assert main(args[:-3] + ["--set", "filter.particles=1500", "--no-progress", "--no-baseline", "--only", "good",
+                             "--seeds", "1"]) == 0
+    printed = capsys.readouterr().out
+    assert "already finished" not in printed
+    assert json.loads((out / "runs/good/tracking/default/seed1/row.json").read_text())["particles"] <= 1500
+
+
+# ----------------------------------------------------------------------------- the runner's kidnap hook
+
+
+def test_runner_kidnaps_the_filter_far_from_the_truth(evaluated, tmp_path):
+    w = evaluated["world"]
+    cfg = load_config(CONFIGS / "baseline.yaml", [f"map={w / 'map.yaml'}", f"log={w / 'log.clf'}",
+                                                  f"truth={w / 'truth.tum'}", "rerun.mode=off", "filter.particles=500",
+                                                  f"filter.initial_pose={list(evaluated['start'])}",
+                                                  "filter.global_localization=false"])
+    s = run(cfg, tmp_path / "k", progress=False, echo=lambda m: None, kidnap_filter_at=(7.5, 5.0))
+    k = s["kidnap"]
+    assert k["t"] >= 7.5 and k["distance_m"] >= 5.0
+    t, e, _ = position_errors(*read_tum(tmp_path / "k" / "trajectory.tum"), *read_tum(w / "truth.tum"))
+    assert e[t < 7.5].max() < 0.5  # tracked before (measured ~0.1 m)
+    assert e[t >= k["t"]][0] > 4.0  # and 5 m off right after (one update's correction is < 1 m)
