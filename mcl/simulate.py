@@ -693,7 +693,7 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
     Obstacles are painted on free cells only. A person within 0.6 m of the
     robot steps aside (is not drawn); boxes stand at least 0.8 m from the path.
     """
-    from mcl.kernels.raycast import cast_rays
+    from mcl.kernels.raycast import cast_rays, cast_rays_serial
 
     boxes, people = _unmapped_obstacles(world, poses[:, :2], n, rng) if n else ([], [])
     boxes = boxes + list(furniture)
@@ -725,8 +725,8 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
             i0, i1 = np.searchsorted(yy, [c[1] - 0.25, c[1] + 0.25])
             disc = (xx[None, j0:j1] - c[0]) ** 2 + (yy[i0:i1, None] - c[1]) ** 2 <= 0.25 ** 2
             grid[i0:i1, j0:j1] |= disc & free[i0:i1, j0:j1]
-        cast_rays(np.ascontiguousarray(poses[m : m + 1].T), angles, np.ascontiguousarray(grid), ox, oy, res,
-                  range_max, out[m : m + 1])
+        cast_rays_serial(np.ascontiguousarray(poses[m : m + 1].T), angles, np.ascontiguousarray(grid), ox, oy, res,
+                         range_max, out[m : m + 1])
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
