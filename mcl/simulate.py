@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -46,335 +45,13 @@ from mcl.errors import ConfigError
 
 __all__ = ["simulate", "make_world", "World", "add_arguments", "run_from_args"]
 
-RESOLUTION = 0.05
-_MARGIN = 1.0  # metres of unknown around the building
-_T_OUT = 0.15  # outer wall thickness
-_T_IN = 0.10  # inner wall thickness
-_MIN_ROOM = 3.0
-_DOOR_MARGIN = 0.35  # from a door's edge to the nearest perpendicular wall
+from mcl.worlds import (  # noqa: F401  (make_world, World: importable from here as before)
+    _MARGIN, _T_IN, _T_OUT, KIND_DEFAULTS, KINDS, RESOLUTION, World, _components, generate, make_world,
+)
+
 _ODOM_RATE = 10.0  # Hz, truth and ODOM
 _SCAN_EVERY = 2  # odometry ticks per scan (5 Hz)
 _SIM_DT = 0.01  # integration step, s
-
-
-# --------------------------------------------------------------------------
-# World
-# --------------------------------------------------------------------------
-
-@dataclass(eq=False)
-class World:
-    """A generated floor plan.
-
-    ``occupancy`` is int8 (H, W), row 0 at the bottom: 100 occupied, 0 free,
-    -1 unknown. ``distance`` is metres from each cell centre to the nearest
-    occupied cell centre; ``reachable`` marks the free cells the robot's
-    planner may use (clear of obstacles by ``clearance`` and connected).
-    """
-
-    occupancy: np.ndarray
-    resolution: float
-    origin: tuple[float, float]
-    distance: np.ndarray
-    reachable: np.ndarray
-    room_id: np.ndarray  # int32 (H, W): index of the room/corridor a cell lies in, -1 elsewhere
-    clearance: float
-
-    @property
-    def blocked(self) -> np.ndarray:
-        return self.occupancy == 100
-
-
-class _Raster:
-    """World rectangles -> cell index ranges (a cell belongs if its centre is inside)."""
-
-    def __init__(self, shape, origin, res):
-        self.shape = shape
-        self.ox, self.oy = origin
-        self.res = res
-
-    def slices(self, x0, y0, x1, y1):
-        r = self.res
-        ix0 = max(math.ceil((x0 - self.ox) / r - 0.5 - 1e-9), 0)
-        ix1 = min(math.floor((x1 - self.ox) / r - 0.5 + 1e-9), self.shape[1] - 1)
-        iy0 = max(math.ceil((y0 - self.oy) / r - 0.5 - 1e-9), 0)
-        iy1 = min(math.floor((y1 - self.oy) / r - 0.5 + 1e-9), self.shape[0] - 1)
-        return slice(iy0, max(iy1 + 1, iy0)), slice(ix0, max(ix1 + 1, ix0))
-
-
-def _bsp(rect, rng, out):
-    """Split ``rect`` (x0, y0, x1, y1) recursively into rooms."""
-    x0, y0, x1, y1 = rect
-    w, h = x1 - x0, y1 - y0
-    longest = max(w, h)
-    max_side = rng.uniform(4.5, 8.0)
-    if longest < 2 * _MIN_ROOM or (longest <= max_side and rng.random() < 0.7):
-        out.append(rect)
-        return
-    if w >= h:
-        c = rng.uniform(x0 + _MIN_ROOM, x1 - _MIN_ROOM)
-        _bsp((x0, y0, c, y1), rng, out)
-        _bsp((c, y0, x1, y1), rng, out)
-    else:
-        c = rng.uniform(y0 + _MIN_ROOM, y1 - _MIN_ROOM)
-        _bsp((x0, y0, x1, c), rng, out)
-        _bsp((x0, c, x1, y1), rng, out)
-
-
-def _shared_edge(a, b, need):
-    """The wall segment rooms ``a`` and ``b`` share, as (axis, coord, lo, hi), or None.
-
-    axis 0: a vertical wall at x = coord spanning y in [lo, hi]; axis 1: horizontal.
-    Only segments long enough for a door (``need``) count.
-    """
-    eps = 1e-6
-    for axis in (0, 1):
-        lo_a, hi_a = (a[0], a[2]) if axis == 0 else (a[1], a[3])
-        lo_b, hi_b = (b[0], b[2]) if axis == 0 else (b[1], b[3])
-        if abs(hi_a - lo_b) < eps:
-            coord = hi_a
-        elif abs(hi_b - lo_a) < eps:
-            coord = lo_a
-        else:
-            continue
-        o = (1, 3) if axis == 0 else (0, 2)
-        lo, hi = max(a[o[0]], b[o[0]]), min(a[o[1]], b[o[1]])
-        if hi - lo >= need:
-            return axis, coord, lo, hi
-    return None
-
-
-def _components(trav):
-    from scipy.ndimage import label
-
-    return label(trav, structure=np.ones((3, 3), dtype=bool))
-
-
-def make_world(rng: np.random.Generator, *, width: float = 20.0, height: float = 15.0,
-               clearance: float = 0.42) -> World:
-    """Generate a floor plan; ``clearance`` is the planner's distance to obstacles."""
-    from scipy.ndimage import distance_transform_edt
-
-    res = RESOLUTION
-    W, H = width, height
-    shape = (int(round((H + 2 * _MARGIN) / res)), int(round((W + 2 * _MARGIN) / res)))
-    origin = (-_MARGIN, -_MARGIN)
-    ras = _Raster(shape, origin, res)
-
-    # --- layout: a main corridor across, a side corridor off it, room blocks
-    cw = rng.uniform(1.6, 2.1)
-    yc = rng.uniform(0.36, 0.52) * H
-    cw2 = rng.uniform(1.4, 1.8)
-    xv = rng.uniform(0.25, 0.65) * W
-    south = rng.random() < 0.5  # side corridor below or above the main one
-    corridors = [(0.0, yc, W, yc + cw)]
-    if south:
-        corridors.append((xv, 0.0, xv + cw2, yc))
-        blocks = [(0.0, yc + cw, W, H), (0.0, 0.0, xv, yc), (xv + cw2, 0.0, W, yc)]
-    else:
-        corridors.append((xv, yc + cw, xv + cw2, H))
-        blocks = [(0.0, 0.0, W, yc), (0.0, yc + cw, xv, H), (xv + cw2, yc + cw, W, H)]
-    rooms: list[tuple] = []
-    for b in blocks:
-        _bsp(b, rng, rooms)
-
-    door_need = 1.3 + 2 * _DOOR_MARGIN
-    n_rooms = len(rooms)
-    cnode = n_rooms  # all corridor pieces are one open space
-
-    def edges_of(removed):
-        e = []
-        keep = [i for i in range(n_rooms) if i not in removed]
-        for ii, i in enumerate(keep):
-            for j in keep[ii + 1:]:
-                s = _shared_edge(rooms[i], rooms[j], door_need)
-                if s:
-                    e.append((i, j, s))
-            best = None
-            for c in corridors:
-                s = _shared_edge(rooms[i], c, door_need)
-                if s and (best is None or s[3] - s[2] > best[3] - best[2]):
-                    best = s
-            if best:
-                e.append((i, cnode, best))
-        return keep, e
-
-    def connected(nodes, edges):
-        parent = {n: n for n in nodes}
-
-        def find(a):
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            return a
-
-        for i, j, _ in edges:
-            parent[find(i)] = find(j)
-        return len({find(n) for n in nodes}) == 1
-
-    # --- cut one building corner off (asymmetry): a room holding a corner
-    corners = [(0.0, 0.0), (W, 0.0), (0.0, H), (W, H)]
-    removed: set[int] = set()
-    for ci in rng.permutation(4):
-        cx, cy = corners[ci]
-        cand = [i for i, r in enumerate(rooms) if (r[0] == cx or r[2] == cx) and (r[1] == cy or r[3] == cy)]
-        if not cand:
-            continue
-        i = cand[0]
-        r = rooms[i]
-        if (r[2] - r[0]) * (r[3] - r[1]) > 0.15 * W * H:
-            continue
-        keep, e = edges_of({i})
-        if connected(keep + [cnode], e):
-            removed = {i}
-            break
-    keep, edges = edges_of(removed)
-    if not connected(keep + [cnode], edges):  # cannot happen with corridor-adjacent blocks; be safe
-        raise RuntimeError("world generation produced disconnected rooms")
-
-    # --- doors: a random spanning tree, plus extra doors onto the corridor and between rooms
-    order = rng.permutation(len(edges))
-    parent = {n: n for n in keep + [cnode]}
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    doors = []
-    for k in order:
-        i, j, s = edges[k]
-        ri, rj = find(i), find(j)
-        if ri != rj:
-            parent[ri] = rj
-            doors.append(s)
-        elif rng.random() < (0.5 if j == cnode else 0.15):
-            doors.append(s)
-
-    # --- rasterise: interior free, inner walls, outer walls by dilation
-    interior = np.zeros(shape, dtype=bool)
-    room_id = np.full(shape, -1, dtype=np.int32)
-    for i in keep:
-        sl = ras.slices(*rooms[i])
-        interior[sl] = True
-        room_id[sl] = i
-    for c in corridors:
-        sl = ras.slices(*c)
-        interior[sl] = True
-        room_id[sl] = cnode
-    walls = np.zeros(shape, dtype=bool)
-    h2 = _T_IN / 2
-    for i in keep:
-        x0, y0, x1, y1 = rooms[i]
-        for rect in ((x0 - h2, y0 - h2, x0 + h2, y1 + h2), (x1 - h2, y0 - h2, x1 + h2, y1 + h2),
-                     (x0 - h2, y0 - h2, x1 + h2, y0 + h2), (x0 - h2, y1 - h2, x1 + h2, y1 + h2)):
-            walls[ras.slices(*rect)] = True
-    walls &= interior
-    dist_out = distance_transform_edt(~interior) * res
-    outer = ~interior & (dist_out <= _T_OUT + 1e-9)
-    door_centres = []
-    for axis, coord, lo, hi in doors:
-        dw = rng.uniform(1.0, 1.3)
-        c = rng.uniform(lo + _DOOR_MARGIN + dw / 2, hi - _DOOR_MARGIN - dw / 2)
-        if axis == 0:
-            walls[ras.slices(coord - _T_IN, c - dw / 2, coord + _T_IN, c + dw / 2)] = False
-            door_centres.append((coord, c))
-        else:
-            walls[ras.slices(c - dw / 2, coord - _T_IN, c + dw / 2, coord + _T_IN)] = False
-            door_centres.append((c, coord))
-    occupied = walls | outer
-
-    def trav_of(occ):
-        d = distance_transform_edt(~occ) * res
-        return d, interior & (d >= clearance)
-
-    d, trav = trav_of(occupied)
-    lab, n = _components(trav)
-    sizes = np.bincount(lab.ravel())
-    sizes[0] = 0
-    main = lab == np.argmax(sizes)
-
-    # --- furniture: tables/cabinets, shelves against walls, pillars; never cutting off space
-    dc = np.array(door_centres) if door_centres else np.zeros((0, 2))
-
-    def try_place(rect):
-        nonlocal occupied, main
-        x0, y0, x1, y1 = rect
-        if len(dc):
-            qx = np.clip(dc[:, 0], x0, x1)
-            qy = np.clip(dc[:, 1], y0, y1)
-            if np.min(np.hypot(dc[:, 0] - qx, dc[:, 1] - qy)) < 1.0:
-                return False
-        cand = occupied.copy()
-        cand[ras.slices(*rect)] = True
-        _, tr = trav_of(cand)
-        lab, _ = _components(tr)
-        kept = lab[main & tr]
-        if kept.size == 0:
-            return False
-        counts = np.bincount(kept)
-        counts[0] = 0
-        best = int(np.argmax(counts))
-        if kept.size - counts[best] > 30:  # would cut off part of the reachable space
-            return False
-        occupied = cand
-        main = lab == best
-        return True
-
-    for i in keep:
-        x0, y0, x1, y1 = rooms[i]
-        ix0, iy0, ix1, iy1 = x0 + h2, y0 + h2, x1 - h2, y1 - h2
-        area = (x1 - x0) * (y1 - y0)
-        n_items = int(rng.integers(0, 2 + int(area // 10)))
-        for _ in range(n_items):
-            for _attempt in range(6):
-                kind = rng.random()
-                if kind < 0.45:  # a table or cabinet anywhere
-                    a, b = rng.uniform(0.5, 1.6), rng.uniform(0.5, 1.2)
-                    if rng.random() < 0.5:
-                        a, b = b, a
-                    if ix1 - ix0 <= a or iy1 - iy0 <= b:
-                        continue
-                    fx, fy = rng.uniform(ix0, ix1 - a), rng.uniform(iy0, iy1 - b)
-                    rect = (fx, fy, fx + a, fy + b)
-                elif kind < 0.85:  # a shelf along one wall
-                    ln, th = rng.uniform(1.0, 2.5), rng.uniform(0.3, 0.45)
-                    side = int(rng.integers(4))
-                    if side < 2:
-                        if ix1 - ix0 <= ln:
-                            continue
-                        fx = rng.uniform(ix0, ix1 - ln)
-                        fy = iy0 if side == 0 else iy1 - th
-                        rect = (fx, fy, fx + ln, fy + th)
-                    else:
-                        if iy1 - iy0 <= ln:
-                            continue
-                        fy = rng.uniform(iy0, iy1 - ln)
-                        fx = ix0 if side == 2 else ix1 - th
-                        rect = (fx, fy, fx + th, fy + ln)
-                else:  # a pillar
-                    s = rng.uniform(0.25, 0.4)
-                    fx, fy = rng.uniform(ix0 + 0.8, ix1 - 0.8 - s), rng.uniform(iy0 + 0.8, iy1 - 0.8 - s)
-                    rect = (fx, fy, fx + s, fy + s)
-                if try_place(rect):
-                    break
-    # a few pillars in the corridors, half set into a wall
-    for c in corridors:
-        for _ in range(int(rng.integers(1, 3))):
-            s = rng.uniform(0.3, 0.4)
-            if c[2] - c[0] > c[3] - c[1]:
-                fx = rng.uniform(c[0] + 1.0, c[2] - 1.0 - s)
-                fy = c[1] - s / 2 if rng.random() < 0.5 else c[3] - s / 2
-            else:
-                fy = rng.uniform(c[1] + 1.0, c[3] - 1.0 - s)
-                fx = c[0] - s / 2 if rng.random() < 0.5 else c[2] - s / 2
-            try_place((fx, fy, fx + s, fy + s))
-
-    distance, trav = trav_of(occupied)
-    reachable = main & trav
-    occ = np.where(occupied, 100, np.where(interior, 0, -1)).astype(np.int8)
-    room_id[occupied] = -1
-    return World(occ, res, origin, distance.astype(np.float64), reachable, room_id, clearance)
 
 
 # --------------------------------------------------------------------------
@@ -417,10 +94,12 @@ class _Planner:
         r = self.world.resolution
         return np.column_stack([ox + (self.ix[nodes] + 0.5) * r, oy + (self.iy[nodes] + 0.5) * r])
 
-    def tree(self, src):
+    def tree(self, src, limit=None):
         from scipy.sparse.csgraph import dijkstra
 
-        return dijkstra(self.graph, indices=src, return_predecessors=True)
+        if limit is None:
+            return dijkstra(self.graph, indices=src, return_predecessors=True)
+        return dijkstra(self.graph, indices=src, return_predecessors=True, limit=limit)
 
     def nearest_node(self, x, y):
         pts = self.xy(np.arange(self.iy.size))
@@ -454,8 +133,14 @@ def _clear(xy: np.ndarray, world: World) -> np.ndarray:
     return world.distance[iy, ix]
 
 
-def _plan_route(planner: _Planner, world: World, start_node: int, length: float, rng) -> np.ndarray:
-    """A route from ``start_node`` through goals in rarely visited rooms, at least ``length`` long."""
+def _plan_route(planner: _Planner, world: World, start_node: int, length: float, rng,
+                fine: World | None = None, leg_max: float | None = None) -> np.ndarray:
+    """A route from ``start_node`` through goals in rarely visited rooms, at least ``length`` long.
+
+    ``world`` is the planner's (maybe coarse) world, ``fine`` the full one the
+    route is smoothed against; ``leg_max`` bounds the path length to each goal
+    (rooms farther away count as unreachable for that leg, unless none is near).
+    """
     goal_ok = world.reachable & (world.distance >= 0.55)
     rid = world.room_id[planner.iy, planner.ix]
     goal_mask = goal_ok[planner.iy, planner.ix]
@@ -465,8 +150,9 @@ def _plan_route(planner: _Planner, world: World, start_node: int, length: float,
     visits[int(rid[cur])] = visits.get(int(rid[cur]), 0) + 1
     pieces = []
     total = 0.0
+    misses = 0
     while total < length:
-        dist, pred = planner.tree(cur)
+        dist, pred = planner.tree(cur, leg_max if misses < 50 else None)
         here = int(rid[cur])
         cand_rooms = [r for r in visits if r != here]
         wts = np.array([1.0 / (1 + visits[r]) ** 2 for r in cand_rooms])
@@ -474,7 +160,9 @@ def _plan_route(planner: _Planner, world: World, start_node: int, length: float,
         cells = np.flatnonzero(goal_mask & (rid == room) & np.isfinite(dist))
         if cells.size == 0:
             visits[room] += 10
+            misses += 1
             continue
+        misses = 0
         goal = int(cells[rng.integers(cells.size)])
         nodes = [goal]
         while nodes[-1] != cur:
@@ -485,7 +173,7 @@ def _plan_route(planner: _Planner, world: World, start_node: int, length: float,
         total += float(np.hypot(*np.diff(leg, axis=0).T).sum())
         visits[room] += 1
         cur = goal
-    return _smooth(np.vstack(pieces), world)
+    return _smooth(np.vstack(pieces), fine if fine is not None else world)
 
 
 def _wrap(a):
@@ -539,14 +227,37 @@ class _Robot:
         return len(self.path) - 1 - self.idx
 
 
-def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick):
-    """Truth poses (n_ticks, 3) at 10 Hz, the pre-teleport poses, start and kidnap poses."""
+def _coarse(world: World, stride: int) -> World:
+    """The planner's view of a big world: every ``stride``-th cell, the largest connected part.
+
+    Coarse cell i is fine cell i*stride (same centre), so a route through
+    coarse cells passes through reachable fine cells.
+    """
+    s = stride
+    reach = world.reachable[::s, ::s]
+    lab, _ = _components(reach)
+    sizes = np.bincount(lab.ravel())
+    sizes[0] = 0
+    r = world.resolution
+    origin = (world.origin[0] + 0.5 * r - 0.5 * s * r, world.origin[1] + 0.5 * r - 0.5 * s * r)
+    return World(world.occupancy[::s, ::s], r * s, origin, world.distance[::s, ::s], lab == np.argmax(sizes),
+                 world.room_id[::s, ::s], world.clearance)
+
+
+def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, leg_max=None):
+    """Truth poses (n_ticks, 3) at 10 Hz, the pre-teleport poses, start and kidnap poses.
+
+    ``plan_stride`` > 1 plans on a coarse lattice (big maps); ``leg_max`` bounds each leg of the route.
+    """
+    fine = world
+    if plan_stride > 1:
+        world = _coarse(world, plan_stride)
     planner = _Planner(world)
     per_tick = int(round(1.0 / (_ODOM_RATE * _SIM_DT)))
     route_len = speed * n_ticks / _ODOM_RATE * 1.3 + 5.0
 
     def start_at(node, theta=None):
-        path = _plan_route(planner, world, node, route_len, rng)
+        path = _plan_route(planner, world, node, route_len, rng, fine, leg_max)
         if theta is None:
             k = min(10, len(path) - 1)
             theta = math.atan2(path[k, 1] - path[0, 1], path[k, 0] - path[0, 0])
@@ -568,7 +279,7 @@ def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick):
         if robot.remaining < 5:  # route used up (slow driving): extend from here
             robot = _Robot(np.vstack([robot.path[robot.idx:],
                                       _plan_route(planner, world, planner.nearest_node(*robot.pose[:2]),
-                                                  route_len, rng)]),
+                                                  route_len, rng, fine, leg_max)]),
                            robot.pose, speed, turn_rate)
         pre[k] = truth[k] = robot.pose
         if k == kidnap_tick:
@@ -723,16 +434,22 @@ def _check(cond, key, msg):
         raise ConfigError(f"simulate: {key}: {msg}")
 
 
-def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 181, fov: float = math.pi,
+def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 60.0, n_beams: int = 181,
+             fov: float = math.pi,
              range_max: float = 12.0, range_sigma: float = 0.02, p_short: float = 0.03, p_max: float = 0.01,
              odom_alphas=(0.05, 0.05, 0.05, 0.02), odom_scale: float = 1.01, odom_yaw_drift: float = 0.01,
-             kidnap_at: float | None = None, speed: float = 0.5, turn_rate: float = 0.6,
-             robot_radius: float = 0.2, dynamic_obstacles: int = 0, landmarks: int = 0,
+             kidnap_at: float | None = None, speed: float | None = None, turn_rate: float = 0.6,
+             robot_radius: float = 0.2, dynamic_obstacles: int | None = None,
+             unmapped_furniture: int | None = None, landmarks: int = 0,
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
              landmark_fp: float = 0.03) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
-    Deterministic for a given ``seed`` and parameters. ``range_sigma``,
+    Deterministic for a given ``seed`` and parameters. ``kind`` picks the
+    world generator (``mcl.worlds.KINDS``: office, rooms, corridor, hall,
+    clutter, large); ``speed``, ``dynamic_obstacles`` and
+    ``unmapped_furniture`` left at None take the kind's defaults
+    (``mcl.worlds.KIND_DEFAULTS``). ``range_sigma``,
     ``p_short`` (short readings from unexpected obstacles) and ``p_max``
     (max-range dropouts) set the laser noise; set all three to 0 for exact
     ranges. ``odom_alphas`` are (a1, a2, a3, a4) of the odometry motion model
@@ -743,7 +460,9 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     adds that many obstacles the saved map does not show (``_unmapped_obstacles``):
     half of them boxes standing near the path, half people walking to and fro;
     the laser sees them, the map does not. The world, path and noise stay those
-    of the same seed without them. ``landmarks`` = K > 0 places K point
+    of the same seed without them. ``unmapped_furniture`` = N adds N static
+    boxes (0.3-0.9 m: chairs, crates, carts) the map does not show, standing
+    near walls within 6 m of the path and clear of it. ``landmarks`` = K > 0 places K point
     landmarks near walls (``landmarks.yaml``) and writes a ``LANDMARK`` line
     after each scan: the landmarks within ``landmark_range`` in line of sight,
     range/bearing noise ``landmark_sigma`` (m, rad), missed with probability
@@ -756,6 +475,11 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     from mcl.maps import OccupancyGrid, save_map
     from mcl.trajectory import atomic_write_text, write_tum
 
+    _check(kind in KINDS, "kind", f"expected one of {', '.join(KINDS)}, got {kind!r}")
+    defaults = KIND_DEFAULTS[kind]
+    speed = defaults["speed"] if speed is None else speed
+    dynamic_obstacles = defaults["dynamic_obstacles"] if dynamic_obstacles is None else dynamic_obstacles
+    unmapped_furniture = defaults["unmapped_furniture"] if unmapped_furniture is None else unmapped_furniture
     _check(isinstance(seed, (int, np.integer)) and seed >= 0, "seed", f"expected an integer >= 0, got {seed!r}")
     _check(math.isfinite(duration) and 1.0 <= duration <= 3600.0, "duration", f"expected 1..3600 s, got {duration}")
     _check(isinstance(n_beams, (int, np.integer)) and 2 <= n_beams <= 4096, "n_beams", f"expected 2..4096, got {n_beams}")
@@ -768,6 +492,8 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     _check(0.1 <= speed <= 2.0 and 0.1 <= turn_rate <= 3.0, "speed/turn_rate", "out of range")
     _check(isinstance(dynamic_obstacles, (int, np.integer)) and 0 <= dynamic_obstacles <= 200, "dynamic_obstacles",
            f"expected 0..200, got {dynamic_obstacles!r}")
+    _check(isinstance(unmapped_furniture, (int, np.integer)) and 0 <= unmapped_furniture <= 500,
+           "unmapped_furniture", f"expected 0..500, got {unmapped_furniture!r}")
     _check(isinstance(landmarks, (int, np.integer)) and 0 <= landmarks <= 1000, "landmarks",
            f"expected 0..1000, got {landmarks!r}")
     _check(math.isfinite(landmark_range) and 0.5 <= landmark_range <= 100.0, "landmark_range",
@@ -783,8 +509,9 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
 
     seeds = np.random.SeedSequence(int(seed)).spawn(4)
     rng_world, rng_drive, rng_odom, rng_laser = (np.random.default_rng(s) for s in seeds)
-    world = make_world(rng_world)
-    truth, pre, start, kidnap, length = _drive(world, rng_drive, n_ticks, speed, turn_rate, kidnap_tick)
+    world = generate(kind, rng_world)
+    truth, pre, start, kidnap, length = _drive(world, rng_drive, n_ticks, speed, turn_rate, kidnap_tick,
+                                               defaults["plan_stride"], defaults["leg_max"])
     clear = _clear(truth[:, :2], world).min()
     if clear < robot_radius + world.resolution:
         raise RuntimeError(f"simulate: seed {seed}: the drive came {clear:.3f} m close to a wall (a bug)")
@@ -799,11 +526,16 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     exact = np.empty((scan_ticks.size, angles.size))
     cast_rays(np.ascontiguousarray(truth[scan_ticks].T), angles, blocked, world.origin[0], world.origin[1],
               world.resolution, range_max, exact)
-    if dynamic_obstacles:
+    furniture = []
+    if unmapped_furniture:
+        # A seventh child stream: the others are unchanged.
+        rng_furn = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(7)[6])
+        furniture = _unmapped_furniture(world, truth[:, :2], int(unmapped_furniture), robot_radius, rng_furn)
+    if dynamic_obstacles or furniture:
         # A fifth child stream: the first four (world, drive, odometry, laser) are unchanged.
         rng_obst = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(5)[4])
         _cast_with_unmapped(world, truth[scan_ticks], t[scan_ticks], angles, range_max, int(dynamic_obstacles),
-                            rng_obst, exact)
+                            rng_obst, exact, furniture)
     noise = rng_laser.standard_normal(exact.shape)
     u = rng_laser.random(exact.shape)
     frac = rng_laser.uniform(0.05, 1.0, exact.shape)
@@ -860,6 +592,7 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
     import yaml
 
     params = {
+        "kind": kind,
         "seed": int(seed),
         "duration": float(duration),
         "start_pose": _pose_list(start),
@@ -878,6 +611,7 @@ def simulate(outdir, *, seed: int = 0, duration: float = 60.0, n_beams: int = 18
         "scans": int(scan_ticks.size),
         "path_length": round(length, 3),
         "dynamic_obstacles": int(dynamic_obstacles),
+        "unmapped_furniture": len(furniture),
     }
     if lm_obs is not None:
         params["landmarks"] = {"count": int(lm_ids.size), "range_max": float(landmark_range),
@@ -923,16 +657,46 @@ def _unmapped_obstacles(world: World, path_xy: np.ndarray, n: int, rng: np.rando
     return boxes, people
 
 
+def _unmapped_furniture(world: World, path_xy: np.ndarray, n: int, radius: float,
+                        rng: np.random.Generator) -> list[tuple[float, float, float, float]]:
+    """n static boxes missing from the map, as (x0, y0, x1, y1): 0.3-0.9 m sides, centres on free cells
+    0.3-1.5 m from a wall (furniture stands by walls) and 6 m at most from the path, the whole box
+    farther than ``radius`` + 0.1 m from every path point (the drive never touches it)."""
+    from scipy.spatial import cKDTree
+
+    ox, oy = world.origin
+    r = world.resolution
+    lo, hi = path_xy.min(axis=0) - 6.0, path_xy.max(axis=0) + 6.0
+    ix0, iy0 = max(int((lo[0] - ox) / r), 0), max(int((lo[1] - oy) / r), 0)
+    ix1, iy1 = int((hi[0] - ox) / r) + 1, int((hi[1] - oy) / r) + 1
+    sub = (slice(iy0, iy1), slice(ix0, ix1))
+    iy, ix = np.nonzero((world.occupancy[sub] == 0) & (world.distance[sub] >= 0.3) & (world.distance[sub] <= 1.5))
+    cells = np.column_stack([ox + (ix + ix0 + 0.5) * r, oy + (iy + iy0 + 0.5) * r])
+    tree = cKDTree(path_xy)
+    d, _ = tree.query(cells)
+    cells = cells[(d > 0.75 + radius) & (d <= 6.0)]  # 0.75: a box's half-diagonal (0.64) plus a margin
+    boxes = []
+    for _ in range(n):
+        if cells.shape[0] == 0:
+            break
+        cx, cy = cells[rng.integers(cells.shape[0])]
+        hw, hh = rng.uniform(0.15, 0.45, 2)
+        boxes.append((float(cx - hw), float(cy - hh), float(cx + hw), float(cy + hh)))
+    return boxes
+
+
 def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angles: np.ndarray, range_max: float,
-                        n: int, rng: np.random.Generator, out: np.ndarray) -> None:
-    """Cast every scan (poses (M, 3)) into ``out`` (M, B) against the world plus ``n`` unmapped obstacles.
+                        n: int, rng: np.random.Generator, out: np.ndarray, furniture=()) -> None:
+    """Cast every scan (poses (M, 3)) into ``out`` (M, B) against the world plus ``n`` unmapped obstacles
+    and the unmapped ``furniture`` boxes.
 
     Obstacles are painted on free cells only. A person within 0.6 m of the
     robot steps aside (is not drawn); boxes stand at least 0.8 m from the path.
     """
-    from mcl.kernels.raycast import cast_rays
+    from mcl.kernels.raycast import cast_rays, cast_rays_serial
 
-    boxes, people = _unmapped_obstacles(world, poses[:, :2], n, rng)
+    boxes, people = _unmapped_obstacles(world, poses[:, :2], n, rng) if n else ([], [])
+    boxes = boxes + list(furniture)
     res = world.resolution
     ox, oy = world.origin
     h, w = world.occupancy.shape
@@ -942,6 +706,10 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
     for x0, y0, x1, y1 in boxes:
         static[max(int((y0 - oy) / res), 0):max(int(math.ceil((y1 - oy) / res)), 0),
                max(int((x0 - ox) / res), 0):max(int(math.ceil((x1 - ox) / res)), 0)] = True
+    if not people:  # static only: one cast of every scan
+        cast_rays(np.ascontiguousarray(poses.T), angles, np.ascontiguousarray(base | (static & free)), ox, oy, res,
+                  range_max, out)
+        return
     yy = oy + (np.arange(h) + 0.5) * res
     xx = ox + (np.arange(w) + 0.5) * res
     for m in range(poses.shape[0]):
@@ -957,22 +725,36 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
             i0, i1 = np.searchsorted(yy, [c[1] - 0.25, c[1] + 0.25])
             disc = (xx[None, j0:j1] - c[0]) ** 2 + (yy[i0:i1, None] - c[1]) ** 2 <= 0.25 ** 2
             grid[i0:i1, j0:j1] |= disc & free[i0:i1, j0:j1]
-        cast_rays(np.ascontiguousarray(poses[m : m + 1].T), angles, np.ascontiguousarray(grid), ox, oy, res,
-                  range_max, out[m : m + 1])
+        cast_rays_serial(np.ascontiguousarray(poses[m : m + 1].T), angles, np.ascontiguousarray(grid), ox, oy, res,
+                         range_max, out[m : m + 1])
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mcl simulate``."""
     parser.add_argument("outdir", help="folder to write map.yaml, map.pgm, log.clf, truth.tum, sim.yaml")
+    parser.add_argument("--kind", choices=KINDS, default="office",
+                        help="world layout: office (default; the demo's ~20x15 m building), rooms (identical rooms "
+                        "off a corridor: ambiguous), corridor (60-150 m, featureless), hall (40-80 m open hall, "
+                        "sparse pillars), clutter (office full of small furniture, people and furniture the map "
+                        "lacks), large (150-200 m building)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (world, path, noise); default 0")
     parser.add_argument("--duration", type=float, default=60.0, help="seconds of driving; default 60")
     parser.add_argument("--range-max", type=float, default=12.0, help="laser maximum range in m; default 12")
     parser.add_argument("--beams", type=int, default=181,
-                        help="beams over 180 degrees; default 181 (FLASER; other counts write ROBOTLASER1)")
+                        help="beams over the field of view; default 181 (FLASER at 180 degrees; other geometries "
+                        "write ROBOTLASER1)")
+    parser.add_argument("--fov", type=float, default=180.0, metavar="DEG",
+                        help="laser field of view in degrees; default 180 (a short-range URG-like laser: "
+                        "--range-max 5.6 --fov 240)")
+    parser.add_argument("--speed", type=float, default=None, metavar="V",
+                        help="robot speed in m/s; default the kind's (office 0.5, corridor/hall 0.8, large 1.0)")
     parser.add_argument("--kidnap-at", type=float, default=None, metavar="T",
                         help="teleport the robot at time T s (odometry does not see it)")
-    parser.add_argument("--dynamic-obstacles", type=int, default=0, metavar="N",
-                        help="N obstacles the map does not show (boxes near the path, walking people); default 0")
+    parser.add_argument("--dynamic-obstacles", type=int, default=None, metavar="N",
+                        help="N obstacles the map does not show (boxes near the path, walking people); default 0 "
+                        "(clutter: 10)")
+    parser.add_argument("--unmapped-furniture", type=int, default=None, metavar="N",
+                        help="N static boxes by the walls that the map does not show; default 0 (clutter: 12)")
     parser.add_argument("--landmarks", type=int, default=0, metavar="K",
                         help="K point landmarks near walls: landmarks.yaml and a LANDMARK line per scan; default 0")
     parser.add_argument("--landmark-range", type=float, default=8.0, metavar="M",
@@ -981,8 +763,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_from_args(args: argparse.Namespace) -> int:
     """Run ``mcl simulate`` from parsed arguments; prints a one-line summary."""
-    s = simulate(args.outdir, seed=args.seed, duration=args.duration, range_max=args.range_max,
-                 n_beams=args.beams, kidnap_at=args.kidnap_at, dynamic_obstacles=args.dynamic_obstacles,
+    s = simulate(args.outdir, kind=args.kind, seed=args.seed, duration=args.duration, range_max=args.range_max,
+                 n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
+                 dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                  landmarks=args.landmarks, landmark_range=args.landmark_range)
     x, y, th = s["start_pose"]
     msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "

@@ -156,3 +156,14 @@ def segments_blocked(x, y, theta, lx, ly, endpoints, blocked, ox, oy, res, out):
             continue
         out[j] = cast_ray(sx, sy, math.atan2(ey - sy, ex - sx), blocked, ox, oy, res, length) < length
     return out
+
+
+@njit(cache=True)
+def cast_rays_serial(poses, angles, blocked, ox, oy, res, max_range, out):
+    """Serial twin of :func:`cast_rays` (same rays, same result): for a few poses per call, where waking
+    the parallel threads would cost more than the rays (``mcl.simulate`` casts one scan at a time
+    among moving people)."""
+    for i in range(poses.shape[1]):
+        for j in range(angles.shape[0]):
+            out[i, j] = cast_ray(poses[0, i], poses[1, i], poses[2, i] + angles[j], blocked, ox, oy, res, max_range)
+    return out
