@@ -41,3 +41,36 @@ def test_recovery_time_rule():
     assert k.recovery_time(t, err, 2.0, 0.5) == pytest.approx(4.0)  # below from t = 6 on
     assert k.recovery_time(t, np.r_[err[:-1], 1.0], 2.0, 0.5) is None  # off again at the end
     assert k.recovery_time(t, np.full(10, 0.1), 2.0, 0.5) == 0.0
+
+
+@pytest.fixture(scope="module")
+def rooms_world(tmp_path_factory):
+    from mcl.simulate import simulate
+
+    out = tmp_path_factory.mktemp("rooms")
+    return out, simulate(out, kind="rooms", seed=5, duration=45.0)
+
+
+def _track(data, sim, out, *sets):
+    from mcl.config import load_config
+    from mcl.runner import run
+
+    x, y, th = sim["start_pose"]
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={data / 'map.yaml'}", f"log={data / 'log.clf'}", f"truth={data / 'truth.tum'}", "rerun.mode=off",
+        "filter.global_localization=false", f"filter.initial_pose=[{x}, {y}, {th}]", *sets])
+    return run(cfg, out, progress=False, echo=lambda m: None)
+
+
+def test_default_recovery_does_not_inject_while_the_track_is_correct_on_repeated_rooms(rooms_world, tmp_path):
+    # Identical rooms off a corridor: a pose in the next room fits the scan as well as the true one, so
+    # any particle drawn there can take the estimate away. The default (`lost` recovery) must draw none
+    # while tracking from the true start pose; the book's augmented MCL (the old default) reacts to the
+    # scene's likelihood swings and injects anyway, which is what this test exists to catch.
+    data, sim = rooms_world
+    s = _track(data, sim, tmp_path / "default")
+    assert s["eval"]["ate_max"] < 0.5, s["eval"]
+    assert s["quality"]["lost_updates"] == 0, s["quality"]
+    assert s["injected_particles"] == 0
+    a = _track(data, sim, tmp_path / "augmented", "filter.recovery=augmented")
+    assert a["injected_particles"] > 0
