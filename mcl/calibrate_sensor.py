@@ -39,9 +39,15 @@ import sys
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import erf
 
 from mcl.errors import DataError
+
+
+def erf(x):
+    """scipy.special.erf, imported on first use (scipy.special takes a second to import: not at mcl's startup)."""
+    from scipy.special import erf as _erf
+
+    return _erf(x)
 
 BEAM_KEYS = ("z_hit", "z_short", "z_max", "z_rand", "sigma_hit", "lambda_short")
 _LAMBDA_MIN, _LAMBDA_MAX = 1e-3, 1e3

@@ -277,9 +277,9 @@ def test_support_from_a_subsample_above_the_cap_is_within_its_standard_error():
     e = rng.uniform(-3, 3, (2, 40))
     full = _support_numpy(p, w, e, np.asarray(g.distance, dtype=np.float32), -1.0, -2.0, 0.05, 0.5)
     sub = model.beam_support(p, w, e)
-    # every 10th particle: a 2,000-sample weighted proportion, standard error <= 0.5 * sqrt(1.33 / 2000) = 0.013
+    # every 10th particle: a 500-sample weighted proportion, standard error <= 0.5 * sqrt(1.33 / 500) = 0.026
     # (the weights' second moment adds a third); 4 standard errors
-    assert np.abs(sub - full).max() < 0.05
+    assert np.abs(sub - full).max() < 0.105
     assert 0.03 < full.min() and full.max() < 0.97  # proportions away from 0 and 1 (measured 0.044..0.14)
 
 
