@@ -151,8 +151,11 @@ def _plan_route(planner: _Planner, world: World, start_node: int, length: float,
     pieces = []
     total = 0.0
     misses = 0
+    tree_of = None
     while total < length:
-        dist, pred = planner.tree(cur, leg_max if misses < 50 else None)
+        if tree_of != (cur, misses < 50):  # a miss draws another room from the same place
+            tree_of = (cur, misses < 50)
+            dist, pred = planner.tree(cur, leg_max if misses < 50 else None)
         here = int(rid[cur])
         cand_rooms = [r for r in visits if r != here]
         wts = np.array([1.0 / (1 + visits[r]) ** 2 for r in cand_rooms])

@@ -550,8 +550,9 @@ def _corridor_world(rng: np.random.Generator, clearance: float) -> World:
     H = south + cw + north + 2 * depth
     yc = south + depth
     ras, interior, occupied, room_id, origin = _canvas(L, H)
-    interior[ras.slices(0.0, yc, L, yc + cw)] = True
-    zone = _zones(room_id, interior, 0, int(round(10.0 / RESOLUTION)))
+    main = ras.slices(0.0, yc, L, yc + cw)
+    interior[main] = True
+    zone = _zones(room_id, interior, 0, int(round(10.0 / RESOLUTION)), (main[0].start, 0))  # 10 m along it
     for x, w, ln, down in sides:
         rect = (x, yc - ln, x + w, yc) if down else (x, yc + cw, x + w, yc + cw + ln)
         sl = ras.slices(*rect)
@@ -628,7 +629,7 @@ def _hall_world(rng: np.random.Generator, clearance: float) -> World:
             rects.append(r)
             occupied[ras.slices(*r)] = True
     occupied &= interior
-    zone = _zones(room_id, interior, 0, int(round(8.0 / RESOLUTION)))
+    zone = _zones(room_id, interior, 0, int(round(8.0 / RESOLUTION)), (int(round(_MARGIN / RESOLUTION)),) * 2)
     room_id[ras.slices(cx + h2, cy + h2, cx + ow - h2, cy + oh - h2)] = zone
     meta = {"kind": "hall", "size": (W, H), "objects": len(rects) - 1}
     return _finish(interior, occupied, room_id, origin, clearance, meta)
