@@ -65,7 +65,8 @@ def test_truth_stays_in_free_space_clear_of_walls(sims, worlds, kind):
     assert w.distance[iy, ix].min() >= params["robot"]["radius"] + w.resolution / 2
     speed = KIND_DEFAULTS[kind]["speed"]
     assert params["robot"]["speed"] == speed
-    assert summary["path_length"] > 0.5 * speed * DURATION  # it really drove, at about the kind's speed
+    # it really drove (two starts from rest, turns on the spot: about half the top speed on average)
+    assert summary["path_length"] > 0.3 * speed * DURATION
     steps = np.hypot(np.diff(p[0]), np.diff(p[1]))
     assert np.sort(steps)[-2] <= speed * 0.2 + 1e-6  # one jump (the kidnapping), else never faster
 
@@ -91,9 +92,11 @@ def test_saved_map_is_the_generated_world_and_its_rooms_are_connected(sims, worl
 def test_worlds_are_deterministic_for_a_seed(worlds, kind):
     a = worlds[kind]
     b = generate(kind, _world_rng(SEED))
-    c = generate(kind, _world_rng(SEED + 1))
     np.testing.assert_array_equal(a.occupancy, b.occupancy)
     np.testing.assert_array_equal(a.room_id, b.room_id)
+    if kind == "large":  # a third large world costs seconds; the office-like kinds show seeds matter
+        return
+    c = generate(kind, _world_rng(SEED + 1))
     assert a.occupancy.shape != c.occupancy.shape or np.mean(a.occupancy != c.occupancy) > 0.01
 
 
@@ -120,7 +123,8 @@ def test_rooms_are_identical_cell_for_cell(worlds):
     occ = w.occupancy
     assert np.mean(occ != occ[::-1, ::-1]) > 0.01 and np.mean(occ != occ[:, ::-1]) > 0.01
     # every room is reachable: 2n rooms, the corridor, the lobby
-    assert np.unique(w.room_id[w.reachable]).size == 2 * n + 2
+    ids = np.unique(w.room_id[w.reachable])
+    assert ids[ids >= 0].size == 2 * n + 2
 
 
 def test_corridor_is_long_and_narrow(worlds, sims):
