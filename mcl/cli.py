@@ -198,7 +198,13 @@ def _add_simulate(sub) -> None:
     _command(sub, "simulate", simulate,
              help="make a synthetic world: map + noisy CARMEN log + exact truth",
              description="Draw an indoor world, drive a robot through it, and write map.yaml/map.pgm, log.clf,\n"
-             "truth.tum and sim.yaml into OUTDIR.")
+             "truth.tum and sim.yaml into OUTDIR.",
+             epilog="examples:\n"
+             "  mcl simulate data/demo --seed 0 --duration 60          # the bundled demo (kind office)\n"
+             "  mcl simulate runs/w --kind rooms --seed 3 --duration 90 # identical rooms: ambiguous\n"
+             "  mcl simulate runs/w --kind hall --range-max 5.6 --fov 240 --beams 241   # short-range laser\n"
+             "  mcl simulate runs/w --kind clutter --unmapped-furniture 25\n"
+             "the 43 worlds of suites/synthetic.yaml: README, 'World kinds'")
 
 
 def _add_calibrate(sub) -> None:

@@ -4,7 +4,8 @@
 a seed:
 
 ``map.yaml`` + ``map.pgm``
-    The floor plan (0.05 m cells): outer walls around a building of about
+    The floor plan of ``kind`` (``mcl.worlds``: office, rooms, corridor,
+    hall, clutter, large). The default office (0.05 m cells): outer walls around a building of about
     20 m x 15 m with a corner cut off, a main corridor and a side corridor,
     rooms from a random binary space partition joined by doorways (a random
     spanning tree of the room adjacency graph plus extra doors), furniture
@@ -45,8 +46,8 @@ from mcl.errors import ConfigError
 
 __all__ = ["simulate", "make_world", "World", "add_arguments", "run_from_args"]
 
-from mcl.worlds import (  # noqa: F401  (make_world, World: importable from here as before)
-    _MARGIN, _T_IN, _T_OUT, KIND_DEFAULTS, KINDS, RESOLUTION, World, _components, generate, make_world,
+from mcl.worlds import (  # noqa: F401  (RESOLUTION, make_world, World: importable from here as before)
+    KIND_DEFAULTS, KINDS, RESOLUTION, World, _components, generate, make_world,
 )
 
 _ODOM_RATE = 10.0  # Hz, truth and ODOM
@@ -151,8 +152,11 @@ def _plan_route(planner: _Planner, world: World, start_node: int, length: float,
     pieces = []
     total = 0.0
     misses = 0
+    tree_of = None
     while total < length:
-        dist, pred = planner.tree(cur, leg_max if misses < 50 else None)
+        if tree_of != (cur, misses < 50):  # a miss draws another room from the same place
+            tree_of = (cur, misses < 50)
+            dist, pred = planner.tree(cur, leg_max if misses < 50 else None)
         here = int(rid[cur])
         cand_rooms = [r for r in visits if r != here]
         wts = np.array([1.0 / (1 + visits[r]) ** 2 for r in cand_rooms])

@@ -18,8 +18,9 @@ planner may use; a room/zone id per free cell for the planner's goals):
     A 60-150 m corridor with one or two side corridors and a few door niches:
     along the corridor most scans look alike (a ridge of equal likelihood).
 ``hall``
-    A 40-80 m x 30-60 m open hall with sparse pillars and a few large objects:
-    most beams of a 12 m laser return no echo (max range).
+    A 40-80 m x 30-60 m open hall with a sparse pillar grid (9-15 m apart,
+    three in ten missing) and a few large objects: most beams of a 12 m laser
+    return no echo (max range).
 ``clutter``
     The office with many small mapped items (chairs, bins, small tables);
     ``mcl.simulate`` adds people and furniture the map does not show.
@@ -550,8 +551,9 @@ def _corridor_world(rng: np.random.Generator, clearance: float) -> World:
     H = south + cw + north + 2 * depth
     yc = south + depth
     ras, interior, occupied, room_id, origin = _canvas(L, H)
-    interior[ras.slices(0.0, yc, L, yc + cw)] = True
-    zone = _zones(room_id, interior, 0, int(round(10.0 / RESOLUTION)))
+    main = ras.slices(0.0, yc, L, yc + cw)
+    interior[main] = True
+    zone = _zones(room_id, interior, 0, int(round(10.0 / RESOLUTION)), (main[0].start, 0))  # 10 m along it
     for x, w, ln, down in sides:
         rect = (x, yc - ln, x + w, yc) if down else (x, yc + cw, x + w, yc + cw + ln)
         sl = ras.slices(*rect)
@@ -580,6 +582,11 @@ def _corridor_world(rng: np.random.Generator, clearance: float) -> World:
 # hall: large and open
 # --------------------------------------------------------------------------
 
+def _apart(r, rects, gap) -> bool:
+    """True when rectangle ``r`` keeps ``gap`` m from every one of ``rects``."""
+    return all(r[0] - gap >= q[2] or q[0] - gap >= r[2] or r[1] - gap >= q[3] or q[1] - gap >= r[3] for q in rects)
+
+
 def _place_apart(rng, rects, size, bounds, gap, tries=60):
     """A random (x0, y0, x1, y1) of ``size`` inside ``bounds``, ``gap`` m from every rect in ``rects``, or None.
 
@@ -590,13 +597,14 @@ def _place_apart(rng, rects, size, bounds, gap, tries=60):
     for _ in range(tries):
         fx, fy = rng.uniform(x0, x1 - a), rng.uniform(y0, y1 - b)
         r = (fx, fy, fx + a, fy + b)
-        if all(r[0] - gap >= q[2] or q[0] - gap >= r[2] or r[1] - gap >= q[3] or q[1] - gap >= r[3] for q in rects):
+        if _apart(r, rects, gap):
             return r
     return None
 
 
 def _hall_world(rng: np.random.Generator, clearance: float) -> World:
-    """A 40-80 m x 30-60 m hall: 4-10 pillars, 1-3 large objects (containers, shelving), an office in a corner."""
+    """A 40-80 m x 30-60 m hall: a sparse pillar grid, 1-3 large objects (containers, shelving), an office in a
+    corner."""
     W = rng.uniform(40.0, 80.0)
     H = rng.uniform(30.0, min(60.0, W))
     ras, interior, occupied, room_id, origin = _canvas(W, H)
@@ -620,15 +628,18 @@ def _hall_world(rng: np.random.Generator, clearance: float) -> World:
         if r:
             rects.append(r)
             occupied[ras.slices(*r)] = True
-    n_pillars = int(rng.integers(4, 11))
-    for _ in range(n_pillars):
-        s = rng.uniform(0.4, 0.8)
-        r = _place_apart(rng, rects, (s, s), inner, 4.0)
-        if r:
+    # a pillar grid every 9-15 m, three in ten pillars missing: a 12 m laser sees a few, often none
+    sx, sy = rng.uniform(9.0, 15.0, 2)
+    ps = rng.uniform(0.4, 0.7)
+    for px in np.arange(rng.uniform(3.0, sx), W - 3.0, sx):
+        for py in np.arange(rng.uniform(3.0, sy), H - 3.0, sy):
+            r = (px, py, px + ps, py + ps)
+            if rng.random() < 0.3 or not _apart(r, rects, 2.0):
+                continue
             rects.append(r)
             occupied[ras.slices(*r)] = True
     occupied &= interior
-    zone = _zones(room_id, interior, 0, int(round(8.0 / RESOLUTION)))
+    zone = _zones(room_id, interior, 0, int(round(8.0 / RESOLUTION)), (int(round(_MARGIN / RESOLUTION)),) * 2)
     room_id[ras.slices(cx + h2, cy + h2, cx + ow - h2, cy + oh - h2)] = zone
     meta = {"kind": "hall", "size": (W, H), "objects": len(rects) - 1}
     return _finish(interior, occupied, room_id, origin, clearance, meta)
