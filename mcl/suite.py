@@ -270,6 +270,8 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: 
     from mcl.config import PROJECT_ROOT, load_config
 
     default_cfg = Path(config) if config else PROJECT_ROOT / "configs" / "default.yaml"
+    if not default_cfg.is_file():
+        raise ConfigError(f"--config: no such file {default_cfg}")
     label = "default" if config is None else default_cfg.stem
     configs = [(label, default_cfg, list(sets))]
     if baseline and label != BASELINE:

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -146,6 +144,14 @@ def test_plan_modes_only_and_configs(tmp_path):
     assert by["b", "global", "baseline", 1].cfg.sensor.sigma_hit == 0.3  # a dataset's set: both configs
     assert by["b", "global", "default", 1].cfg.filter.global_localization
     assert by["a", "kidnapped", "default", 1].kidnap_filter
+    # config: a dataset config gives the data and the start pose, not its tuned parameters
+    _write(tmp_path / "ds.yaml", {"map": str(demo / "map.yaml"), "log": str(demo / "log.clf"),
+                                  "truth": str(demo / "truth.tum"), "filter": {"particles": 123,
+                                                                               "initial_pose": [1.0, 2.0, 0.5]}})
+    via = plan(load_suite(_write(tmp_path / "c.yaml", {"datasets": [{"name": "c", "config": "ds.yaml"}]})),
+               config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", baseline=False)
+    assert via[0].cfg.filter.initial_pose == (1.0, 2.0, 0.5) and via[0].cfg.map == str(demo / "map.yaml")
+    assert via[0].cfg.filter.particles == load_config(CONFIGS / "default.yaml").filter.particles
     only = plan(suite, config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", modes=("global",),
                 only=["b"], baseline=False)
     assert [(j.dataset, j.mode, j.config) for j in only] == [("b", "global", "default")]
