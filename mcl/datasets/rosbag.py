@@ -28,7 +28,8 @@ naming the bag and the topic or frame, raised before a run writes anything.
 Numbers: LaserScan ranges are float32; they are read to 10 micrometres (``round(r, 5)``), which removes the
 float32 noise and gives back the decimal a CARMEN log holds (so a log and the bag made from it read the same
 numbers). Stamps are read as the exact decimal ``sec.nanosec``; headings to 1e-12 rad; float32 angles that are
-the float32 of a simple fraction of pi (-pi/2, pi/180) as that fraction.
+the float32 of a simple fraction of pi (-pi/2, pi/180) as that fraction; other float32 fields (range_max,
+range_min, a map's resolution) as the shortest decimal of the float32.
 """
 
 from __future__ import annotations
@@ -219,15 +220,21 @@ class BagScans:
 def laser_ranges(msg):
     """(ranges float64, angle_min, angle_increment, max_range or None) of a LaserScan (see the module doc)."""
     r = np.round(np.asarray(msg.ranges, dtype=np.float64), 5)
-    rmax = float(msg.range_max)
+    rmax = f32(msg.range_max)
     rmax = rmax if math.isfinite(rmax) and rmax > 0 else None
-    rmin = float(msg.range_min)
+    rmin = f32(msg.range_min)
     with np.errstate(invalid="ignore"):
         if rmax is not None:
             r[np.isposinf(r)] = rmax  # REP 117: +inf is no return
         # Too close, -inf or NaN: not a reading. 0 is never a valid range (valid: r > sensor.range_min >= 0).
         r[~(r >= rmin) | np.isneginf(r) | np.isnan(r)] = 0.0
     return r, snap_pi(msg.angle_min), snap_pi(msg.angle_increment), rmax
+
+
+def f32(v: float) -> float:
+    """A float32 field as the shortest decimal that float32 stands for (81.83, not 81.83000183)."""
+    v = float(v)
+    return float(str(np.float32(v))) if math.isfinite(v) else v
 
 
 def snap_pi(v: float) -> float:
@@ -400,7 +407,7 @@ def _grid_from_msg(path, topic, msg):
     if abs(yaw_of(info.origin.orientation)) > 1e-9:
         raise DataError(f"{path}: {topic}: a rotated map origin is not supported")
     try:
-        return OccupancyGrid.from_occupancy(data.reshape(h, w), float(info.resolution),
+        return OccupancyGrid.from_occupancy(data.reshape(h, w), f32(info.resolution),
                                             (float(info.origin.position.x), float(info.origin.position.y)),
                                             path=f"{path}:{topic}")
     except ValueError as e:
@@ -472,8 +479,10 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     counts: dict[str, int] = {t: 0 for t in scan_topics}
     grid = initial = None
     truth_rows: list[tuple] = []
+    seen: dict[str, int] = {}
     for conn, msg in _messages(reader, path, conns):
         topic = conn.topic
+        seen[topic] = seen.get(topic, 0) + 1
         if topic in counts:
             counts[topic] += 1
             order.see(topic, stamp_seconds(msg.header.stamp))
@@ -481,7 +490,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         elif topic in ("/tf", "/tf_static"):
             for ts in msg.transforms:
                 parent, child = _frame(ts.header.frame_id), _frame(ts.child_frame_id)
-                tf_frames.add(f"{parent} -> {child}")
+                if topic == "/tf":
+                    tf_frames.add(f"{parent} -> {child}")
                 if topic == "/tf" and odom_topic is None and parent == odom_frame and child == base_frame:
                     t = stamp_seconds(ts.header.stamp)
                     order.see(topic, t, f" {odom_frame} -> {base_frame}")
@@ -500,6 +510,10 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         if topic == truth_topic:
             truth_rows.append((stamp_seconds(msg.header.stamp), *_pose_msg(msg)))
 
+    for t in sorted(wanted):
+        if seen.get(t, 0) != topics[t].msgcount:
+            raise DataError(f"{path}: {t}: {seen.get(t, 0)} messages read of the {topics[t].msgcount} the bag lists "
+                            "(truncated or corrupt?)")
     warnings: list[str] = []
     notes: list[str] = []
     empty = [t for t in scan_topics if counts[t] == 0]
@@ -509,7 +523,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         if odom_topic is not None:
             raise DataError(f"{path}: {odom_topic}: no messages")
         seen = sorted(tf_frames)
-        raise DataError(f"{path}: /tf: the transform {odom_frame} -> {base_frame} never appears (transforms: "
+        raise DataError(f"{path}: /tf: the transform {odom_frame} -> {base_frame} never appears (it has: "
                         f"{_listing(seen[:12])}{', ...' if len(seen) > 12 else ''}); set frames.odom / frames.base "
                         "or --odom-topic")
     odometry = np.array(odom_rows, dtype=np.float64)
