@@ -104,6 +104,8 @@ def cmd_run(args) -> int:
         overrides.append("bag=null")
     if args.truth and args.truth_topic:
         raise MclError("--truth and --truth-topic: give one")
+    if args.truth_topic:
+        overrides.append("truth=null")  # the topic instead of a config's truth file
     for key, value in (("map", args.map), ("log", args.log), ("bag", args.bag), ("truth", args.truth)):
         if value is not None:
             overrides.append(f"{key}={str(Path(value).resolve())}")

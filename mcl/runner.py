@@ -368,7 +368,11 @@ def _run(
     pf = ParticleFilter(cfg, grid, landmark_map=landmark_map)
     fc = cfg.filter
     if bag_initial is not None and not initial_pose_override:  # the bag's /initialpose, covariance included
-        pf.init_gaussian_cov(*bag_initial)
+        mean0, cov0 = bag_initial
+        if not np.any(cov0):  # no covariance given: filter.initial_std
+            cov0 = np.diag(np.square(fc.initial_std))
+        pf.init_gaussian_cov(mean0, cov0)
+        echo(f"{cfg.bag}: tracking from {cfg.topics.initial_pose} ({mean0[0]:.3f}, {mean0[1]:.3f}, {mean0[2]:.3f})")
         mode = "tracking"
     elif fc.global_localization or fc.initial_pose is None:
         pf.init_global()

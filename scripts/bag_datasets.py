@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -96,7 +95,6 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     names = sorted(p.name for p in DATA.iterdir() if (p / "log.clf").exists())
     wanted = names if args.track == ["all"] else args.track
-    rows = []
     for name in names:
         bag = out / f"{name}.mcap"
         variant = VARIANT.get(name, "topic")
@@ -115,7 +113,6 @@ def main(argv=None) -> int:
                      f"(seeds {' '.join(map(str, args.seeds))}; per seed clf {r['clf']}, mcap {r['mcap']}); "
                      f"identical trajectories: {sum(r['identical'])}/{len(r['identical'])}; "
                      f"run time clf {r['time_clf']:.0f} s, mcap {r['time_mcap']:.0f} s")
-            rows.append((name, r))
         print(line, flush=True)
     return 0
 

@@ -98,11 +98,6 @@ def _compose(a, b):
     return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], math.atan2(math.sin(th), math.cos(th)))
 
 
-def _inverse(a):
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
-
-
 def _tf_pose(tr) -> tuple[float, float, float]:
     return (float(tr.translation.x), float(tr.translation.y), yaw_of(tr.rotation))
 
