@@ -1,4 +1,4 @@
-"""Command line: ``mcl run``, ``mcl eval``, ``mcl simulate``.
+"""Command line: ``mcl run``, ``mcl eval``, ``mcl simulate``, ``mcl bag info``, ``mcl convert``.
 
 Known errors (MclError: a bad config, map or log) print one line on stderr and
 exit with status 2; an interrupted run exits with 130 after saving what it
@@ -49,7 +49,16 @@ def _add_run(sub) -> None:
     p.add_argument("config", nargs="?", help="YAML config (default: configs/default.yaml, the bundled demo)")
     p.add_argument("--map", help="ROS map_server YAML of the occupancy grid")
     p.add_argument("--log", help="CARMEN log (.clf, plain or gzip)")
+    p.add_argument("--bag", help="ROS bag instead of a log: .bag (ROS 1), .db3 / .mcap (ROS 2) or a rosbag2 folder; "
+                   "its /map stands in for --map (see 'mcl bag info')")
+    p.add_argument("--scan-topic", metavar="TOPIC", help="bag: LaserScan/PointCloud2 topic, or 'all' to fuse them (topics.scan)")
+    p.add_argument("--odom-topic", metavar="TOPIC", help="bag: nav_msgs/Odometry topic, or 'tf' for odom -> base on /tf (topics.odom)")
+    p.add_argument("--odom-frame", metavar="FRAME", help="bag: odometry frame (frames.odom, default odom)")
+    p.add_argument("--base-frame", metavar="FRAME", help="bag: robot frame (frames.base, default base_link)")
+    p.add_argument("--write-bag", action="store_true",
+                   help="bag: also write estimate.<kind of the input>: /amcl_pose, map -> odom on /tf, /particlecloud")
     p.add_argument("--truth", help="reference trajectory (TUM) to score the run against")
+    p.add_argument("--truth-topic", metavar="TOPIC", help="bag: reference poses from this topic (topics.truth)")
     p.add_argument("--out", help="output folder (default: a fresh folder under runs/)")
     p.add_argument("--particles", type=int, help="number of particles (filter.particles)")
     p.add_argument("--seed", type=int, help="random seed: the same seed gives the same trajectory")
@@ -80,14 +89,32 @@ def cmd_run(args) -> int:
     if config_path is None:
         # No config: the documented defaults of configs/default.yaml, with the user's data instead of the demo's.
         config_path = _project_default_config()
-        if args.map or args.log:
+        if args.bag:
+            # a bag may hold its own map (/map): --map is optional
+            overrides += ["map=null", "log=null"] + (["truth=null"] if args.truth is None else [])
+        elif args.map or args.log:
             if not (args.map and args.log):
                 raise MclError("--map and --log go together when no config file is given")
             if args.truth is None:
                 overrides.append("truth=null")
-    for key, value in (("map", args.map), ("log", args.log), ("truth", args.truth)):
+    if args.bag and args.log:
+        raise MclError("--bag and --log: give one")
+    if args.bag:
+        overrides.append("log=null")
+    elif args.log:
+        overrides.append("bag=null")
+    if args.truth and args.truth_topic:
+        raise MclError("--truth and --truth-topic: give one")
+    if args.truth_topic:
+        overrides.append("truth=null")  # the topic instead of a config's truth file
+    for key, value in (("map", args.map), ("log", args.log), ("bag", args.bag), ("truth", args.truth)):
         if value is not None:
             overrides.append(f"{key}={str(Path(value).resolve())}")
+    for key, value in (("topics.scan", args.scan_topic), ("topics.odom", args.odom_topic),
+                       ("topics.truth", args.truth_topic), ("frames.odom", args.odom_frame),
+                       ("frames.base", args.base_frame)):
+        if value is not None:
+            overrides.append(f"{key}={json.dumps(value)}")
     if args.particles is not None:
         overrides.append(f"filter.particles={args.particles}")
     if args.seed is not None:
@@ -103,7 +130,10 @@ def cmd_run(args) -> int:
     if args.threads is not None:
         set_threads(args.threads)
     out = Path(args.out) if args.out else default_out_dir()
-    summary = run(cfg, out, progress=False if args.no_progress else None)
+    if args.write_bag and cfg.bag is None:
+        raise MclError("--write-bag needs a bag input (--bag)")
+    summary = run(cfg, out, progress=False if args.no_progress else None,
+                  initial_pose_override=args.initial_pose is not None or args.global_, write_bag=args.write_bag)
     if args.json:
         print(json.dumps(summary, indent=2))
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
@@ -253,6 +283,96 @@ def _add_explore(sub) -> None:
     )
 
 
+def _add_bag(sub) -> None:
+    bsub = _group(sub, "bag", help="look into a ROS bag: topics, frames, and what mcl would use",
+                  description="ROS 1 (.bag) and ROS 2 (.db3, .mcap, rosbag2 folder) recordings, read without ROS.")
+    p = bsub.add_parser("info", help="topics, types, counts, duration, tf frames, and what mcl would use",
+                        description="List a bag's topics (type, message count), its duration, the frames in /tf and "
+                        "/tf_static, and the scan topics, odometry source, laser pose, map and initial pose mcl "
+                        "would take from it with the given options (or why it cannot).")
+    p.add_argument("bag", help="the bag")
+    _bag_options(p)
+    p.add_argument("--json", action="store_true", help="print as JSON")
+    p.set_defaults(func=cmd_bag_info)
+
+
+def _bag_options(p) -> None:
+    p.add_argument("--config", help="config whose topics: and frames: sections apply (default: the defaults)")
+    p.add_argument("--scan-topic", metavar="TOPIC", help="topics.scan")
+    p.add_argument("--odom-topic", metavar="TOPIC", help="topics.odom")
+    p.add_argument("--odom-frame", metavar="FRAME", help="frames.odom")
+    p.add_argument("--base-frame", metavar="FRAME", help="frames.base")
+
+
+def _bag_config(args):
+    from mcl.config import load_config
+
+    overrides = []
+    for key, value in (("topics.scan", args.scan_topic), ("topics.odom", args.odom_topic),
+                       ("frames.odom", args.odom_frame), ("frames.base", args.base_frame)):
+        if value is not None:
+            overrides.append(f"{key}={json.dumps(value)}")
+    return load_config(args.config, overrides)
+
+
+def cmd_bag_info(args) -> int:
+    from mcl.datasets.rosbag import bag_info, format_info
+
+    cfg = _bag_config(args)
+    info = bag_info(args.bag, cfg.topics, cfg.frames)
+    print(json.dumps(info, indent=2) if args.json else format_info(info))
+    return 0
+
+
+def _add_convert(sub) -> None:
+    p = sub.add_parser(
+        "convert", help="a ROS bag to a CARMEN log, or a CARMEN log to a ROS bag (.bag, .db3, .mcap)",
+        description="Convert between a ROS bag and a CARMEN log, keeping everything mcl uses: scan stamps, ranges, "
+        "beam geometry, maximum range, odometry (pose and velocities) at each scan, laser mounting pose. A log "
+        "becomes /scan (LaserScan), /odom (Odometry) or odom -> base_link on /tf, base_link -> laser on /tf_static; "
+        "a bag becomes ROBOTLASER1 + ODOM lines. The output appears only when complete.",
+        epilog="examples:\n  mcl convert run.mcap run.clf\n  mcl convert log.clf log.mcap --odom tf\n"
+        "  mcl convert log.clf log.bag --map map.yaml --initial-pose 1 2 0.5",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("src", help="bag (.bag, .db3, .mcap, rosbag2 folder) or CARMEN log")
+    p.add_argument("out", help="output: .clf, .bag, .db3 or .mcap")
+    _bag_options(p)
+    p.add_argument("--odom", choices=["topic", "tf", "both"], default="topic",
+                   help="bag output: odometry as /odom, as odom -> base_link on /tf, or both (default topic)")
+    p.add_argument("--mount", nargs=3, type=float, metavar=("X", "Y", "THETA"),
+                   help="bag output: the laser's pose in a new base frame; the odometry becomes that base's")
+    p.add_argument("--map", help="bag output: also write this map as /map (OccupancyGrid)")
+    p.add_argument("--initial-pose", nargs=3, type=float, metavar=("X", "Y", "THETA"),
+                   help="bag output: also write /initialpose (std 0.1 m, 0.1 m, 0.1 rad)")
+    p.add_argument("--truth", help="bag output: also write this TUM trajectory as /ground_truth (PoseStamped)")
+    p.set_defaults(func=cmd_convert)
+
+
+def cmd_convert(args) -> int:
+    import numpy as np
+
+    from mcl.datasets.bagwrite import convert
+
+    cfg = _bag_config(args)
+    grid = truth = initial = None
+    if args.map:
+        from mcl.maps import load_map
+
+        grid = load_map(args.map)
+    if args.truth:
+        from mcl.trajectory import read_tum
+
+        truth = read_tum(args.truth)
+    if args.initial_pose:
+        initial = (np.array(args.initial_pose), np.diag([0.01, 0.01, 0.01]))
+    if Path(args.out).exists():
+        raise MclError(f"{args.out}: exists already")
+    n = convert(args.src, args.out, topics=cfg.topics, frames=cfg.frames, odom=args.odom, mount=args.mount,
+                grid=grid, initial=initial, truth=truth, echo=lambda m: print(m, file=sys.stderr))
+    print(f"{args.out}: {n} scans")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mcl",
@@ -269,6 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_calibrate(sub)
     _add_explore(sub)
+    _add_bag(sub)
+    _add_convert(sub)
     return parser
 
 

@@ -179,11 +179,33 @@ class QualityConfig:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class TopicsConfig:
+    """What mcl reads from a ROS bag (mcl.datasets.rosbag); topic names as in the bag."""
+
+    scan: str = "auto"  # auto (/scan, else the only LaserScan), all (fuse every scan topic), or a topic name
+    odom: str = "auto"  # auto (/odom, else the only Odometry topic, else /tf), tf, or a nav_msgs/Odometry topic
+    map: str | None = "/map"  # nav_msgs/OccupancyGrid used when no map file is given; null: never
+    initial_pose: str | None = "/initialpose"  # first PoseWithCovarianceStamped starts tracking; null: ignore
+    truth: str | None = None  # PoseStamped, PoseWithCovarianceStamped or Odometry topic with reference poses
+    cloud_z: tuple[float, float] = (-0.1, 0.1)  # PointCloud2: z band (m, in the cloud's frame) kept as a plane
+    cloud_beams: int = field(default=720, metadata=_rng(8, 100_000))  # PointCloud2: bearing bins over 360 deg
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class FramesConfig:
+    """tf frame names (REP 105) for a ROS bag."""
+
+    odom: str = "odom"  # odometry frame: /tf odom -> base gives the odometry when no Odometry topic is used
+    base: str = "base_link"  # robot frame: the laser's mounting is base -> the scan's frame
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Config:
     """A whole run: the data, the seed and each part of the filter."""
 
     map: str | None = None
     log: str | None = None
+    bag: str | None = None  # ROS bag (.bag, .db3, .mcap or a rosbag2 folder) instead of a CARMEN log
     truth: str | None = None
     laser: str = "auto"  # which laser stream of the log: auto, FLASER, RLASER, ROBOTLASER1, RAWLASER1..4
     seed: int = field(default=1, metadata=_rng(0, 2**63 - 1))
@@ -194,10 +216,12 @@ class Config:
     eval: EvalConfig = field(default_factory=EvalConfig)
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
     quality: QualityConfig = field(default_factory=QualityConfig)
+    topics: TopicsConfig = field(default_factory=TopicsConfig)
+    frames: FramesConfig = field(default_factory=FramesConfig)
 
 
 LASER_KINDS = ("auto", "FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
-PATH_KEYS = ("map", "log", "truth")
+PATH_KEYS = ("map", "log", "bag", "truth")
 
 
 # ----------------------------------------------------------------------------- validation
@@ -304,6 +328,12 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
 def _cross_checks(cfg: Config) -> None:
     if cfg.laser not in LASER_KINDS:
         raise ConfigError(f"laser: expected one of {', '.join(LASER_KINDS)}, got {cfg.laser!r}")
+    if cfg.log is not None and cfg.bag is not None:
+        raise ConfigError("bag: give a CARMEN log (log) or a ROS bag (bag), not both")
+    if not cfg.topics.cloud_z[0] <= cfg.topics.cloud_z[1]:
+        raise ConfigError(f"topics.cloud_z: expected [min, max], got {list(cfg.topics.cloud_z)}")
+    if cfg.topics.scan == "" or cfg.topics.odom == "":
+        raise ConfigError("topics.scan: empty topic name")
     s = cfg.sensor
     if s.range_min >= s.range_max:
         raise ConfigError(f"sensor.range_min: {s.range_min} must be below sensor.range_max ({s.range_max})")

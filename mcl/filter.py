@@ -186,6 +186,20 @@ class ParticleFilter:
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
 
+    def init_gaussian_cov(self, mean, cov) -> None:
+        """Particles drawn from N(mean, cov) with a full 3x3 covariance (x, y, theta), e.g. a ROS /initialpose:
+        mean + S z with S S^T = cov (symmetric square root, so a singular cov is fine)."""
+        c = np.asarray(cov, dtype=np.float64)
+        c = 0.5 * (c + c.T)
+        w, v = np.linalg.eigh(c)
+        root = (v * np.sqrt(np.clip(w, 0.0, None))) @ v.T
+        n = self.cfg.filter.particles
+        p = root @ self.rng.standard_normal((3, n)) + np.asarray(mean, dtype=np.float64)[:, None]
+        p[2] = wrap_angle(p[2])
+        self._set(np.ascontiguousarray(p))
+        self.recovery = make_recovery(self.cfg.filter, False, self.cfg.quality.lost_after)
+        self.quality.reset(lost=False)
+
     def init_global(self) -> None:
         """Particles uniform over the poses the map allows (global localization)."""
         self._set(self.sample_uniform(self.cfg.filter.particles, self.rng))

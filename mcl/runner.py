@@ -179,6 +179,82 @@ def _landmark_records(log, cfg: Config) -> list:
     return list(log.landmarks)
 
 
+class _Unpaired:
+    """``(scan, None)`` for each scan of a sized iterable, without holding them (a bag's stream)."""
+
+    def __init__(self, scans) -> None:
+        self.scans = scans
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+    def __iter__(self):
+        return ((s, None) for s in self.scans)
+
+
+def _open_source(cfg: Config, echo):
+    """The run's data: (log, grid, scans, landmark records, truth, initial pose from the bag or None).
+
+    ``log`` carries ``path``, ``skipped``, ``warnings`` and ``notes``. A CARMEN log (``cfg.log``) is read whole; a
+    ROS bag (``cfg.bag``, mcl.datasets.rosbag) is checked in one pass and its scans streamed; its map
+    (``topics.map``) stands in for a missing ``cfg.map``, its truth topic for a missing ``cfg.truth``.
+    """
+    from mcl.maps import load_map
+    from mcl.trajectory import read_tum
+
+    if cfg.log is None and cfg.bag is None:
+        raise ConfigError("log: no log given (set log or bag in the config, or pass --log or --bag)")
+    if cfg.bag is None and cfg.map is None:
+        raise ConfigError("map: no map given (set it in the config or pass --map)")
+    initial = None
+    if cfg.bag is not None:
+        from mcl.datasets.rosbag import open_bag
+
+        if cfg.landmarks.use:
+            raise ConfigError("landmarks.use: a ROS bag carries no LANDMARK records")
+        log = open_bag(cfg.bag, cfg.topics, cfg.frames)
+        if cfg.map is not None:
+            grid = load_map(cfg.map)
+        elif log.grid is not None:
+            grid = log.grid
+            echo(f"{cfg.bag}: map from {cfg.topics.map} ({grid.width} x {grid.height} cells, {grid.resolution} m)")
+        else:
+            raise ConfigError(f"map: no map given and no {cfg.topics.map or 'map topic'} in {cfg.bag} (pass --map)")
+        scans = log.scans if cfg.sensor.use else []
+        marks: list = []
+        initial = log.initial_pose
+    else:
+        from mcl.datasets.carmen import read_carmen
+
+        grid = load_map(cfg.map)
+        log = read_carmen(cfg.log)
+        scans = _choose_scans(log, cfg.laser) if cfg.sensor.use else []
+        marks = _landmark_records(log, cfg)
+    for w in log.warnings:
+        echo(f"warning: {w}")
+    for note in log.notes:
+        echo(note)
+    if cfg.truth:
+        truth = Truth(*read_tum(cfg.truth))
+    elif cfg.bag is not None and log.truth is not None:
+        truth = Truth(*log.truth)
+    else:
+        truth = None
+    return log, grid, scans, marks, truth, initial
+
+
+def _estimate_bag(cfg: Config, out_dir: Path):
+    """``--write-bag``: an EstimateBag ``estimate.<bag|db3|mcap>`` of the input bag's kind in ``out_dir``."""
+    from mcl.datasets.bagwrite import EstimateBag
+    from mcl.datasets.rosbag import bag_kind
+
+    if cfg.bag is None:
+        raise ConfigError("--write-bag: needs a bag input (bag)")
+    kind = bag_kind(cfg.bag)
+    ext = {"bag1": "bag", "db3": "db3", "mcap": "mcap"}[kind]
+    return EstimateBag(out_dir / f"estimate.{ext}", kind, cfg.rerun.particles_max, cfg.frames.odom)
+
+
 def _updates(scans: list, marks: list) -> list[tuple]:
     """The filter updates in time order, as (scan, marks) pairs.
 
@@ -188,7 +264,7 @@ def _updates(scans: list, marks: list) -> list[tuple]:
     tells a landmark-only update. Scans with no landmarks come as ``(scan, None)``.
     """
     if not marks:
-        return [(s, None) for s in scans]
+        return _Unpaired(scans)
     attached: dict[int, object] = {}
     alone = []
     st = np.array([s.t for s in scans])
@@ -267,7 +343,8 @@ def _kidnap(pf, truth, t: float, estimate, min_distance: float) -> dict:
 def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
-    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at`` (see :func:`_run`). SIGINT and
+    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at``, ``write_bag`` (see
+    :func:`_run`). SIGINT and
     SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true.
     """
     with _Interrupts() as signals:
@@ -283,6 +360,7 @@ def _run(
     initial_pose_override: bool = False,
     echo=None,
     kidnap_filter_at: tuple[float, float] | None = None,
+    write_bag: bool = False,
 ) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
@@ -294,29 +372,15 @@ def _run(
     # Heavy imports here so `mcl --help` stays fast.
     from tqdm import tqdm
 
-    from mcl.datasets.carmen import read_carmen
     from mcl.evaluate import evaluate, format_eval
     from mcl.filter import Control, ParticleFilter
-    from mcl.maps import load_map
     from mcl.motion import velocities_from_odometry
     from mcl.sensors import beam_endpoints
-    from mcl.trajectory import LineWriter, TumWriter, atomic_write_text, read_tum
+    from mcl.trajectory import LineWriter, TumWriter, atomic_write_text
 
     echo = echo or (lambda msg: print(msg, file=sys.stderr))
-    if cfg.map is None:
-        raise ConfigError("map: no map given (set it in the config or pass --map)")
-    if cfg.log is None:
-        raise ConfigError("log: no log given (set it in the config or pass --log)")
     wall0 = time.perf_counter()
-    grid = load_map(cfg.map)
-    log = read_carmen(cfg.log)
-    for w in log.warnings:
-        echo(f"warning: {w}")
-    for note in log.notes:
-        echo(note)
-    truth = Truth(*read_tum(cfg.truth)) if cfg.truth else None
-    scans = _choose_scans(log, cfg.laser) if cfg.sensor.use else []
-    marks_all = _landmark_records(log, cfg)
+    log, grid, scans, marks_all, truth, bag_initial = _open_source(cfg, echo)
     landmark_map = None
     if cfg.landmarks.use:
         from mcl.landmarks import load_landmarks
@@ -332,7 +396,14 @@ def _run(
 
     pf = ParticleFilter(cfg, grid, landmark_map=landmark_map)
     fc = cfg.filter
-    if fc.global_localization or fc.initial_pose is None:
+    if bag_initial is not None and not initial_pose_override:  # the bag's /initialpose, covariance included
+        mean0, cov0 = bag_initial
+        if not np.any(cov0):  # no covariance given: filter.initial_std
+            cov0 = np.diag(np.square(fc.initial_std))
+        pf.init_gaussian_cov(mean0, cov0)
+        echo(f"{cfg.bag}: tracking from {cfg.topics.initial_pose} ({mean0[0]:.3f}, {mean0[1]:.3f}, {mean0[2]:.3f})")
+        mode = "tracking"
+    elif fc.global_localization or fc.initial_pose is None:
         pf.init_global()
         mode = "global"
     else:
@@ -373,6 +444,7 @@ def _run(
     last_t = 0.0
     odom_to_map = None
     writer = TumWriter(out_dir / "trajectory.tum")
+    bag_out = _estimate_bag(cfg, out_dir) if write_bag else None
     quality_out = LineWriter(out_dir / "quality.csv", header=QUALITY_HEADER)
     quality_rows: list[tuple] = []  # (match, contradiction, lost) of each filter update, for the summary
     last_mean, last_lost, last_spread = None, False, math.nan
@@ -432,6 +504,8 @@ def _run(
                     counts["updates"] += 1
                     if info.fit is not None and info.fit.beams:
                         quality_rows.append((info.fit.match, info.fit.contradiction, info.lost))
+                if bag_out is not None:
+                    bag_out.update(scan.t, mean, cov, odom, pf.particles)
                 counts["resamples"] += int(info.resampled)
                 counts["rejected"] += info.rejected
                 counts["degenerate"] += int(info.degenerate)
@@ -502,6 +576,8 @@ def _run(
         bar.close()
         writer.close()
         quality_out.close()
+        if bag_out is not None:
+            bag_out.close()
         if viz is not None:
             viz.close()
     loop_time = time.perf_counter() - loop0
@@ -513,6 +589,7 @@ def _run(
         "interrupted": interrupted,
         "map": cfg.map,
         "log": cfg.log,
+        "bag": cfg.bag,
         "truth": cfg.truth,
         "seed": cfg.seed,
         "scans": len(scans),
@@ -544,6 +621,7 @@ def _run(
             "recording": str(viz.path) if (viz is not None and viz.path is not None and Path(viz.path).exists()) else None,
             "config": str(out_dir / "config.yaml"),
             "quality": str(out_dir / "quality.csv"),
+            "bag": str(bag_out.out.path) if bag_out is not None else None,
         },
     }
     if kidnap is not None:

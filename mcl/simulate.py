@@ -735,7 +735,7 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mcl simulate``."""
-    parser.add_argument("outdir", help="folder to write map.yaml, map.pgm, log.clf, truth.tum, sim.yaml")
+    parser.add_argument("outdir", help="folder to write map.yaml, map.pgm, log.clf (or a bag), truth.tum, sim.yaml")
     parser.add_argument("--kind", choices=KINDS, default="office",
                         help="world layout: office (default; the demo's ~20x15 m building), rooms (identical rooms "
                         "off a corridor: ambiguous), corridor (60-150 m, featureless), hall (40-80 m open hall, "
@@ -763,6 +763,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="K point landmarks near walls: landmarks.yaml and a LANDMARK line per scan; default 0")
     parser.add_argument("--landmark-range", type=float, default=8.0, metavar="M",
                         help="range of the landmark detector in m; default 8")
+    parser.add_argument("--format", choices=["clf", "bag1", "db3", "mcap"], default="clf",
+                        help="the log as a CARMEN log.clf (default) or a ROS bag: log.bag (ROS 1), log.db3 or "
+                        "log.mcap (ROS 2), with /scan, /odom, /tf_static and the truth as /ground_truth")
+
+
+def write_log_as_bag(outdir, fmt: str) -> Path:
+    """Replace ``outdir/log.clf`` by the same data as a ROS bag (``log.bag``, ``log.db3`` or ``log.mcap``,
+    mcl.datasets.bagwrite): /scan, /odom, /tf_static, and truth.tum as /ground_truth."""
+    from mcl.datasets.bagwrite import convert
+    from mcl.trajectory import read_tum
+
+    out = Path(outdir)
+    bag = out / ("log." + {"bag1": "bag", "db3": "db3", "mcap": "mcap"}[fmt])
+    if bag.exists():
+        bag.unlink()
+    convert(out / "log.clf", bag, truth=read_tum(out / "truth.tum"), echo=lambda m: None)
+    (out / "log.clf").unlink()
+    return bag
 
 
 def run_from_args(args: argparse.Namespace) -> int:
@@ -771,6 +789,9 @@ def run_from_args(args: argparse.Namespace) -> int:
                  n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
                  dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                  landmarks=args.landmarks, landmark_range=args.landmark_range)
+    fmt = getattr(args, "format", "clf")
+    if fmt != "clf":
+        write_log_as_bag(s["outdir"], fmt)
     x, y, th = s["start_pose"]
     msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
            f"start pose {x:.3f} {y:.3f} {th:.3f}")

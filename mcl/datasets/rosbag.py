@@ -1,0 +1,614 @@
+"""ROS bag reader (ROS 1 ``.bag``, ROS 2 ``.db3`` / ``.mcap`` or a rosbag2 folder) -> the records of a CARMEN log.
+
+Reading goes through the ``rosbags`` library (``rosbags.highlevel.AnyReader``: one reader for the three storage
+kinds, message definitions from the bag itself, else the ROS 2 Humble type store); no bag or CDR parsing here.
+
+What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the config, REP 105 names by default):
+
+* **scans**: ``sensor_msgs/LaserScan`` (angle_min, angle_increment, range_min, range_max from each message;
+  +inf, the REP 117 no-return, becomes range_max, a no-return reading as in a CARMEN log; below range_min,
+  -inf and NaN are dropped as beams); ``sensor_msgs/PointCloud2`` projected to the plane: points whose z (in
+  the cloud's frame) lies in ``topics.cloud_z`` binned by bearing into ``topics.cloud_beams`` beams, the
+  nearest point per beam (as pointcloud_to_laserscan / Beluga). One topic, or every scan topic fused
+  (``topics.scan: all``), each with its own mounting pose.
+* **odometry**: ``nav_msgs/Odometry`` on a topic, or the ``frames.odom -> frames.base`` transform of ``/tf``;
+  interpolated at each scan's header stamp (linear in x, y, shortest angle in theta; an exact stamp gives the
+  message's own pose). Velocities from the Odometry twist (0 from /tf: the runner derives them).
+* **laser mounting**: ``frames.base -> scan frame`` from ``/tf_static`` (or the first ``/tf`` that has it),
+  through any chain of frames; None when absent (the runner then uses ``sensor.laser_pose`` or the centre).
+* **map** (``nav_msgs/OccupancyGrid`` on ``topics.map``), **initial pose** (the first
+  ``PoseWithCovarianceStamped`` on ``topics.initial_pose``, with its x, y, yaw covariance) and **truth**
+  (``PoseStamped``, ``PoseWithCovarianceStamped`` or ``Odometry`` on ``topics.truth``).
+
+Streaming: :func:`open_bag` makes one pass over the bag that checks every message (order, decoding) and keeps
+only the small ones (odometry, transforms, map, initial pose, truth); :class:`BagScans` then reads the scans
+again, one message at a time, so memory stays flat however long the bag. Any problem is a :class:`DataError`
+naming the bag and the topic or frame, raised before a run writes anything.
+
+Numbers: LaserScan ranges are float32; they are read to 10 micrometres (``round(r, 5)``), which removes the
+float32 noise and gives back the decimal a CARMEN log holds (so a log and the bag made from it read the same
+numbers). Stamps are read as the exact decimal ``sec.nanosec``; headings to 1e-12 rad; float32 angles that are
+the float32 of a simple fraction of pi (-pi/2, pi/180) as that fraction; other float32 fields (range_max,
+range_min, a map's resolution) as the shortest decimal of the float32.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mcl.datasets.carmen import Scan
+from mcl.errors import DataError
+
+__all__ = ["BAG_SUFFIXES", "is_bag", "bag_kind", "open_bag", "BagSource", "BagScans", "bag_info", "format_info",
+           "SCAN_TYPES", "stamp_seconds", "yaw_of"]
+
+BAG_SUFFIXES = {".bag": "bag1", ".db3": "db3", ".mcap": "mcap"}
+LASER = "sensor_msgs/msg/LaserScan"
+CLOUD = "sensor_msgs/msg/PointCloud2"
+SCAN_TYPES = (LASER, CLOUD)
+ODOM = "nav_msgs/msg/Odometry"
+GRID = "nav_msgs/msg/OccupancyGrid"
+PWCS = "geometry_msgs/msg/PoseWithCovarianceStamped"
+POSE = "geometry_msgs/msg/PoseStamped"
+TF = "tf2_msgs/msg/TFMessage"
+TRUTH_TYPES = (POSE, PWCS, ODOM)
+# Header stamps on one topic may step back this much (s) without being "out of order": recorders jitter, and
+# CARMEN logs converted to bags keep their own small backward steps (intel_lab: 4, all < 1 s).
+REORDER_TOLERANCE = 1.0
+
+
+def is_bag(path) -> bool:
+    """A ROS bag by its name: .bag, .db3, .mcap, or a folder with a rosbag2 metadata.yaml."""
+    p = Path(path)
+    return p.suffix in BAG_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").exists())
+
+
+def bag_kind(path) -> str:
+    """bag1, db3 or mcap (a rosbag2 folder: from its storage files)."""
+    p = Path(path)
+    if p.suffix in BAG_SUFFIXES:
+        return BAG_SUFFIXES[p.suffix]
+    if p.is_dir():
+        return "mcap" if any(p.glob("*.mcap")) else "db3"
+    raise DataError(f"{p}: not a ROS bag (.bag, .db3, .mcap or a rosbag2 folder)")
+
+
+def stamp_seconds(stamp) -> float:
+    """A ROS time as float seconds: the exact decimal sec.nanosec, correctly rounded."""
+    return float(f"{int(stamp.sec)}.{int(stamp.nanosec):09d}")
+
+
+def yaw_of(q) -> float:
+    """Heading (rad) of a quaternion: the rotation about z of its planar part, to 1e-12 rad (which removes the
+    last-bit noise of the quaternion round trip: a heading written as a quaternion reads back the same)."""
+    return round(math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)), 12)
+
+
+def _frame(name: str) -> str:
+    return name.lstrip("/")  # ROS 1 frames may start with '/'
+
+
+def _compose(a, b):
+    c, s = math.cos(a[2]), math.sin(a[2])
+    th = a[2] + b[2]
+    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], math.atan2(math.sin(th), math.cos(th)))
+
+
+def _tf_pose(tr) -> tuple[float, float, float]:
+    return (float(tr.translation.x), float(tr.translation.y), yaw_of(tr.rotation))
+
+
+def _open_reader(path: Path):
+    """An open AnyReader (DataError for a missing, truncated or corrupt bag)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    if not path.exists():
+        raise DataError(f"{path}: no such bag")
+    if not is_bag(path):
+        raise DataError(f"{path}: not a ROS bag (.bag, .db3, .mcap or a rosbag2 folder)")
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except Exception as e:  # the library's readers raise many kinds for a damaged file
+        raise DataError(f"{path}: cannot read the bag (truncated or corrupt?): {_why(e)}") from None
+    return reader
+
+
+def _why(e: Exception) -> str:
+    text = " ".join(str(e).split())
+    return (text[:160] or type(e).__name__)
+
+
+def _messages(reader, path, connections):
+    """(connection, deserialized message) in time order; DataError naming the topic on damage."""
+    it = reader.messages(connections=connections)
+    conn = None
+    while True:
+        try:
+            conn, _, raw = next(it)
+            msg = reader.deserialize(raw, conn.msgtype)
+        except StopIteration:
+            return
+        except Exception as e:
+            where = f" on {conn.topic}" if conn is not None else ""
+            raise DataError(f"{path}: cannot read a message{where} (truncated or corrupt?): {_why(e)}") from None
+        yield conn, msg
+
+
+@dataclass
+class _Topics:
+    scan: str = "auto"
+    odom: str = "auto"
+    map: str | None = "/map"
+    initial_pose: str | None = "/initialpose"
+    truth: str | None = None
+    cloud_z: tuple[float, float] = (-0.1, 0.1)
+    cloud_beams: int = 720
+
+
+@dataclass
+class _Frames:
+    odom: str = "odom"
+    base: str = "base_link"
+
+
+@dataclass(eq=False)
+class BagSource:
+    """What a bag holds for a run: the scan stream and the small records read in the first pass."""
+
+    path: str
+    kind: str
+    scans: "BagScans"
+    odom_source: str  # "/odom (nav_msgs/Odometry)" or "/tf odom -> base_link"
+    odometry: np.ndarray  # (M, 6): t, x, y, theta, tv, rv, time-sorted
+    laser_offsets: dict  # scan topic -> (3,) array or None
+    grid: object | None = None  # mcl.maps.OccupancyGrid from topics.map
+    initial_pose: tuple[np.ndarray, np.ndarray] | None = None  # mean (3,), cov (3, 3)
+    truth: tuple[np.ndarray, np.ndarray] | None = None  # t (K,), poses (3, K)
+    warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    skipped: dict[str, int] = field(default_factory=dict)
+    landmarks: list = field(default_factory=list)
+
+
+class BagScans:
+    """The scans of a bag as a sized iterable of :class:`mcl.datasets.carmen.Scan`: each pass reads the bag again,
+    one message at a time (odometry interpolated at each stamp, the mounting pose of its topic)."""
+
+    def __init__(self, path: Path, topics: list[str], count: int, odometry: np.ndarray, offsets: dict,
+                 cloud_z, cloud_beams: int, has_twist: bool):
+        self.path, self.topics, self.count = path, topics, count
+        self.odometry, self.offsets = odometry, offsets
+        self.cloud_z, self.cloud_beams, self.has_twist = cloud_z, int(cloud_beams), has_twist
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __iter__(self):
+        reader = _open_reader(self.path)
+        try:
+            conns = [c for c in reader.connections if c.topic in self.topics]
+            index: dict[str, int] = {}
+            for conn, msg in _messages(reader, self.path, conns):
+                k = index[conn.topic] = index.get(conn.topic, 0) + 1
+                yield self._scan(conn, msg, k)
+        finally:
+            reader.close()
+
+    def _scan(self, conn, msg, k: int) -> Scan:
+        t = stamp_seconds(msg.header.stamp)
+        if conn.msgtype == LASER:
+            ranges, amin, inc, rmax = laser_ranges(msg)
+        else:
+            ranges, amin, inc, rmax = cloud_ranges(msg, self.cloud_z, self.cloud_beams)
+        odom, tv, rv = odometry_at(self.odometry, t)
+        if not self.has_twist:
+            tv = rv = 0.0
+        return Scan(t, ranges, amin, inc, rmax, odom, self.offsets.get(conn.topic), tv, rv, conn.topic, k)
+
+
+def laser_ranges(msg):
+    """(ranges float64, angle_min, angle_increment, max_range or None) of a LaserScan (see the module doc)."""
+    r = np.round(np.asarray(msg.ranges, dtype=np.float64), 5)
+    rmax = f32(msg.range_max)
+    rmax = rmax if math.isfinite(rmax) and rmax > 0 else None
+    rmin = f32(msg.range_min)
+    with np.errstate(invalid="ignore"):
+        if rmax is not None:
+            r[np.isposinf(r)] = rmax  # REP 117: +inf is no return
+        # Too close, -inf or NaN: not a reading. 0 is never a valid range (valid: r > sensor.range_min >= 0).
+        r[~(r >= rmin) | np.isneginf(r) | np.isnan(r)] = 0.0
+    return r, snap_pi(msg.angle_min), snap_pi(msg.angle_increment), rmax
+
+
+def f32(v: float) -> float:
+    """A float32 field as the shortest decimal that float32 stands for (81.83, not 81.83000183)."""
+    v = float(v)
+    return float(str(np.float32(v))) if math.isfinite(v) else v
+
+
+def snap_pi(v: float) -> float:
+    """A float32 angle as float64: p*pi/q when the float32 is exactly that simple fraction of pi (a driver's
+    -pi/2 or pi/180, stored as float32), else the float32 value itself."""
+    v = float(v)
+    f = np.float32(v)
+    qs = list(range(1, 9))
+    if v != 0.0 and 1.0 <= math.pi / abs(v) <= 1e5:
+        qs.append(round(math.pi / abs(v)))
+    for q in qs:
+        p = round(v * q / math.pi)
+        cand = p * math.pi / q
+        if p != 0 and np.float32(cand) == f:
+            return cand
+    return v
+
+
+def cloud_ranges(msg, z_band, beams: int):
+    """A PointCloud2 as a planar scan: points with z_band[0] <= z <= z_band[1], nearest per bearing bin."""
+    names = {f.name: f for f in msg.fields}
+    if not all(n in names for n in "xyz"):
+        raise DataError(f"PointCloud2 without x, y, z fields (has {', '.join(names)})")
+    types = {7: "f4", 8: "f8"}  # sensor_msgs/PointField FLOAT32, FLOAT64
+    order = ">" if msg.is_bigendian else "<"
+    try:
+        dt = np.dtype({"names": list("xyz"), "formats": [order + types[names[n].datatype] for n in "xyz"],
+                       "offsets": [names[n].offset for n in "xyz"], "itemsize": int(msg.point_step)})
+    except KeyError:
+        raise DataError("PointCloud2: x, y, z must be FLOAT32 or FLOAT64") from None
+    n = int(msg.width) * int(msg.height)
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if n * int(msg.point_step) > data.size or n == 0:
+        pts = np.zeros(0, dtype=dt)
+    else:
+        rows = data[: n * int(msg.point_step)]
+        pts = np.frombuffer(rows.tobytes(), dtype=dt, count=n)
+    x, y, z = (pts[c].astype(np.float64) for c in "xyz")
+    keep = np.isfinite(x) & np.isfinite(y) & (z >= z_band[0]) & (z <= z_band[1])
+    x, y = x[keep], y[keep]
+    inc = 2.0 * math.pi / beams
+    out = np.zeros(beams)  # 0: no point in that bin (not a reading)
+    if x.size:
+        r = np.hypot(x, y)
+        b = np.minimum(((np.arctan2(y, x) + math.pi) / inc).astype(np.int64), beams - 1)
+        o = np.lexsort((r, b))
+        first = np.unique(b[o], return_index=True)
+        out[first[0]] = r[o][first[1]]
+    return np.round(out, 5), -math.pi, inc, None
+
+
+def odometry_at(odometry: np.ndarray, t: float):
+    """Robot pose (3,), tv, rv interpolated at ``t`` from time-sorted rows t, x, y, theta, tv, rv (clamped at the
+    ends; a row stamped exactly ``t`` is returned as is)."""
+    ot = odometry[:, 0]
+    m = ot.shape[0]
+    i = int(np.searchsorted(ot, t, side="right")) - 1
+    if i >= 0 and ot[i] == t:
+        row = odometry[i]
+        return row[1:4].copy(), float(row[4]), float(row[5])
+    i = min(max(i, 0), m - 1)
+    j = min(i + 1, m - 1)
+    dt = ot[j] - ot[i]
+    f = min(max((t - ot[i]) / dt, 0.0), 1.0) if dt > 0 else 0.0
+    a, b = odometry[i], odometry[j]
+    dth = math.atan2(math.sin(b[3] - a[3]), math.cos(b[3] - a[3]))
+    th = a[3] + f * dth
+    pose = np.array([a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]), math.atan2(math.sin(th), math.cos(th))])
+    return pose, float(a[4] + f * (b[4] - a[4])), float(a[5] + f * (b[5] - a[5]))
+
+
+def _scan_like(topics: dict) -> list[str]:
+    return sorted(n for n, i in topics.items() if i.msgtype in SCAN_TYPES)
+
+
+def _listing(names: list[str]) -> str:
+    return ", ".join(names) if names else "none"
+
+
+def _choose_scan_topics(path, topics: dict, want: str) -> list[str]:
+    scan_like = _scan_like(topics)
+    if want == "all":
+        if not scan_like:
+            raise DataError(f"{path}: no LaserScan or PointCloud2 topic (topics: {_listing(sorted(topics))})")
+        return scan_like
+    if want == "auto":
+        lasers = [n for n in scan_like if topics[n].msgtype == LASER]
+        if "/scan" in scan_like:
+            return ["/scan"]
+        if len(lasers) == 1:
+            return lasers
+        if not lasers and len(scan_like) == 1:
+            return scan_like
+        if not scan_like:
+            raise DataError(f"{path}: no LaserScan or PointCloud2 topic (topics: {_listing(sorted(topics))})")
+        raise DataError(f"{path}: several scan topics ({_listing(scan_like)}); choose one with --scan-topic "
+                        "(topics.scan) or fuse them with topics.scan: all")
+    if want not in topics:
+        raise DataError(f"{path}: no topic {want} (scan-like topics: {_listing(scan_like)})")
+    if topics[want].msgtype not in SCAN_TYPES:
+        raise DataError(f"{path}: {want} is {topics[want].msgtype}, not a LaserScan or PointCloud2 "
+                        f"(scan-like topics: {_listing(scan_like)})")
+    return [want]
+
+
+def _choose_odom(path, topics: dict, want: str) -> str | None:
+    """The Odometry topic to use, or None for /tf."""
+    odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
+    if want == "tf":
+        return None
+    if want == "auto":
+        if "/odom" in odoms:
+            return "/odom"
+        return odoms[0] if len(odoms) == 1 else None
+    if want not in topics:
+        raise DataError(f"{path}: no topic {want} (Odometry topics: {_listing(odoms)}; or topics.odom: tf)")
+    if topics[want].msgtype != ODOM:
+        raise DataError(f"{path}: {want} is {topics[want].msgtype}, not nav_msgs/Odometry")
+    return want
+
+
+def _check_type(path, topics: dict, name: str | None, types: tuple, what: str) -> str | None:
+    if name is None or name not in topics:
+        return None
+    if topics[name].msgtype not in types:
+        raise DataError(f"{path}: {name} ({what}) is {topics[name].msgtype}, expected "
+                        f"{' or '.join(t.replace('/msg/', '/') for t in types)}")
+    return name
+
+
+class _Order:
+    """Header stamps per topic must not step back more than REORDER_TOLERANCE."""
+
+    def __init__(self, path):
+        self.path, self.last, self.count = path, {}, {}
+
+    def see(self, topic: str, t: float, what: str = "") -> None:
+        k = self.count[topic] = self.count.get(topic, 0) + 1
+        key = topic + what
+        prev = self.last.get(key)
+        if prev is not None and t < prev - REORDER_TOLERANCE:
+            raise DataError(f"{self.path}: {topic}{what}: messages out of order: message {k} is stamped "
+                            f"{t:.3f} s, {prev - t:.3f} s before the one before it")
+        if not math.isfinite(t):
+            raise DataError(f"{self.path}: {topic}: message {k} has a non-finite stamp")
+        self.last[key] = t if prev is None else max(prev, t)
+
+
+def _cov3(c) -> np.ndarray:
+    """x, y, yaw block of a 6x6 row-major ROS covariance."""
+    c = np.asarray(c, dtype=np.float64).reshape(6, 6)
+    idx = [0, 1, 5]
+    return c[np.ix_(idx, idx)].copy()
+
+
+def _pose_msg(msg) -> tuple[float, float, float]:
+    """(x, y, yaw) of a PoseStamped, PoseWithCovarianceStamped or Odometry."""
+    p = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose
+    return float(p.position.x), float(p.position.y), yaw_of(p.orientation)
+
+
+def _grid_from_msg(path, topic, msg):
+    from mcl.maps import OccupancyGrid
+
+    info = msg.info
+    w, h = int(info.width), int(info.height)
+    data = np.asarray(msg.data, dtype=np.int8)
+    if w <= 0 or h <= 0 or data.size != w * h:
+        raise DataError(f"{path}: {topic}: OccupancyGrid of {w} x {h} cells holds {data.size} values")
+    if abs(yaw_of(info.origin.orientation)) > 1e-9:
+        raise DataError(f"{path}: {topic}: a rotated map origin is not supported")
+    try:
+        return OccupancyGrid.from_occupancy(data.reshape(h, w), f32(info.resolution),
+                                            (float(info.origin.position.x), float(info.origin.position.y)),
+                                            path=f"{path}:{topic}")
+    except ValueError as e:
+        raise DataError(f"{path}: {topic}: {e}") from None
+
+
+def _static_chain(static: dict, base: str, frame: str):
+    """Pose of ``frame`` in ``base`` through the parent links of ``static`` (child -> (parent, pose)), or None."""
+    pose = (0.0, 0.0, 0.0)
+    f, seen = frame, set()
+    while f != base:
+        if f in seen or f not in static:
+            return None
+        seen.add(f)
+        parent, p = static[f]
+        pose = _compose(p, pose)
+        f = parent
+    return pose
+
+
+def open_bag(path, topics=None, frames=None) -> BagSource:
+    """Read a bag's small records and set up its scan stream (see the module doc).
+
+    ``topics`` and ``frames`` are the config sections (or any objects with the same attributes; None: the
+    defaults). DataError naming the bag and the topic or frame for every problem found.
+    """
+    path = Path(path)
+    tp = topics or _Topics()
+    fr = frames or _Frames()
+    reader = _open_reader(path)
+    try:
+        return _first_pass(path, reader, tp, fr)
+    finally:
+        reader.close()
+
+
+def _first_pass(path: Path, reader, tp, fr) -> BagSource:
+    topics = reader.topics
+    for name, info in topics.items():
+        if info.msgtype is None:
+            raise DataError(f"{path}: {name}: several message types on one topic")
+    scan_topics = _choose_scan_topics(path, topics, tp.scan)
+    odom_topic = _choose_odom(path, topics, tp.odom)
+    map_topic = _check_type(path, topics, tp.map, (GRID,), "map")
+    init_topic = _check_type(path, topics, tp.initial_pose, (PWCS,), "initial pose")
+    truth_topic = tp.truth
+    if truth_topic is not None:
+        if truth_topic not in topics:
+            poses = sorted(n for n, i in topics.items() if i.msgtype in TRUTH_TYPES)
+            raise DataError(f"{path}: no truth topic {truth_topic} (pose and odometry topics: {_listing(poses)})")
+        _check_type(path, topics, truth_topic, TRUTH_TYPES, "truth")
+    tf_topics = [n for n in ("/tf", "/tf_static") if n in topics]
+    for n in tf_topics:
+        if topics[n].msgtype != TF:
+            raise DataError(f"{path}: {n} is {topics[n].msgtype}, expected tf2_msgs/TFMessage")
+    odom_frame, base_frame = _frame(fr.odom), _frame(fr.base)
+    if odom_topic is None and "/tf" not in topics:
+        odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
+        raise DataError(f"{path}: no odometry: no nav_msgs/Odometry topic{'' if not odoms else ' chosen'} "
+                        f"(Odometry topics: {_listing(odoms)}) and no /tf for {odom_frame} -> {base_frame}")
+
+    wanted = set(scan_topics) | set(tf_topics) | {t for t in (odom_topic, map_topic, init_topic, truth_topic) if t}
+    conns = [c for c in reader.connections if c.topic in wanted]
+    order = _Order(path)
+    odom_rows: list[tuple] = []
+    static: dict[str, tuple] = {}  # child -> (parent, pose): /tf_static, and the first /tf of a non-odometry link
+    tf_frames: set[str] = set()
+    scan_frames: dict[str, str] = {}
+    counts: dict[str, int] = {t: 0 for t in scan_topics}
+    grid = initial = None
+    truth_rows: list[tuple] = []
+    seen: dict[str, int] = {}
+    for conn, msg in _messages(reader, path, conns):
+        topic = conn.topic
+        seen[topic] = seen.get(topic, 0) + 1
+        if topic in counts:
+            counts[topic] += 1
+            order.see(topic, stamp_seconds(msg.header.stamp))
+            scan_frames.setdefault(topic, _frame(msg.header.frame_id))
+        elif topic in ("/tf", "/tf_static"):
+            for ts in msg.transforms:
+                parent, child = _frame(ts.header.frame_id), _frame(ts.child_frame_id)
+                if topic == "/tf":
+                    tf_frames.add(f"{parent} -> {child}")
+                if topic == "/tf" and odom_topic is None and parent == odom_frame and child == base_frame:
+                    t = stamp_seconds(ts.header.stamp)
+                    order.see(topic, t, f" {odom_frame} -> {base_frame}")
+                    odom_rows.append((t, *_tf_pose(ts.transform), 0.0, 0.0))
+                elif topic == "/tf_static" or child not in static:
+                    if parent != odom_frame or child != base_frame:
+                        static[child] = (parent, _tf_pose(ts.transform))
+        elif topic == odom_topic:
+            t = stamp_seconds(msg.header.stamp)
+            order.see(topic, t)
+            odom_rows.append((t, *_pose_msg(msg), float(msg.twist.twist.linear.x), float(msg.twist.twist.angular.z)))
+        if topic == map_topic and grid is None:
+            grid = _grid_from_msg(path, topic, msg)
+        if topic == init_topic and initial is None:
+            initial = (np.array(_pose_msg(msg)), _cov3(msg.pose.covariance))
+        if topic == truth_topic:
+            truth_rows.append((stamp_seconds(msg.header.stamp), *_pose_msg(msg)))
+
+    for t in sorted(wanted):
+        if seen.get(t, 0) != topics[t].msgcount:
+            raise DataError(f"{path}: {t}: {seen.get(t, 0)} messages read of the {topics[t].msgcount} the bag lists "
+                            "(truncated or corrupt?)")
+    warnings: list[str] = []
+    notes: list[str] = []
+    empty = [t for t in scan_topics if counts[t] == 0]
+    if empty:
+        raise DataError(f"{path}: {empty[0]}: no messages")
+    if not odom_rows:
+        if odom_topic is not None:
+            raise DataError(f"{path}: {odom_topic}: no messages")
+        seen = sorted(tf_frames)
+        raise DataError(f"{path}: /tf: the transform {odom_frame} -> {base_frame} never appears (it has: "
+                        f"{_listing(seen[:12])}{', ...' if len(seen) > 12 else ''}); set frames.odom / frames.base "
+                        "or --odom-topic")
+    odometry = np.array(odom_rows, dtype=np.float64)
+    odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
+    if not np.isfinite(odometry).all():
+        raise DataError(f"{path}: {odom_topic or '/tf'}: non-finite odometry")
+    offsets: dict[str, np.ndarray | None] = {}
+    for t in scan_topics:
+        f = scan_frames[t]
+        pose = (0.0, 0.0, 0.0) if f == base_frame else _static_chain(static, base_frame, f)
+        if pose is None:
+            offsets[t] = None
+            notes.append(f"{path}: {t}: no transform {base_frame} -> {f} in /tf_static or /tf; the laser pose comes "
+                         "from sensor.laser_pose (else the robot centre)")
+        else:
+            offsets[t] = np.array(pose, dtype=np.float64)
+    truth = None
+    if truth_topic is not None:
+        if not truth_rows:
+            raise DataError(f"{path}: {truth_topic}: no messages")
+        a = np.array(truth_rows, dtype=np.float64)
+        truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
+    src_name = f"{odom_topic} (nav_msgs/Odometry)" if odom_topic else f"/tf {odom_frame} -> {base_frame}"
+    scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
+                     has_twist=odom_topic is not None)
+    skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
+    return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
+                     warnings, notes, skipped)
+
+
+# ----------------------------------------------------------------------------- mcl bag info
+
+
+def bag_info(path, topics=None, frames=None) -> dict:
+    """Topics (type, count), duration, frames in /tf and /tf_static, and what mcl would use (or why not)."""
+    path = Path(path)
+    reader = _open_reader(path)
+    try:
+        tps = reader.topics
+        info = {
+            "path": str(path),
+            "kind": bag_kind(path),
+            "duration_s": reader.duration * 1e-9 if reader.message_count else 0.0,
+            "messages": reader.message_count,
+            "topics": {n: {"type": i.msgtype.replace("/msg/", "/") if i.msgtype else "(mixed)",
+                           "count": i.msgcount} for n, i in sorted(tps.items())},
+        }
+        frames_seen: dict[str, set] = {"/tf": set(), "/tf_static": set()}
+        conns = [c for c in reader.connections if c.topic in frames_seen and c.msgtype == TF]
+        for conn, msg in _messages(reader, path, conns):
+            for ts in msg.transforms:
+                frames_seen[conn.topic].add(f"{_frame(ts.header.frame_id)} -> {_frame(ts.child_frame_id)}")
+        info["frames"] = {k: sorted(v) for k, v in frames_seen.items()}
+    finally:
+        reader.close()
+    try:
+        src = open_bag(path, topics, frames)
+        info["mcl_uses"] = {
+            "scan_topics": src.scans.topics,
+            "scans": len(src.scans),
+            "odometry": src.odom_source,
+            "laser_pose": {t: (None if o is None else [round(float(v), 6) for v in o])
+                           for t, o in src.laser_offsets.items()},
+            "map": "from the bag" if src.grid is not None else "needs --map",
+            "initial_pose": (None if src.initial_pose is None
+                             else [round(float(v), 6) for v in src.initial_pose[0]]),
+            "notes": src.notes,
+        }
+    except DataError as e:
+        info["mcl_uses"] = {"error": str(e)}
+    return info
+
+
+def format_info(info: dict) -> str:
+    lines = [f"{info['path']}: {info['kind']}, {info['messages']} messages, {info['duration_s']:.1f} s"]
+    lines.append("topics:")
+    w = max((len(n) for n in info["topics"]), default=0)
+    for n, t in info["topics"].items():
+        lines.append(f"  {n:<{w}}  {t['type']:<40} {t['count']:>8}")
+    for k in ("/tf", "/tf_static"):
+        lines.append(f"frames in {k}: {', '.join(info['frames'][k]) or 'none'}")
+    u = info["mcl_uses"]
+    lines.append("mcl would use:")
+    if "error" in u:
+        lines.append(f"  nothing: {u['error']}")
+    else:
+        lines.append(f"  scans:        {', '.join(u['scan_topics'])} ({u['scans']} messages)")
+        lines.append(f"  odometry:     {u['odometry']}")
+        for t, p in u["laser_pose"].items():
+            lines.append(f"  laser pose:   {t}: {p if p is not None else 'not in /tf_static or /tf (sensor.laser_pose)'}")
+        lines.append(f"  map:          {u['map']}")
+        lines.append(f"  initial pose: {u['initial_pose'] if u['initial_pose'] is not None else 'none in the bag'}")
+    return "\n".join(lines)

@@ -1,0 +1,434 @@
+"""ROS bags (issue 9): the same records as the CARMEN log they came from, each storage kind, each odometry source,
+the map / initial pose / truth inside the bag, conversion both ways, and each bad input as one line and exit 2.
+
+Every bag is written on the fly by the rosbags library's writers (mcl.datasets.bagwrite.BagOut) from a short
+synthetic world (mcl simulate, 8 s, 41 scans)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mcl.cli import main
+from mcl.config import load_config
+from mcl.datasets.bagwrite import BagOut, convert, write_scans
+from mcl.datasets.carmen import read_carmen
+from mcl.datasets.rosbag import bag_info, open_bag
+from mcl.errors import DataError
+from mcl.maps import load_map
+from mcl.runner import run
+from mcl.simulate import simulate
+from mcl.trajectory import read_tum
+
+KINDS = {"bag1": "bag", "db3": "db3", "mcap": "mcap"}
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    d = tmp_path_factory.mktemp("world")
+    simulate(d, seed=3, duration=8.0)
+    return d
+
+
+@pytest.fixture(scope="module")
+def scans(world):
+    return read_carmen(world / "log.clf").laser_stream()
+
+
+def _quiet(*_a, **_k):
+    pass
+
+
+def _run(tmp_path, name, **data):
+    overrides = ["rerun.mode=off", "filter.particles=400", "filter.kld=false", "truth=null", "log=null"]
+    overrides += [f"{k}={v}" for k, v in data.items()]
+    cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "default.yaml", overrides)
+    out = tmp_path / name
+    return run(cfg, out, progress=False, echo=_quiet), out
+
+
+def _same_records(a, b, *, offset_tol=0.0):
+    assert a.t == b.t
+    assert np.array_equal(a.ranges, b.ranges)
+    assert (a.angle_min, a.angle_increment, a.max_range) == (b.angle_min, b.angle_increment, b.max_range)
+    assert np.array_equal(a.odom, b.odom)
+    assert (a.tv, a.rv) == (b.tv, b.rv)
+    oa = np.zeros(3) if a.laser_offset is None else a.laser_offset
+    ob = np.zeros(3) if b.laser_offset is None else b.laser_offset
+    assert np.allclose(oa, ob, rtol=0, atol=offset_tol)
+
+
+# ----------------------------------------------------------------------------- same data, same trajectory
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_each_storage_kind_reads_the_logs_records_and_gives_a_byte_identical_trajectory(world, scans, tmp_path, kind):
+    bag = tmp_path / f"log.{KINDS[kind]}"
+    assert write_scans(bag, scans) == len(scans)
+    src = open_bag(bag)
+    got = list(src.scans)
+    assert len(got) == len(src.scans) == len(scans)
+    for a, b in zip(scans, got):
+        _same_records(a, b)
+    s_clf, o_clf = _run(tmp_path, "clf", map=world / "map.yaml", log=world / "log.clf")
+    s_bag, o_bag = _run(tmp_path, "bag", map=world / "map.yaml", bag=bag)
+    assert s_bag["updates"] == s_clf["updates"] > 30
+    assert (o_bag / "trajectory.tum").read_bytes() == (o_clf / "trajectory.tum").read_bytes()
+
+
+def test_odometry_from_tf_is_interpolated_at_each_scan_stamp(scans, tmp_path):
+    # /tf carries odom -> base_link at every other scan only: the scans between get the linear interpolation of
+    # their two neighbours (x, y exactly the midpoint within float rounding; the motion between is small).
+    bag = tmp_path / "tf.mcap"
+    with BagOut(bag) as b:
+        for k, s in enumerate(scans):
+            if k == 0:
+                b.write("/tf_static", "tf2_msgs/msg/TFMessage", s.t,
+                        b.msg("tf2_msgs/msg/TFMessage", transforms=[b.transform(s.t, "base_link", "laser", (0, 0, 0))]))
+            if k % 2 == 0:
+                b.write("/tf", "tf2_msgs/msg/TFMessage", s.t,
+                        b.msg("tf2_msgs/msg/TFMessage", transforms=[b.transform(s.t, "odom", "base_link", s.odom)]))
+            _laser(b, "/scan", s)
+    src = open_bag(bag)
+    assert src.odom_source == "/tf odom -> base_link"
+    got = list(src.scans)
+    for k in range(1, len(scans) - 1, 2):
+        a, c = scans[k - 1], scans[k + 1]
+        f = (scans[k].t - a.t) / (c.t - a.t)
+        expect = a.odom[:2] + f * (c.odom[:2] - a.odom[:2])
+        assert np.allclose(got[k].odom[:2], expect, atol=1e-12)
+    for k in range(0, len(scans), 2):
+        assert np.array_equal(got[k].odom, scans[k].odom)  # a stamp with its own transform: that pose exactly
+
+
+def test_odometry_topic_and_tf_give_the_same_records(scans, tmp_path):
+    write_scans(tmp_path / "a.db3", scans, odom="topic")
+    write_scans(tmp_path / "b.db3", scans, odom="tf")
+    a, b = open_bag(tmp_path / "a.db3"), open_bag(tmp_path / "b.db3")
+    assert a.odom_source.startswith("/odom") and b.odom_source.startswith("/tf")
+    for x, y in zip(a.scans, b.scans):
+        assert np.array_equal(x.odom, y.odom)
+
+
+def test_laser_mounting_from_tf_static_gives_the_same_laser_poses(scans, tmp_path):
+    # The laser 0.3 m ahead, 0.1 m left, turned 0.2 rad on a new base frame: the base's odometry moves, the
+    # laser's own pose in the odometry frame (base ∘ mount) stays what the log says (robot ∘ its offset = robot).
+    from mcl.runner import compose
+
+    mount = (0.3, 0.1, 0.2)
+    write_scans(tmp_path / "m.mcap", scans, mount=mount)
+    src = open_bag(tmp_path / "m.mcap")
+    got = list(src.scans)
+    assert np.allclose(src.laser_offsets["/scan"], mount, atol=1e-12)
+    for a, b in zip(scans, got):
+        assert np.allclose(compose(b.odom, b.laser_offset), a.odom, atol=1e-9)
+        assert not np.allclose(b.odom[:2], a.odom[:2], atol=0.05)
+
+
+def test_a_laser_without_transform_falls_back_with_a_note(scans, tmp_path):
+    bag = tmp_path / "nostatic.bag"
+    with BagOut(bag) as b:
+        for s in scans:
+            _odom(b, s)
+            _laser(b, "/scan", s)
+    src = open_bag(bag)
+    assert src.laser_offsets["/scan"] is None
+    assert any("base_link -> laser" in n and "sensor.laser_pose" in n for n in src.notes)
+
+
+def test_several_lasers_fused_each_with_its_mounting(scans, tmp_path):
+    bag = tmp_path / "two.mcap"
+    with BagOut(bag) as b:
+        b.write("/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+            b.transform(scans[0].t, "base_link", "front", (0.2, 0.0, 0.0)),
+            b.transform(scans[0].t, "base_link", "mount", (-0.2, 0.0, 0.0)),
+            b.transform(scans[0].t, "mount", "rear", (0.0, 0.1, 3.0))]))
+        for s in scans:
+            _odom(b, s)
+            _laser(b, "/front/scan", s, frame="front")
+            _laser(b, "/rear/scan", s, frame="rear")
+    with pytest.raises(DataError, match="several scan topics.*/front/scan, /rear/scan"):
+        open_bag(bag)
+    cfg = load_config(None, ["topics.scan=all"])
+    src = open_bag(bag, cfg.topics, cfg.frames)
+    got = list(src.scans)
+    assert len(got) == 2 * len(scans)
+    front = [g for g in got if g.kind == "/front/scan"]
+    rear = [g for g in got if g.kind == "/rear/scan"]
+    assert len(front) == len(rear) == len(scans)
+    assert np.allclose(front[0].laser_offset, (0.2, 0, 0))
+    assert np.allclose(rear[0].laser_offset, (-0.2, 0.1, 3.0))  # through the chain base_link -> mount -> rear
+    one = open_bag(bag, load_config(None, ["topics.scan=/rear/scan"]).topics)
+    assert one.scans.topics == ["/rear/scan"] and len(one.scans) == len(scans)
+
+
+def test_laser_scan_no_return_and_invalid_readings(scans, tmp_path):
+    # REP 117: +inf is no return -> range_max (a no-return reading, as in a CARMEN log); NaN, -inf and readings
+    # below range_min are not readings -> 0 (never valid).
+    s = scans[0]
+    bag = tmp_path / "inf.mcap"
+    r = np.array([1.5, np.inf, np.nan, -np.inf, 0.05, 2.25], dtype=np.float32)
+    with BagOut(bag) as b:
+        _odom(b, s)
+        _laser(b, "/scan", s, ranges=r, range_min=0.1)
+    (got,) = list(open_bag(bag).scans)
+    assert got.ranges.tolist() == [1.5, s.max_range, 0.0, 0.0, 0.0, 2.25]
+
+
+def test_pointcloud_is_projected_within_the_height_band(scans, tmp_path):
+    s = scans[0]
+    pts = np.array([[2.0, 0.0, 0.0], [1.0, 0.0, 0.05], [0.0, 3.0, 0.0], [0.0, 0.5, 1.0], [-1.0, -1.0, -0.05]],
+                   dtype=np.float32)  # the nearest in-band point per bearing; (0, 0.5) lies above the band
+    bag = tmp_path / "cloud.mcap"
+    with BagOut(bag) as b:
+        _odom(b, s)
+        F = "sensor_msgs/msg/PointField"
+        fields = [b.msg(F, name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")]
+        b.write("/points", "sensor_msgs/msg/PointCloud2", s.t, b.msg(
+            "sensor_msgs/msg/PointCloud2", header=b.header(s.t, "base_link"), height=1, width=len(pts),
+            fields=fields, is_bigendian=False, point_step=12, row_step=12 * len(pts),
+            data=np.frombuffer(pts.tobytes(), dtype=np.uint8), is_dense=True))
+    cfg = load_config(None, ["topics.cloud_beams=8"])
+    (got,) = list(open_bag(bag, cfg.topics).scans)
+    assert got.angle_min == -math.pi and got.angle_increment == pytest.approx(math.pi / 4)
+    # bins of 45 degrees from -180: 0 deg -> bin 4, 90 deg -> bin 6, -135 deg -> bin 1
+    expect = np.zeros(8)
+    expect[4], expect[6], expect[1] = 1.0, 3.0, round(math.sqrt(2.0), 5)
+    assert np.allclose(got.ranges, expect, atol=1e-6)
+
+
+# ----------------------------------------------------------------------------- map, initial pose, truth
+
+
+def test_map_initial_pose_and_truth_from_the_bag(world, scans, tmp_path):
+    grid = load_map(world / "map.yaml")
+    truth = read_tum(world / "truth.tum")
+    start = truth[1][:, 0]
+    cov = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, 0.0], [0.0, 0.0, 0.0025]])
+    bag = tmp_path / "all.mcap"
+    write_scans(bag, scans, grid=grid, initial=(start, cov), truth=truth)
+    src = open_bag(bag, load_config(None, ["topics.truth=/ground_truth"]).topics)
+    assert np.array_equal(src.grid.occupancy, grid.occupancy)
+    assert (src.grid.resolution, src.grid.origin) == (grid.resolution, grid.origin)
+    assert np.allclose(src.initial_pose[0], start, atol=1e-12) and np.allclose(src.initial_pose[1], cov)
+    assert np.array_equal(src.truth[0], truth[0]) and np.allclose(src.truth[1], truth[1], atol=1e-12)
+    # A run with no --map and no --initial-pose: the bag's map, tracking from /initialpose, scored on its truth.
+    summary, _ = _run(tmp_path, "r", map="null", bag=bag, **{"topics.truth": "/ground_truth"})
+    assert summary["mode"] == "tracking"
+    assert summary["eval"]["ate_rmse"] < 0.15  # 8 s of tracking from the true pose; measured 0.05
+
+
+def test_initial_pose_covariance_shapes_the_particles(world):
+    # N(mean, cov) with a full covariance: the sample covariance of 20,000 particles is within 5 % of cov
+    # (the standard error of a variance estimate at N=20,000 is sqrt(2/N) = 1 %).
+    from mcl.filter import ParticleFilter
+
+    cfg = load_config(None, ["filter.particles=20000", "seed=4"])
+    pf = ParticleFilter(cfg, load_map(world / "map.yaml"))
+    cov = np.array([[0.04, 0.015, 0.0], [0.015, 0.09, 0.0], [0.0, 0.0, 0.01]])
+    pf.init_gaussian_cov((5.0, 5.0, 0.0), cov)
+    got = np.cov(pf.particles)
+    assert np.allclose(got, cov, atol=0.05 * 0.09)
+    assert abs(got[0, 1] / math.sqrt(got[0, 0] * got[1, 1]) - 0.25) < 0.03  # the correlation is kept
+
+
+def test_command_line_initial_pose_overrides_the_bags(world, scans, tmp_path, capsys):
+    bag = tmp_path / "init.bag"
+    write_scans(bag, scans, initial=((1.0, 1.0, 0.0), np.eye(3) * 0.01))
+    out = tmp_path / "g"
+    assert main(["run", "--map", str(world / "map.yaml"), "--bag", str(bag), "--global", "--out", str(out),
+                 "--rerun", "off", "--particles", "300", "--no-progress", "--json"]) == 0
+    import json
+
+    assert json.loads((out / "summary.json").read_text())["mode"] == "global"
+
+
+# ----------------------------------------------------------------------------- convert, write-bag, info
+
+
+def test_convert_round_trip_keeps_what_mcl_uses(world, scans, tmp_path):
+    # clf -> mcap (laser off-centre) -> clf -> bag -> read: every record as the log's, the offset to 1e-12.
+    assert main(["convert", str(world / "log.clf"), str(tmp_path / "a.mcap")]) == 0
+    assert main(["convert", str(tmp_path / "a.mcap"), str(tmp_path / "b.clf")]) == 0
+    back = read_carmen(tmp_path / "b.clf").laser_stream()
+    assert len(back) == len(scans)
+    for a, b in zip(scans, back):
+        _same_records(a, b, offset_tol=1e-12)
+    assert convert(tmp_path / "b.clf", tmp_path / "c.bag") == len(scans)
+    for a, b in zip(scans, open_bag(tmp_path / "c.bag").scans):
+        _same_records(a, b, offset_tol=1e-12)
+
+
+def test_simulate_writes_bags(tmp_path, capsys):
+    assert main(["simulate", str(tmp_path / "s"), "--duration", "4", "--format", "db3"]) == 0
+    assert sorted(p.name for p in (tmp_path / "s").iterdir()) == ["log.db3", "map.pgm", "map.yaml", "sim.yaml",
+                                                                 "truth.tum"]
+    src = open_bag(tmp_path / "s" / "log.db3", load_config(None, ["topics.truth=/ground_truth"]).topics)
+    t, _ = read_tum(tmp_path / "s" / "truth.tum")
+    assert len(src.scans) == t.size and np.array_equal(src.truth[0], t)
+
+
+def test_write_bag_holds_the_estimate(world, scans, tmp_path):
+    bag = tmp_path / "in.bag"
+    write_scans(bag, scans)
+    cfg = load_config(None, ["rerun.mode=off", "filter.particles=300", f"map={world / 'map.yaml'}", "log=null",
+                             f"bag={bag}", "truth=null", "rerun.particles_max=50"])
+    summary = run(cfg, tmp_path / "r", progress=False, echo=_quiet, write_bag=True)
+    est = tmp_path / "r" / "estimate.bag"
+    assert summary["outputs"]["bag"] == str(est)
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([est]) as r:
+        counts = {c.topic: c.msgcount for c in r.connections}
+        assert counts == {"/amcl_pose": summary["updates"], "/tf": summary["updates"],
+                          "/particlecloud": summary["updates"]}
+        conn = [c for c in r.connections if c.topic == "/amcl_pose"]
+        poses = [r.deserialize(raw, c.msgtype) for c, _, raw in r.messages(conn)]
+        conn = [c for c in r.connections if c.topic == "/particlecloud"]
+        cloud = [r.deserialize(raw, c.msgtype) for c, _, raw in r.messages(conn)]
+    t, p = read_tum(tmp_path / "r" / "trajectory.tum")
+    last = poses[-1].pose.pose.position
+    assert (last.x, last.y) == pytest.approx((p[0, -1], p[1, -1]), abs=1e-9)
+    assert 0 < len(cloud[0].poses) <= 50
+
+
+def test_bag_info_names_what_mcl_would_use(scans, tmp_path, capsys):
+    bag = tmp_path / "i.mcap"
+    write_scans(bag, scans, odom="tf", mount=(0.1, 0.0, 0.0))
+    info = bag_info(bag)
+    assert info["topics"]["/scan"] == {"type": "sensor_msgs/LaserScan", "count": len(scans)}
+    assert info["frames"] == {"/tf": ["odom -> base_link"], "/tf_static": ["base_link -> laser"]}
+    assert info["mcl_uses"]["odometry"] == "/tf odom -> base_link"
+    assert info["mcl_uses"]["laser_pose"]["/scan"] == [0.1, 0.0, 0.0]
+    assert main(["bag", "info", str(bag)]) == 0
+    text = capsys.readouterr().out
+    assert "mcl would use:" in text and "/tf odom -> base_link" in text
+
+
+# ----------------------------------------------------------------------------- bad input: one line, exit 2
+
+
+def _fails(capsys, tmp_path, bag, *extra, match):
+    out = tmp_path / "out"
+    code = main(["run", "--bag", str(bag), "--out", str(out), "--rerun", "off", "--no-progress", *extra])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and str(bag) in err, err
+    assert match in err, err
+    assert not out.exists()  # nothing written, not even the folder
+    return err
+
+
+def test_missing_topic_lists_the_scan_like_topics(scans, tmp_path, capsys):
+    bag = tmp_path / "b.mcap"
+    write_scans(bag, scans)
+    _fails(capsys, tmp_path, bag, "--scan-topic", "/base_scan", match="no topic /base_scan (scan-like topics: /scan)")
+
+
+def test_unknown_message_type_on_the_scan_topic(scans, tmp_path, capsys):
+    from rosbags.typesys import get_types_from_msg
+
+    bag = tmp_path / "u.mcap"
+    with BagOut(bag) as b:
+        b.ts.register(get_types_from_msg("float64[] values", "acme_msgs/msg/Blob"))
+        for s in scans:
+            _odom(b, s)
+            _laser(b, "/scan", s)
+            b.write("/sonar", "acme_msgs/msg/Blob", s.t, b.msg("acme_msgs/msg/Blob", values=np.zeros(3)))
+    _fails(capsys, tmp_path, bag, "--scan-topic", "/sonar", match="/sonar is acme_msgs/msg/Blob, not a LaserScan")
+
+
+def test_transform_that_never_appears(scans, tmp_path, capsys):
+    bag = tmp_path / "t.bag"
+    write_scans(bag, scans, odom="tf")
+    _fails(capsys, tmp_path, bag, "--base-frame", "base_footprint",
+           match="/tf: the transform odom -> base_footprint never appears (it has: odom -> base_link)")
+
+
+def test_messages_out_of_order(scans, tmp_path, capsys):
+    bag = tmp_path / "o.db3"
+    with BagOut(bag) as b:
+        for k, s in enumerate(scans):
+            _odom(b, s)
+            _laser(b, "/scan", s, t=s.t - 5.0 if k == 10 else s.t)
+    _fails(capsys, tmp_path, bag, match="/scan: messages out of order: message 11")
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_truncated_bag(scans, tmp_path, capsys, kind):
+    bag = tmp_path / f"full.{KINDS[kind]}"
+    write_scans(bag, scans)
+    data = bag.read_bytes()
+    cut = tmp_path / f"cut.{KINDS[kind]}"
+    cut.write_bytes(data[: len(data) // 2])
+    _fails(capsys, tmp_path, cut, match="truncated or corrupt")
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_corrupt_bag(scans, tmp_path, capsys, kind):
+    # 512 random bytes at each eighth of the file: broken records (bag1), chunks (mcap), database pages (db3).
+    # (Bytes changed only inside a message's float payload decode as other floats: no format can tell.)
+    bag = tmp_path / f"c.{KINDS[kind]}"
+    write_scans(bag, scans)
+    data = bytearray(bag.read_bytes())
+    rng = np.random.default_rng(0)
+    for k in range(1, 8):
+        at = k * len(data) // 8
+        data[at:at + 512] = rng.integers(0, 256, 512, dtype=np.uint8).tobytes()
+    bag.write_bytes(bytes(data))
+    _fails(capsys, tmp_path, bag, match="truncated or corrupt")
+
+
+def test_bag_without_map_needs_map(scans, tmp_path, capsys):
+    bag = tmp_path / "nomap.mcap"
+    write_scans(bag, scans)
+    out = tmp_path / "out"
+    assert main(["run", "--bag", str(bag), "--out", str(out), "--rerun", "off"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no /map in" in err and str(bag) in err and not out.exists()
+
+
+def test_convert_never_leaves_a_half_written_output(scans, tmp_path, capsys):
+    bad = tmp_path / "bad.clf"
+    bad.write_text("FLASER 3 1 2 3 0 0 0 0 0 0 1.0 h 1.0\nFLASER 3 1 2 x 0 0 0 0 0 0 2.0 h 2.0\n")
+    assert main(["convert", str(bad), str(tmp_path / "o.mcap")]) == 2
+    assert "bad.clf:2" in capsys.readouterr().err
+    # A failure while the bag is being written (here: an exception after 5 scans) leaves neither the bag nor
+    # the writer's temporary folder.
+    with pytest.raises(RuntimeError):
+        write_scans(tmp_path / "p.bag", _explode_after(scans, 5))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.clf"]
+
+
+def _explode_after(items, n):
+    for k, s in enumerate(items):
+        if k == n:
+            raise RuntimeError("stop")
+        yield s
+
+
+# ----------------------------------------------------------------------------- helpers writing raw messages
+
+
+def _odom(b: BagOut, s) -> None:
+    cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*s.odom), covariance=np.zeros(36))
+    v3 = lambda x, z: b.msg("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)  # noqa: E731
+    tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
+               twist=b.msg("geometry_msgs/msg/Twist", linear=v3(0.0, 0.0), angular=v3(0.0, 0.0)),
+               covariance=np.zeros(36))
+    b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=b.header(s.t, "odom"),
+                                                        child_frame_id="base_link", pose=cov, twist=tw))
+
+
+def _laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.0, t=None) -> None:
+    r = np.asarray(s.ranges if ranges is None else ranges, dtype=np.float32)
+    t = s.t if t is None else t
+    L = "sensor_msgs/msg/LaserScan"
+    b.write(topic, L, t, b.msg(L, header=b.header(t, frame), angle_min=s.angle_min,
+                                angle_max=s.angle_min + s.angle_increment * (r.size - 1),
+                                angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0,
+                                range_min=range_min, range_max=s.max_range, ranges=r,
+                                intensities=np.zeros(0, dtype=np.float32)))
