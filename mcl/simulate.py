@@ -78,6 +78,7 @@ class World:
     reachable: np.ndarray
     room_id: np.ndarray  # int32 (H, W): index of the room/corridor a cell lies in, -1 elsewhere
     clearance: float
+    furniture: np.ndarray | None = None  # bool (H, W): occupied cells that are furniture, not walls (depth sim)
 
     @property
     def blocked(self) -> np.ndarray:
@@ -283,6 +284,7 @@ def make_world(rng: np.random.Generator, *, width: float = 20.0, height: float =
             walls[ras.slices(c - dw / 2, coord - _T_IN, c + dw / 2, coord + _T_IN)] = False
             door_centres.append((c, coord))
     occupied = walls | outer
+    structure = occupied
 
     def trav_of(occ):
         d = distance_transform_edt(~occ) * res
@@ -374,7 +376,8 @@ def make_world(rng: np.random.Generator, *, width: float = 20.0, height: float =
     reachable = main & trav
     occ = np.where(occupied, 100, np.where(interior, 0, -1)).astype(np.int8)
     room_id[occupied] = -1
-    return World(occ, res, origin, distance.astype(np.float64), reachable, room_id, clearance)
+    return World(occ, res, origin, distance.astype(np.float64), reachable, room_id, clearance,
+                 occupied & ~structure)
 
 
 # --------------------------------------------------------------------------
