@@ -271,49 +271,23 @@ def _plane_axes(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _finish(cloud: Cloud, raw: np.ndarray, k_sigma: float, erode: int) -> tuple[list, np.ndarray]:
-    """Final inliers, fit, covariance and boundary of each detected plane (module docstring)."""
-    from mcl.kernels.planes import fit_plane_weighted
+    """Final inliers and fit (mcl.kernels.planes.finish_planes), covariance and boundary of each plane."""
+    from mcl.kernels.planes import finish_planes
 
     pts = cloud.points
-    k = raw.shape[0]
     labels = np.full(pts.shape[0], -1, dtype=np.int64)
+    k = raw.shape[0]
     if k == 0:
         return [], labels
-    planes = raw.copy()
-    w = np.empty(pts.shape[0])
+    planes = np.ascontiguousarray(raw)
+    finish_planes(pts, cloud.rays, cloud.noise, cloud.pix, cloud.grid, planes, k_sigma, int(erode), labels)
     out = []
-    for _ in range(2):
-        dot = pts @ planes[:, :3].T  # (M, K)
-        s = np.stack([cloud.residual_std(planes[j, :3], planes[j, 3]) for j in range(k)], axis=1)
-        near = np.abs(dot - planes[:, 3]) <= k_sigma * s
-        only = near & (near.sum(axis=1) == 1)[:, None]
-        for j in range(k):
-            idx = np.flatnonzero(only[:, j])
-            w[idx] = 1.0 / s[idx, j] ** 2
-            fit_plane_weighted(pts, w, idx, idx.size, planes[j])
-    for j in range(k):
-        idx = np.flatnonzero(only[:, j])
-        labels[idx] = j
-    if erode > 0:
-        # Keep the points inside each plane's image region: a band of ``erode`` pixels along its border
-        # holds the points of the neighbouring surface that lie within k_sigma of it (a wall's foot, a
-        # corner, a door jamb), which would bias the fit. Pixels with no reading do not erode.
-        from scipy.ndimage import binary_erosion
-
-        lab_img = np.where(cloud.grid >= 0, labels[np.maximum(cloud.grid, 0)], -2)
-        core = np.zeros_like(labels, dtype=bool)
-        for j in range(k):
-            inner = binary_erosion((lab_img == j) | (lab_img == -2), iterations=int(erode), border_value=1)
-            sel = inner & (lab_img == j)
-            core[cloud.grid[sel]] = True
-        labels = np.where(core, labels, -1)
-        for j in range(k):
-            idx = np.flatnonzero(labels == j)
-            w[idx] = 1.0 / cloud.residual_std(planes[j, :3], planes[j, 3])[idx] ** 2
-            fit_plane_weighted(pts, w, idx, idx.size, planes[j])
     for j in range(k):
         idx = np.flatnonzero(labels == j)
         n, rho = planes[j, :3], planes[j, 3]
+        if idx.size < 3:
+            out.append((n.copy(), rho, np.full((3, 3), np.inf), idx.size, np.zeros((4, 3)), np.zeros(3)))
+            continue
         cov = plane_covariance(pts[idx], cloud.residual_std(n, rho)[idx], n)
         h, v = _plane_axes(n)
         a = pts[idx] @ h
@@ -600,3 +574,117 @@ def load_depth_folder(folder: str | os.PathLike) -> tuple[DepthCamera, list[Dept
         raise DataError(f"{folder}: no depth frames (<t>.npz)")
     frames.sort(key=lambda f: f.t)
     return cam, frames
+
+
+class PlaneSensor:
+    """The depth camera as a sensor of a run (mcl.runner): its frames joined to the filter updates, the
+    planes extracted from each and the measurement model.
+
+    Extraction draws its random triples from its own generator, a child of the run's seed, so adding
+    planes to a run leaves the filter's random stream as it was.
+    """
+
+    def __init__(self, cfg, grid, odometry: np.ndarray, seed: int):
+        pc = cfg.planes
+        self.cfg = pc
+        self.camera, self.frames = load_depth_folder(pc.depth)
+        plane_map = load_plane_map(pc.map) if pc.map is not None else PlaneMap.from_grid(grid)
+        self.model = PlaneModel(plane_map, pc, camera_xy=self.camera.mount[:2])
+        self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x504C414E]))  # "PLAN"
+        if odometry.shape[0] == 0:
+            raise DataError(f"{pc.depth}: no ODOM lines in the log to place the depth frames")
+        from mcl.datasets.carmen import interpolate_odometry
+
+        od = interpolate_odometry(odometry, np.array([f.t for f in self.frames]))
+        self.frames = [DepthFrame(f.t, f.path, od[:, k].copy()) for k, f in enumerate(self.frames)]
+        self._of: dict[int, DepthFrame] = {}
+        self.planes_seen = 0
+        self.walls_seen = 0
+        self.observed = 0
+        self.seconds = 0.0
+        self.last_cloud: Cloud | None = None
+
+    def attach(self, updates: list[tuple]) -> list[tuple]:
+        """The updates with the frames joined: a frame within 1 ms of an update joins it, any other is an
+        update of its own, ``(frame, None)``; in time order."""
+        ut = np.array([u[0].t for u in updates])
+        taken: set[int] = set()
+        out = list(updates)
+        for f in self.frames:
+            i = int(np.searchsorted(ut, f.t)) if ut.size else 0
+            near = [j for j in (i - 1, i) if 0 <= j < ut.size and abs(ut[j] - f.t) <= 1e-3 and j not in taken]
+            if near:
+                j = min(near, key=lambda j: abs(ut[j] - f.t))
+                taken.add(j)
+                self._of[id(updates[j][0])] = f
+            else:
+                out.append((f, None))
+                self._of[id(f)] = f
+        out.sort(key=lambda u: u[0].t)
+        return out
+
+    def frame_of(self, record) -> DepthFrame | None:
+        """The depth frame of an update (given its first element), or None."""
+        return self._of.get(id(record))
+
+    def observe(self, frame: DepthFrame) -> Planes:
+        """The planes of a depth frame."""
+        import time
+
+        t0 = time.perf_counter()
+        cloud = cloud_from_depth(read_depth_frame(frame.path), self.camera, int(self.cfg.stride))
+        planes = extract_planes(cloud, self.cfg, self.rng, rho_max=self.camera.z_max)
+        self.seconds += time.perf_counter() - t0
+        self.last_cloud = cloud
+        self.observed += 1
+        self.planes_seen += len(planes)
+        self.walls_seen += int(planes.vertical(float(self.cfg.vertical_tol)).size)
+        return planes
+
+    def summary(self) -> dict:
+        n = max(self.observed, 1)
+        return {"frames": len(self.frames), "observed": self.observed, "planes_per_frame": self.planes_seen / n,
+                "walls_per_frame": self.walls_seen / n, "ms_per_frame": 1e3 * self.seconds / n,
+                "method": self.cfg.method, "map_faces": len(self.model.map)}
+
+
+def associate(model: PlaneModel, pose, prepared: np.ndarray | None) -> np.ndarray:
+    """For one pose: the map face (row of ``model.map.faces``) each prepared observation is associated
+    with, -1 beyond the gate (the kernel's rule, in NumPy, for the recording and the tests)."""
+    if prepared is None:
+        return np.zeros(0, dtype=np.int64)
+    f = model.map.faces
+    x, y, th = (float(v) for v in pose)
+    c, s = math.cos(th), math.sin(th)
+    mx, my = model.camera_xy
+    px, py = x + c * mx - s * my, y + s * mx + c * my
+    rho_hat = f[:, 0] * px + f[:, 1] * py - f[:, 2]
+    phi_hat = np.arctan2(-f[:, 1], -f[:, 0]) - th
+    ab = f[:, 5:7] - f[:, 3:5]
+    ln = np.hypot(ab[:, 0], ab[:, 1])
+    out = np.full(prepared.shape[0], -1, dtype=np.int64)
+    for j, (phi, rho, spp, spr, srr, cx, cy) in enumerate(prepared):
+        qx, qy = px + c * cx - s * cy, py + s * cx + c * cy
+        along = ((qx - f[:, 3]) * ab[:, 0] + (qy - f[:, 4]) * ab[:, 1]) / ln
+        e = np.arctan2(np.sin(phi - phi_hat), np.cos(phi - phi_hat))
+        er = rho - rho_hat
+        d2 = (srr * e * e - 2 * spr * e * er + spp * er * er) / (spp * srr - spr * spr)
+        ok = (rho_hat > 0) & (along >= -model.cfg.extent_margin) & (along <= ln + model.cfg.extent_margin)
+        d2 = np.where(ok, d2, np.inf)
+        k = int(np.argmin(d2))
+        if d2[k] < float(model.cfg.gate) ** 2:
+            out[j] = k
+    return out
+
+
+def level_to_world(pose, camera: DepthCamera, pts: np.ndarray) -> np.ndarray:
+    """(K, 3) level-frame points to the world frame for a robot pose (x, y, theta)."""
+    x, y, th = (float(v) for v in pose)
+    c, s = math.cos(th), math.sin(th)
+    mx, my, mz = camera.mount[:3]
+    p = np.asarray(pts, dtype=np.float64).reshape(-1, 3)
+    out = np.empty_like(p)
+    out[:, 0] = x + c * (mx + p[:, 0]) - s * (my + p[:, 1])
+    out[:, 1] = y + s * (mx + p[:, 0]) + c * (my + p[:, 1])
+    out[:, 2] = mz + p[:, 2]
+    return out

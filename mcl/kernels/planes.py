@@ -305,6 +305,66 @@ def rht_detect(pts, rays, noise, pix, grid, uniforms, max_planes, min_points, mi
     return found, trial
 
 
+@njit(cache=True)
+def finish_planes(pts, rays, noise, pix, grid, planes, k_sigma, erode, labels):
+    """Final inliers and fits of the K detected planes (K, 4), in place; labels (M,) out (-1: none).
+
+    Twice: each point within k_sigma residual stds of exactly one plane is that plane's (a point near
+    two, at a wall's foot or in a corner, is left out), and each plane is fitted again on its points.
+    Then the border band of ``erode`` pixels of each plane's image region is left out (points of a
+    neighbouring surface within k_sigma of the plane lie there; pixels with no reading do not count as
+    border) and the planes are fitted a last time.
+    """
+    m_pts = pts.shape[0]
+    k = planes.shape[0]
+    idx = np.empty(m_pts, dtype=np.int64)
+    w = np.empty(m_pts)
+    gh, gw = grid.shape
+    for rnd in range(3):
+        for q in range(m_pts):
+            lab = -1
+            for j in range(k):
+                r = planes[j, 0] * pts[q, 0] + planes[j, 1] * pts[q, 1] + planes[j, 2] * pts[q, 2] - planes[j, 3]
+                d = planes[j, 0] * rays[q, 0] + planes[j, 1] * rays[q, 1] + planes[j, 2] * rays[q, 2]
+                s = residual_std(noise, d, planes[j, 3])
+                if abs(r) <= k_sigma * s:
+                    if lab == -1:
+                        lab = j
+                        w[q] = 1.0 / (s * s)
+                    else:
+                        lab = -2
+                        break
+            labels[q] = lab if lab >= 0 else -1
+        if rnd == 2 and erode > 0:
+            keep = np.ones(m_pts, dtype=np.bool_)
+            for q in range(m_pts):
+                j = labels[q]
+                if j < 0:
+                    continue
+                r0 = pix[q, 0]
+                c0 = pix[q, 1]
+                for di in range(-erode, erode + 1):
+                    for dj in range(-erode, erode + 1):
+                        ii = r0 + di
+                        jj = c0 + dj
+                        if ii < 0 or ii >= gh or jj < 0 or jj >= gw:
+                            continue
+                        o = grid[ii, jj]
+                        if o >= 0 and labels[o] != j:
+                            keep[q] = False
+            for q in range(m_pts):
+                if not keep[q]:
+                    labels[q] = -1
+        for j in range(k):
+            m = 0
+            for q in range(m_pts):
+                if labels[q] == j:
+                    idx[m] = q
+                    m += 1
+            fit_plane_weighted(pts, w, idx, m, planes[j])
+    return labels
+
+
 # ----------------------------------------------------------------------------- RANSAC
 
 
