@@ -35,7 +35,8 @@ from mcl.maps import OccupancyGrid  # noqa: E402
 from mcl.planes import DepthCamera, PlaneMap, cloud_from_depth, extract_planes  # noqa: E402
 from mcl.simulate import make_world  # noqa: E402
 
-VIEWS = [(18.275, 9.325, 1.8476), (5.0, 5.0, 0.3), (10.0, 8.0, 2.0), (3.0, 12.0, -0.8), (14.0, 3.0, 3.0)]
+CHI2_3_9973 = 14.156  # scipy.stats.chi2.ppf(0.9973, 3)
+VIEWS = [(18.275, 9.325, 1.8476), (5.0, 5.0, 0.3), (3.0, 12.0, -0.8), (14.0, 3.0, 3.0), (10.0, 8.0, 2.0)]
 
 
 def visible_walls(pm: PlaneMap, pose, cam: DepthCamera, exact: np.ndarray, min_pixels: int = 4000):
@@ -103,22 +104,27 @@ def accuracy(trials: int, views, cfg, rng) -> list[dict]:
                     if abs(dphi[j]) > 0.1 or abs(pl.rho[v][j] - rho) > 0.1:
                         continue
                     e = np.array([pl.theta[v][j] - math.pi / 2, dphi[j], pl.rho[v][j] - rho])
-                    z[k].append(e / np.sqrt(np.diag(pl.cov[v][j])))
+                    cov = pl.cov[v][j]
+                    z[k].append(np.r_[e / np.sqrt(np.diag(cov)), e @ np.linalg.solve(cov, e)])
             for k, phi, rho, cnt in walls:
-                a = np.array(z[k]).reshape(-1, 3)
+                a = np.array(z[k]).reshape(-1, 4)
+                d2, a = a[:, 3], a[:, :3]
                 within = np.abs(a) <= 3.0
                 rows.append({
                     "view": list(pose), "face": int(k), "phi": phi, "rho": rho, "pixels": cnt, "method": method,
                     "found": len(a) / trials,
                     "within3_theta_phi_rho": within.mean(axis=0).round(4).tolist() if len(a) else None,
                     "within3_all": float(within.all(axis=1).mean()) if len(a) else None,
+                    # the 3-D "3 sigma": the ellipsoid holding 99.73 % (chi-square, 3 dof: d^2 <= 14.16)
+                    "within_ellipsoid_9973": float(np.mean(d2 <= CHI2_3_9973)) if len(a) else None,
                     "z_mean": a.mean(axis=0).round(3).tolist() if len(a) else None,
                     "z_std": a.std(axis=0).round(3).tolist() if len(a) else None,
                     "ms_median": 1e3 * float(np.median(times)),
                 })
                 r = rows[-1]
                 print(f"view {pose} face {k} ({cnt} px, rho {rho:.2f}) {method}: found {r['found']:.3f}, "
-                      f"within 3 sigma {r['within3_theta_phi_rho']} all {r['within3_all']}, z mean {r['z_mean']}"
+                      f"within 3 sigma {r['within3_theta_phi_rho']} all {r['within3_all']} ellipsoid "
+                      f"{r['within_ellipsoid_9973']}, z mean {r['z_mean']}"
                       f" std {r['z_std']}", flush=True)
     return rows
 

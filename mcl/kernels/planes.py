@@ -306,11 +306,15 @@ def rht_detect(pts, rays, noise, pix, grid, uniforms, max_planes, min_points, mi
 
 
 @njit(cache=True)
-def finish_planes(pts, rays, noise, pix, grid, planes, k_sigma, erode, labels):
+def finish_planes(pts, rays, noise, pix, grid, planes, k_sigma, erode, z_lo, z_hi, labels):
     """Final inliers and fits of the K detected planes (K, 4), in place; labels (M,) out (-1: none).
 
     Twice: each point within k_sigma residual stds of exactly one plane is that plane's (a point near
     two, at a wall's foot or in a corner, is left out), and each plane is fitted again on its points.
+    Points whose depth on the plane, rho / (n . ray), is outside [z_lo, z_hi] are left out: near the
+    camera's range limits the noise decides whether a point has a reading at all, and keeping only the
+    readings inside the range would keep the ones the noise moved nearer (a bias in rho and in the
+    angles of an oblique wall). The plane, not the reading, decides, so this is no selection on the noise.
     Then the border band of ``erode`` pixels of each plane's image region is left out (points of a
     neighbouring surface within k_sigma of the plane lie there; pixels with no reading do not count as
     border) and the planes are fitted a last time.
@@ -328,6 +332,10 @@ def finish_planes(pts, rays, noise, pix, grid, planes, k_sigma, erode, labels):
                 d = planes[j, 0] * rays[q, 0] + planes[j, 1] * rays[q, 1] + planes[j, 2] * rays[q, 2]
                 s = residual_std(noise, d, planes[j, 3])
                 if abs(r) <= k_sigma * s:
+                    zp = planes[j, 3] / max(abs(d), 1e-9)
+                    if zp < z_lo or zp > z_hi:
+                        lab = -2
+                        break
                     if lab == -1:
                         lab = j
                         w[q] = 1.0 / (s * s)
