@@ -6,7 +6,7 @@ validator, and returns a :class:`Config`. Unknown keys are errors with the
 dotted path and a did-you-mean; wrong types and out-of-range values are errors
 naming the key; nothing is silently replaced by a default.
 
-Paths in a config file (``map``, ``log``, ``truth``, ``landmarks.map``) are resolved relative to
+Paths in a config file (``map``, ``log``, ``truth``, ``landmarks.map``, ``planes.depth``, ``planes.map``) are resolved relative to
 the config file's folder first and, if nothing exists there, to the current
 directory; the resolved config stores absolute paths so a run can be repeated
 from anywhere.
@@ -15,6 +15,7 @@ from anywhere.
 from __future__ import annotations
 
 import dataclasses
+import math
 import difflib
 import types
 import typing
@@ -170,6 +171,39 @@ class LandmarkConfig:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class PlaneConfig:
+    """Plane features from a depth camera (seed 003, "Kinect Features (Plane)"; mcl.planes): extraction by
+    the randomized Hough transform (or RANSAC) and a measurement model against a map of vertical faces."""
+
+    use: bool = False  # correct with the planes of the depth frames in ``depth``
+    depth: str | None = None  # depth folder: camera.yaml and <t>.npz frames (mcl simulate --depth writes one)
+    map: str | None = None  # plane map YAML (planes: [{x0, y0, x1, y1}, ...]); null: faces of the occupancy grid
+    method: Literal["rht", "ransac"] = "rht"
+    stride: int = field(default=4, metadata=_rng(1, 64))  # use every stride-th row and column of the image
+    max_planes: int = field(default=8, metadata=_rng(1, 64))  # the seed's DetectedPlanes < 8
+    min_points: int = field(default=200, metadata=_rng(3, 10**7))  # the seed's MinPoints: stop when as few remain
+    min_inliers: int = field(default=100, metadata=_rng(3, 10**7))  # a plane needs this many points
+    votes: int = field(default=10, metadata=_rng(1, 10**6))  # votes in a Hough cell that make a local maximum
+    region_px: float = field(default=15.0, metadata=_rng(1.0, 10_000.0))  # radius of the random circular region
+    theta_bins: int = field(default=45, metadata=_rng(3, 3600))  # Hough cells over theta in [0, pi]
+    phi_bins: int = field(default=90, metadata=_rng(3, 7200))  # Hough cells over phi in [-pi, pi)
+    rho_step: float = field(default=0.05, metadata=_rng(0.0, lo_open=True))  # m: Hough cell size in rho
+    max_trials: int = field(default=3000, metadata=_rng(1, 10**7))  # random triples per cloud at most
+    ransac_iterations: int = field(default=150, metadata=_rng(1, 10**6))  # triples per plane (method ransac)
+    k_sigma: float = field(default=3.0, metadata=_rng(0.0, lo_open=True))  # inliers: within k residual stds
+    coarse: float = field(default=0.05, metadata=_rng(0.0, lo_open=True))  # m: first inlier band of a candidate
+    erode: int = field(default=2, metadata=_rng(0, 50))  # pixels of each plane's border left out of its fit
+    vertical_tol: float = field(default=0.1, metadata=_rng(0.0, math.pi / 2, lo_open=True))  # rad: a wall
+    sigma_phi: float = field(default=0.03, metadata=_rng(0.0, lo_open=True))  # rad: map/model noise added to the fit's
+    sigma_rho: float = field(default=0.05, metadata=_rng(0.0, lo_open=True))  # m
+    z_det: float = field(default=0.9, metadata=_rng(0.0, 1.0))  # weight of p_det
+    z_fp: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # weight of false positives, uniform density
+    range_max: float = field(default=4.5, metadata=_rng(0.0, lo_open=True))  # m: p_uniform = 1/(2 pi range_max)
+    gate: float = field(default=3.0, metadata=_rng(0.0, lo_open=True))  # Mahalanobis distance of an association
+    extent_margin: float = field(default=0.3, metadata=_rng(0.0))  # m: a patch centre may lie this far off a face
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class QualityConfig:
     """The localization-quality signal and the lost belief (mcl.quality)."""
 
@@ -215,6 +249,7 @@ class Config:
     rerun: RerunConfig = field(default_factory=RerunConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
+    planes: PlaneConfig = field(default_factory=PlaneConfig)
     quality: QualityConfig = field(default_factory=QualityConfig)
     topics: TopicsConfig = field(default_factory=TopicsConfig)
     frames: FramesConfig = field(default_factory=FramesConfig)
@@ -344,8 +379,13 @@ def _cross_checks(cfg: Config) -> None:
         raise ConfigError("landmarks.z_det: z_det + z_fp must be positive")
     if lm.use and lm.map is None:
         raise ConfigError("landmarks.map: landmarks.use is true but no landmark map is given")
-    if not s.use and not lm.use:
-        raise ConfigError("sensor.use: false needs landmarks.use: true (nothing else to correct with)")
+    pc = cfg.planes
+    if pc.z_det + pc.z_fp <= 0:
+        raise ConfigError("planes.z_det: z_det + z_fp must be positive")
+    if pc.use and pc.depth is None:
+        raise ConfigError("planes.depth: planes.use is true but no depth folder is given")
+    if not s.use and not lm.use and not pc.use:
+        raise ConfigError("sensor.use: false needs landmarks.use or planes.use: true (nothing else to correct with)")
     if s.model == "beam":
         total = s.z_hit + s.z_short + s.z_max + s.z_rand
         if abs(total - 1.0) > 1e-6:
@@ -448,6 +488,12 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
             except (RuntimeError, ValueError):  # ~user that does not exist; a NUL byte
                 where = f"{path}: " if path is not None else ""
                 raise ConfigError(f"{where}{k}: not a usable path: {data[k]!r}") from None
+    for sec, key in (("planes", "depth"), ("planes", "map")):
+        if isinstance(data.get(sec), dict) and isinstance(data[sec].get(key), str):
+            try:
+                data[sec][key] = _resolve_path(data[sec][key], base)
+            except (RuntimeError, ValueError):
+                raise ConfigError(f"{path}: {sec}.{key}: not a usable path") from None
     if isinstance(data.get("landmarks"), dict) and isinstance(data["landmarks"].get("map"), str):
         try:
             data["landmarks"]["map"] = _resolve_path(data["landmarks"]["map"], base)

@@ -101,7 +101,8 @@ class StepInfo:
 class ParticleFilter:
     """MCL over a (3, N) particle array with log weights."""
 
-    def __init__(self, cfg: Config, grid, *, rng: np.random.Generator | None = None, landmark_map=None):
+    def __init__(self, cfg: Config, grid, *, rng: np.random.Generator | None = None, landmark_map=None,
+                 plane_model=None):
         self.cfg = cfg
         self.grid = grid
         self.rng = rng if rng is not None else np.random.default_rng(cfg.seed)
@@ -137,6 +138,7 @@ class ParticleFilter:
         self._marks = None
         if self.landmarks is not None:
             self.recovery_sampler = self.sample_from_landmarks
+        self.planes = plane_model  # mcl.planes.PlaneModel (cfg.planes), or None
 
     # ------------------------------------------------------------------ state
 
@@ -258,7 +260,7 @@ class ParticleFilter:
 
     # ------------------------------------------------------------------ the loop
 
-    def step(self, control: Control | None, observation, landmarks=None) -> StepInfo:
+    def step(self, control: Control | None, observation, landmarks=None, planes=None) -> StepInfo:
         """One MCL update: predict -> correct -> normalise -> estimate -> assess -> resample."""
         info = StepInfo(particles=self.n)
         clock = [time.perf_counter()]
@@ -272,6 +274,7 @@ class ParticleFilter:
         t_predict = lap()
         self.correct(observation, info)
         self.correct_landmarks(landmarks, info)
+        self.correct_planes(planes, info)
         t_correct = lap()
         self.normalize(info)
         t_normalize = lap()
@@ -375,6 +378,18 @@ class ParticleFilter:
         loglik = self.landmarks.log_likelihood(self.particles, prepared)
         if self.recovery is not None and not self.cfg.sensor.use:  # landmark-only runs: they drive the averages
             self.recovery.observe_likelihood(self.logw, loglik / prepared.shape[1], self._injected)
+        self.logw += loglik
+
+    def correct_planes(self, planes, info: StepInfo | None = None) -> None:
+        """w_t *= p(z_t | x_t, m) for the planes extracted from a depth frame (mcl.planes.PlaneModel)."""
+        if planes is None or self.planes is None:
+            return
+        prepared = self.planes.prepare(planes)
+        if prepared is None:
+            return
+        loglik = self.planes.log_likelihood(self.particles, prepared)
+        if self.recovery is not None and not self.cfg.sensor.use and not self.cfg.landmarks.use:
+            self.recovery.observe_likelihood(self.logw, loglik / prepared.shape[0], self._injected)
         self.logw += loglik
 
     def normalize(self, info: StepInfo) -> None:

@@ -387,6 +387,12 @@ def _run(
 
         landmark_map = load_landmarks(cfg.landmarks.map)
     updates = _updates(scans, marks_all)
+    plane_sensor = None
+    if cfg.planes.use:
+        from mcl.planes import PlaneSensor
+
+        plane_sensor = PlaneSensor(cfg, grid, log.odometry, cfg.seed)
+        updates = plane_sensor.attach(updates)
     load_time = time.perf_counter() - wall0
 
     signals.defer()  # outputs from here on: a signal stops the loop only, and everything is closed
@@ -394,7 +400,8 @@ def _run(
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "config.yaml", dump_config(cfg))
 
-    pf = ParticleFilter(cfg, grid, landmark_map=landmark_map)
+    pf = ParticleFilter(cfg, grid, landmark_map=landmark_map,
+                        plane_model=plane_sensor.model if plane_sensor is not None else None)
     fc = cfg.filter
     if bag_initial is not None and not initial_pose_override:  # the bag's /initialpose, covariance included
         mean0, cov0 = bag_initial
@@ -475,7 +482,10 @@ def _run(
                     if cfg.sensor.laser_pose is not None
                     else (getattr(scan, "laser_offset", None) if getattr(scan, "laser_offset", None) is not None else np.zeros(3))
                 )
-                observation = pf.prepare(scan, laser_pose) if scan is not marks else None  # None when unusable
+                frame = plane_sensor.frame_of(scan) if plane_sensor is not None else None
+                no_scan = scan is marks or scan is frame  # an update from a LANDMARK line or a depth frame alone
+                observation = pf.prepare(scan, laser_pose) if not no_scan else None  # None when unusable
+                planes = plane_sensor.observe(frame) if frame is not None else None
                 control = None
                 if last_odom is not None:
                     dt = scan.t - last_t
@@ -490,7 +500,7 @@ def _run(
                     seed_from_landmarks, control = False, None  # particles drawn for this very time
                 if kidnap_filter_at is not None and kidnap is None and scan.t >= kidnap_filter_at[0]:
                     kidnap = _kidnap(pf, truth, scan.t, last_mean, kidnap_filter_at[1])
-                info = pf.step(control, observation, landmarks=marks)
+                info = pf.step(control, observation, landmarks=marks, planes=planes)
                 last_odom, last_t = odom, scan.t
                 mean, cov = info.mean, info.cov
                 spread_full = _spread(info.full_cov)
@@ -537,12 +547,15 @@ def _run(
                         "quality/lost": float(info.lost),
                         **{f"time_ms/{k}": 1e3 * v for k, v in info.timings.items()},
                     }
+                    if planes is not None:
+                        stats["planes/found"] = float(len(planes))
+                        stats["planes/walls"] = float(planes.vertical(cfg.planes.vertical_tol).size)
                     if ref is not None:
                         stats["error/position"] = float(math.hypot(mean[0] - ref[0], mean[1] - ref[1]))
                         stats["error/heading"] = abs(float(wrap_angle(mean[2] - ref[2])))
                     scan_world = None
                     endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose)
-                                 if scan is not marks else np.zeros((2, 0)))
+                                 if not no_scan else np.zeros((2, 0)))
                     if cfg.rerun.scan and endpoints.shape[1]:
                         scan_world = _to_world(mean, endpoints)
                     viz.log_step(
@@ -559,7 +572,7 @@ def _run(
                         truth_pose=ref,
                         stats=stats,
                     )
-                    if cfg.rerun.lines and scan is not marks:
+                    if cfg.rerun.lines and not no_scan:
                         from mcl.features import extract_scan_lines, line_segments_world
                         from mcl.viz import log_line_features
 
@@ -569,6 +582,10 @@ def _run(
                         from mcl.viz import log_landmark_observations
 
                         log_landmark_observations(viz, mean, marks, landmark_map)
+                    if planes is not None:
+                        from mcl.viz import log_planes
+
+                        log_planes(viz, mean, plane_sensor, planes)
                     stage_totals["viz"] += time.perf_counter() - tv
     except KeyboardInterrupt:
         interrupted = True
@@ -613,6 +630,7 @@ def _run(
         },
         "skipped_beams": skipped_beams,
         "quality": _quality_summary(quality_rows),
+        **({"planes": plane_sensor.summary()} if plane_sensor is not None else {}),
         "skipped_messages": dict(log.skipped),
         "wall_time_s": {"load": load_time, "loop": loop_time, **stage_totals},
         "ms_per_update": {k: 1e3 * v / n_up for k, v in stage_totals.items()},

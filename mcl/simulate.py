@@ -446,7 +446,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              robot_radius: float = 0.2, dynamic_obstacles: int | None = None,
              unmapped_furniture: int | None = None, landmarks: int = 0,
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
-             landmark_fp: float = 0.03) -> dict:
+             landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -471,7 +471,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     after each scan: the landmarks within ``landmark_range`` in line of sight,
     range/bearing noise ``landmark_sigma`` (m, rad), missed with probability
     ``landmark_miss``, plus a false positive (random id) with probability
-    ``landmark_fp``. K = 0 leaves every output byte-identical.
+    ``landmark_fp``. K = 0 leaves every output byte-identical. ``depth`` renders a Kinect-like depth
+    image (mcl.depthsim; ``depth_camera`` a mcl.planes.DepthCamera, default Kinect v1 on a 0.6 m mount) at
+    every ``depth_every``-th scan into ``depth/<t>.npz`` with ``depth/camera.yaml``; without it every output
+    is byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap.
     """
@@ -505,6 +508,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(len(landmark_sigma) == 2 and all(v >= 0 for v in landmark_sigma) and 0 <= landmark_miss <= 1
            and 0 <= landmark_fp <= 1, "landmark_sigma/landmark_miss/landmark_fp",
            "noise must be >= 0 and the probabilities in [0, 1]")
+    _check(isinstance(depth_every, (int, np.integer)) and depth_every >= 1, "depth_every",
+           f"expected an integer >= 1, got {depth_every!r}")
     n_ticks = int(round(duration * _ODOM_RATE)) + 1
     kidnap_tick = None
     if kidnap_at is not None:
@@ -592,6 +597,16 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
 
         save_landmarks(out / "landmarks.yaml", lm_ids, lm_xy)
     write_tum(out / "truth.tum", t[scan_ticks], truth[scan_ticks].T)
+    n_depth = 0
+    if depth:
+        from mcl.depthsim import write_depth_folder
+        from mcl.planes import DepthCamera
+
+        # A seventh child stream: the others are unchanged.
+        rng_depth = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(7)[6])
+        cam = depth_camera if depth_camera is not None else DepthCamera()
+        ticks = scan_ticks[:: int(depth_every)]
+        n_depth = write_depth_folder(out, world, truth[ticks], t[ticks], rng_depth, cam)
 
     import yaml
 
@@ -622,6 +637,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
                                "sigma_range": float(landmark_sigma[0]), "sigma_bearing": float(landmark_sigma[1]),
                                "p_miss": float(landmark_miss), "p_false_positive": float(landmark_fp),
                                "observations": int(sum(o[0].size for o in lm_obs))}
+    if depth:
+        params["depth"] = {"folder": "depth", "frames": n_depth, "every_scans": int(depth_every),
+                           "camera": cam.to_dict()}
     atomic_write_text(out / "sim.yaml", yaml.safe_dump(params, sort_keys=False))
     return {"outdir": str(out), "scans": int(scan_ticks.size), "duration": float(t[-1]),
             "path_length": round(length, 3), "start_pose": _pose_list(start), "kidnap": kidnap}
@@ -763,6 +781,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="K point landmarks near walls: landmarks.yaml and a LANDMARK line per scan; default 0")
     parser.add_argument("--landmark-range", type=float, default=8.0, metavar="M",
                         help="range of the landmark detector in m; default 8")
+    parser.add_argument("--depth", action="store_true",
+                        help="a Kinect-like depth camera (640x480, 57x43 deg, 0.5-4.5 m) in a 2.5D world: depth/")
+    parser.add_argument("--depth-every", type=int, default=1, metavar="K",
+                        help="a depth frame every K-th scan; default 1")
     parser.add_argument("--format", choices=["clf", "bag1", "db3", "mcap"], default="clf",
                         help="the log as a CARMEN log.clf (default) or a ROS bag: log.bag (ROS 1), log.db3 or "
                         "log.mcap (ROS 2), with /scan, /odom, /tf_static and the truth as /ground_truth")
@@ -788,7 +810,8 @@ def run_from_args(args: argparse.Namespace) -> int:
     s = simulate(args.outdir, kind=args.kind, seed=args.seed, duration=args.duration, range_max=args.range_max,
                  n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
                  dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
-                 landmarks=args.landmarks, landmark_range=args.landmark_range)
+                 landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
+                 depth_every=args.depth_every)
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
         write_log_as_bag(s["outdir"], fmt)

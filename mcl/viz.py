@@ -517,6 +517,8 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = ()) -> rrb.Bluepri
     ]
     if not views:
         views = [rrb.TimeSeriesView(name="Stats", origin="/stats")]
+    if any(stat_group(n) == "planes" for n in stat_names):  # plane features: a 3D view of the depth cloud
+        views = [rrb.Spatial3DView(name="Depth", origin="/", contents=["+ /depth/**"])] + views
     return rrb.Blueprint(
         rrb.Horizontal(world, rrb.Vertical(*views), column_shares=[3, 2]),
         collapse_panels=False,
@@ -620,3 +622,52 @@ def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) 
             rec.log(f"motion/{k}/samples", rr.Points2D(np.stack([c[0] + dx, c[1]], axis=1), radii=0.003 * span,
                                                        colors=[[40, 40, 160]]))
     rec.flush()
+
+
+# -- plane features (mcl.planes) ----------------------------------------------------------------
+#   depth/cloud            Points3D per step: the depth cloud (at most 5,000 points) in the world frame at the
+#                          estimate, coloured by the plane each point belongs to (grey: none)
+#   depth/planes           Mesh3D per step: each extracted plane's boundary rectangle, as two triangles
+#   world/planes/observed  LineStrips2D per step: the wall patches' horizontal extents at the estimate
+#   world/planes/matched   LineStrips2D per step: the map faces they are associated with at the estimate
+
+_PLANE_COLORS = np.array([[230, 25, 75], [60, 180, 75], [255, 225, 25], [0, 130, 200], [245, 130, 48],
+                          [145, 30, 180], [70, 240, 240], [240, 50, 230]], dtype=np.uint8)
+
+
+def log_planes(logger: RerunLogger, estimate: np.ndarray, sensor: Any, planes: Any, max_points: int = 5000) -> None:
+    """This step's depth cloud, extracted planes (patches) and their matches (``sensor``: a
+    mcl.planes.PlaneSensor whose ``last_cloud`` the planes came from). Call after ``log_step``."""
+    from mcl.planes import associate, level_to_world
+
+    rec = logger._live()
+    if rec is None:
+        return
+    cam = sensor.camera
+    cloud = sensor.last_cloud
+    if cloud is not None and cloud.points.shape[0]:
+        idx = subsample_indices(cloud.points.shape[0], max_points)
+        lab = planes.labels[idx]
+        colors = np.where(lab[:, None] >= 0, _PLANE_COLORS[np.maximum(lab, 0) % len(_PLANE_COLORS)], 150)
+        rec.log("depth/cloud", rr.Points3D(level_to_world(estimate, cam, cloud.points[idx]).astype(np.float32),
+                                           colors=colors.astype(np.uint8), radii=0.01))
+    k = len(planes)
+    if k:
+        verts = level_to_world(estimate, cam, planes.corners.reshape(-1, 3)).astype(np.float32)
+        tri = np.array([[4 * j, 4 * j + 1, 4 * j + 2] for j in range(k)] + [[4 * j, 4 * j + 2, 4 * j + 3]
+                                                                           for j in range(k)], dtype=np.uint32)
+        vcol = np.repeat(_PLANE_COLORS[np.arange(k) % len(_PLANE_COLORS)], 4, axis=0)
+        rec.log("depth/planes", rr.Mesh3D(vertex_positions=verts, triangle_indices=tri, vertex_colors=vcol))
+    else:
+        rec.log("depth/planes", rr.Clear(recursive=False))
+    model = sensor.model
+    walls = planes.vertical(float(sensor.cfg.vertical_tol))
+    seg_obs = [level_to_world(estimate, cam, planes.corners[j, :2])[:, :2] for j in walls]
+    rec.log("world/planes/observed", rr.LineStrips2D([s.astype(np.float32) for s in seg_obs],
+                                                     colors=[[0, 200, 255]], radii=rr.Radius.ui_points(3.0),
+                                                     draw_order=_DRAW_ORDER["scan"] + 1.0))
+    match = associate(model, estimate, model.prepare(planes))
+    faces = model.map.faces[match[match >= 0]]
+    rec.log("world/planes/matched", rr.LineStrips2D([f[3:7].reshape(2, 2).astype(np.float32) for f in faces],
+                                                    colors=[[255, 255, 255]], radii=rr.Radius.ui_points(1.5),
+                                                    draw_order=_DRAW_ORDER["scan"] + 0.5))

@@ -71,6 +71,7 @@ class World:
     room_id: np.ndarray  # int32 (H, W): index of the room/corridor a cell lies in, -1 elsewhere
     clearance: float
     meta: dict = field(default_factory=dict)  # kind-specific facts (sizes, the identical rooms' cell blocks)
+    furniture: np.ndarray | None = None  # bool (H, W): occupied cells that are furniture, not walls (depth sim)
 
     @property
     def blocked(self) -> np.ndarray:
@@ -281,6 +282,7 @@ def make_world(rng: np.random.Generator, *, width: float = 20.0, height: float =
             walls[ras.slices(c - dw / 2, coord - _T_IN, c + dw / 2, coord + _T_IN)] = False
             door_centres.append((c, coord))
     occupied = walls | outer
+    structure = occupied
 
     def trav_of(occ):
         d = distance_transform_edt(~occ) * res
@@ -383,7 +385,8 @@ def make_world(rng: np.random.Generator, *, width: float = 20.0, height: float =
     reachable = main & trav
     occ = np.where(occupied, 100, np.where(interior, 0, -1)).astype(np.int8)
     room_id[occupied] = -1
-    return World(occ, res, origin, distance.astype(np.float64), reachable, room_id, clearance)
+    return World(occ, res, origin, distance.astype(np.float64), reachable, room_id, clearance,
+                 furniture=occupied & ~structure)
 
 
 
