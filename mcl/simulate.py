@@ -655,9 +655,13 @@ def _unmapped_obstacles(world: World, path_xy: np.ndarray, n: int, rng: np.rando
     """
     from scipy.spatial import cKDTree
 
-    iy, ix = np.nonzero(world.reachable)
-    cells = np.column_stack([world.origin[0] + (ix + 0.5) * world.resolution,
-                             world.origin[1] + (iy + 0.5) * world.resolution])
+    # only cells near the path's bounding box can be within 3 m of it (the same cells, in the same order)
+    r = world.resolution
+    ix0, iy0 = (np.maximum(((path_xy.min(axis=0) - 3.5 - world.origin) / r).astype(int), 0))
+    ix1, iy1 = ((path_xy.max(axis=0) + 3.5 - world.origin) / r).astype(int) + 1
+    iy, ix = np.nonzero(world.reachable[iy0:iy1, ix0:ix1])
+    cells = np.column_stack([world.origin[0] + (ix + ix0 + 0.5) * world.resolution,
+                             world.origin[1] + (iy + iy0 + 0.5) * world.resolution])
     d, _ = cKDTree(path_xy).query(cells)
     n_box = (n + 1) // 2
     box_ok = cells[(d >= 0.8) & (d <= 3.0)]
@@ -722,8 +726,15 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
     res = world.resolution
     ox, oy = world.origin
     h, w = world.occupancy.shape
-    base = world.blocked
-    free = world.occupancy == 0
+    sub = (slice(None), slice(None))
+    if h * w > 2_000_000:  # a big map: cast inside the box no ray of range_max can leave
+        ix0, iy0 = np.maximum(((poses[:, :2].min(axis=0) - range_max - 1.0 - world.origin) / res).astype(int), 0)
+        ix1, iy1 = ((poses[:, :2].max(axis=0) + range_max + 1.0 - world.origin) / res).astype(int) + 1
+        sub = (slice(iy0, iy1), slice(ix0, ix1))
+        ox, oy = ox + ix0 * res, oy + iy0 * res
+    base = np.ascontiguousarray(world.blocked[sub])
+    free = world.occupancy[sub] == 0
+    h, w = base.shape
     static = np.zeros_like(base)
     for x0, y0, x1, y1 in boxes:
         static[max(int((y0 - oy) / res), 0):max(int(math.ceil((y1 - oy) / res)), 0),
