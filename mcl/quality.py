@@ -98,11 +98,17 @@ class ScanQuality:
 
     def bad(self, fit: Fit) -> bool:
         """Whether one update's fit says the estimate is wrong (no beam: no evidence either way, not bad)."""
-        return fit.beams > 0 and fit.score < self.cfg.lost_below
+        return fit.beams >= self.cfg.min_beams and fit.score < self.cfg.lost_below
+
+    def doubtful(self, fit: Fit | None) -> bool:
+        """Whether one update's fit is doubtful (score below ``quality.doubt_below``): the filter then inflates
+        the next motion's noise by ``quality.inflation``, so the cloud can follow odometry that slipped."""
+        return fit is not None and fit.beams >= self.cfg.min_beams and fit.score < self.cfg.doubt_below
 
     def update(self, fit: Fit | None) -> bool:
-        """Fold one update's fit into the lost belief (None or no beam: no evidence, the belief stays); return it."""
-        if fit is None or fit.beams == 0:
+        """Fold one update's fit into the lost belief (None or fewer than ``min_beams`` beams: no evidence, the
+        belief stays); return it."""
+        if fit is None or fit.beams < self.cfg.min_beams:
             return self.lost
         self._recent.append(self.bad(fit))
         n_bad = sum(self._recent)

@@ -37,7 +37,7 @@ def _scan_from(pose, grid, n=90):
 
 
 T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
-QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3)
+QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5, doubt_below=0.85, inflation=1.0)
 
 
 def test_fit_is_high_at_the_true_pose_and_low_away_from_it():
