@@ -84,6 +84,14 @@ def child_run(path: str, out: str) -> dict:
             "loop_s": s["wall_time_s"]["loop"]}
 
 
+def peak_rss_mb() -> float:
+    """This process's peak resident memory (VmHWM: unlike ru_maxrss, not inherited from the parent)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def in_child(*args: str) -> dict:
     r = subprocess.run([sys.executable, __file__, "--child", *args], capture_output=True, text=True, check=True)
     return json.loads(r.stdout.strip().splitlines()[-1])
@@ -99,7 +107,7 @@ def main(argv=None) -> int:
     if args.child:
         what, *rest = args.child
         r = child_read(*rest) if what == "read" else child_run(*rest)
-        r["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        r["peak_rss_mb"] = peak_rss_mb()
         print(json.dumps(r))
         return 0
     out = Path(args.out)
