@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -173,8 +174,8 @@ def evaluated(tmp_path_factory):
         {"name": "planted", "simulate": sim, "initial_pose": [start[0] + 3.0, start[1], start[2]], "lost_m": 1.0},
     ]})
     out = tmp / "out"
-    code = main(["eval", "--suite", str(suite), "--out", str(out), "--seeds", "2", "--jobs", "2",
-                 "--set", "filter.particles=2000", "--no-progress"])
+    code = main(["eval", "--suite", str(suite), "--out", str(out), "--cache", str(tmp / "worlds"), "--seeds", "2",
+                 "--jobs", "2", "--set", "filter.particles=2000", "--no-progress"])
     return {"code": code, "out": out, "suite": suite, "world": world, "start": start, "tmp": tmp}
 
 
@@ -217,14 +218,16 @@ def test_suite_rmse_matches_a_direct_run_and_eval(evaluated, tmp_path, capsys):
     assert row["max"] == pytest.approx(direct["ate_max"], rel=1e-9)
 
 
-def test_suite_resumes_and_skips_finished_runs(evaluated, capsys):
-    out, suite = evaluated["out"], evaluated["suite"]
+def test_suite_resumes_and_skips_finished_runs(evaluated, tmp_path, capsys):
+    out, suite = tmp_path / "out", evaluated["suite"]
+    shutil.copytree(evaluated["out"], out)  # the other tests keep the original
     row_files = sorted(out.glob("runs/*/*/*/seed*/row.json"))
     assert len(row_files) == 8
     before = {p: p.stat().st_mtime_ns for p in row_files}
     removed = out / "runs" / "planted" / "tracking" / "baseline" / "seed1" / "row.json"
     removed.unlink()
-    args = ["eval", "--suite", str(suite), "--out", str(out), "--seeds", "2", "--jobs", "1",
+    args = ["eval", "--suite", str(suite), "--out", str(out), "--cache", str(evaluated["tmp"] / "worlds"),
+            "--seeds", "2", "--jobs", "1",
             "--set", "filter.particles=2000", "--no-progress"]
     assert main(args) == 0
     assert "7 of 8 runs already finished" in capsys.readouterr().out
