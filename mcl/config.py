@@ -211,8 +211,6 @@ class QualityConfig:
     lost_below: float = field(default=0.6, metadata=_rng(-2.0, 1.0))  # an update is bad when match - 2 contradiction < this
     lost_after: int = field(default=3, metadata=_rng(1, 10_000))  # lost when this many of the last 2k-1 updates were bad
     min_beams: int = field(default=5, metadata=_rng(1, 100_000))  # a fit of fewer beams with a return is no evidence
-    doubt_below: float = field(default=0.85, metadata=_rng(-2.0, 1.0))  # a fit whose score is below this is doubtful:
-    inflation: float = field(default=1.0, metadata=_rng(1.0, 100.0))  # the next motion's noise std times this (1: off)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

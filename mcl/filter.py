@@ -437,7 +437,6 @@ class ParticleFilter:
             fit = self.quality.fit(self.last_estimate.mean, self.sensor.endpoints(obs), self._laser_pose[:2])
         info.fit = fit
         info.lost = self.quality.update(fit)
-        self.motion.noise_scale = self.cfg.quality.inflation if self.quality.doubtful(fit) else 1.0
         if self.recovery is not None:
             self.recovery.observe_lost(info.lost)
 

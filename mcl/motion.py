@@ -109,7 +109,6 @@ class OdometryMotionModel:
         if cfg.noise_form not in ("variance", "std"):
             raise ValueError(f"motion.noise_form: unknown value {cfg.noise_form!r} (expected 'variance' or 'std')")
         self.max_tries = int(getattr(cfg, "max_tries", 10))
-        self.noise_scale = 1.0  # multiplies every std (the filter inflates it after a doubtful fit)
         self._noise = np.empty((3, 0))
         self._all = np.empty(0, dtype=np.int64)
 
@@ -140,7 +139,7 @@ class OdometryMotionModel:
         p, out = _particles_and_out(particles, out)
         n = p.shape[1]
         rot1, trans, rot2 = odometry_deltas(odom_prev, odom_now)
-        s1, st, s2 = (self.noise_scale * v for v in noise_sigmas(rot1, trans, rot2, self.cfg))
+        s1, st, s2 = noise_sigmas(rot1, trans, rot2, self.cfg)
         noise, idx_all = self._buffers(n)
         kind = getattr(self.cfg, "noise", "normal")
         standard_noise(kind, rng, out=noise)  # normal: rng.standard_normal
@@ -480,7 +479,6 @@ class VelocityMotionModel:
             raise ValueError(f"motion.noise_form: unknown value {cfg.noise_form!r} (expected 'variance' or 'std')")
         self.noise_kind = getattr(cfg, "noise", "normal")
         self.max_tries = int(getattr(cfg, "max_tries", 10))
-        self.noise_scale = 1.0  # multiplies every std (the filter inflates it after a doubtful fit)
         self._noise = np.empty((3, 0))
         self._all = np.empty(0, dtype=np.int64)
 
@@ -495,7 +493,7 @@ class VelocityMotionModel:
         p, out = _particles_and_out(particles, out)
         n = p.shape[1]
         v, w, dt = float(v), float(w), max(float(dt), 0.0)
-        sv, sw, sg = (self.noise_scale * x for x in velocity_sigmas(v, w, self.cfg))
+        sv, sw, sg = velocity_sigmas(v, w, self.cfg)
         if self._noise.shape[1] != n:
             self._noise = np.empty((3, n))
             self._all = np.arange(n, dtype=np.int64)

@@ -100,11 +100,6 @@ class ScanQuality:
         """Whether one update's fit says the estimate is wrong (no beam: no evidence either way, not bad)."""
         return fit.beams >= self.cfg.min_beams and fit.score < self.cfg.lost_below
 
-    def doubtful(self, fit: Fit | None) -> bool:
-        """Whether one update's fit is doubtful (score below ``quality.doubt_below``): the filter then inflates
-        the next motion's noise by ``quality.inflation``, so the cloud can follow odometry that slipped."""
-        return fit is not None and fit.beams >= self.cfg.min_beams and fit.score < self.cfg.doubt_below
-
     def update(self, fit: Fit | None) -> bool:
         """Fold one update's fit into the lost belief (None or fewer than ``min_beams`` beams: no evidence, the
         belief stays); return it."""

@@ -37,7 +37,7 @@ def _scan_from(pose, grid, n=90):
 
 
 T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
-QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5, doubt_below=0.85, inflation=1.0)
+QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5)
 
 
 def test_fit_is_high_at_the_true_pose_and_low_away_from_it():
@@ -113,3 +113,12 @@ def test_quality_drops_and_says_lost_when_the_robot_is_kidnapped(kidnapped_world
     assert first_lost.size and first_lost[0] - t_jump < 1.5, first_lost[:3]
     assert np.nanmedian(match[after]) < 0.5
     assert s["quality"]["lost_updates"] > 0
+
+
+def test_a_fit_of_fewer_than_min_beams_returns_is_no_evidence():
+    # An open hall: two returns off a pillar match wherever the pillar is; they must not make the filter lost.
+    q = ScanQuality(_box_grid(), QCFG)
+    few = Fit(QCFG.min_beams - 1, 0.0, 1.0)
+    assert not q.bad(few)
+    assert [q.update(few) for _ in range(6)] == [False] * 6
+    assert q.bad(Fit(QCFG.min_beams, 0.0, 1.0))
