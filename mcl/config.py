@@ -128,7 +128,7 @@ class SensorConfig:
     exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # temper the beam product
     # beam skipping (after AMCL likelihood_field_prob): once converged, ignore the short beams most particles cannot
     # explain (AMCL's own settings: beam_skip_distance 0.5, beam_skip_threshold 0.3, beam_skip_rule amcl)
-    beam_skip: bool = True
+    beam_skip: bool = False
     beam_skip_distance: float = field(default=0.25, metadata=_rng(0.0, lo_open=True))  # m: endpoint explained if closer
     beam_skip_threshold: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # keep a beam explained by > this fraction
     beam_skip_error_threshold: float = field(default=0.9, metadata=_rng(0.0, 1.0))  # skip >= this fraction: use all
