@@ -273,40 +273,19 @@ def _plane_axes(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return h, np.cross(n, h)
 
 
-def _depth_fit(cloud: Cloud, idx: np.ndarray, n: np.ndarray, rho: float, iterations: int = 3):
-    """Maximum likelihood plane under depth noise: Gauss-Newton on the depth residuals
-    ``(z_i - rho / (n . d_i)) / sigma_z(rho / (n . d_i))`` from the weighted total-least-squares plane.
-
-    The noise lies along each point's ray, not along the normal, so the total-least-squares plane (even
-    weighted) is biased by O(sigma^2) per point: the term sum_i w_i sigma_i^2 (n . d_i)^2 of its expected
-    cost depends on n and tilts it. That bias does not shrink with the number of points while the std does
-    (about a third of a std on a 15,000-point wall). n moves in its tangent plane (no pole at the floor).
-    """
-    n = np.asarray(n, dtype=np.float64).copy()
-    p_z, d = cloud.depth[idx], cloud.rays[idx]
-    a_, b_, z0, q2 = cloud.noise
-    for _ in range(iterations):
-        t1, t2 = _plane_axes(n)
-        nd = np.maximum(d @ n, 1e-9)
-        zp = rho / nd
-        sz = np.sqrt((a_ + b_ * (zp - z0) ** 2) ** 2 + q2)
-        r = (p_z - zp) / sz
-        j = np.stack([rho * (d @ t1) / nd ** 2, rho * (d @ t2) / nd ** 2, -1.0 / nd], axis=1) / sz[:, None]
-        try:
-            step = np.linalg.solve(j.T @ j, -(j.T @ r))
-        except np.linalg.LinAlgError:
-            break
-        n = n + step[0] * t1 + step[1] * t2
-        n /= np.linalg.norm(n)
-        rho = rho + step[2]
-    if rho < 0:
-        n, rho = -n, -rho
-    return n, float(rho)
+def _invert_info(info: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Covariance from the information matrix of (theta, phi, rho); at the poles phi has none (inf)."""
+    if math.hypot(n[0], n[1]) < 1e-6:
+        cov = np.zeros((3, 3))
+        cov[np.ix_([0, 2], [0, 2])] = np.linalg.inv(info[np.ix_([0, 2], [0, 2])])
+        cov[1, 1] = np.inf
+        return cov
+    return np.linalg.inv(info)
 
 
 def _finish(cloud: Cloud, raw: np.ndarray, k_sigma: float, erode: int) -> tuple[list, np.ndarray]:
     """Final inliers and fit (mcl.kernels.planes.finish_planes), covariance and boundary of each plane."""
-    from mcl.kernels.planes import finish_planes
+    from mcl.kernels.planes import depth_fit, finish_planes
 
     pts = cloud.points
     labels = np.full(pts.shape[0], -1, dtype=np.int64)
@@ -324,13 +303,20 @@ def _finish(cloud: Cloud, raw: np.ndarray, k_sigma: float, erode: int) -> tuple[
     out = []
     for j in range(k):
         idx = np.flatnonzero(labels == j)
-        if idx.size >= 3:
-            planes[j, :3], planes[j, 3] = _depth_fit(cloud, idx, planes[j, :3], planes[j, 3])
-        n, rho = planes[j, :3], planes[j, 3]
-        if idx.size < 3:
-            out.append((n.copy(), rho, np.full((3, 3), np.inf), idx.size, np.zeros((4, 3)), np.zeros(3)))
+        # Maximum likelihood under depth noise (mcl.kernels.planes.depth_fit): the noise lies along each
+        # point's ray, not along the normal, so the total-least-squares plane, even weighted, is biased by
+        # O(sigma^2) per point (its expected cost's term sum w_i sigma_i^2 (n . d_i)^2 depends on n and
+        # tilts it); that bias does not shrink with the number of points while the std does (about a
+        # third of a std on a 15,000-point wall before this step).
+        info = np.zeros((3, 3))
+        if idx.size < 3 or not depth_fit(cloud.depth, cloud.rays, idx, idx.size, cloud.noise, planes[j], 3, info):
+            out.append((planes[j, :3].copy(), planes[j, 3], np.full((3, 3), np.inf), idx.size, np.zeros((4, 3)),
+                        np.zeros(3)))
             continue
-        cov = plane_covariance(pts[idx], cloud.residual_std(n, rho)[idx], n)
+        if planes[j, 3] < 0:
+            planes[j] = -planes[j]
+        n, rho = planes[j, :3], planes[j, 3]
+        cov = _invert_info(info, n)
         h, v = _plane_axes(n)
         a = pts[idx] @ h
         b = pts[idx] @ v
