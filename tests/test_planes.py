@@ -143,7 +143,9 @@ def test_rht_finds_the_planted_planes():
         assert pl.inliers[j] > 1000
     floor = np.flatnonzero(pl.theta > math.pi - 0.02)
     assert floor.size == 1 and abs(pl.rho[floor[0]] - CAM.mount[2]) < 0.01
-    assert np.isinf(pl.cov[floor[0], 1, 1]) and np.isfinite(pl.cov[floor[0], 2, 2])  # no phi at the pole
+    # near the pole phi is all but undetermined (its std is of the order of radians), theta and rho are not
+    sd = np.sqrt(np.diag(pl.cov[floor[0]]))
+    assert sd[1] > 0.5 and sd[0] < 0.01 and sd[2] < 0.01, sd
     assert len(pl) == 3
     # the boundary of a wall: its patch spans the wall's visible height from the floor up
     j = int(np.argmin(np.abs(pl.rho - walls[0][1])))
