@@ -252,13 +252,18 @@ def _plane_axes(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _invert_info(info: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Covariance from the information matrix of (theta, phi, rho); at the poles phi has none (inf)."""
-    if math.hypot(n[0], n[1]) < 1e-6:
-        cov = np.zeros((3, 3))
-        cov[np.ix_([0, 2], [0, 2])] = np.linalg.inv(info[np.ix_([0, 2], [0, 2])])
-        cov[1, 1] = np.inf
-        return cov
-    return np.linalg.inv(info)
+    """Covariance from the information matrix of (theta, phi, rho); at the poles phi has none (inf). None
+    when the points do not determine the plane (all on one line)."""
+    try:
+        if math.hypot(n[0], n[1]) < 1e-6:
+            cov = np.zeros((3, 3))
+            cov[np.ix_([0, 2], [0, 2])] = np.linalg.inv(info[np.ix_([0, 2], [0, 2])])
+            cov[1, 1] = np.inf
+            return cov
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return None
+    return cov if np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0) else None
 
 
 def _finish(cloud: Cloud, raw: np.ndarray, k_sigma: float, erode: int) -> tuple[list, np.ndarray]:
@@ -287,14 +292,16 @@ def _finish(cloud: Cloud, raw: np.ndarray, k_sigma: float, erode: int) -> tuple[
         # tilts it); that bias does not shrink with the number of points while the std does (about a
         # third of a std on a 15,000-point wall before this step).
         info = np.zeros((3, 3))
-        if idx.size < 3 or not depth_fit(cloud.depth, cloud.rays, idx, idx.size, cloud.noise, planes[j], 3, info):
-            out.append((planes[j, :3].copy(), planes[j, 3], np.full((3, 3), np.inf), idx.size, np.zeros((4, 3)),
+        ok = idx.size >= 3 and depth_fit(cloud.depth, cloud.rays, idx, idx.size, cloud.noise, planes[j], 3, info)
+        cov = _invert_info(info, planes[j, :3]) if ok else None
+        if cov is None:  # dropped (fewer than min_inliers)
+            labels[idx] = -1
+            out.append((planes[j, :3].copy(), planes[j, 3], np.full((3, 3), np.inf), 0, np.zeros((4, 3)),
                         np.zeros(3)))
             continue
         if planes[j, 3] < 0:
             planes[j] = -planes[j]
         n, rho = planes[j, :3], planes[j, 3]
-        cov = _invert_info(info, n)
         h, v = _plane_axes(n)
         a = pts[idx] @ h
         b = pts[idx] @ v

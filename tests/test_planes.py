@@ -318,3 +318,18 @@ def _grid_of(sim):
 
     g = load_map(sim / "map.yaml")
     return g.occupancy, g.resolution, g.origin
+
+
+def test_points_on_one_line_give_no_plane():
+    """A plane whose inliers all lie on one line has a singular information matrix: no covariance, dropped."""
+    from mcl.kernels.planes import depth_fit
+    from mcl.planes import _invert_info
+
+    d = np.zeros((CAM.height, CAM.width))
+    d[60, 20:140] = 2.0  # one image row at constant depth: a line in space (a tilt about it changes nothing)
+    cl = cloud_from_depth(d, CAM, 1)
+    info = np.zeros((3, 3))
+    idx = np.arange(cl.points.shape[0])
+    depth_fit(cl.depth, cl.rays, idx, idx.size, cl.noise, np.array([1.0, 0.0, 0.0, 2.0]), 0, info)
+    assert _invert_info(info, np.array([1.0, 0.0, 0.0])) is None
+    assert len(extract_planes(cl, cfg(min_inliers=10, min_points=10), np.random.default_rng(0))) == 0
