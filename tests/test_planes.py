@@ -235,9 +235,14 @@ def test_config_errors(override, message):
         load_config(None, [override])
 
 
-def test_config_planes_alone_is_enough_and_nothing_is_not():
-    cfg_ = load_config(None, ["sensor.use=false", "planes.use=true", "planes.depth=/tmp/x"])
+def test_config_planes_alone_is_enough_and_nothing_is_not(tmp_path):
+    (tmp_path / "depth").mkdir()
+    p = tmp_path / "c.yaml"
+    p.write_text("sensor:\n  use: false\nplanes:\n  use: true\n  depth: depth\n  map: walls.yaml\n")
+    cfg_ = load_config(p)
     assert cfg_.planes.use and not cfg_.sensor.use
+    assert cfg_.planes.depth == str((tmp_path / "depth").resolve())  # relative to the config file
+    assert cfg_.planes.map.endswith("walls.yaml")
     with pytest.raises(ConfigError, match="planes.use"):
         load_config(None, ["sensor.use=false"])
 
