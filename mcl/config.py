@@ -6,8 +6,8 @@ validator, and returns a :class:`Config`. Unknown keys are errors with the
 dotted path and a did-you-mean; wrong types and out-of-range values are errors
 naming the key; nothing is silently replaced by a default.
 
-Paths in a config file (``map``, ``log``, ``truth``, ``landmarks.map``, ``planes.depth``, ``planes.map``) are resolved relative to
-the config file's folder first and, if nothing exists there, to the current
+Paths in a config file (``map``, ``log``, ``truth``, ``landmarks.map``, ``planes.depth``, ``planes.map``)
+are resolved relative to the config file's folder first and, if nothing exists there, to the current
 directory; the resolved config stores absolute paths so a run can be repeated
 from anywhere.
 """
@@ -386,7 +386,8 @@ def _cross_checks(cfg: Config) -> None:
     if pc.use and pc.depth is None:
         raise ConfigError("planes.depth: planes.use is true but no depth folder is given")
     if not s.use and not lm.use and not pc.use:
-        raise ConfigError("sensor.use: false needs landmarks.use or planes.use: true (nothing else to correct with)")
+        raise ConfigError(
+            "sensor.use: false needs landmarks.use: true or planes.use: true (nothing else to correct with)")
     if s.model == "beam":
         total = s.z_hit + s.z_short + s.z_max + s.z_rand
         if abs(total - 1.0) > 1e-6:

@@ -27,15 +27,17 @@ cell reaching ``votes`` votes (the randomized Hough transform's threshold, Xu & 
 2011). Its plane is refined on the points near it (weighted total least squares). ``method: ransac`` runs a
 plain sequential RANSAC instead on the same points.
 
-Each plane then gets its final inliers (points within ``k_sigma`` of their own residual std of it, leaving
-out points as near another detected plane: a wall's foot on the floor, and points whose depth on the
-plane is within k_sigma depth stds of the camera's range limits, where the noise decides which readings
-exist), a weighted fit, its boundary (the
-inliers' extent along the plane's horizontal and in-plane vertical axes: a rectangle patch) and the
-covariance of (theta, phi, rho) from the point noise: with residuals r_i = n(theta, phi) . p_i - rho of std
-s_i = sigma_z(rho / (n . d_i)) |n . d_i| (d_i the pixel's ray at unit depth: the noise at the depth the plane
-predicts, not the measured one, whose weights would favour the points the noise moved nearer), ``C = (sum_i J_i J_i^T / s_i^2)^-1``, J_i = (n_theta . p_i, n_phi . p_i,
--1) (Gauss-Newton; at the poles phi's variance is inf).
+Each plane then gets its final inliers: the points within ``k_sigma`` of their residual std
+s_i = sigma_z(z_i) |n . d_i| (d_i the pixel's ray at unit depth, z_i = rho / (n . d_i) the depth the plane
+predicts: the measured depth would favour the points the noise moved nearer), leaving out points as near
+another detected plane (a wall's foot on the floor), points whose depth on the plane is within k_sigma
+depth stds of the camera's range limits (there the noise decides which readings exist) and a border of
+``erode`` pixels (a neighbouring surface's points within k_sigma lie there). Its fit is the maximum
+likelihood under depth noise: Gauss-Newton on the depth residuals (z_i - rho / (n . d_i)) / sigma_z from
+the weighted total-least-squares plane, which ray-direction noise biases by about a third of a std on a
+15,000-point wall. Its covariance is ``C = (sum_i J_i J_i^T)^-1``, J_i = (rho n_theta . d_i, rho n_phi . d_i,
+-(n . d_i)) / ((n . d_i)^2 sigma_z(z_i)) (at the poles phi's variance is inf), and its boundary is the
+inliers' extent along the plane's horizontal and in-plane vertical axes: a rectangle patch.
 
 Measurement model (:class:`PlaneModel`), like the landmark model (Prob. Rob. Table 6.4 with the lecture's
 false-positive mixture): each observed vertical plane (|theta - pi/2| < ``vertical_tol``) is associated,
@@ -70,7 +72,7 @@ from mcl.yamlfile import finite_number, read_yaml
 
 __all__ = [
     "DepthCamera", "Cloud", "Planes", "PlaneMap", "PlaneModel", "DepthFrame",
-    "cloud_from_depth", "extract_planes", "plane_covariance", "angles_of", "normal_of",
+    "cloud_from_depth", "extract_planes", "angles_of", "normal_of",
     "load_plane_map", "save_plane_map", "load_depth_folder", "read_depth_frame", "write_depth_frame",
     "rotation_rpy",
 ]
@@ -173,12 +175,6 @@ class Cloud:
     noise: np.ndarray
     z_range: tuple[float, float] = (0.0, math.inf)  # the camera's z_min, z_max
 
-    def residual_std(self, normal, rho) -> np.ndarray:
-        """(M,) std of each point's residual n . p - rho on the plane (mcl.kernels.planes.residual_std)."""
-        a = np.maximum(np.abs(self.rays @ np.asarray(normal)), 1e-6)
-        sz = self.noise[0] + self.noise[1] * (rho / a - self.noise[2]) ** 2
-        return np.sqrt(sz * sz + self.noise[3]) * a
-
 
 def cloud_from_depth(depth: np.ndarray, cam: DepthCamera, stride: int = 1) -> Cloud:
     """The points of a depth image (m, 0 or NaN: no reading), every ``stride``-th row and column."""
@@ -214,24 +210,6 @@ def angles_of(n) -> tuple[np.ndarray, np.ndarray]:
     """(theta, phi) of unit normals (..., 3)."""
     n = np.asarray(n, dtype=np.float64)
     return np.arccos(np.clip(n[..., 2], -1.0, 1.0)), np.arctan2(n[..., 1], n[..., 0])
-
-
-def plane_covariance(points, s, normal) -> np.ndarray:
-    """3x3 covariance of (theta, phi, rho) of the weighted fit to ``points`` (K, 3) whose residuals have
-    std ``s`` (K,): ``(sum J J^T / s^2)^-1`` (module docstring); phi's variance is inf at the poles."""
-    th, ph = angles_of(normal)
-    ct, st, cp, sp = math.cos(th), math.sin(th), math.cos(ph), math.sin(ph)
-    n_t = np.array([ct * cp, ct * sp, -st])
-    n_p = np.array([-st * sp, st * cp, 0.0])
-    j = np.stack([points @ n_t, points @ n_p, -np.ones(points.shape[0])], axis=1) / s[:, None]
-    info = j.T @ j
-    if st < 1e-6:
-        cov = np.full((3, 3), 0.0)
-        sub = np.linalg.inv(info[np.ix_([0, 2], [0, 2])])
-        cov[np.ix_([0, 2], [0, 2])] = sub
-        cov[1, 1] = np.inf
-        return cov
-    return np.linalg.inv(info)
 
 
 @dataclass(eq=False)
@@ -273,40 +251,24 @@ def _plane_axes(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return h, np.cross(n, h)
 
 
-def _depth_fit(cloud: Cloud, idx: np.ndarray, n: np.ndarray, rho: float, iterations: int = 3):
-    """Maximum likelihood plane under depth noise: Gauss-Newton on the depth residuals
-    ``(z_i - rho / (n . d_i)) / sigma_z(rho / (n . d_i))`` from the weighted total-least-squares plane.
-
-    The noise lies along each point's ray, not along the normal, so the total-least-squares plane (even
-    weighted) is biased by O(sigma^2) per point: the term sum_i w_i sigma_i^2 (n . d_i)^2 of its expected
-    cost depends on n and tilts it. That bias does not shrink with the number of points while the std does
-    (about a third of a std on a 15,000-point wall). n moves in its tangent plane (no pole at the floor).
-    """
-    n = np.asarray(n, dtype=np.float64).copy()
-    p_z, d = cloud.depth[idx], cloud.rays[idx]
-    a_, b_, z0, q2 = cloud.noise
-    for _ in range(iterations):
-        t1, t2 = _plane_axes(n)
-        nd = np.maximum(d @ n, 1e-9)
-        zp = rho / nd
-        sz = np.sqrt((a_ + b_ * (zp - z0) ** 2) ** 2 + q2)
-        r = (p_z - zp) / sz
-        j = np.stack([rho * (d @ t1) / nd ** 2, rho * (d @ t2) / nd ** 2, -1.0 / nd], axis=1) / sz[:, None]
-        try:
-            step = np.linalg.solve(j.T @ j, -(j.T @ r))
-        except np.linalg.LinAlgError:
-            break
-        n = n + step[0] * t1 + step[1] * t2
-        n /= np.linalg.norm(n)
-        rho = rho + step[2]
-    if rho < 0:
-        n, rho = -n, -rho
-    return n, float(rho)
+def _invert_info(info: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Covariance from the information matrix of (theta, phi, rho); at the poles phi has none (inf). None
+    when the points do not determine the plane (all on one line)."""
+    try:
+        if math.hypot(n[0], n[1]) < 1e-6:
+            cov = np.zeros((3, 3))
+            cov[np.ix_([0, 2], [0, 2])] = np.linalg.inv(info[np.ix_([0, 2], [0, 2])])
+            cov[1, 1] = np.inf
+            return cov
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return None
+    return cov if np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0) else None
 
 
 def _finish(cloud: Cloud, raw: np.ndarray, k_sigma: float, erode: int) -> tuple[list, np.ndarray]:
     """Final inliers and fit (mcl.kernels.planes.finish_planes), covariance and boundary of each plane."""
-    from mcl.kernels.planes import finish_planes
+    from mcl.kernels.planes import depth_fit, finish_planes
 
     pts = cloud.points
     labels = np.full(pts.shape[0], -1, dtype=np.int64)
@@ -324,13 +286,22 @@ def _finish(cloud: Cloud, raw: np.ndarray, k_sigma: float, erode: int) -> tuple[
     out = []
     for j in range(k):
         idx = np.flatnonzero(labels == j)
-        if idx.size >= 3:
-            planes[j, :3], planes[j, 3] = _depth_fit(cloud, idx, planes[j, :3], planes[j, 3])
-        n, rho = planes[j, :3], planes[j, 3]
-        if idx.size < 3:
-            out.append((n.copy(), rho, np.full((3, 3), np.inf), idx.size, np.zeros((4, 3)), np.zeros(3)))
+        # Maximum likelihood under depth noise (mcl.kernels.planes.depth_fit): the noise lies along each
+        # point's ray, not along the normal, so the total-least-squares plane, even weighted, is biased by
+        # O(sigma^2) per point (its expected cost's term sum w_i sigma_i^2 (n . d_i)^2 depends on n and
+        # tilts it); that bias does not shrink with the number of points while the std does (about a
+        # third of a std on a 15,000-point wall before this step).
+        info = np.zeros((3, 3))
+        ok = idx.size >= 3 and depth_fit(cloud.depth, cloud.rays, idx, idx.size, cloud.noise, planes[j], 3, info)
+        cov = _invert_info(info, planes[j, :3]) if ok else None
+        if cov is None:  # dropped (fewer than min_inliers)
+            labels[idx] = -1
+            out.append((planes[j, :3].copy(), planes[j, 3], np.full((3, 3), np.inf), 0, np.zeros((4, 3)),
+                        np.zeros(3)))
             continue
-        cov = plane_covariance(pts[idx], cloud.residual_std(n, rho)[idx], n)
+        if planes[j, 3] < 0:
+            planes[j] = -planes[j]
+        n, rho = planes[j, :3], planes[j, 3]
         h, v = _plane_axes(n)
         a = pts[idx] @ h
         b = pts[idx] @ v
@@ -348,7 +319,8 @@ def extract_planes(cloud: Cloud, cfg, rng: np.random.Generator, method: str | No
 
     ``cfg`` is read duck-typed (mcl.config.PlaneConfig): max_planes, min_points, min_inliers, votes,
     region_px, theta_bins, phi_bins, rho_step, k_sigma, coarse, max_trials, ransac_iterations, method.
-    ``rho_max`` bounds the accumulator (the camera's z_max is enough). Planes with fewer than ``min_inliers`` final inliers are dropped.
+    ``rho_max`` bounds the accumulator (the camera's z_max is enough). Planes with fewer than
+    ``min_inliers`` final inliers are dropped.
     """
     import time
 

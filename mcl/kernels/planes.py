@@ -324,7 +324,7 @@ def finish_planes(pts, rays, noise, pix, grid, planes, k_sigma, erode, z_lo, z_h
     idx = np.empty(m_pts, dtype=np.int64)
     w = np.empty(m_pts)
     gh, gw = grid.shape
-    for rnd in range(3):
+    for rnd in range(2):
         for q in range(m_pts):
             lab = -1
             for j in range(k):
@@ -343,7 +343,7 @@ def finish_planes(pts, rays, noise, pix, grid, planes, k_sigma, erode, z_lo, z_h
                         lab = -2
                         break
             labels[q] = lab if lab >= 0 else -1
-        if rnd == 2 and erode > 0:
+        if rnd == 1 and erode > 0:
             keep = np.ones(m_pts, dtype=np.bool_)
             for q in range(m_pts):
                 j = labels[q]
@@ -371,6 +371,80 @@ def finish_planes(pts, rays, noise, pix, grid, planes, k_sigma, erode, z_lo, z_h
                     m += 1
             fit_plane_weighted(pts, w, idx, m, planes[j])
     return labels
+
+
+@njit(cache=True)
+def _tangents(nx, ny, nz):
+    hx, hy = -ny, nx
+    hn = math.sqrt(hx * hx + hy * hy)
+    if hn < 1e-6:
+        hx, hy, hn = 1.0, 0.0, 1.0
+    hx /= hn
+    hy /= hn
+    # v = n x h (h has no z)
+    return hx, hy, 0.0, ny * 0.0 - nz * hy, nz * hx - nx * 0.0, nx * hy - ny * hx
+
+
+@njit(cache=True)
+def depth_fit(depth, rays, idx, n_idx, noise, plane, iterations, info):
+    """Maximum likelihood plane under depth noise, in place: Gauss-Newton on the depth residuals
+    (z_i - rho / (n . d_i)) / sigma_z(rho / (n . d_i)) of the points idx[:n_idx], n moving in its tangent
+    plane (no pole at the floor). info (3, 3) out: the information matrix sum J J^T of (theta, phi, rho)
+    at the result, J = (rho n_theta . d, rho n_phi . d, -(n . d)) / ((n . d)^2 sigma_z).
+    """
+    jtj = np.empty((3, 3))
+    jtr = np.empty(3)
+    for it in range(iterations + 1):
+        nx, ny, nz, rho = plane[0], plane[1], plane[2], plane[3]
+        last = it == iterations
+        if last:
+            th = math.acos(max(-1.0, min(1.0, nz)))
+            ph = math.atan2(ny, nx)
+            ct, st, cp, sp = math.cos(th), math.sin(th), math.cos(ph), math.sin(ph)
+            ax, ay, az = ct * cp, ct * sp, -st
+            bx, by, bz = -st * sp, st * cp, 0.0
+        else:
+            ax, ay, az, bx, by, bz = _tangents(nx, ny, nz)
+        jtj[:, :] = 0.0
+        jtr[:] = 0.0
+        for k in range(n_idx):
+            q = idx[k]
+            nd = max(nx * rays[q, 0] + ny * rays[q, 1] + nz * rays[q, 2], 1e-9)
+            zp = rho / nd
+            sz = noise[0] + noise[1] * (zp - noise[2]) ** 2
+            sz = math.sqrt(sz * sz + noise[3])
+            r = (depth[q] - zp) / sz
+            f = rho / (nd * nd * sz)
+            j0 = f * (ax * rays[q, 0] + ay * rays[q, 1] + az * rays[q, 2])
+            j1 = f * (bx * rays[q, 0] + by * rays[q, 1] + bz * rays[q, 2])
+            j2 = -1.0 / (nd * sz)
+            jtj[0, 0] += j0 * j0
+            jtj[0, 1] += j0 * j1
+            jtj[0, 2] += j0 * j2
+            jtj[1, 1] += j1 * j1
+            jtj[1, 2] += j1 * j2
+            jtj[2, 2] += j2 * j2
+            jtr[0] += j0 * r
+            jtr[1] += j1 * r
+            jtr[2] += j2 * r
+        jtj[1, 0] = jtj[0, 1]
+        jtj[2, 0] = jtj[0, 2]
+        jtj[2, 1] = jtj[1, 2]
+        if last:
+            info[:, :] = jtj
+            return True
+        if abs(np.linalg.det(jtj)) < 1e-300:
+            return False
+        step = np.linalg.solve(jtj, -jtr)
+        mx = nx + step[0] * ax + step[1] * bx
+        my = ny + step[0] * ay + step[1] * by
+        mz = nz + step[0] * az + step[1] * bz
+        mn = math.sqrt(mx * mx + my * my + mz * mz)
+        plane[0] = mx / mn
+        plane[1] = my / mn
+        plane[2] = mz / mn
+        plane[3] = rho + step[2]
+    return True
 
 
 # ----------------------------------------------------------------------------- RANSAC
