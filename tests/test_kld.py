@@ -200,7 +200,7 @@ def test_filter_injects_from_the_hook_sampler():
 
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml",
                       ["rerun.mode=off", "filter.kld=false", "filter.particles=1000", "filter.resample_threshold=1.0",
-                       "filter.recovery_alpha_slow=0.05", "filter.recovery_alpha_fast=0.5",
+                       "filter.recovery=augmented", "filter.recovery_alpha_slow=0.05", "filter.recovery_alpha_fast=0.5",
                        "sensor.beam_skip=false"])  # the stub sensor below has no beams to skip
     grid = load_map(cfg.map)
     pf = ParticleFilter(cfg, grid)
