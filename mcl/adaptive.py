@@ -114,7 +114,7 @@ class BinCounter:
 
     ``add(particles)`` returns, for each particle in order, the number of
     distinct bins occupied so far (including earlier batches). ``reset()``
-    clears only the bins touched.
+    clears only the bins touched. One serial numba pass each (``mcl.kernels.kld``).
     """
 
     def __init__(self, origin, size, bin_xy: float, bin_theta: float):
@@ -124,8 +124,9 @@ class BinCounter:
         self.nx = max(1, int(math.ceil(size[0] / self.bin_xy)))
         self.ny = max(1, int(math.ceil(size[1] / self.bin_xy)))
         self.nt = max(1, int(math.ceil(2.0 * math.pi / self.bin_theta)))
-        self.flags = np.zeros(self.nx * self.ny * self.nt, dtype=bool)
-        self.touched: list[np.ndarray] = []
+        self.flags = np.zeros(self.nx * self.ny * self.nt, dtype=np.bool_)
+        self._touched = np.empty(1024, dtype=np.int64)  # the flagged bins, to clear only those (mcl.kernels.kld)
+        self._n_touched = 0
         self.k = 0
 
     def keys(self, particles: np.ndarray) -> np.ndarray:
@@ -136,21 +137,27 @@ class BinCounter:
         return (iy * self.nx + ix) * self.nt + it
 
     def add(self, particles: np.ndarray) -> np.ndarray:
-        keys = self.keys(particles)
-        uniq, first = np.unique(keys, return_index=True)
-        new = ~self.flags[uniq]
-        is_new = np.zeros(keys.size, dtype=np.int64)
-        is_new[first[new]] = 1
-        self.flags[uniq[new]] = True
-        self.touched.append(uniq[new])
-        counts = self.k + np.cumsum(is_new)
-        self.k = int(counts[-1]) if counts.size else self.k
+        """Flag the bins of ``particles`` (3, M); (M,) the count of distinct bins so far after each pose."""
+        from mcl.kernels.kld import mark_bins
+
+        p = np.ascontiguousarray(particles, dtype=np.float64)
+        m = p.shape[1]
+        if self._n_touched + m > self._touched.size:
+            grown = np.empty(max(2 * self._touched.size, self._n_touched + m), dtype=np.int64)
+            grown[: self._n_touched] = self._touched[: self._n_touched]
+            self._touched = grown
+        counts = np.empty(m, dtype=np.int64)
+        self._n_touched = mark_bins(p, self.x0, self.y0, self.bin_xy, self.bin_theta, self.nx, self.ny, self.nt,
+                                    self.flags, self._touched, self._n_touched, self.k, counts)
+        if m:
+            self.k = int(counts[-1])
         return counts
 
     def reset(self) -> None:
-        for t in self.touched:
-            self.flags[t] = False
-        self.touched = []
+        from mcl.kernels.kld import clear_bins
+
+        clear_bins(self.flags, self._touched, self._n_touched)
+        self._n_touched = 0
         self.k = 0
 
 
