@@ -51,7 +51,7 @@ KIDNAP_M = 5.0  # m: a real log's filter is kidnapped at least this far from the
 LOST_M = 1.0  # m: default lost threshold of a dataset (tracking: max error above it)
 
 SUITE_KEYS = ("name", "root", "modes", "datasets")
-DATASET_KEYS = ("name", "map", "config", "log", "truth", "initial_pose", "lost_m", "set", "modes", "simulate")
+DATASET_KEYS = ("name", "map", "config", "log", "truth", "initial_pose", "lost_m", "set", "modes", "simulate", "held_out")
 BASELINE = "baseline"
 
 
@@ -72,6 +72,7 @@ class Dataset:
     set: dict = field(default_factory=dict)
     modes: tuple[str, ...] = ("tracking",)
     simulate: dict | None = None
+    held_out: bool = False  # mcl tune: never seen while tuning; the best and the base config are scored on it at the end
 
 
 @dataclass
@@ -140,6 +141,10 @@ def load_suite(path: str | os.PathLike) -> Suite:
             d.lost_m = finite_number(e["lost_m"], f"{label}: lost_m", ConfigError)
             if not d.lost_m > 0:
                 raise ConfigError(f"{label}: lost_m: must be positive, got {d.lost_m}")
+        if "held_out" in e:
+            if not isinstance(e["held_out"], bool):
+                raise ConfigError(f"{label}: held_out: expected true or false, got {e['held_out']!r}")
+            d.held_out = e["held_out"]
         if "set" in e:
             if not isinstance(e["set"], dict):
                 raise ConfigError(f"{label}: set: expected a mapping of config keys, got {e['set']!r}")
