@@ -317,27 +317,32 @@ class _Local:
         if self.pool is not None:
             self.pool.shutdown(wait=True, cancel_futures=True)
 
-    def map(self, fn, items: list) -> list:
-        """fn over items, results in order; KeyboardInterrupt when interrupted (a run returning
-        ``interrupted`` included)."""
+    def imap(self, fn, items: list):
+        """fn over items, the results yielded in order as they come; KeyboardInterrupt when interrupted (a run
+        returning ``interrupted`` included)."""
         if self.pool is None:
-            out = []
-            for it in items:
-                r = fn(it)
-                if isinstance(r, dict) and r.get("interrupted"):
-                    raise KeyboardInterrupt
-                out.append(r)
-            return out
-        futures = [self.pool.submit(fn, it) for it in items]
-        try:
-            out = [f.result() for f in futures]
-        except KeyboardInterrupt:
-            for f in futures:
-                f.cancel()
-            raise
-        if any(isinstance(r, dict) and r.get("interrupted") for r in out):
-            raise KeyboardInterrupt
-        return out
+            results = (fn(it) for it in items)
+        else:
+            futures = [self.pool.submit(fn, it) for it in items]
+            results = _in_order(futures, lambda f: f.result(), lambda f: f.cancel())
+        for r in results:
+            if isinstance(r, dict) and r.get("interrupted"):
+                raise KeyboardInterrupt
+            yield r
+
+    def map(self, fn, items: list) -> list:
+        return list(self.imap(fn, items))
+
+
+def _in_order(handles: list, get, cancel):
+    """Each handle's result in order; every handle cancelled when interrupted."""
+    try:
+        for h in handles:
+            yield get(h)
+    except BaseException:  # KeyboardInterrupt, or the generator closed early
+        for h in handles:
+            cancel(h)
+        raise
 
 
 def _ray_call(fn, item):
@@ -383,17 +388,15 @@ class _Ray:
         if self.started:
             self.ray.shutdown()
 
-    def map(self, fn, items: list) -> list:
+    def imap(self, fn, items: list):
         refs = [self.remote.remote(fn, it) for it in items]
-        try:
-            out = self.ray.get(refs)
-        except KeyboardInterrupt:
-            for r in refs:
-                self.ray.cancel(r, force=True)
-            raise
-        if any(isinstance(r, dict) and r.get("interrupted") for r in out):
-            raise KeyboardInterrupt
-        return out
+        for r in _in_order(refs, self.ray.get, lambda ref: self.ray.cancel(ref, force=True)):
+            if isinstance(r, dict) and r.get("interrupted"):
+                raise KeyboardInterrupt
+            yield r
+
+    def map(self, fn, items: list) -> list:
+        return list(self.imap(fn, items))
 
 
 def _run_job(job) -> dict:
@@ -405,19 +408,27 @@ def _run_job(job) -> dict:
     return row
 
 
-def _evaluate(executor, plans: list[list]) -> list[list[dict]]:
-    """Run every job of several plans (finished runs are read back, not run again); rows per plan in order."""
+def _evaluate(executor, plans: list[list]):
+    """Run every job of several plans at once (finished runs are read back, not run again); yield each plan's
+    rows, in the order of the plans, as soon as its runs (and those of the plans before it) are done."""
     from mcl.suite import _finished
 
     flat = [(i, j) for i, jobs in enumerate(plans) for j in jobs]
     rows: list[dict | None] = [_finished(j) for _, j in flat]
     todo = [k for k, r in enumerate(rows) if r is None]
-    for k, r in zip(todo, executor.map(_run_job, [flat[k][1] for k in todo])):
-        rows[k] = r
-    out: list[list[dict]] = [[] for _ in plans]
-    for (i, _), r in zip(flat, rows):
-        out[i].append(r)
-    return out
+    results = iter(executor.imap(_run_job, [flat[k][1] for k in todo]))
+    pending = iter(todo)
+    nxt = next(pending, None)
+    k = 0
+    for i, jobs in enumerate(plans):
+        out = []
+        for _ in jobs:
+            if k == nxt:
+                rows[k] = next(results)
+                nxt = next(pending, None)
+            out.append(rows[k])
+            k += 1
+        yield out
 
 
 # ----------------------------------------------------------------------------- the study
@@ -520,8 +531,8 @@ class Tuner:
             except (MclError, RuntimeError) as e:
                 raise MclError(f"{self.suite.path}: simulate: {e}") from None
 
-    def evaluate_trials(self, executor, trials: list[tuple[int, dict]]) -> list[tuple[dict | None, str | None]]:
-        """(figures, None) or (None, the config error) per trial, in order."""
+    def evaluate_trials(self, executor, trials: list[tuple[int, dict]]):
+        """Yield (figures, None) or (None, the config error) per trial, in order, as each is done."""
         from mcl.suite import _finish_plan
 
         plans, errors = [], []
@@ -534,8 +545,8 @@ class Tuner:
                 jobs = []
                 errors.append(str(e))
             plans.append(jobs)
-        results = _evaluate(executor, plans)
-        return [(None, e) if e else (objective_values(rows), None) for rows, e in zip(results, errors)]
+        for rows, e in zip(_evaluate(executor, plans), errors):
+            yield (None, e) if e else (objective_values(rows), None)
 
 
 def _make_world(item):
@@ -593,8 +604,8 @@ def optimise(tuner: Tuner, *, trials: int, executor, progress=None, echo=print) 
             if not todo:
                 break
             results = tuner.evaluate_trials(executor, [(t.number, t.params) for t in todo])
-            with _sigint_deferred():
-                for t, (fig, err) in zip(todo, results):
+            for t, (fig, err) in zip(todo, results):  # told in order, each as soon as it and those before are done
+                with _sigint_deferred():
                     live = _trial(study, t)
                     if err is not None:
                         live.set_user_attr("error", err)
@@ -604,8 +615,8 @@ def optimise(tuner: Tuner, *, trials: int, executor, progress=None, echo=print) 
                         for k in FIGURES:
                             live.set_user_attr(k, fig[k])
                         study.tell(live, [fig[o] for o in s.objectives])
-                    bar.update(1)
-            bar.set_postfix_str(_best_text(study, s))
+                bar.update(1)
+                bar.set_postfix_str(_best_text(study, s))
     finally:
         bar.close()
 
