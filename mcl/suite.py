@@ -16,6 +16,9 @@ in:
   ``WITHIN_S`` (or the maximum error before the kidnap exceeds ``lost_m``); RMSE and max over the poses
   before the kidnap and after the recovery.
 
+A dataset marked ``held_out: true`` is evaluated like the others here; ``mcl tune`` (mcl.tune) never tunes on
+it and scores its best and its base config on it at the end.
+
 Every run goes through :func:`mcl.runner.run` in a worker process (``concurrent.futures``, one numba
 thread each, no recording) with seeds 1..K, for the config under test and, unless ``--no-baseline``, for
 ``configs/baseline.yaml`` (a plain fixed-N filter). Outputs in ``--out``: one folder per run

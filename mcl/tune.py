@@ -449,6 +449,7 @@ class Settings:
     seed: int
     trials: int
     cache: str
+    held_out: list[str] = dataclasses.field(default_factory=list)  # --held-out, besides the suite's held_out: true
 
     def params(self) -> list[Param]:
         return [Param(**{**p, "choices": tuple(p["choices"]) if p.get("choices") is not None else None})
@@ -487,8 +488,14 @@ class Tuner:
         self.s = s
         self.suite = load_suite(s.suite)
         self.params = s.params()
-        self.tuning = [d.name for d in self.suite.datasets if not d.held_out]
-        self.held_out = [d.name for d in self.suite.datasets if d.held_out]
+        names = [d.name for d in self.suite.datasets]
+        for n in s.held_out:
+            if n not in names:
+                hint = difflib.get_close_matches(n, names, n=1)
+                raise ConfigError(f"--held-out: no dataset {n!r} in {self.suite.path}"
+                                  + (f" (did you mean {hint[0]}?)" if hint else ""))
+        self.tuning = [d.name for d in self.suite.datasets if not (d.held_out or d.name in s.held_out)]
+        self.held_out = [d.name for d in self.suite.datasets if d.held_out or d.name in s.held_out]
         if not self.tuning:
             raise ConfigError(f"{self.suite.path}: every dataset is held_out: nothing left to tune on")
         self.modes = tuple(s.modes) if s.modes else None
@@ -838,6 +845,8 @@ def add_arguments(p) -> None:
                    "(a setting of the study: the same --seed gives the same trials whatever --jobs; default 4)")
     p.add_argument("--seeds", type=int, default=1, metavar="K", help="run seeds 1..K per dataset and mode (default 1)")
     p.add_argument("--modes", metavar="M,...", help="only these modes: tracking,global,kidnapped")
+    p.add_argument("--held-out", metavar="NAME,...", help="also hold these datasets out (as held_out: true in the "
+                   "suite): never tuned on; the best and the base config are scored on them at the end")
     p.add_argument("--seed", type=int, default=0, help="the sampler's seed (default 0)")
     p.add_argument("--study", metavar="DIR", help="study folder (default runs/tune-SUITE)")
     p.add_argument("--cache", help="folder of the generated synthetic worlds (default STUDY/worlds)")
@@ -874,6 +883,7 @@ def run_from_args(args) -> int:
     if existing:
         given = [o for o, v in (("SUITE", args.suite), ("--space", args.space), ("--config", args.config),
                                 ("--set", args.set), ("--modes", args.modes), ("--study", args.study),
+                                ("--held-out", args.held_out),
                                 ("--cache", args.cache)) if v]
         if given:
             raise MclError(f"{'--resume' if args.resume else '--report'}: the study's settings are in "
@@ -904,9 +914,11 @@ def run_from_args(args) -> int:
                      config=str(Path(args.config).resolve()) if args.config else None, sets=list(args.set),
                      objectives=objectives, seeds=args.seeds, modes=modes, batch=args.batch, seed=args.seed,
                      trials=args.trials if args.trials is not None else 100,
-                     cache=str(Path(args.cache).resolve() if args.cache else (study_dir / "worlds").resolve()))
+                     cache=str(Path(args.cache).resolve() if args.cache else (study_dir / "worlds").resolve()),
+                     held_out=[n.strip() for n in args.held_out.split(",") if n.strip()] if args.held_out else [])
         tuner = Tuner(study_dir, s)
-        tuner.plan({}, study_dir / "trials" / "base", [d.name for d in tuner.suite.datasets])  # the base config checks
+        if not tuner.plan({}, study_dir / "trials" / "base", tuner.tuning):  # the base config checks too
+            raise ConfigError(f"{tuner.suite.path}: no run to tune on (modes {args.modes} not in any tuned dataset)")
         study_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")
         _open_study(study_dir, s, create=True)

@@ -127,11 +127,19 @@ def test_space_file_forms():
     assert ps["sensor.max_beams"].kind == "int" and ps["sensor.max_beams"].step == 30
     assert ps["filter.recovery"].choices == (False, "lost")
     assert ps["sensor.max_beams"].contains(60) and not ps["sensor.max_beams"].contains(45)
+    from mcl.config import PROJECT_ROOT
+
+    assert len(load_space(PROJECT_ROOT / "suites" / "tune-space.yaml")) == 6  # the README's example checks
 
 
-def test_bad_objective_and_missing_ray(files, tmp_path, capsys, monkeypatch):
+def test_bad_objective_held_out_and_missing_ray(files, tmp_path, capsys, monkeypatch):
     assert main(_args(files, tmp_path / "a", "--objective", "rmse,partcles")) == 2
     assert "did you mean particles" in capsys.readouterr().err
+    assert main(_args(files, tmp_path / "a", "--held-out", "ofice")) == 2
+    assert "--held-out: no dataset 'ofice'" in capsys.readouterr().err
+    assert main(_args(files, tmp_path / "a", "--held-out", "office")) == 2  # both held out: nothing to tune on
+    assert "nothing left to tune on" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
     assert main(_args(files, tmp_path / "b", "--trials", "1", "--ray", "auto")) == 2
     err = capsys.readouterr().err
