@@ -119,7 +119,7 @@ def _flatten(doc: dict, path: Path, prefix: str = "") -> dict[str, dict]:
     out = {}
     for k, v in doc.items():
         key = f"{prefix}{k}"
-        if isinstance(v, dict) and v and not any(s in v for s in SPEC_KEYS) and all(isinstance(x, dict) for x in v.values()):
+        if isinstance(v, dict) and v and not any(s in v for s in SPEC_KEYS):  # a section
             out.update(_flatten(v, path, key + "."))
         else:
             out[key] = v
@@ -148,6 +148,10 @@ def load_space(path: str | os.PathLike) -> list[Param]:
     params = []
     for key, spec in _flatten(doc, path).items():
         where = f"{path}: {key}"
+        parent, _, last = key.rpartition(".")
+        if key not in schema and parent in schema:  # sensor.sigma_hit: {lo: ..}: a misspelt spec key
+            hint = difflib.get_close_matches(last, SPEC_KEYS, n=1)
+            raise ConfigError(f"{path}: {key}: unknown key" + (f" (did you mean {hint[0]}?)" if hint else ""))
         if key not in schema:
             hint = difflib.get_close_matches(key, list(schema), n=1)
             raise ConfigError(f"{where}: unknown key" + (f" (did you mean {hint[0]}?)" if hint else ""))

@@ -87,6 +87,8 @@ BAD_SPACES = [
     ({"sensor.sigma_hit": {"low": 0.5, "high": 0.1}}, ["sensor.sigma_hit", "must be below high"]),
     ({"motion.alpha1": {"low": 0.0, "high": 0.5, "log": True}}, ["motion.alpha1", "log", "low > 0"]),
     ({"sensor.sigma_hit": {"low": 0.05, "hihg": 0.5}}, ["sensor.sigma_hit.hihg", "did you mean high"]),
+    ({"sensor.sigma_hit": {"lo": 0.05, "high": 0.5}}, ["sensor.sigma_hit.lo", "did you mean low"]),
+    ({"sensor": {"sigma_hit": 0.1}}, ["sensor.sigma_hit", "expected {low"]),
     ({"filter.particles": {"choices": [1000, "many"]}}, ["filter.particles", "choices[1]", "integer"]),
     ({"filter.particles": {"low": 100.5, "high": 1000}}, ["filter.particles", "low", "integer"]),
     ({"filter.resampling": {"choices": ["systematic", "sistematic"]}}, ["filter.resampling", "choices[1]",
