@@ -454,6 +454,7 @@ class Settings:
     trials: int
     cache: str
     held_out: list[str] = dataclasses.field(default_factory=list)  # --held-out, besides the suite's held_out: true
+    only: list[str] = dataclasses.field(default_factory=list)  # --only: these datasets of the suite (empty: all)
 
     def params(self) -> list[Param]:
         return [Param(**{**p, "choices": tuple(p["choices"]) if p.get("choices") is not None else None})
@@ -493,13 +494,16 @@ class Tuner:
         self.suite = load_suite(s.suite)
         self.params = s.params()
         names = [d.name for d in self.suite.datasets]
-        for n in s.held_out:
-            if n not in names:
-                hint = difflib.get_close_matches(n, names, n=1)
-                raise ConfigError(f"--held-out: no dataset {n!r} in {self.suite.path}"
-                                  + (f" (did you mean {hint[0]}?)" if hint else ""))
-        self.tuning = [d.name for d in self.suite.datasets if not (d.held_out or d.name in s.held_out)]
-        self.held_out = [d.name for d in self.suite.datasets if d.held_out or d.name in s.held_out]
+        for opt, given in (("--only", s.only), ("--held-out", s.held_out)):
+            for n in given:
+                if n not in names:
+                    hint = difflib.get_close_matches(n, names, n=1)
+                    raise ConfigError(f"{opt}: no dataset {n!r} in {self.suite.path}"
+                                      + (f" (did you mean {hint[0]}?)" if hint else ""))
+        datasets = [d for d in self.suite.datasets if not s.only or d.name in s.only]
+        self.all = [d.name for d in datasets]
+        self.tuning = [d.name for d in datasets if not (d.held_out or d.name in s.held_out)]
+        self.held_out = [d.name for d in datasets if d.held_out or d.name in s.held_out]
         if not self.tuning:
             raise ConfigError(f"{self.suite.path}: every dataset is held_out: nothing left to tune on")
         self.modes = tuple(s.modes) if s.modes else None
@@ -533,7 +537,7 @@ class Tuner:
         return out
 
     def make_worlds(self, executor, echo) -> None:
-        jobs = self.plan({}, self.dir / "trials" / "base", [d.name for d in self.suite.datasets])
+        jobs = self.plan({}, self.dir / "trials" / "base", self.all)
         worlds = {j.world[0]: j.world[1] for j in jobs if j.world is not None and not Path(j.world[0], "sim.yaml").is_file()}
         if worlds:
             echo(f"generating {len(worlds)} synthetic world(s) into {self.s.cache}")
@@ -849,6 +853,7 @@ def add_arguments(p) -> None:
                    "(a setting of the study: the same --seed gives the same trials whatever --jobs; default 4)")
     p.add_argument("--seeds", type=int, default=1, metavar="K", help="run seeds 1..K per dataset and mode (default 1)")
     p.add_argument("--modes", metavar="M,...", help="only these modes: tracking,global,kidnapped")
+    p.add_argument("--only", metavar="NAME,...", help="only these datasets of the suite (tuned on and held out)")
     p.add_argument("--held-out", metavar="NAME,...", help="also hold these datasets out (as held_out: true in the "
                    "suite): never tuned on; the best and the base config are scored on them at the end")
     p.add_argument("--seed", type=int, default=0, help="the sampler's seed (default 0)")
@@ -860,6 +865,10 @@ def add_arguments(p) -> None:
     g.add_argument("--resume", metavar="DIR", help="go on with an interrupted study (with --trials: up to N trials)")
     g.add_argument("--report", metavar="DIR", help="write best.yaml, trials.csv, the plots and the summary again")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _names(text: str | None) -> list[str]:
+    return [n.strip() for n in text.split(",") if n.strip()] if text else []
 
 
 def _load_settings(study_dir: Path) -> Settings:
@@ -887,7 +896,7 @@ def run_from_args(args) -> int:
     if existing:
         given = [o for o, v in (("SUITE", args.suite), ("--space", args.space), ("--config", args.config),
                                 ("--set", args.set), ("--modes", args.modes), ("--study", args.study),
-                                ("--held-out", args.held_out),
+                                ("--held-out", args.held_out), ("--only", args.only),
                                 ("--cache", args.cache)) if v]
         if given:
             raise MclError(f"{'--resume' if args.resume else '--report'}: the study's settings are in "
@@ -919,7 +928,7 @@ def run_from_args(args) -> int:
                      objectives=objectives, seeds=args.seeds, modes=modes, batch=args.batch, seed=args.seed,
                      trials=args.trials if args.trials is not None else 100,
                      cache=str(Path(args.cache).resolve() if args.cache else (study_dir / "worlds").resolve()),
-                     held_out=[n.strip() for n in args.held_out.split(",") if n.strip()] if args.held_out else [])
+                     held_out=_names(args.held_out), only=_names(args.only))
         tuner = Tuner(study_dir, s)
         if not tuner.plan({}, study_dir / "trials" / "base", tuner.tuning):  # the base config checks too
             raise ConfigError(f"{tuner.suite.path}: no run to tune on (modes {args.modes} not in any tuned dataset)")
