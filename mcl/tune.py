@@ -6,11 +6,12 @@ from their rows (:func:`objective_values`). Optuna proposes the values: TPE (Ber
 objective, its multi-objective form for several (``--objective rmse,particles``: a Pareto front).
 
 Determinism. Trials are asked in batches of ``batch`` (a setting of the study, not of ``--jobs``); every run
-of a batch is evaluated in parallel (worker processes or Ray tasks) and the trials are told in order. The
+of a batch is evaluated in parallel (worker processes or Ray tasks) and the trials are told in order, each as
+soon as it and those before it are done (the next batch is asked once the whole batch is told). The
 sampler of each batch is seeded from (``--seed``, the number of trials asked before it), and every run has a
 fixed seed (1..``seeds``), so a study's trials are the same whatever ``--jobs``, with or without Ray, and
-whether it was stopped and resumed: a batch cut by Ctrl-C stays in the journal as running trials, which
-``--resume`` evaluates first (its finished runs are not run again: ``row.json`` with the config's
+whether it was stopped and resumed: the trials of a batch cut by Ctrl-C stay in the journal as running, and
+``--resume`` evaluates them first (their finished runs are not run again: ``row.json`` with the config's
 fingerprint, as ``mcl eval --suite``). The last batch is always asked whole; trials past ``--trials`` wait
 in the journal for a resume with more trials.
 
@@ -606,7 +607,7 @@ def optimise(tuner: Tuner, *, trials: int, executor, progress=None, echo=print) 
                 if n_finished() >= trials:
                     break
                 asked = sum(t.state != TrialState.WAITING for t in states())
-                with _sigint_deferred():  # a whole batch goes into the journal, or none of it
+                with _sigint_deferred():  # Ctrl-C waits until the whole batch is in the journal
                     if asked == 0:
                         base = tuner.base_values()
                         if base:

@@ -262,3 +262,18 @@ def test_two_objectives_give_a_pareto_front(files, tmp_path):
         front = {int(r["number"]) for r in csv.DictReader(f)}
     assert front == {n for n, v in pts.items() if not dominated(v)}
     assert (study / "plots" / "pareto.png").is_file() and (study / "plots" / "importances.png").is_file()
+
+
+def test_suite_held_out_key(tmp_path):
+    from mcl.errors import ConfigError
+    from mcl.suite import load_suite
+
+    doc = {"datasets": [{"name": "a", "simulate": {"duration": 5}, "held_out": True},
+                        {"name": "b", "simulate": {"duration": 5}}]}
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    assert [d.held_out for d in load_suite(p).datasets] == [True, False]
+    doc["datasets"][1]["held_out"] = "yes"
+    p.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=r"datasets\[1\] \(b\): held_out: expected true or false"):
+        load_suite(p)
