@@ -268,8 +268,9 @@ def objective_values(rows: list[dict]) -> dict:
         per["lost"].append(sum(lost(r) for r in rs) / len(rs))
         per["convergence"].append(statistics.median(
             NEVER_S if lost(r) or r.get("conv_s") is None else r["conv_s"] for r in rs))
-        per["particles"].append(statistics.median(r.get("particles", math.nan) for r in rs))
-        per["wall"].append(statistics.median(r.get("wall_s", math.nan) for r in rs))
+        for k, col in (("particles", "particles"), ("wall", "wall_s")):  # runs that failed: no figure
+            have = [r[col] for r in rs if r.get(col) is not None]
+            per[k].append(statistics.median(have) if have else math.inf)
         raw += [r["rmse"] for r in rs if r.get("rmse") is not None]
     v = {k: float(statistics.fmean(x)) for k, x in per.items()}
     v["lost"] = v["lost"] + 1e-3 * v["rmse"]
