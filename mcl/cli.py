@@ -1,4 +1,4 @@
-"""Command line: ``mcl run``, ``mcl eval``, ``mcl simulate``, ``mcl bag info``, ``mcl convert``.
+"""Command line: ``mcl run``, ``mcl eval``, ``mcl tune``, ``mcl simulate``, ``mcl bag info``, ``mcl convert``.
 
 Known errors (MclError: a bad config, map or log) print one line on stderr and
 exit with status 2; an interrupted run exits with 130 after saving what it
@@ -283,6 +283,22 @@ def _add_explore(sub) -> None:
     )
 
 
+def _add_tune(sub) -> None:
+    from mcl import tune
+
+    _command(sub, "tune", tune,
+             help="search config values for the best score over a suite (Optuna; local processes or Ray)",
+             description="Tune a config over a suite's datasets: each trial is the base config with the space's keys\n"
+             "set to values Optuna's TPE proposes, scored like 'mcl eval --suite'. Study folder: best.yaml,\n"
+             "trials.csv, plots/, summary.txt; Ctrl-C keeps the finished trials, --resume goes on.",
+             epilog="examples:\n"
+             "  mcl tune suites/real.yaml --space suites/tune-space.yaml --modes tracking --trials 50 --jobs 2\n"
+             "  mcl tune suites/smoke.yaml --space S.yaml --objective rmse,particles --study runs/tune-pareto\n"
+             "  mcl tune --resume runs/tune-real --trials 100\n"
+             "  mcl tune --report runs/tune-real\n"
+             "space file: README, 'Tuning a config'")
+
+
 def _add_bag(sub) -> None:
     bsub = _group(sub, "bag", help="look into a ROS bag: topics, frames, and what mcl would use",
                   description="ROS 1 (.bag) and ROS 2 (.db3, .mcap, rosbag2 folder) recordings, read without ROS.")
@@ -389,6 +405,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_calibrate(sub)
     _add_explore(sub)
+    _add_tune(sub)
     _add_bag(sub)
     _add_convert(sub)
     return parser

@@ -16,6 +16,9 @@ in:
   ``WITHIN_S`` (or the maximum error before the kidnap exceeds ``lost_m``); RMSE and max over the poses
   before the kidnap and after the recovery.
 
+A dataset marked ``held_out: true`` is evaluated like the others here; ``mcl tune`` (mcl.tune) never tunes on
+it and scores its best and its base config on it at the end.
+
 Every run goes through :func:`mcl.runner.run` in a worker process (``concurrent.futures``, one numba
 thread each, no recording) with seeds 1..K, for the config under test and, unless ``--no-baseline``, for
 ``configs/baseline.yaml`` (a plain fixed-N filter). Outputs in ``--out``: one folder per run
@@ -51,7 +54,7 @@ KIDNAP_M = 5.0  # m: a real log's filter is kidnapped at least this far from the
 LOST_M = 1.0  # m: default lost threshold of a dataset (tracking: max error above it)
 
 SUITE_KEYS = ("name", "root", "modes", "datasets")
-DATASET_KEYS = ("name", "map", "config", "log", "truth", "initial_pose", "lost_m", "set", "modes", "simulate")
+DATASET_KEYS = ("name", "map", "config", "log", "truth", "initial_pose", "lost_m", "set", "modes", "simulate", "held_out")
 BASELINE = "baseline"
 
 
@@ -72,6 +75,7 @@ class Dataset:
     set: dict = field(default_factory=dict)
     modes: tuple[str, ...] = ("tracking",)
     simulate: dict | None = None
+    held_out: bool = False  # mcl tune: never seen while tuning; the best and the base config are scored on it at the end
 
 
 @dataclass
@@ -140,6 +144,10 @@ def load_suite(path: str | os.PathLike) -> Suite:
             d.lost_m = finite_number(e["lost_m"], f"{label}: lost_m", ConfigError)
             if not d.lost_m > 0:
                 raise ConfigError(f"{label}: lost_m: must be positive, got {d.lost_m}")
+        if "held_out" in e:
+            if not isinstance(e["held_out"], bool):
+                raise ConfigError(f"{label}: held_out: expected true or false, got {e['held_out']!r}")
+            d.held_out = e["held_out"]
         if "set" in e:
             if not isinstance(e["set"], dict):
                 raise ConfigError(f"{label}: set: expected a mapping of config keys, got {e['set']!r}")

@@ -247,7 +247,7 @@ def test_config_landmarks_section(tmp_path):
     assert cfg.landmarks.map == str((tmp_path / "lm.yaml").resolve()) and not cfg.sensor.use
     with pytest.raises(ConfigError, match="landmarks.map: landmarks.use is true but no landmark map"):
         load_config(None, ["landmarks.use=true"])
-    with pytest.raises(ConfigError, match="sensor.use: false needs landmarks.use: true"):
+    with pytest.raises(ConfigError, match="sensor.use: false needs landmarks.use: true or planes.use: true"):
         load_config(None, ["sensor.use=false"])
     with pytest.raises(ConfigError, match="landmarks.sigma_range"):
         load_config(None, ["landmarks.sigma_range=0"])

@@ -1,0 +1,279 @@
+"""``mcl tune``: the space file, a tiny study that finds a planted optimum, the same trials whatever --jobs,
+on Ray, and after a resume (--trials k then --resume; a real SIGINT), held-out datasets, several objectives.
+
+The tiny world: mcl.simulate office, 15 s, range noise sigma 0.1 m and noisy odometry; the filter tracks it
+with 300 particles (no KLD) from a base config whose sigma_hit is 2.0 m, twenty times the simulator's noise.
+Swept once (seed 1): sigma_hit 0.01 -> RMSE 0.13 m, 0.036 -> 0.073, 0.14 -> 0.067, 0.24 -> 0.079, 2.0 -> 0.11.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from mcl.cli import main
+from mcl.config import load_config
+from mcl.tune import LOST_PENALTY, load_space, objective_values
+
+RANGE_SIGMA = 0.1
+SUITE = {
+    "name": "tiny",
+    "modes": ["tracking"],
+    "datasets": [
+        {"name": "office", "simulate": {"kind": "office", "seed": 3, "duration": 15, "range_sigma": RANGE_SIGMA,
+                                        "odom_alphas": [0.2, 0.2, 0.2, 0.1]}},
+        {"name": "office-held", "held_out": True,
+         "simulate": {"kind": "office", "seed": 4, "duration": 10, "range_sigma": RANGE_SIGMA}},
+    ],
+}
+BASE = {"filter": {"particles": 300, "kld": False}, "sensor": {"sigma_hit": 2.0}}
+SPACE = {"sensor.sigma_hit": {"low": 0.005, "high": 3.0, "log": True}}
+TRIALS = 8
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("tune")
+    (d / "suite.yaml").write_text(yaml.safe_dump(SUITE))
+    (d / "base.yaml").write_text(yaml.safe_dump(BASE))
+    (d / "space.yaml").write_text(yaml.safe_dump(SPACE))
+    return d
+
+
+def _args(files: Path, study: Path, *extra) -> list[str]:
+    return ["tune", str(files / "suite.yaml"), "--space", str(files / "space.yaml"), "--config",
+            str(files / "base.yaml"), "--study", str(study), "--cache", str(files / "worlds"), "--seed", "1",
+            "--no-progress", *extra]
+
+
+def _trials(study: Path) -> list[dict]:
+    with open(study / "trials.csv") as f:
+        return list(csv.DictReader(f))
+
+
+def _same_trials(a: Path, b: Path) -> None:
+    """Same sampled values and the same scores, trial by trial (the runs are deterministic for a seed)."""
+    ta, tb = _trials(a), _trials(b)
+    assert [(r["number"], r["state"], r["sensor.sigma_hit"]) for r in ta] == \
+           [(r["number"], r["state"], r["sensor.sigma_hit"]) for r in tb]
+    assert [float(r["value_rmse"]) for r in ta] == pytest.approx([float(r["value_rmse"]) for r in tb], rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def serial(files):
+    """The reference study: --jobs 1, 8 trials, seed 1."""
+    study = files / "serial"
+    assert main(_args(files, study, "--trials", str(TRIALS), "--jobs", "1")) == 0
+    return study
+
+
+# ----------------------------------------------------------------------------- the space file
+
+
+BAD_SPACES = [
+    ({"sensor.sigma_hti": {"low": 0.05, "high": 0.5}}, ["sensor.sigma_hti", "unknown key", "did you mean sensor.sigma_hit"]),
+    ({"sensor": {"sigma_hti": {"low": 0.05, "high": 0.5}}}, ["sensor.sigma_hti", "did you mean sensor.sigma_hit"]),
+    ({"sensor.sigma_hit": {"low": -0.1, "high": 0.5}}, ["sensor.sigma_hit", "low", "out of range"]),
+    ({"sensor.z_hit": {"low": 0.5, "high": 1.5}}, ["sensor.z_hit", "high", "out of range"]),
+    ({"sensor.sigma_hit": {"low": 0.5, "high": 0.1}}, ["sensor.sigma_hit", "must be below high"]),
+    ({"motion.alpha1": {"low": 0.0, "high": 0.5, "log": True}}, ["motion.alpha1", "log", "low > 0"]),
+    ({"sensor.sigma_hit": {"low": 0.05, "hihg": 0.5}}, ["sensor.sigma_hit.hihg", "did you mean high"]),
+    ({"sensor.sigma_hit": {"lo": 0.05, "high": 0.5}}, ["sensor.sigma_hit.lo", "did you mean low"]),
+    ({"sensor": {"sigma_hit": 0.1}}, ["sensor.sigma_hit", "expected {low"]),
+    ({"filter.particles": {"choices": [1000, "many"]}}, ["filter.particles", "choices[1]", "integer"]),
+    ({"filter.particles": {"low": 100.5, "high": 1000}}, ["filter.particles", "low", "integer"]),
+    ({"filter.resampling": {"choices": ["systematic", "sistematic"]}}, ["filter.resampling", "choices[1]",
+                                                                         "did you mean systematic"]),
+    ({"sensor.model": {"low": 0, "high": 1}}, ["sensor.model", "not a number", "choices"]),
+    ({"map": {"choices": ["a.yaml"]}}, ["map", "not tunable"]),
+    ({"filter.initial_std": {"low": 0.1, "high": 0.2}}, ["filter.initial_std", "not a number"]),
+]
+
+
+@pytest.mark.parametrize("space, words", BAD_SPACES, ids=[next(iter(s)) + "-" + w[-1] for s, w in BAD_SPACES])
+def test_space_errors_exit_2_naming_the_key(files, tmp_path, capsys, space, words):
+    path = tmp_path / "space.yaml"
+    path.write_text(yaml.safe_dump(space))
+    study = tmp_path / "study"
+    rc = main(["tune", str(files / "suite.yaml"), "--space", str(path), "--study", str(study), "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert err.count("\n") == 0 and str(path) in err, err
+    for w in words:
+        assert w in err, err
+    assert not study.exists()  # nothing half-written
+
+
+def test_space_file_forms():
+    """Dotted and nested keys alike; a float range, an int range with a step, choices."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "s.yaml"
+        p.write_text(yaml.safe_dump({"sensor": {"sigma_hit": {"low": 0.05, "high": 0.5, "log": True}},
+                                     "filter.particles": {"choices": [1000, 2000]},
+                                     "sensor.max_beams": {"low": 30, "high": 90, "step": 30},
+                                     "filter.recovery": {"choices": [False, "lost"]}}))
+        ps = {q.key: q for q in load_space(p)}
+    assert ps["sensor.sigma_hit"].kind == "float" and ps["sensor.sigma_hit"].log
+    assert ps["filter.particles"].choices == (1000, 2000)
+    assert ps["sensor.max_beams"].kind == "int" and ps["sensor.max_beams"].step == 30
+    assert ps["filter.recovery"].choices == (False, "lost")
+    assert ps["sensor.max_beams"].contains(60) and not ps["sensor.max_beams"].contains(45)
+    from mcl.config import PROJECT_ROOT
+
+    assert len(load_space(PROJECT_ROOT / "suites" / "tune-space.yaml")) == 6  # the README's example checks
+
+
+def test_bad_objective_held_out_and_missing_ray(files, tmp_path, capsys, monkeypatch):
+    assert main(_args(files, tmp_path / "a", "--objective", "rmse,partcles")) == 2
+    assert "did you mean particles" in capsys.readouterr().err
+    assert main(_args(files, tmp_path / "a", "--held-out", "ofice")) == 2
+    assert "--held-out: no dataset 'ofice'" in capsys.readouterr().err
+    assert main(_args(files, tmp_path / "a", "--held-out", "office")) == 2  # both held out: nothing to tune on
+    assert "nothing left to tune on" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    assert main(_args(files, tmp_path / "b", "--trials", "1", "--ray", "auto")) == 2
+    err = capsys.readouterr().err
+    assert "--ray" in err and "pip install 'mcl[cluster]'" in err and err.count("\n") == 1
+
+
+def test_lost_runs_are_penalised_not_dropped():
+    def row(ds, rmse, lost, seed=1):
+        return {"dataset": ds, "mode": "tracking", "seed": seed, "rmse": rmse, "lost": lost, "lost_m": 1.0,
+                "conv_s": 0.0, "particles": 300.0, "wall_s": 1.0}
+
+    ok = objective_values([row("a", 0.1, False), row("b", 0.3, False)])
+    assert ok["rmse"] == pytest.approx(0.2) and ok["lost_runs"] == 0
+    lost = objective_values([row("a", 0.1, False), row("b", 0.4, True)])
+    assert lost["rmse"] == pytest.approx((0.1 + LOST_PENALTY) / 2) and lost["lost_runs"] == 1
+    failed = objective_values([row("a", 0.1, False), {"dataset": "b", "mode": "tracking", "seed": 1, "error": "x"}])
+    assert failed["rmse"] == pytest.approx(lost["rmse"]) and failed["lost"] > 0.5
+
+
+# ----------------------------------------------------------------------------- studies
+
+
+def test_tiny_study_finds_the_planted_sigma(serial, files):
+    """The best sigma_hit lies within a factor 2 of the simulator's range noise (0.1 m), and beats the base
+    config's 2.0 m (trial 0, the base values) by at least 20 % (the sweep in the module doc: 0.067 vs 0.11)."""
+    rows = _trials(serial)
+    assert len(rows) == TRIALS and all(r["state"] == "complete" for r in rows)
+    assert float(rows[0]["sensor.sigma_hit"]) == 2.0
+    best = min(rows, key=lambda r: float(r["value_rmse"]))
+    sigma = float(best["sensor.sigma_hit"])
+    assert RANGE_SIGMA / 2 <= sigma <= RANGE_SIGMA * 2, rows
+    assert float(best["value_rmse"]) < 0.8 * float(rows[0]["value_rmse"])
+    cfg = load_config(serial / "best.yaml")  # a full config mcl run takes
+    assert cfg.sensor.sigma_hit == pytest.approx(sigma) and cfg.filter.particles == 300
+    assert (serial / "plots" / "history.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the held-out dataset: never run while tuning, scored at the end for the best and the base config
+    assert not list((serial / "trials").glob("*/runs/office-held"))
+    ho = json.loads((serial / "heldout" / "heldout.json").read_text())
+    assert ho["datasets"] == ["office-held"] and ho["trial"] == int(best["number"])
+    assert ho["best"]["runs"] == 1 and ho["base"]["runs"] == 1
+    summary = (serial / "summary.txt").read_text()
+    assert "Held out (office-held" in summary and f"trial {best['number']}" in summary
+
+
+def test_jobs_2_gives_the_same_trials(serial, files):
+    study = files / "jobs2"
+    assert main(_args(files, study, "--trials", str(TRIALS), "--jobs", "2")) == 0
+    _same_trials(serial, study)
+    assert (study / "best.yaml").read_text().split("\n", 1)[1] == (serial / "best.yaml").read_text().split("\n", 1)[1]
+
+
+def test_resume_after_k_trials_reaches_the_same_best(serial, files, capsys):
+    """--trials 3 (not a whole batch of 4: trial 3 is asked and waits, queued), then --resume up to 8."""
+    study = files / "resumed"
+    assert main(_args(files, study, "--trials", "3", "--jobs", "1")) == 0
+    rows = _trials(study)
+    assert [r["state"] for r in rows] == ["complete"] * 3 + ["queued"]
+    assert main(["tune", "--resume", str(study), "--trials", str(TRIALS), "--jobs", "1", "--no-progress"]) == 0
+    _same_trials(serial, study)
+    assert main(["tune", "--report", str(study), "--jobs", "1", "--no-progress"]) == 0
+    assert "trial" in capsys.readouterr().out
+    # a new study in a study folder is refused
+    assert main(_args(files, study, "--trials", "1")) == 2
+
+
+def test_sigint_then_resume_reaches_the_same_best(serial, files):
+    """A real Ctrl-C to `python -m mcl tune` once two runs are written: exit 130 with the finished trials kept
+    (told in order as they finish); --resume evaluates the rest of the cut batch first and ends with the trials
+    of the uninterrupted study."""
+    study = files / "sigint"
+    cmd = [sys.executable, "-m", "mcl", *_args(files, study, "--trials", str(TRIALS), "--jobs", "1")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "NUMBA_NUM_THREADS": "1"})
+    deadline = time.monotonic() + 120
+    while len(list(study.glob("trials/*/runs/*/*/*/*/row.json"))) < 2:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (out, err)
+    assert "interrupted after" in out
+    k = int(out.split("interrupted after ")[1].split()[0])
+    assert 1 <= k < TRIALS
+    assert sum(r["state"] == "complete" for r in _trials(study)) == k
+    done = {p: p.stat().st_mtime_ns for p in study.glob("trials/*/runs/*/*/*/*/row.json")}
+    assert main(["tune", "--resume", str(study), "--jobs", "1", "--no-progress"]) == 0
+    _same_trials(serial, study)
+    assert {p: p.stat().st_mtime_ns for p in done} == done  # the finished runs were not run again
+
+
+def test_ray_gives_the_same_trials(serial, files):
+    ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'mcl[cluster]')")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        study = files / "ray"
+        assert main(_args(files, study, "--trials", str(TRIALS), "--ray", "auto")) == 0
+    finally:
+        ray.shutdown()
+    _same_trials(serial, study)
+
+
+def test_two_objectives_give_a_pareto_front(files, tmp_path):
+    """rmse against particles: pareto.csv holds exactly the trials no other complete trial dominates."""
+    space = tmp_path / "space.yaml"
+    space.write_text(yaml.safe_dump({**SPACE, "filter.particles": {"choices": [50, 300]}}))
+    study = tmp_path / "pareto"
+    args = _args(files, study, "--trials", "8", "--jobs", "1", "--objective", "rmse,particles")
+    args[args.index("--space") + 1] = str(space)
+    assert main(args) == 0
+    rows = [r for r in _trials(study) if r["state"] == "complete"]
+    pts = {int(r["number"]): (float(r["value_rmse"]), float(r["value_particles"])) for r in rows}
+    assert {v[1] for v in pts.values()} == {50.0, 300.0}
+
+    def dominated(a):
+        return any(b[0] <= a[0] and b[1] <= a[1] and b != a for b in pts.values())
+
+    with open(study / "pareto.csv") as f:
+        front = {int(r["number"]) for r in csv.DictReader(f)}
+    assert front == {n for n, v in pts.items() if not dominated(v)}
+    assert (study / "plots" / "pareto.png").is_file() and (study / "plots" / "importances.png").is_file()
+
+
+def test_suite_held_out_key(tmp_path):
+    from mcl.errors import ConfigError
+    from mcl.suite import load_suite
+
+    doc = {"datasets": [{"name": "a", "simulate": {"duration": 5}, "held_out": True},
+                        {"name": "b", "simulate": {"duration": 5}}]}
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    assert [d.held_out for d in load_suite(p).datasets] == [True, False]
+    doc["datasets"][1]["held_out"] = "yes"
+    p.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=r"datasets\[1\] \(b\): held_out: expected true or false"):
+        load_suite(p)
