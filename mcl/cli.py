@@ -9,12 +9,14 @@ runs, so ``mcl --help`` is instant.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
+import warnings
 from pathlib import Path
 
-from mcl.errors import MclError
+from mcl.errors import MclError, MclWarning
 
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
@@ -394,6 +396,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def _clean_warnings():
+    """While a command runs, mcl's own warnings (MclWarning) print as one line, ``mcl: warning: <message>``, with
+    no module path or source line; tqdm.write keeps a running progress bar intact. Other warnings print as Python
+    prints them, and the library itself keeps plain ``warnings.warn`` (pytest.warns, catch_warnings)."""
+    saved = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, MclWarning):
+            return saved(message, category, filename, lineno, file, line)
+        from tqdm import tqdm
+
+        tqdm.write(f"mcl: warning: {message}", file=file or sys.stderr)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = saved
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -401,7 +424,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     try:
-        return int(args.func(args) or 0)
+        with _clean_warnings():
+            return int(args.func(args) or 0)
     except MclError as e:
         print(f"mcl: error: {e}", file=sys.stderr)
         return EXIT_ERROR

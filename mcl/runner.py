@@ -231,7 +231,7 @@ def _open_source(cfg: Config, echo):
         scans = _choose_scans(log, cfg.laser) if cfg.sensor.use else []
         marks = _landmark_records(log, cfg)
     for w in log.warnings:
-        echo(f"warning: {w}")
+        echo(f"mcl: warning: {w}")
     for note in log.notes:
         echo(note)
     if cfg.truth:

@@ -1,0 +1,62 @@
+"""Issue 11: mcl behaves like a real package (clean warnings, config files validated on their own, --version,
+package data, first-run compile message, a user cache folder for numba)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import pytest
+
+from mcl.cli import main
+from mcl.config import PROJECT_ROOT
+
+DEMO = PROJECT_ROOT / "data" / "demo"
+
+
+def _short_bad_log(dst: Path, scans: int = 40) -> None:
+    """The demo's first `scans` scans, with NaN readings in scan 10 and time running backwards at scan 20."""
+    out, k = [], -1
+    for line in (DEMO / "log.clf").read_text().splitlines():
+        f = line.split()
+        if f and f[0] == "FLASER":
+            k += 1
+            if k == scans:
+                break
+            n = int(f[1])
+            if k == 10:
+                f[2:2 + n:5] = ["nan"] * len(f[2:2 + n:5])
+            if k == 20:
+                f[-3] = f"{float(f[-3]) - 5.0:.6f}"
+                f[-1] = f"{float(f[-1]) - 5.0:.6f}"
+            line = " ".join(f)
+        out.append(line + "\n")
+    dst.write_text("".join(out))
+
+
+def test_cli_prints_each_warning_as_one_clean_line(tmp_path, capsys):
+    # Today: "…/mcl/filter.py:263: RuntimeWarning: time ran backwards …" plus the source line.
+    _short_bad_log(tmp_path / "bad.clf")
+    rc = main(["run", "--map", str(DEMO / "map.yaml"), "--log", str(tmp_path / "bad.clf"), "--out",
+               str(tmp_path / "out"), "--rerun", "off", "--no-progress", "--particles", "200",
+               "--initial-pose", "18.961318", "9.225", "3.0954", "--set", "filter.update_min_d=0",
+               "--set", "filter.update_min_a=0"])
+    assert rc == 0
+    err = capsys.readouterr().err.splitlines()
+    warned = [line for line in err if line.startswith("mcl: warning: ")]
+    assert len(warned) == 2, err  # one line each: NaN ranges, time backwards
+    assert any("NaN or infinite ranges" in line for line in warned) and any("backwards" in line for line in warned)
+    assert not any("RuntimeWarning" in line or ".py:" in line or "warnings.warn" in line for line in err), err
+
+
+def test_library_callers_still_get_a_runtime_warning():
+    from mcl.degenerate import InputGuard
+    from mcl.errors import MclWarning
+
+    with pytest.warns(RuntimeWarning, match="time ran backwards") as rec:
+        InputGuard(2.0).event("time_backwards", "time ran backwards")
+    assert rec[0].category is MclWarning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MclWarning)
+        with pytest.raises(MclWarning):
+            InputGuard(2.0).event("nan_ranges", "NaN")
