@@ -14,6 +14,7 @@ from anywhere.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import difflib
@@ -476,6 +477,12 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: expected a mapping of sections at the top level")
         data = loaded
+        if overrides:
+            # The file on its own first: a bad value in it is an error even when an override replaces it.
+            try:
+                _build(Config, copy.deepcopy(data), "")
+            except ConfigError as e:
+                raise ConfigError(f"{path}: {e}") from None
     set_by: dict[str, str] = {}  # dotted key -> the --set text that gave it its value
     for text in overrides:
         keys, value = parse_override(text)

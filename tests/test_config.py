@@ -96,9 +96,14 @@ def test_override_errors():
 def test_a_bad_value_names_the_set_that_gave_it_else_the_file(tmp_path):
     p = tmp_path / "c.yaml"
     p.write_text("sensor:\n  sigma_hit: 0.1\n  z_hit: abc\n")
+    good = tmp_path / "good.yaml"
+    good.write_text("sensor:\n  sigma_hit: 0.1\n")
     with pytest.raises(ConfigError) as e:
-        load_config(p, ["sensor.sigma_hit=-1"])
-    assert str(e.value).startswith("--set sensor.sigma_hit=-1: sensor.sigma_hit: ") and "c.yaml" not in str(e.value)
+        load_config(good, ["sensor.sigma_hit=-1"])
+    assert str(e.value).startswith("--set sensor.sigma_hit=-1: sensor.sigma_hit: ") and "good.yaml" not in str(e.value)
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["sensor.sigma_hit=-1"])  # the file is checked on its own first (issue 11)
+    assert str(e.value).startswith(f"{p}: sensor.z_hit: expected a number")
     with pytest.raises(ConfigError) as e:
         load_config(p, ["sensor.sigma_hit=0.2"])  # the file's own bad value
     assert str(e.value).startswith(f"{p}: sensor.z_hit: expected a number")

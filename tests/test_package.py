@@ -60,3 +60,24 @@ def test_library_callers_still_get_a_runtime_warning():
         warnings.simplefilter("error", MclWarning)
         with pytest.raises(MclWarning):
             InputGuard(2.0).event("nan_ranges", "NaN")
+
+
+def test_a_bad_value_in_the_config_file_is_rejected_even_when_an_option_overrides_it(tmp_path, capsys):
+    # Today `--particles 100` replaces `particles: lots` before validation and the bad file is accepted.
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("filter:\n  particles: lots\n")
+    rc = main(["run", str(bad), "--particles", "100", "--rerun", "off", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err == f"mcl: error: {bad}: filter.particles: expected an integer, got 'lots'", err
+    assert not (tmp_path / "out").exists()
+    from mcl.config import load_config
+    from mcl.errors import ConfigError
+
+    bad.write_text("sensor:\n  sigma_hitt: 0.1\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml: sensor.sigma_hitt: unknown key \(did you mean sigma_hit\?\)"):
+        load_config(bad, ["sensor.sigma_hitt=0.2"])
+    # a value the file leaves valid may still be replaced, and a bad --set still names the --set
+    bad.write_text("filter:\n  particles: 300\n")
+    assert load_config(bad, ["filter.particles=100"]).filter.particles == 100
+    with pytest.raises(ConfigError, match=r"^--set filter.particles=x: filter.particles: expected an integer"):
+        load_config(bad, ["filter.particles=x"])
