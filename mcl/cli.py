@@ -1,3 +1,4 @@
+# PYTHON_ARGCOMPLETE_OK  (argcomplete: this entry point completes; see README, 'Installed as a package')
 """Command line: ``mcl run``, ``mcl eval``, ``mcl simulate``, ``mcl bag info``, ``mcl convert``.
 
 Known errors (MclError: a bad config, map or log) print one line on stderr and
@@ -375,6 +376,16 @@ def cmd_convert(args) -> int:
     return 0
 
 
+def package_version() -> str:
+    """The installed distribution's version (pyproject.toml's, through importlib.metadata)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("mcl")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mcl",
@@ -382,9 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
         "occupancy-grid map, write the trajectory and a Rerun recording of every filter step.",
         epilog="Run 'mcl COMMAND --help' for the options of a command.",
     )
-    from mcl import __version__
-
-    parser.add_argument("--version", action="version", version=f"mcl {__version__}")
+    parser.add_argument("--version", action="version", version=f"mcl {package_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_run(sub)
     _add_eval(sub)
@@ -419,6 +428,11 @@ def _clean_warnings():
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    if "_ARGCOMPLETE" in os.environ:  # the shell asks for completions (pip install 'mcl[completion]')
+        with contextlib.suppress(ImportError):
+            import argcomplete
+
+            argcomplete.autocomplete(parser, exit_method=sys.exit)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()

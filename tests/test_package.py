@@ -81,3 +81,41 @@ def test_a_bad_value_in_the_config_file_is_rejected_even_when_an_option_override
     assert load_config(bad, ["filter.particles=100"]).filter.particles == 100
     with pytest.raises(ConfigError, match=r"^--set filter.particles=x: filter.particles: expected an integer"):
         load_config(bad, ["filter.particles=x"])
+
+
+def test_version_is_the_installed_distributions(capsys, monkeypatch):
+    import importlib.metadata
+    import tomllib
+
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0
+    declared = tomllib.loads((PROJECT_ROOT / "pyproject.toml").read_text())["project"]["version"]
+    assert capsys.readouterr().out.strip() == f"mcl {declared}"
+    # read from the metadata, not a copy in the code that can drift from pyproject.toml
+    monkeypatch.setattr(importlib.metadata, "version", lambda name: "9.8.7" if name == "mcl" else "?")
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert capsys.readouterr().out.strip() == "mcl 9.8.7"
+
+
+def _complete(line: str, tmp_path: Path) -> list[str]:
+    """What the shell hook of `register-python-argcomplete mcl` would offer for `line` (a subprocess: argcomplete
+    writes to file descriptors pytest uses)."""
+    import os
+    import subprocess
+    import sys
+
+    out = tmp_path / "completions"
+    env = dict(os.environ, _ARGCOMPLETE="1", _ARGCOMPLETE_IFS="\n", COMP_LINE=line, COMP_POINT=str(len(line)),
+               _ARGCOMPLETE_STDOUT_FILENAME=str(out))
+    r = subprocess.run([sys.executable, "-m", "mcl"], env=env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    return out.read_text().split()
+
+
+def test_shell_completion_through_argcomplete(tmp_path):
+    pytest.importorskip("argcomplete")
+    assert _complete("mcl run --par", tmp_path) == ["--particles"]
+    assert _complete("mcl ca", tmp_path) == ["calibrate"]
+    assert _complete("mcl calibrate s", tmp_path) == ["sensor"]
