@@ -1,5 +1,5 @@
 # PYTHON_ARGCOMPLETE_OK  (argcomplete: this entry point completes; see README, 'Installed as a package')
-"""Command line: ``mcl run``, ``mcl eval``, ``mcl simulate``, ``mcl bag info``, ``mcl convert``.
+"""Command line: ``mcl run``, ``mcl eval``, ``mcl simulate``, ``mcl bag info``, ``mcl convert``, ``mcl config``.
 
 Known errors (MclError: a bad config, map or log) print one line on stderr and
 exit with status 2; an interrupted run exits with 130 after saving what it
@@ -24,9 +24,9 @@ EXIT_INTERRUPTED = 130
 
 
 def _project_default_config() -> Path | None:
-    from mcl.config import PROJECT_ROOT
+    from mcl.config import shipped
 
-    p = PROJECT_ROOT / "configs" / "default.yaml"
+    p = shipped("configs/default.yaml")
     return p if p.exists() else None
 
 
@@ -386,6 +386,47 @@ def package_version() -> str:
         return "unknown (not installed)"
 
 
+def _add_config(sub) -> None:
+    csub = _group(sub, "config", help="print the commented default config, or the resolved config of a run",
+                  description="Configs: the documented defaults to start one from, and what a run really used.")
+    p = csub.add_parser("default", help="print configs/default.yaml: every key with its default and a comment",
+                        description="Print the default config (the bundled demo's; every key, commented). Its "
+                        "paths find the demo from anywhere.",
+                        epilog="example:\n  mcl config default > my.yaml && mcl run my.yaml --set filter.particles=5000",
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.set_defaults(func=cmd_config_default)
+    p = csub.add_parser("show", help="print the resolved config of a run folder or a config file (every key)",
+                        description="Print the config a run used (RUN_DIR/config.yaml), or the one a config file "
+                        "gives with the defaults filled in, paths made absolute and --set applied: what `mcl run` "
+                        "would use.",
+                        epilog="examples:\n  mcl config show runs/20261123-101500\n"
+                        "  mcl config show configs/intel_lab.yaml --set sensor.model=beam",
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("path", metavar="RUN_DIR|CONFIG", help="a run folder (its config.yaml) or a config file")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (repeatable)")
+    p.set_defaults(func=cmd_config_show)
+
+
+def cmd_config_default(args) -> int:
+    p = _project_default_config()
+    if p is None:
+        raise MclError("configs/default.yaml: not found in the repository nor in the installed package")
+    sys.stdout.write(p.read_text(encoding="utf-8"))
+    return 0
+
+
+def cmd_config_show(args) -> int:
+    from mcl.config import dump_config, load_config
+
+    path = Path(args.path)
+    if path.is_dir():
+        if not (path / "config.yaml").is_file():
+            raise MclError(f"{path}: no config.yaml (not a run folder?)")
+        path = path / "config.yaml"
+    sys.stdout.write(dump_config(load_config(path, list(args.set))))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mcl",
@@ -402,6 +443,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_explore(sub)
     _add_bag(sub)
     _add_convert(sub)
+    _add_config(sub)
     return parser
 
 

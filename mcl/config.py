@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import importlib.resources
 import math
 import difflib
 import types
@@ -30,6 +31,16 @@ from mcl.errors import ConfigError
 from mcl.yamlfile import finite_number, read_yaml
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+def shipped(rel: str) -> Path:
+    """A file the project ships (``configs/default.yaml``, ``configs/baseline.yaml``, ``data/demo/...``): the
+    repository's copy in a source tree or an editable install, else the installed package's (``mcl/_project/``,
+    copied there when the wheel is built, see setup.py), read through importlib.resources."""
+    repo = PROJECT_ROOT / rel
+    if repo.exists():
+        return repo
+    return Path(str(importlib.resources.files("mcl").joinpath("_project", *rel.split("/"))))
 
 
 # Ranges a number may take: (min, max, min_inclusive, max_inclusive). Checked by
@@ -454,7 +465,9 @@ def _resolve_path(value: str | None, base: Path | None) -> str | None:
     p = Path(value).expanduser()
     if p.is_absolute():
         return str(p)
-    candidates = ([base / p] if base is not None else []) + [Path.cwd() / p, PROJECT_ROOT / p]
+    # ... and the default config's folder: a copy of it (`mcl config default > my.yaml`) still finds the demo
+    candidates = ([base / p] if base is not None else []) + [Path.cwd() / p, PROJECT_ROOT / p,
+                                                             shipped("configs") / p]
     for c in candidates:
         if c.exists():
             return str(c.resolve())

@@ -119,3 +119,57 @@ def test_shell_completion_through_argcomplete(tmp_path):
     assert _complete("mcl run --par", tmp_path) == ["--particles"]
     assert _complete("mcl ca", tmp_path) == ["calibrate"]
     assert _complete("mcl calibrate s", tmp_path) == ["sensor"]
+
+
+def test_config_default_prints_the_commented_default_config_and_show_a_runs(tmp_path, capsys):
+    assert main(["config", "default"]) == 0
+    text = capsys.readouterr().out
+    assert text == (PROJECT_ROOT / "configs" / "default.yaml").read_text()
+    # a copy made anywhere still finds the demo (paths fall back to the default config's folder)
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "my.yaml").write_text(text)
+    from mcl.config import dump_config, load_config
+
+    cfg = load_config(tmp_path / "elsewhere" / "my.yaml")
+    assert Path(cfg.map) == (DEMO / "map.yaml").resolve() and Path(cfg.log) == (DEMO / "log.clf").resolve()
+    # show: a run folder's config.yaml, resolved (every key, absolute paths)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "config.yaml").write_text(dump_config(load_config(None, ["filter.particles=123", "seed=7"])))
+    assert main(["config", "show", str(run_dir)]) == 0
+    shown = capsys.readouterr().out
+    assert shown == dump_config(load_config(None, ["filter.particles=123", "seed=7"])) and "particles: 123" in shown
+    assert main(["config", "show", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip() == f"mcl: error: {tmp_path}: no config.yaml (not a run folder?)"
+
+
+def test_the_wheel_ships_the_default_config_and_the_demo(tmp_path):
+    # pip wheel . builds what `pip install .` installs; the installed package must find the default config and
+    # the demo with no repository beside it (today: `mcl run` from another folder says "map: no map given").
+    import os
+    import subprocess
+    import sys
+    import zipfile
+
+    r = subprocess.run([sys.executable, "-m", "pip", "wheel", str(PROJECT_ROOT), "--no-deps", "-q", "-w",
+                        str(tmp_path / "whl")], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    (wheel,) = (tmp_path / "whl").glob("mcl-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    demo = {f"mcl/_project/data/demo/{f.name}" for f in DEMO.iterdir() if f.is_file()}
+    assert {"mcl/_project/configs/default.yaml", "mcl/_project/configs/baseline.yaml"} | demo <= names, sorted(names)
+    assert {"mcl/_project/data/demo/map.yaml", "mcl/_project/data/demo/log.clf"} <= demo
+    # unpacked alone (no repository beside it), from an empty folder: the default config and its demo paths
+    site = tmp_path / "site"
+    zipfile.ZipFile(wheel).extractall(site)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code = ("import mcl.config as c; from mcl.cli import _project_default_config as d; p = d(); "
+            "cfg = c.load_config(p); print(p); print(cfg.map); print(cfg.log)")
+    r = subprocess.run([sys.executable, "-c", code], cwd=empty, capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ, PYTHONPATH=str(site)))
+    assert r.returncode == 0, r.stderr
+    cfg_path, map_path, log_path = r.stdout.split()
+    assert cfg_path == str(site / "mcl" / "_project" / "configs" / "default.yaml")
+    assert map_path == str(site / "mcl" / "_project" / "data" / "demo" / "map.yaml") and Path(map_path).is_file()
+    assert Path(log_path).is_file()
