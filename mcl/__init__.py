@@ -4,6 +4,9 @@ Importing ``mcl`` compiles nothing and does not import rerun.
 """
 
 from mcl.errors import ConfigError, DataError, MclError
+from mcl.numba_cache import configure as _configure_numba_cache
+
+_configure_numba_cache()  # a read-only install caches the kernels in a user folder (before numba is imported)
 
 __all__ = ["MclError", "ConfigError", "DataError"]
 

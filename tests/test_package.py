@@ -173,3 +173,68 @@ def test_the_wheel_ships_the_default_config_and_the_demo(tmp_path):
     assert cfg_path == str(site / "mcl" / "_project" / "configs" / "default.yaml")
     assert map_path == str(site / "mcl" / "_project" / "data" / "demo" / "map.yaml") and Path(map_path).is_file()
     assert Path(log_path).is_file()
+
+
+def test_numba_cache_dir_is_a_user_folder_when_the_package_is_read_only(tmp_path, monkeypatch):
+    from mcl import numba_cache as nc
+
+    kernels = tmp_path / "site" / "mcl" / "kernels"
+    kernels.mkdir(parents=True)
+    home = str(Path.home())
+    # writable package folder: numba's own in-tree cache (kernels/__pycache__)
+    assert nc.choose_cache_dir({}, kernels, writable=lambda p: True) is None
+    # read-only (a system site-packages): the user cache folder, XDG_CACHE_HOME first
+    assert nc.choose_cache_dir({"XDG_CACHE_HOME": "/x/cache"}, kernels, writable=lambda p: False) == \
+        Path("/x/cache/mcl/numba")
+    assert nc.choose_cache_dir({"XDG_CACHE_HOME": ""}, kernels, writable=lambda p: False) == \
+        Path(home) / ".cache" / "mcl" / "numba"
+    # the user's own NUMBA_CACHE_DIR wins
+    assert nc.choose_cache_dir({"NUMBA_CACHE_DIR": "/mine"}, kernels, writable=lambda p: False) == Path("/mine")
+    # configure() sets it for numba, which reads it when imported
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    monkeypatch.setattr(nc, "_writable", lambda p: False)
+    nc.configure()
+    import os
+
+    assert os.environ["NUMBA_CACHE_DIR"] == str(tmp_path / "xdg" / "mcl" / "numba")
+
+
+def test_cold_cache_detection_uses_numbas_own_cache_layout(tmp_path):
+    from numba.core.caching import _CacheLocator
+
+    from mcl import numba_cache as nc
+
+    kernels = tmp_path / "mcl" / "kernels"
+    kernels.mkdir(parents=True)
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    folder = nc.kernels_cache_folder(env, kernels)
+    # the subfolder numba's UserProvidedCacheLocator picks for a file in kernels/
+    assert folder == tmp_path / "cache" / _CacheLocator.get_suitable_cache_subpath(str(kernels / "likelihood.py"))
+    assert nc.kernels_cache_folder({}, kernels) == kernels / "__pycache__"
+    assert nc.cache_is_cold(env, kernels)
+    folder.mkdir(parents=True)
+    for m in ("likelihood.likelihood_field_loglik_serial-15", "motion.sample_odometry-39"):
+        (folder / f"{m}.py311.nbi").write_bytes(b"")
+    assert nc.cache_is_cold(env, kernels)  # resample still to compile
+    (folder / "resample.merge_positions-25.py311.nbi").write_bytes(b"")
+    assert not nc.cache_is_cold(env, kernels)
+
+
+def test_mcl_run_says_once_that_it_compiles_the_kernels_when_the_cache_is_cold(tmp_path, capsys, monkeypatch):
+    from mcl import numba_cache as nc
+
+    # numba read its cache folder at import (warm, in-tree, for this process); mcl looks into the one given here
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    _short_bad_log(tmp_path / "short.clf", scans=10)
+    argv = ["run", "--map", str(DEMO / "map.yaml"), "--log", str(tmp_path / "short.clf"), "--rerun", "off",
+            "--no-progress", "--particles", "100", "--initial-pose", "18.961318", "9.225", "3.0954"]
+    assert main(argv + ["--out", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err.count("mcl: compiling kernels (once; cached for later runs)") == 1, err
+    folder = nc.kernels_cache_folder()
+    folder.mkdir(parents=True)
+    for m in nc.RUN_KERNELS:
+        (folder / f"{m}.k-1.py311.nbi").write_bytes(b"")
+    assert main(argv + ["--out", str(tmp_path / "b")]) == 0
+    assert not any("compiling" in line for line in capsys.readouterr().err.splitlines())
