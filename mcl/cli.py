@@ -44,7 +44,7 @@ def _add_run(sub) -> None:
             "  mcl run\n"
             "  mcl run configs/intel_lab.yaml --particles 5000 --seed 1\n"
             "  mcl run --map M.yaml --log L.clf --truth T.tum --out runs/x --global\n"
-            "  mcl run configs/mit_csail.yaml --set sensor.sigma_hit=0.1 --set filter.particles=5000\n"
+            "  mcl run configs/mit_csail.yaml --set sensor.model=beam --set filter.particles=5000\n"
             "open the recording with: rerun runs/x/recording.rrd"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -74,7 +74,7 @@ def _add_run(sub) -> None:
         help="save: write recording.rrd (default); spawn: open the viewer (falls back to save without a display); "
         "serve: serve to a web viewer; off: no recording",
     )
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override any config key, e.g. sensor.sigma_hit=0.1 (repeatable)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override any config key, e.g. sensor.likelihood_field.sigma_hit=0.1 (repeatable)")
     p.add_argument("--threads", type=int, metavar="N",
                    help="numba threads for the large parallel kernels (default: every core; 1 = serial). The result "
                    "is the same whatever N; on a machine another job keeps busy, 1 avoids waiting for its core")

@@ -73,9 +73,9 @@ def test_a_bad_value_in_the_config_file_is_rejected_even_when_an_option_override
     from mcl.config import load_config
     from mcl.errors import ConfigError
 
-    bad.write_text("sensor:\n  sigma_hitt: 0.1\n")
-    with pytest.raises(ConfigError, match=r"bad.yaml: sensor.sigma_hitt: unknown key \(did you mean sigma_hit\?\)"):
-        load_config(bad, ["sensor.sigma_hitt=0.2"])
+    bad.write_text("filter:\n  particels: 100\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml: filter.particels: unknown key \(did you mean particles\?\)"):
+        load_config(bad, ["filter.particels=200"])
     # a value the file leaves valid may still be replaced, and a bad --set still names the --set
     bad.write_text("filter:\n  particles: 300\n")
     assert load_config(bad, ["filter.particles=100"]).filter.particles == 100
@@ -238,3 +238,21 @@ def test_mcl_run_says_once_that_it_compiles_the_kernels_when_the_cache_is_cold(t
         (folder / f"{m}.k-1.py311.nbi").write_bytes(b"")
     assert main(argv + ["--out", str(tmp_path / "b")]) == 0
     assert not any("compiling" in line for line in capsys.readouterr().err.splitlines())
+
+
+def test_switching_the_sensor_model_is_one_set():
+    # Today `mcl run configs/mit_csail.yaml --set sensor.model=beam` stops: the likelihood field's z_hit 0.95 and
+    # z_rand 0.05 plus the beam's z_short 0.1, z_max 0.05 do not sum to 1. Each model now has its own block.
+    from mcl.config import load_config, sensor_model_view
+    from mcl.errors import ConfigError
+
+    cfg = load_config(PROJECT_ROOT / "configs" / "mit_csail.yaml", ["sensor.model=beam"])
+    v = sensor_model_view(cfg.sensor)
+    assert (v.model, v.z_hit, v.z_short, v.z_max, v.z_rand) == ("beam", 0.8, 0.1, 0.05, 0.05)
+    lf = sensor_model_view(load_config(PROJECT_ROOT / "configs" / "intel_lab.yaml").sensor)
+    assert (lf.model, lf.z_hit, lf.sigma_hit, lf.max_beams) == ("likelihood_field", 0.95, 0.2, 90)
+    beam = load_config(PROJECT_ROOT / "configs" / "mit_csail_beam.yaml", ["sensor.model=likelihood_field"])
+    assert beam.sensor.likelihood_field.z_hit == 0.95 and beam.sensor.beam.lambda_short == 0.1
+    with pytest.raises(ConfigError, match=r"sensor.sigma_hit: moved to sensor.likelihood_field.sigma_hit or "
+                                          r"sensor.beam.sigma_hit"):
+        load_config(None, ["sensor.sigma_hit=0.2"])
