@@ -135,12 +135,9 @@ def cmd_run(args) -> int:
     out = Path(args.out) if args.out else default_out_dir()
     if args.write_bag and cfg.bag is None:
         raise MclError("--write-bag needs a bag input (--bag)")
-    from mcl.numba_cache import cache_is_cold
-
-    if cache_is_cold():
-        print("mcl: compiling kernels (once; cached for later runs)", file=sys.stderr)
     summary = run(cfg, out, progress=False if args.no_progress else None,
-                  initial_pose_override=args.initial_pose is not None or args.global_, write_bag=args.write_bag)
+                  initial_pose_override=args.initial_pose is not None or args.global_, write_bag=args.write_bag,
+                  compile_note=True)
     if args.json:
         print(json.dumps(summary, indent=2))
     return EXIT_INTERRUPTED if summary["interrupted"] else 0

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, MutableMapping
 from pathlib import Path
 
 KERNELS = Path(os.path.abspath(__file__)).parent / "kernels"
@@ -41,11 +41,13 @@ def choose_cache_dir(environ: Mapping[str, str] = os.environ, kernels: Path = KE
     return user_cache_dir(environ)
 
 
-def configure() -> None:
-    """Set NUMBA_CACHE_DIR for a read-only install (call before numba is imported)."""
-    d = choose_cache_dir()
-    if d is not None and not os.environ.get("NUMBA_CACHE_DIR"):
-        os.environ["NUMBA_CACHE_DIR"] = str(d)
+def configure(environ: MutableMapping[str, str] | None = None) -> None:
+    """Set NUMBA_CACHE_DIR (in ``environ``, default the process's) for a read-only install; call before numba
+    is imported."""
+    environ = os.environ if environ is None else environ
+    d = choose_cache_dir(environ)
+    if d is not None and not environ.get("NUMBA_CACHE_DIR"):
+        environ["NUMBA_CACHE_DIR"] = str(d)
 
 
 def kernels_cache_folder(environ: Mapping[str, str] = os.environ, kernels: Path = KERNELS) -> Path:

@@ -190,14 +190,18 @@ def test_numba_cache_dir_is_a_user_folder_when_the_package_is_read_only(tmp_path
         Path(home) / ".cache" / "mcl" / "numba"
     # the user's own NUMBA_CACHE_DIR wins
     assert nc.choose_cache_dir({"NUMBA_CACHE_DIR": "/mine"}, kernels, writable=lambda p: False) == Path("/mine")
-    # configure() sets it for numba, which reads it when imported
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    # configure() sets it for numba, which reads it when imported (here into a copy of the environment)
     monkeypatch.setattr(nc, "_writable", lambda p: False)
-    nc.configure()
-    import os
-
-    assert os.environ["NUMBA_CACHE_DIR"] == str(tmp_path / "xdg" / "mcl" / "numba")
+    env = {"XDG_CACHE_HOME": str(tmp_path / "xdg")}
+    nc.configure(env)
+    assert env["NUMBA_CACHE_DIR"] == str(tmp_path / "xdg" / "mcl" / "numba")
+    env = {"NUMBA_CACHE_DIR": "/mine"}
+    nc.configure(env)
+    assert env == {"NUMBA_CACHE_DIR": "/mine"}
+    monkeypatch.setattr(nc, "_writable", lambda p: True)
+    env = {}
+    nc.configure(env)
+    assert env == {}
 
 
 def test_cold_cache_detection_uses_numbas_own_cache_layout(tmp_path):
