@@ -289,7 +289,7 @@ def collect(cfg, *, model: str):
     ex, ey = X[ret] + z[ret] * np.cos(A[ret]), Y[ret] + z[ret] * np.sin(A[ret])
     ix = np.floor((ex - ox) / res).astype(np.int64)
     iy = np.floor((ey - oy) / res).astype(np.int64)
-    dmax = float(s.likelihood_max_dist)
+    dmax = float(s.likelihood_field.likelihood_max_dist)
     inside = (ix >= 0) & (ix < grid.width) & (iy >= 0) & (iy < grid.height)
     d = np.full(ex.size, dmax)
     d[inside] = grid.distance[iy[inside], ix[inside]]
@@ -307,7 +307,7 @@ def calibrate_sensor(cfg, model: str | None = None) -> FitResult:
         return fit
     if model == "likelihood_field":
         d, _, _, used = collect(cfg, model="likelihood_field")
-        dmax = float(s.likelihood_max_dist)
+        dmax = float(s.likelihood_field.likelihood_max_dist)
         w_hit, w_rand, sigma, it, ll, conv = fit_likelihood_field(d, dmax)
         z_hit, z_rand = lf_config_weights(w_hit, w_rand, sigma, dmax, float(s.range_max))
         return FitResult("likelihood_field", dict(z_hit=z_hit, z_rand=z_rand, sigma_hit=sigma), int(d.size), ll, it,
@@ -328,8 +328,9 @@ def format_yaml(fit: FitResult) -> str:
                   f"z_rand/range_max (range_max {e['range_max']:g}) the same shape"]
     lines.append("sensor:")
     lines.append(f"  model: {fit.model}")
+    lines.append(f"  {fit.model}:")  # each model has its own block (sensor.likelihood_field, sensor.beam)
     for k, v in fit.params.items():
-        lines.append(f"  {k}: {v:.6g}")
+        lines.append(f"    {k}: {v:.6g}")
     return "\n".join(lines) + "\n"
 
 
@@ -339,7 +340,7 @@ def add_arguments(p) -> None:
     p.add_argument("--log", help="CARMEN log (.clf, plain or gzip)")
     p.add_argument("--truth", help="reference trajectory (TUM) whose timestamps match the scans")
     p.add_argument("--model", choices=["beam", "likelihood_field"], help="model to fit (default: the config's sensor.model)")
-    p.add_argument("--config", help="YAML config for range_max, range_min, likelihood_max_dist, laser, laser_pose, "
+    p.add_argument("--config", help="YAML config for range_max, range_min, likelihood_field.likelihood_max_dist, laser, laser_pose, "
                    "and map/log/truth if not given")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key (repeatable)")
 

@@ -1,4 +1,5 @@
-"""Command line: ``mcl run``, ``mcl eval``, ``mcl tune``, ``mcl simulate``, ``mcl bag info``, ``mcl convert``.
+# PYTHON_ARGCOMPLETE_OK  (argcomplete: this entry point completes; see README, 'Installed as a package')
+"""Command line: ``mcl run``, ``mcl eval``, ``mcl tune``, ``mcl simulate``, ``mcl bag info``, ``mcl convert``, ``mcl config``.
 
 Known errors (MclError: a bad config, map or log) print one line on stderr and
 exit with status 2; an interrupted run exits with 130 after saving what it
@@ -9,21 +10,23 @@ runs, so ``mcl --help`` is instant.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
+import warnings
 from pathlib import Path
 
-from mcl.errors import MclError
+from mcl.errors import MclError, MclWarning
 
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
 
 
 def _project_default_config() -> Path | None:
-    from mcl.config import PROJECT_ROOT
+    from mcl.config import shipped
 
-    p = PROJECT_ROOT / "configs" / "default.yaml"
+    p = shipped("configs/default.yaml")
     return p if p.exists() else None
 
 
@@ -41,7 +44,7 @@ def _add_run(sub) -> None:
             "  mcl run\n"
             "  mcl run configs/intel_lab.yaml --particles 5000 --seed 1\n"
             "  mcl run --map M.yaml --log L.clf --truth T.tum --out runs/x --global\n"
-            "  mcl run configs/mit_csail.yaml --set sensor.sigma_hit=0.1 --set filter.particles=5000\n"
+            "  mcl run configs/mit_csail.yaml --set sensor.model=beam --set filter.particles=5000\n"
             "open the recording with: rerun runs/x/recording.rrd"
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -71,7 +74,7 @@ def _add_run(sub) -> None:
         help="save: write recording.rrd (default); spawn: open the viewer (falls back to save without a display); "
         "serve: serve to a web viewer; off: no recording",
     )
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override any config key, e.g. sensor.sigma_hit=0.1 (repeatable)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override any config key, e.g. sensor.likelihood_field.sigma_hit=0.1 (repeatable)")
     p.add_argument("--threads", type=int, metavar="N",
                    help="numba threads for the large parallel kernels (default: every core; 1 = serial). The result "
                    "is the same whatever N; on a machine another job keeps busy, 1 avoids waiting for its core")
@@ -133,7 +136,8 @@ def cmd_run(args) -> int:
     if args.write_bag and cfg.bag is None:
         raise MclError("--write-bag needs a bag input (--bag)")
     summary = run(cfg, out, progress=False if args.no_progress else None,
-                  initial_pose_override=args.initial_pose is not None or args.global_, write_bag=args.write_bag)
+                  initial_pose_override=args.initial_pose is not None or args.global_, write_bag=args.write_bag,
+                  compile_note=True)
     if args.json:
         print(json.dumps(summary, indent=2))
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
@@ -389,6 +393,57 @@ def cmd_convert(args) -> int:
     return 0
 
 
+def package_version() -> str:
+    """The installed distribution's version (pyproject.toml's, through importlib.metadata)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("mcl")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
+def _add_config(sub) -> None:
+    csub = _group(sub, "config", help="print the commented default config, or the resolved config of a run",
+                  description="Configs: the documented defaults to start one from, and what a run really used.")
+    p = csub.add_parser("default", help="print configs/default.yaml: every key with its default and a comment",
+                        description="Print the default config (the bundled demo's; every key, commented). Its "
+                        "paths find the demo from anywhere.",
+                        epilog="example:\n  mcl config default > my.yaml && mcl run my.yaml --set filter.particles=5000",
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.set_defaults(func=cmd_config_default)
+    p = csub.add_parser("show", help="print the resolved config of a run folder or a config file (every key)",
+                        description="Print the config a run used (RUN_DIR/config.yaml), or the one a config file "
+                        "gives with the defaults filled in, paths made absolute and --set applied: what `mcl run` "
+                        "would use.",
+                        epilog="examples:\n  mcl config show runs/20261123-101500\n"
+                        "  mcl config show configs/intel_lab.yaml --set sensor.model=beam",
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("path", metavar="RUN_DIR|CONFIG", help="a run folder (its config.yaml) or a config file")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (repeatable)")
+    p.set_defaults(func=cmd_config_show)
+
+
+def cmd_config_default(args) -> int:
+    p = _project_default_config()
+    if p is None:
+        raise MclError("configs/default.yaml: not found in the repository nor in the installed package")
+    sys.stdout.write(p.read_text(encoding="utf-8"))
+    return 0
+
+
+def cmd_config_show(args) -> int:
+    from mcl.config import dump_config, load_config
+
+    path = Path(args.path)
+    if path.is_dir():
+        if not (path / "config.yaml").is_file():
+            raise MclError(f"{path}: no config.yaml (not a run folder?)")
+        path = path / "config.yaml"
+    sys.stdout.write(dump_config(load_config(path, list(args.set))))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mcl",
@@ -396,9 +451,7 @@ def build_parser() -> argparse.ArgumentParser:
         "occupancy-grid map, write the trajectory and a Rerun recording of every filter step.",
         epilog="Run 'mcl COMMAND --help' for the options of a command.",
     )
-    from mcl import __version__
-
-    parser.add_argument("--version", action="version", version=f"mcl {__version__}")
+    parser.add_argument("--version", action="version", version=f"mcl {package_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_run(sub)
     _add_eval(sub)
@@ -408,17 +461,45 @@ def build_parser() -> argparse.ArgumentParser:
     _add_tune(sub)
     _add_bag(sub)
     _add_convert(sub)
+    _add_config(sub)
     return parser
+
+
+@contextlib.contextmanager
+def _clean_warnings():
+    """While a command runs, mcl's own warnings (MclWarning) print as one line, ``mcl: warning: <message>``, with
+    no module path or source line; tqdm.write keeps a running progress bar intact. Other warnings print as Python
+    prints them, and the library itself keeps plain ``warnings.warn`` (pytest.warns, catch_warnings)."""
+    saved = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, MclWarning):
+            return saved(message, category, filename, lineno, file, line)
+        from tqdm import tqdm
+
+        tqdm.write(f"mcl: warning: {message}", file=file or sys.stderr)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = saved
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    if "_ARGCOMPLETE" in os.environ:  # the shell asks for completions (pip install 'mcl[completion]')
+        with contextlib.suppress(ImportError):
+            import argcomplete
+
+            argcomplete.autocomplete(parser, exit_method=sys.exit)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
         return 0
     try:
-        return int(args.func(args) or 0)
+        with _clean_warnings():
+            return int(args.func(args) or 0)
     except MclError as e:
         print(f"mcl: error: {e}", file=sys.stderr)
         return EXIT_ERROR

@@ -14,7 +14,9 @@ from anywhere.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import importlib.resources
 import math
 import difflib
 import types
@@ -29,6 +31,16 @@ from mcl.errors import ConfigError
 from mcl.yamlfile import finite_number, read_yaml
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+def shipped(rel: str) -> Path:
+    """A file the project ships (``configs/default.yaml``, ``configs/baseline.yaml``, ``data/demo/...``): the
+    repository's copy in a source tree or an editable install, else the installed package's (``mcl/_project/``,
+    copied there when the wheel is built, see setup.py), read through importlib.resources."""
+    repo = PROJECT_ROOT / rel
+    if repo.exists():
+        return repo
+    return Path(str(importlib.resources.files("mcl").joinpath("_project", *rel.split("/"))))
 
 
 # Ranges a number may take: (min, max, min_inclusive, max_inclusive). Checked by
@@ -103,25 +115,51 @@ class MotionConfig:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
+class LikelihoodFieldConfig:
+    """Parameters of likelihood_field_range_finder_model (Prob. Rob. Table 6.3): sensor.likelihood_field."""
+
+    z_hit: float = field(default=0.95, metadata=_rng(0.0, 1.0))
+    z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
+    sigma_hit: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
+    likelihood_max_dist: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class BeamConfig:
+    """Parameters of beam_range_finder_model (Prob. Rob. Table 6.1): sensor.beam; the four weights sum to 1."""
+
+    z_hit: float = field(default=0.8, metadata=_rng(0.0, 1.0))
+    z_short: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # weight of short readings (unexpected obstacles)
+    z_max: float = field(default=0.05, metadata=_rng(0.0, 1.0))  # weight of no-return (max-range) readings
+    z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
+    sigma_hit: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
+    lambda_short: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # 1/m, rate of p_short
+    beam_lut: bool = False  # gather expected ranges from a precomputed (x, y, theta) table instead of casting
+    beam_lut_bins: int = field(default=120, metadata=_rng(4, 4096))  # heading bins of that table
+
+
+# The flat keys of the sensor section before each model had its own block (issue 11): rejected with the new place.
+MOVED_SENSOR_KEYS = {
+    k: " or ".join(f"sensor.{m}.{k}" for m, c in (("likelihood_field", LikelihoodFieldConfig), ("beam", BeamConfig))
+                   if k in c.__dataclass_fields__)
+    for k in ("z_hit", "z_rand", "sigma_hit", "likelihood_max_dist", "z_short", "z_max", "lambda_short", "beam_lut",
+              "beam_lut_bins")
+}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
 class SensorConfig:
     """Range finder model: likelihood field (Prob. Rob. Table 6.3) or beam model (Table 6.1).
 
-    Both use z_hit, z_rand, sigma_hit; the beam model adds z_short, z_max and
-    lambda_short, and its four weights must sum to 1. ``mcl calibrate sensor``
-    fits them (Table 6.2, learn_intrinsic_parameters).
+    Each model has its own block of parameters (``likelihood_field``, ``beam``) with working defaults, so
+    switching ``model`` is one key. ``mcl calibrate sensor`` fits them (Table 6.2, learn_intrinsic_parameters).
+    The sensor models read :func:`sensor_model_view`: the common keys plus the chosen model's block.
     """
 
     use: bool = True  # false: the laser is not used (landmark-only runs, landmarks.use: true)
     model: Literal["likelihood_field", "beam"] = "likelihood_field"
-    z_hit: float = field(default=0.95, metadata=_rng(0.0, 1.0))
-    z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
-    sigma_hit: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
-    z_short: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # beam: weight of short readings (unexpected obstacles)
-    z_max: float = field(default=0.05, metadata=_rng(0.0, 1.0))  # beam: weight of no-return (max-range) readings
-    lambda_short: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # beam: 1/m, rate of p_short
-    beam_lut: bool = False  # beam: gather expected ranges from a precomputed (x, y, theta) table instead of casting
-    beam_lut_bins: int = field(default=120, metadata=_rng(4, 4096))  # beam: heading bins of that table
-    likelihood_max_dist: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
+    likelihood_field: LikelihoodFieldConfig = field(default_factory=LikelihoodFieldConfig)
+    beam: BeamConfig = field(default_factory=BeamConfig)
     max_beams: int = field(default=60, metadata=_rng(1, 100_000))
     range_min: float = field(default=0.0, metadata=_rng(0.0))
     range_max: float = field(default=80.0, metadata=_rng(0.0, lo_open=True))  # readings >= this: no return
@@ -260,6 +298,18 @@ LASER_KINDS = ("auto", "FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER
 PATH_KEYS = ("map", "log", "bag", "truth")
 
 
+def sensor_model_view(s: Any, model: str | None = None) -> Any:
+    """The keys a range finder model reads, flat: the sensor section's common keys plus the block of ``model``
+    (default ``s.model``). Anything else (a namespace with the keys already flat) is returned as it is."""
+    if not isinstance(s, SensorConfig):
+        return s
+    model = model or s.model
+    block = getattr(s, model)
+    common = {f.name: getattr(s, f.name) for f in dataclasses.fields(s) if f.name not in ("likelihood_field", "beam")}
+    common["model"] = model
+    return types.SimpleNamespace(**common, **{f.name: getattr(block, f.name) for f in dataclasses.fields(block)})
+
+
 # ----------------------------------------------------------------------------- validation
 
 
@@ -349,6 +399,8 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
     for k, v in data.items():
         key = f"{prefix}{_printable(k)}"
         if k not in fields:
+            if cls is SensorConfig and k in MOVED_SENSOR_KEYS:
+                raise ConfigError(f"{key}: moved to {MOVED_SENSOR_KEYS[k]}")
             hint = difflib.get_close_matches(str(k), list(fields), n=1)
             extra = f" (did you mean {hint[0]}?)" if hint else ""
             raise ConfigError(f"{key}: unknown key{extra}")
@@ -373,8 +425,8 @@ def _cross_checks(cfg: Config) -> None:
     s = cfg.sensor
     if s.range_min >= s.range_max:
         raise ConfigError(f"sensor.range_min: {s.range_min} must be below sensor.range_max ({s.range_max})")
-    if s.z_hit + s.z_rand <= 0:
-        raise ConfigError("sensor.z_hit: z_hit + z_rand must be positive")
+    if s.likelihood_field.z_hit + s.likelihood_field.z_rand <= 0:
+        raise ConfigError("sensor.likelihood_field.z_hit: z_hit + z_rand must be positive")
     lm = cfg.landmarks
     if lm.z_det + lm.z_fp <= 0:
         raise ConfigError("landmarks.z_det: z_det + z_fp must be positive")
@@ -386,16 +438,15 @@ def _cross_checks(cfg: Config) -> None:
     if pc.use and pc.depth is None:
         raise ConfigError("planes.depth: planes.use is true but no depth folder is given")
     if not s.use and not lm.use and not pc.use:
+        raise ConfigError("sensor.use: false needs landmarks.use: true or planes.use: true (nothing else to correct with)")
+    b = s.beam
+    total = b.z_hit + b.z_short + b.z_max + b.z_rand
+    if abs(total - 1.0) > 1e-6:
         raise ConfigError(
-            "sensor.use: false needs landmarks.use: true or planes.use: true (nothing else to correct with)")
-    if s.model == "beam":
-        total = s.z_hit + s.z_short + s.z_max + s.z_rand
-        if abs(total - 1.0) > 1e-6:
-            raise ConfigError(
-                f"sensor.z_hit: with sensor.model=beam the mixture weights z_hit + z_short + z_max + z_rand must sum "
-                f"to 1, got {s.z_hit:g} + {s.z_short:g} + {s.z_max:g} + {s.z_rand:g} = {total:g} (e.g. z_hit 0.8, "
-                f"z_short 0.1, z_max 0.05, z_rand 0.05 as in configs/mit_csail_beam.yaml)"
-            )
+            f"sensor.beam.z_hit: the beam model's mixture weights z_hit + z_short + z_max + z_rand must sum to 1, "
+            f"got {b.z_hit:g} + {b.z_short:g} + {b.z_max:g} + {b.z_rand:g} = {total:g} (the defaults: 0.8, 0.1, "
+            f"0.05, 0.05)"
+        )
     if any(v < 0 for v in cfg.filter.initial_std):
         raise ConfigError("filter.initial_std: standard deviations must be >= 0")
     if any(not v > 0 for v in cfg.filter.respread_std):
@@ -452,7 +503,9 @@ def _resolve_path(value: str | None, base: Path | None) -> str | None:
     p = Path(value).expanduser()
     if p.is_absolute():
         return str(p)
-    candidates = ([base / p] if base is not None else []) + [Path.cwd() / p, PROJECT_ROOT / p]
+    # ... and the default config's folder: a copy of it (`mcl config default > my.yaml`) still finds the demo
+    candidates = ([base / p] if base is not None else []) + [Path.cwd() / p, PROJECT_ROOT / p,
+                                                             shipped("configs") / p]
     for c in candidates:
         if c.exists():
             return str(c.resolve())
@@ -475,6 +528,12 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: expected a mapping of sections at the top level")
         data = loaded
+        if overrides:
+            # The file on its own first: a bad value in it is an error even when an override replaces it.
+            try:
+                _build(Config, copy.deepcopy(data), "")
+            except ConfigError as e:
+                raise ConfigError(f"{path}: {e}") from None
     set_by: dict[str, str] = {}  # dotted key -> the --set text that gave it its value
     for text in overrides:
         keys, value = parse_override(text)

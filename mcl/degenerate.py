@@ -1,7 +1,7 @@
 """Degenerate input: what the filter does with data it cannot use as given.
 
 Degenerate input never puts a NaN into the particles. Each kind warns once
-(``RuntimeWarning``) and is counted in ``InputGuard.events`` (summary.json
+(``MclWarning``, a ``RuntimeWarning``) and is counted in ``InputGuard.events`` (summary.json
 ``events``):
 
 * ``nan_ranges``: a scan with NaN or infinite readings (those beams are dropped);
@@ -27,6 +27,7 @@ import warnings
 
 import numpy as np
 
+from mcl.errors import MclWarning
 from mcl.estimate import wrap_angle
 
 EVENT_KINDS = ("degenerate_weights", "nan_ranges", "odometry_jumps", "time_backwards", "empty_scans")
@@ -47,7 +48,7 @@ class InputGuard:
         self._step.append(kind)
         if kind not in self._warned:
             self._warned.add(kind)
-            warnings.warn(f"{message} (warned once; summary.json counts every {kind} event)", RuntimeWarning,
+            warnings.warn(f"{message} (warned once; summary.json counts every {kind} event)", MclWarning,
                           stacklevel=4)
 
     def take_step_events(self) -> tuple[str, ...]:

@@ -15,3 +15,11 @@ class ConfigError(MclError):
 
 class DataError(MclError):
     """A map, log or trajectory file is unreadable or malformed."""
+
+
+class MclWarning(RuntimeWarning):
+    """Input mcl can still use, but not as given (degenerate weights, NaN ranges, time running backwards).
+
+    Library callers get an ordinary ``warnings.warn`` (a ``RuntimeWarning``); the command line prints each as
+    one line, ``mcl: warning: <message>``, as it prints errors.
+    """

@@ -231,7 +231,7 @@ def _open_source(cfg: Config, echo):
         scans = _choose_scans(log, cfg.laser) if cfg.sensor.use else []
         marks = _landmark_records(log, cfg)
     for w in log.warnings:
-        echo(f"warning: {w}")
+        echo(f"mcl: warning: {w}")
     for note in log.notes:
         echo(note)
     if cfg.truth:
@@ -343,7 +343,7 @@ def _kidnap(pf, truth, t: float, estimate, min_distance: float) -> dict:
 def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
-    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at``, ``write_bag`` (see
+    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at``, ``write_bag``, ``compile_note`` (see
     :func:`_run`). SIGINT and
     SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true.
     """
@@ -361,6 +361,7 @@ def _run(
     echo=None,
     kidnap_filter_at: tuple[float, float] | None = None,
     write_bag: bool = False,
+    compile_note: bool = False,
 ) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
@@ -394,6 +395,11 @@ def _run(
         plane_sensor = PlaneSensor(cfg, grid, log.odometry, cfg.seed)
         updates = plane_sensor.attach(updates)
     load_time = time.perf_counter() - wall0
+    if compile_note:  # `mcl run`: the data loaded, the filter's kernels are next (mcl.numba_cache)
+        from mcl.numba_cache import cache_is_cold
+
+        if cache_is_cold():
+            echo("mcl: compiling kernels (once; cached for later runs)")
 
     signals.defer()  # outputs from here on: a signal stops the loop only, and everything is closed
     out_dir = Path(out_dir)

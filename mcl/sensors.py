@@ -105,10 +105,13 @@ class LikelihoodField:
     ``grid`` needs ``distance`` (float (H, W), metres to the nearest occupied
     cell centre, row 0 at the bottom), ``origin`` (x0, y0) and ``resolution``.
     ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit, likelihood_max_dist,
-    range_max, exponent.
+    range_max, exponent (a SensorConfig: its common keys and sensor.likelihood_field).
     """
 
     def __init__(self, grid, cfg):
+        from mcl.config import sensor_model_view
+
+        cfg = sensor_model_view(cfg, "likelihood_field")
         self.cfg = cfg
         self.table = np.ascontiguousarray(point_log_likelihood(grid.distance, cfg), dtype=np.float32)
         # off-map endpoints: the value at likelihood_max_dist (float32 like the table)
@@ -303,13 +306,15 @@ class BeamModel:
     ``beam_lut_bins`` headings are cast once (uint16, ``range_max / 65535``
     m steps) and gathered per beam (nearest cell, nearest heading bin):
     much faster, slightly less exact; refused (ConfigError naming
-    ``sensor.beam_lut``) when the table would exceed 512 MiB.
+    ``sensor.beam.beam_lut``) when the table would exceed 512 MiB.
     """
 
     def __init__(self, grid, cfg):
         from mcl.errors import ConfigError
+        from mcl.config import sensor_model_view
         from mcl.kernels.beam import build_range_table
 
+        cfg = sensor_model_view(cfg, "beam")  # a SensorConfig: its common keys and sensor.beam
         self.cfg = cfg
         self.blocked = np.ascontiguousarray(grid.occupied, dtype=np.bool_)
         self.origin = (float(grid.origin[0]), float(grid.origin[1]))
@@ -324,9 +329,9 @@ class BeamModel:
             nbytes = h * w * bins * 2
             if nbytes > BEAM_LUT_MAX_BYTES:
                 raise ConfigError(
-                    f"sensor.beam_lut: the range table for this {w}x{h}-cell map with {bins} heading bins would take "
+                    f"sensor.beam.beam_lut: the range table for this {w}x{h}-cell map with {bins} heading bins would take "
                     f"{nbytes / 2**20:.0f} MiB (limit {BEAM_LUT_MAX_BYTES / 2**20:.0f} MiB); use fewer "
-                    "sensor.beam_lut_bins or beam_lut: false")
+                    "sensor.beam.beam_lut_bins or beam_lut: false")
             self.table = np.empty((h, w, bins), dtype=np.uint16)
             build_range_table(self.blocked, self.origin[0], self.origin[1], self.resolution, float(cfg.range_max),
                               self.unit, self.table)

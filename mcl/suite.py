@@ -275,15 +275,15 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: 
          modes: tuple[str, ...] | None = None, only: list[str] | None = None, baseline: bool = True) -> list[Job]:
     """Every run of the suite, each with its validated Config (ConfigError naming the suite, the dataset
     and the key when a dataset's ``set`` or a --set is wrong)."""
-    from mcl.config import PROJECT_ROOT, load_config
+    from mcl.config import load_config, shipped
 
-    default_cfg = Path(config) if config else PROJECT_ROOT / "configs" / "default.yaml"
+    default_cfg = Path(config) if config else shipped("configs/default.yaml")
     if not default_cfg.is_file():
         raise ConfigError(f"--config: no such file {default_cfg}")
     label = "default" if config is None else default_cfg.stem
     configs = [(label, default_cfg, list(sets))]
     if baseline and label != BASELINE:
-        configs.append((BASELINE, PROJECT_ROOT / "configs" / "baseline.yaml", []))
+        configs.append((BASELINE, shipped("configs/baseline.yaml"), []))
     datasets = suite.datasets
     if only:
         names = {d.name for d in datasets}

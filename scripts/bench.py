@@ -155,14 +155,14 @@ def bench_beam(grid, mask, ranges, angles, max_range, laser_pose, rng, quick):
     One cast = one (particle, beam) expected range plus its mixture term; 10,000 particles
     uniform over free cells near the map centre with random headings, the scan's 60 beams.
     """
-    from mcl.config import SensorConfig
+    from mcl.config import BeamConfig, SensorConfig
     from mcl.sensors import BeamModel
 
-    cfg = SensorConfig(model="beam", z_hit=0.8, z_short=0.1, z_max=0.05, z_rand=0.05, max_beams=60,
-                       beam_lut_bins=120)
+    cfg = SensorConfig(model="beam", max_beams=60, beam=BeamConfig(z_hit=0.8, z_short=0.1, z_max=0.05, z_rand=0.05,
+                                                                  beam_lut_bins=120))
     exact = BeamModel(grid, cfg)
     t = time.perf_counter()
-    lut = BeamModel(grid, SensorConfig(**{**{f: getattr(cfg, f) for f in cfg.__slots__}, "beam_lut": True}))
+    lut = BeamModel(grid, SensorConfig(model="beam", max_beams=60, beam=BeamConfig(beam_lut=True, beam_lut_bins=120)))
     build = time.perf_counter() - t
     obs = exact.prepare(SimpleNamespace(ranges=ranges, angles=angles, max_range=max_range), laser_pose)
     n, k = 10_000, obs[0].size

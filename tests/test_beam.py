@@ -238,20 +238,28 @@ def test_lut_agrees_with_exact_casting():
 def test_lut_memory_guard_names_the_key():
     occ = np.zeros((4000, 4000), dtype=np.int8)  # 4000 x 4000 cells x 120 bins x 2 bytes = 3662 MiB
     g = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
-    with pytest.raises(ConfigError, match=r"sensor\.beam_lut: .*3662 MiB"):
+    with pytest.raises(ConfigError, match=r"sensor\.beam\.beam_lut: .*3662 MiB"):
         BeamModel(g, cfg(beam_lut=True, beam_lut_bins=120))
 
 
 def test_config_selects_and_validates_the_beam_model():
-    c = load_config(None, ["sensor.model=beam", "sensor.z_hit=0.8", "sensor.z_short=0.1", "sensor.z_max=0.05",
-                           "sensor.z_rand=0.05"])
-    assert isinstance(make_sensor_model(room(), c.sensor), BeamModel)
-    with pytest.raises(ConfigError, match=r"sensor\.z_hit: .*sum to 1"):
-        load_config(None, ["sensor.model=beam"])  # defaults sum to 1.15
-    with pytest.raises(ConfigError, match=r"sensor\.z_short"):
-        load_config(None, ["sensor.model=beam", "sensor.z_short=-0.1"])
-    # the likelihood field ignores the beam-only weights
-    assert load_config(None, ["sensor.z_short=0.7"]).sensor.model == "likelihood_field"
+    # issue 11: each model has its own block with working defaults, so switching is one key
+    c = load_config(None, ["sensor.model=beam"])
+    m = make_sensor_model(room(), c.sensor)
+    assert isinstance(m, BeamModel) and list(m.params) == [0.8, 0.1, 0.05, 0.05, 0.1, 0.1]
+    c = load_config(None, ["sensor.model=beam", "sensor.beam.z_hit=0.7", "sensor.beam.z_short=0.2",
+                           "sensor.beam.sigma_hit=0.2", "sensor.likelihood_field.sigma_hit=0.3"])
+    assert list(make_sensor_model(room(), c.sensor).params) == [0.7, 0.2, 0.05, 0.05, 0.2, 0.1]
+    with pytest.raises(ConfigError, match=r"sensor\.beam\.z_hit: .*sum to 1"):
+        load_config(None, ["sensor.beam.z_hit=0.9"])  # 1.1
+    with pytest.raises(ConfigError, match=r"sensor\.beam\.z_short"):
+        load_config(None, ["sensor.model=beam", "sensor.beam.z_short=-0.1"])
+    # the old flat keys point at their new place
+    with pytest.raises(ConfigError, match=r"^--set sensor.z_hit=0.8: sensor.z_hit: moved to "
+                                          r"sensor.likelihood_field.z_hit or sensor.beam.z_hit$"):
+        load_config(None, ["sensor.z_hit=0.8"])
+    with pytest.raises(ConfigError, match=r"sensor.z_short: moved to sensor.beam.z_short$"):
+        load_config(None, ["sensor.z_short=0.1"])
 
 
 @needs_shared

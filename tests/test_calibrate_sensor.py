@@ -105,16 +105,18 @@ def test_cli_prints_yaml_that_loads_as_a_config(sim_log, capsys):
     text = capsys.readouterr().out
     data = yaml.safe_load(text)
     assert set(data) == {"sensor"} and data["sensor"]["model"] == "beam"
-    assert set(data["sensor"]) == {"model", "z_hit", "z_short", "z_max", "z_rand", "sigma_hit", "lambda_short"}
+    assert set(data["sensor"]) == {"model", "beam"}
+    assert set(data["sensor"]["beam"]) == {"z_hit", "z_short", "z_max", "z_rand", "sigma_hit", "lambda_short"}
     # paste it into a config: it validates (the beam weights sum to 1 within the loader's tolerance)
-    overrides = [f"sensor.{k}={v}" for k, v in data["sensor"].items()]
+    overrides = [f"sensor.beam.{k}={v}" for k, v in data["sensor"]["beam"].items()] + ["sensor.model=beam"]
     cfg = load_config(None, overrides)
-    assert cfg.sensor.model == "beam"
+    assert cfg.sensor.model == "beam" and cfg.sensor.beam.z_hit == data["sensor"]["beam"]["z_hit"]
     # likelihood field: three keys
     assert main(["calibrate", "sensor", "--map", str(sim_log / "map.yaml"), "--log", str(sim_log / "log.clf"),
                  "--truth", str(sim_log / "truth.tum"), "--model", "likelihood_field"]) == 0
     lf = yaml.safe_load(capsys.readouterr().out)["sensor"]
-    assert set(lf) == {"model", "z_hit", "z_rand", "sigma_hit"} and lf["model"] == "likelihood_field"
+    assert set(lf) == {"model", "likelihood_field"} and lf["model"] == "likelihood_field"
+    assert set(lf["likelihood_field"]) == {"z_hit", "z_rand", "sigma_hit"}
 
 
 def test_cli_errors_are_one_line(sim_log, tmp_path, capsys):

@@ -34,8 +34,9 @@ def test_default_yaml_lists_every_key():
 
 
 def test_overrides_parse_yaml_values(tmp_path):
-    cfg = load_config(None, ["sensor.sigma_hit=0.2", "filter.particles=123", "filter.initial_pose=[1, 2, 0.5]"])
-    assert cfg.sensor.sigma_hit == 0.2
+    cfg = load_config(None, ["sensor.likelihood_field.sigma_hit=0.2", "filter.particles=123",
+                             "filter.initial_pose=[1, 2, 0.5]"])
+    assert cfg.sensor.likelihood_field.sigma_hit == 0.2
     assert cfg.filter.particles == 123
     assert cfg.filter.initial_pose == (1.0, 2.0, 0.5)
 
@@ -60,8 +61,8 @@ def test_roundtrip_of_the_resolved_config(tmp_path):
         ("filter:\n  particels: 10\n", "filter.particels: unknown key (did you mean particles?)"),
         ("filter:\n  particles: many\n", "filter.particles: expected an integer"),
         ("filter:\n  particles: 0\n", "filter.particles: 0 is out of range"),
-        ("sensor:\n  sigma_hit: 0\n", "sensor.sigma_hit: 0.0 is out of range"),
-        ("sensor:\n  z_hit: 1.5\n", "sensor.z_hit: 1.5 is out of range"),
+        ("sensor:\n  likelihood_field:\n    sigma_hit: 0\n", "sensor.likelihood_field.sigma_hit: 0.0 is out of range"),
+        ("sensor:\n  beam:\n    z_hit: 1.5\n", "sensor.beam.z_hit: 1.5 is out of range"),
         ("motion:\n  noise_form: varience\n", "motion.noise_form: expected one of"),
         ("filter:\n  resampling: sytematic\n", "did you mean systematic?"),
         ("filter:\n  initial_pose: [1, 2]\n", "filter.initial_pose: expected"),
@@ -87,21 +88,26 @@ def test_errors_name_the_file_and_key(tmp_path, text, fragment):
 def test_override_errors():
     with pytest.raises(ConfigError, match="expected section.key=value"):
         load_config(None, ["sensor.sigma_hit"])
-    with pytest.raises(ConfigError, match="sensor.sigma_hit: expected a number"):
-        load_config(None, ["sensor.sigma_hit=abc"])
+    with pytest.raises(ConfigError, match="sensor.beam.sigma_hit: expected a number"):
+        load_config(None, ["sensor.beam.sigma_hit=abc"])
     with pytest.raises(ConfigError, match="sensor.sigma: unknown key"):
         load_config(None, ["sensor.sigma=1"])
 
 
 def test_a_bad_value_names_the_set_that_gave_it_else_the_file(tmp_path):
     p = tmp_path / "c.yaml"
-    p.write_text("sensor:\n  sigma_hit: 0.1\n  z_hit: abc\n")
+    p.write_text("sensor:\n  beam:\n    sigma_hit: 0.1\n    z_hit: abc\n")
+    good = tmp_path / "good.yaml"
+    good.write_text("sensor:\n  beam:\n    sigma_hit: 0.1\n")
     with pytest.raises(ConfigError) as e:
-        load_config(p, ["sensor.sigma_hit=-1"])
-    assert str(e.value).startswith("--set sensor.sigma_hit=-1: sensor.sigma_hit: ") and "c.yaml" not in str(e.value)
+        load_config(good, ["sensor.beam.sigma_hit=-1"])
+    assert str(e.value).startswith("--set sensor.beam.sigma_hit=-1: sensor.beam.sigma_hit: ") and "good.yaml" not in str(e.value)
     with pytest.raises(ConfigError) as e:
-        load_config(p, ["sensor.sigma_hit=0.2"])  # the file's own bad value
-    assert str(e.value).startswith(f"{p}: sensor.z_hit: expected a number")
+        load_config(p, ["sensor.beam.sigma_hit=-1"])  # the file is checked on its own first (issue 11)
+    assert str(e.value).startswith(f"{p}: sensor.beam.z_hit: expected a number")
+    with pytest.raises(ConfigError) as e:
+        load_config(p, ["sensor.beam.sigma_hit=0.2"])  # the file's own bad value
+    assert str(e.value).startswith(f"{p}: sensor.beam.z_hit: expected a number")
     with pytest.raises(ConfigError) as e:
         load_config(None, ["filter.initial_std=[1, 2]"])
     assert str(e.value).startswith("--set filter.initial_std=[1, 2]: filter.initial_std: ")

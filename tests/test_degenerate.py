@@ -95,7 +95,8 @@ def test_degenerate_three_times_in_a_row_reinitialises_globally():
 
 def test_real_likelihood_that_underflows_everywhere_recovers():
     # z_rand = 0: a scan 2 m from every wall gives exp(-0.5 (2 / 0.05)^2) = 0, log p = -inf, for every particle.
-    pf = _pf("sensor.z_rand=0.0", "sensor.z_hit=1.0", "sensor.sigma_hit=0.05")
+    pf = _pf("sensor.likelihood_field.z_rand=0.0", "sensor.likelihood_field.z_hit=1.0",
+             "sensor.likelihood_field.sigma_hit=0.05")
     bad = pf.prepare(_scan(np.full(181, 0.7)), np.zeros(3))  # a 0.7 m circle: no wall there from (5, 3)
     assert np.isneginf(pf.sensor.log_likelihood(pf.particles, bad)).all()
     good = pf.prepare(_true_scan(pf), np.zeros(3))

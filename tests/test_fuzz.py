@@ -483,7 +483,7 @@ def _world(d: Path) -> Path:
 
 # Each case breaks one file for sure: (file, function of its text/bytes -> broken content).
 CLI_BREAKS = st.one_of(
-    st.tuples(st.just("run.yaml"), st.sampled_from(["filter:\n  particles: many\n", "seed: -1\n", "sensor: {sigma_hit: 0}\n",
+    st.tuples(st.just("run.yaml"), st.sampled_from(["filter:\n  particles: many\n", "seed: -1\n", "sensor: {beam: {sigma_hit: 0}}\n",
                                                    "rerun:\n  particles_every: 0\n", "filtre: {}\n", "motion: [\n",
                                                    "filter:\n  initial_pose: [1, 2]\n", "seed: " + "9" * 400 + "\n"])),
     st.tuples(st.just("map.yaml"), st.sampled_from([MAP_YAML.replace("0.1", "-0.1"), MAP_YAML.replace("map.pgm", "nope.pgm"),
@@ -539,7 +539,7 @@ BIG = "9" * 400  # a YAML integer beyond the float range
 
 
 @pytest.mark.parametrize("text, key", [
-    (f"sensor:\n  sigma_hit: {BIG}\n", "sensor.sigma_hit"),                  # was OverflowError
+    (f"sensor:\n  likelihood_field:\n    sigma_hit: {BIG}\n", "sensor.likelihood_field.sigma_hit"),                  # was OverflowError
     (f"filter:\n  initial_pose: [0, 0, {BIG}]\n", "filter.initial_pose"),   # was OverflowError
     ("map: ~no-such-user-mcl/map.yaml\n", "map"),                             # was RuntimeError
     ('log: "a\\0b.clf"\n', "log"),                                            # was ValueError

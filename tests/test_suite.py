@@ -128,7 +128,7 @@ def test_plan_modes_only_and_configs(tmp_path):
     demo = PROJECT_ROOT / "data" / "demo"
     path = _write(tmp_path / "s.yaml", {"name": "s", "root": str(demo), "modes": ["tracking", "global"], "datasets": [
         {"name": "a", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum", "modes": ["tracking", "kidnapped"]},
-        {"name": "b", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum", "set": {"sensor.sigma_hit": 0.3}},
+        {"name": "b", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum", "set": {"sensor.likelihood_field.sigma_hit": 0.3}},
     ]})
     suite = load_suite(path)
     jobs = plan(suite, config=None, sets=["filter.particles=100"], seeds=2, out=tmp_path, cache=tmp_path / "w")
@@ -141,7 +141,7 @@ def test_plan_modes_only_and_configs(tmp_path):
     assert by["a", "tracking", "default", 2].cfg.seed == 2
     assert by["a", "tracking", "default", 1].cfg.filter.particles == 100  # --set: the config under test only
     assert by["a", "tracking", "baseline", 1].cfg.filter.particles == 5000
-    assert by["b", "global", "baseline", 1].cfg.sensor.sigma_hit == 0.3  # a dataset's set: both configs
+    assert by["b", "global", "baseline", 1].cfg.sensor.likelihood_field.sigma_hit == 0.3  # a dataset's set: both configs
     assert by["b", "global", "default", 1].cfg.filter.global_localization
     assert by["a", "kidnapped", "default", 1].kidnap_filter
     # config: a dataset config gives the data and the start pose, not its tuned parameters

@@ -291,7 +291,7 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=No
 
         log = read_carmen(src)
         for w in log.warnings:
-            echo(f"warning: {w}")
+            echo(f"mcl: warning: {w}")
         scans = log.laser_stream(laser)
     if out_kind != "clf":
         return write_scans(out, scans, odom=odom, mount=mount, grid=grid, initial=initial, truth=truth,
