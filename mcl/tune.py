@@ -116,7 +116,7 @@ def _leaf_keys(cls, prefix: str = "") -> dict[str, tuple]:
 
 
 def _flatten(doc: dict, path: Path, prefix: str = "") -> dict[str, dict]:
-    """``{sensor: {sigma_hit: {...}}}`` and ``{sensor.sigma_hit: {...}}`` alike -> {dotted key: spec}."""
+    """``{sensor: {likelihood_field: {sigma_hit: {...}}}}`` and ``{sensor.likelihood_field.sigma_hit: {...}}`` alike -> {dotted key: spec}."""
     out = {}
     for k, v in doc.items():
         key = f"{prefix}{k}"
@@ -144,13 +144,13 @@ def load_space(path: str | os.PathLike) -> list[Param]:
     path = Path(path)
     doc = read_yaml(path, ConfigError)
     if not isinstance(doc, dict) or not doc:
-        raise ConfigError(f"{path}: expected a mapping of config keys, e.g. sensor.sigma_hit: {{low: 0.05, high: 0.5}}")
+        raise ConfigError(f"{path}: expected a mapping of config keys, e.g. sensor.likelihood_field.sigma_hit: {{low: 0.05, high: 0.5}}")
     schema = _leaf_keys(Config)
     params = []
     for key, spec in _flatten(doc, path).items():
         where = f"{path}: {key}"
         parent, _, last = key.rpartition(".")
-        if key not in schema and parent in schema:  # sensor.sigma_hit: {lo: ..}: a misspelt spec key
+        if key not in schema and parent in schema:  # sensor.likelihood_field.sigma_hit: {lo: ..}: a misspelt spec key
             hint = difflib.get_close_matches(last, SPEC_KEYS, n=1)
             raise ConfigError(f"{path}: {key}: unknown key" + (f" (did you mean {hint[0]}?)" if hint else ""))
         if key not in schema:

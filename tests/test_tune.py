@@ -35,8 +35,8 @@ SUITE = {
          "simulate": {"kind": "office", "seed": 4, "duration": 10, "range_sigma": RANGE_SIGMA}},
     ],
 }
-BASE = {"filter": {"particles": 300, "kld": False}, "sensor": {"sigma_hit": 2.0}}
-SPACE = {"sensor.sigma_hit": {"low": 0.005, "high": 3.0, "log": True}}
+BASE = {"filter": {"particles": 300, "kld": False}, "sensor": {"likelihood_field": {"sigma_hit": 2.0}}}
+SPACE = {"sensor.likelihood_field.sigma_hit": {"low": 0.005, "high": 3.0, "log": True}}
 TRIALS = 8
 
 
@@ -63,8 +63,8 @@ def _trials(study: Path) -> list[dict]:
 def _same_trials(a: Path, b: Path) -> None:
     """Same sampled values and the same scores, trial by trial (the runs are deterministic for a seed)."""
     ta, tb = _trials(a), _trials(b)
-    assert [(r["number"], r["state"], r["sensor.sigma_hit"]) for r in ta] == \
-           [(r["number"], r["state"], r["sensor.sigma_hit"]) for r in tb]
+    assert [(r["number"], r["state"], r["sensor.likelihood_field.sigma_hit"]) for r in ta] == \
+           [(r["number"], r["state"], r["sensor.likelihood_field.sigma_hit"]) for r in tb]
     assert [float(r["value_rmse"]) for r in ta] == pytest.approx([float(r["value_rmse"]) for r in tb], rel=1e-9)
 
 
@@ -80,15 +80,15 @@ def serial(files):
 
 
 BAD_SPACES = [
-    ({"sensor.sigma_hti": {"low": 0.05, "high": 0.5}}, ["sensor.sigma_hti", "unknown key", "did you mean sensor.sigma_hit"]),
-    ({"sensor": {"sigma_hti": {"low": 0.05, "high": 0.5}}}, ["sensor.sigma_hti", "did you mean sensor.sigma_hit"]),
-    ({"sensor.sigma_hit": {"low": -0.1, "high": 0.5}}, ["sensor.sigma_hit", "low", "out of range"]),
-    ({"sensor.z_hit": {"low": 0.5, "high": 1.5}}, ["sensor.z_hit", "high", "out of range"]),
-    ({"sensor.sigma_hit": {"low": 0.5, "high": 0.1}}, ["sensor.sigma_hit", "must be below high"]),
+    ({"sensor.likelihood_field.sigma_hti": {"low": 0.05, "high": 0.5}}, ["sensor.likelihood_field.sigma_hti", "unknown key", "did you mean sensor.likelihood_field.sigma_hit"]),
+    ({"sensor": {"likelihood_field": {"sigma_hti": {"low": 0.05, "high": 0.5}}}}, ["sensor.likelihood_field.sigma_hti", "did you mean sensor.likelihood_field.sigma_hit"]),
+    ({"sensor.likelihood_field.sigma_hit": {"low": -0.1, "high": 0.5}}, ["sensor.likelihood_field.sigma_hit", "low", "out of range"]),
+    ({"sensor.likelihood_field.z_hit": {"low": 0.5, "high": 1.5}}, ["sensor.likelihood_field.z_hit", "high", "out of range"]),
+    ({"sensor.likelihood_field.sigma_hit": {"low": 0.5, "high": 0.1}}, ["sensor.likelihood_field.sigma_hit", "must be below high"]),
     ({"motion.alpha1": {"low": 0.0, "high": 0.5, "log": True}}, ["motion.alpha1", "log", "low > 0"]),
-    ({"sensor.sigma_hit": {"low": 0.05, "hihg": 0.5}}, ["sensor.sigma_hit.hihg", "did you mean high"]),
-    ({"sensor.sigma_hit": {"lo": 0.05, "high": 0.5}}, ["sensor.sigma_hit.lo", "did you mean low"]),
-    ({"sensor": {"sigma_hit": 0.1}}, ["sensor.sigma_hit", "expected {low"]),
+    ({"sensor.likelihood_field.sigma_hit": {"low": 0.05, "hihg": 0.5}}, ["sensor.likelihood_field.sigma_hit.hihg", "did you mean high"]),
+    ({"sensor.likelihood_field.sigma_hit": {"lo": 0.05, "high": 0.5}}, ["sensor.likelihood_field.sigma_hit.lo", "did you mean low"]),
+    ({"sensor": {"likelihood_field": {"sigma_hit": 0.1}}}, ["sensor.likelihood_field.sigma_hit", "expected {low"]),
     ({"filter.particles": {"choices": [1000, "many"]}}, ["filter.particles", "choices[1]", "integer"]),
     ({"filter.particles": {"low": 100.5, "high": 1000}}, ["filter.particles", "low", "integer"]),
     ({"filter.resampling": {"choices": ["systematic", "sistematic"]}}, ["filter.resampling", "choices[1]",
@@ -119,12 +119,12 @@ def test_space_file_forms():
 
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "s.yaml"
-        p.write_text(yaml.safe_dump({"sensor": {"sigma_hit": {"low": 0.05, "high": 0.5, "log": True}},
+        p.write_text(yaml.safe_dump({"sensor": {"likelihood_field": {"sigma_hit": {"low": 0.05, "high": 0.5, "log": True}}},
                                      "filter.particles": {"choices": [1000, 2000]},
                                      "sensor.max_beams": {"low": 30, "high": 90, "step": 30},
                                      "filter.recovery": {"choices": [False, "lost"]}}))
         ps = {q.key: q for q in load_space(p)}
-    assert ps["sensor.sigma_hit"].kind == "float" and ps["sensor.sigma_hit"].log
+    assert ps["sensor.likelihood_field.sigma_hit"].kind == "float" and ps["sensor.likelihood_field.sigma_hit"].log
     assert ps["filter.particles"].choices == (1000, 2000)
     assert ps["sensor.max_beams"].kind == "int" and ps["sensor.max_beams"].step == 30
     assert ps["filter.recovery"].choices == (False, "lost")
@@ -169,13 +169,13 @@ def test_tiny_study_finds_the_planted_sigma(serial, files):
     config's 2.0 m (trial 0, the base values) by at least 20 % (the sweep in the module doc: 0.067 vs 0.11)."""
     rows = _trials(serial)
     assert len(rows) == TRIALS and all(r["state"] == "complete" for r in rows)
-    assert float(rows[0]["sensor.sigma_hit"]) == 2.0
+    assert float(rows[0]["sensor.likelihood_field.sigma_hit"]) == 2.0
     best = min(rows, key=lambda r: float(r["value_rmse"]))
-    sigma = float(best["sensor.sigma_hit"])
+    sigma = float(best["sensor.likelihood_field.sigma_hit"])
     assert RANGE_SIGMA / 2 <= sigma <= RANGE_SIGMA * 2, rows
     assert float(best["value_rmse"]) < 0.8 * float(rows[0]["value_rmse"])
     cfg = load_config(serial / "best.yaml")  # a full config mcl run takes
-    assert cfg.sensor.sigma_hit == pytest.approx(sigma) and cfg.filter.particles == 300
+    assert cfg.sensor.likelihood_field.sigma_hit == pytest.approx(sigma) and cfg.filter.particles == 300
     assert (serial / "plots" / "history.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # the held-out dataset: never run while tuning, scored at the end for the best and the base config
     assert not list((serial / "trials").glob("*/runs/office-held"))
