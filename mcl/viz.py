@@ -88,7 +88,7 @@ _RADII_AT = np.array([0.5, 0.9])
 
 _WARM_MS = 0.1  # a stage timing below this did no work (the first update predicts nothing): still warming up
 
-# Weight histogram: bins of log10(w / w_max) over [-_HIST_DECADES, 0]; lighter particles count in the first bin.
+# Weight histogram: _HIST_BINS bins of log10(w / w_max) over [-span, 0], span >= _HIST_DECADES (weight_histogram).
 _HIST_DECADES, _HIST_BINS = 6.0, 24
 
 ABOUT = """\
@@ -105,8 +105,9 @@ p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off
 **Quality**: the scan laid on the map at the estimate, without truth: `match` = fraction of beams ending near a
 mapped obstacle, `contradiction` = fraction that pass through one, `lost` = 1 while the filter believes it is lost.
 **Particles**: how many particles (KLD sampling shrinks the set once it converges) and the effective sample size.
-**Particle weights**: histogram of log10(w / w_max) over all particles at this step: one bar at 0 = every particle
-alike (no evidence yet, or after resampling); a spread = the scan tells poses apart.
+**Particle weights**: histogram of log10(w / w_max) over all particles at this step (the x range fits the step:
+one scan can put hundreds of decades between poses): one bar at 0 = every particle alike (no evidence yet, or just
+resampled); most particles far left and a few at 0 = the scan singled out a few poses.
 **Time per update**: milliseconds per filter stage. A stage's first real run compiles or loads its numba kernels
 (often over a second): that value (and any before it) is at `warmup/time_ms/*`, left out of the plot so the scale
 reads. Later peaks are real: a global search or a recovery weighs 20,000 particles instead of a few thousand.
@@ -157,20 +158,30 @@ def weight_scale(weights: np.ndarray) -> np.ndarray:
     return np.clip(1.0 + rel / _WEIGHT_DECADES, 0.0, 1.0)
 
 
-def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(counts (B,), bin centres (B,)) of log10(w / w_max) over [-_HIST_DECADES, 0]; lighter (and zero) weights
-    count in the first bin. Equal weights put every particle in the last bin."""
+def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(counts (B,), bin centres (B,), bin width) of log10(w / w_max) over [-span, 0], ``_HIST_BINS`` bins.
+
+    span = the lightest non-zero weight's decades below the heaviest, rounded up to a whole number of decades,
+    at least ``_HIST_DECADES``: one scan can set hundreds of decades between poses (60 beams of a few nats
+    each), so a fixed range would put nearly every particle in one bin. Zero weights count in the first bin;
+    equal weights put every particle in the last."""
     w = np.asarray(weights, dtype=np.float64)
-    edges = np.linspace(-_HIST_DECADES, 0.0, _HIST_BINS + 1)
-    centres = 0.5 * (edges[:-1] + edges[1:])
     wmax = w.max() if w.size else 0.0
-    if not np.isfinite(wmax) or wmax <= 0.0:
-        return np.zeros(_HIST_BINS), centres
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.log10(np.where(w > 0, w / wmax, 0.0))
-    rel = np.clip(np.nan_to_num(rel, nan=-_HIST_DECADES, neginf=-_HIST_DECADES), -_HIST_DECADES, 0.0)
+    span = _HIST_DECADES
+    rel = None
+    if np.isfinite(wmax) and wmax > 0.0:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = np.log10(np.where(w > 0, w / wmax, 0.0))
+        finite = rel[np.isfinite(rel)]
+        if finite.size:
+            span = max(span, float(np.ceil(-finite.min())))
+    edges = np.linspace(-span, 0.0, _HIST_BINS + 1)
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    if rel is None:
+        return np.zeros(_HIST_BINS), centres, span / _HIST_BINS
+    rel = np.clip(np.nan_to_num(rel, nan=-span, neginf=-span), -span, 0.0)
     counts, _ = np.histogram(rel, bins=edges)
-    return counts.astype(np.float64), centres
+    return counts.astype(np.float64), centres, span / _HIST_BINS
 
 
 def weight_colors(weights: np.ndarray, alpha: bool = False) -> np.ndarray:
@@ -336,13 +347,7 @@ class RerunLogger:
             static=True,
         )
         rec.log("about", rr.TextDocument(ABOUT, media_type=rr.MediaType.MARKDOWN), static=True)
-        centres = weight_histogram(np.ones(1))[1]  # the bins are fixed: abscissa and widths once, static
-        rec.log(
-            "weights/histogram",
-            rr.BarChart.from_fields(abscissa=centres, widths=np.full(centres.size, _HIST_DECADES / _HIST_BINS),
-                                    color=[92, 200, 99]),
-            static=True,
-        )
+        rec.log("weights/histogram", rr.BarChart.from_fields(values=np.zeros(1), color=[92, 200, 99]), static=True)
 
     # -- context manager ---------------------------------------------------------------
     def __enter__(self) -> RerunLogger:
@@ -561,8 +566,11 @@ class RerunLogger:
         # few distinct values keep the recording small (they compress), and still read at a glance.
         radii = rr.Radius.ui_points(_RADII[np.searchsorted(_RADII_AT, weight_scale(w))])
         rec.log("world/particles", rr.Points2D(xy, colors=weight_colors(w, alpha=True), radii=radii))
-        counts, centres = weight_histogram(weights)
-        rec.log("weights/histogram", rr.BarChart.from_fields(values=counts.astype(np.float32)))
+        counts, centres, width = weight_histogram(weights)
+        rec.log(
+            "weights/histogram",
+            rr.BarChart(counts.astype(np.float32), abscissa=centres, widths=np.full(centres.size, width)),
+        )
 
     def _log_estimate(self, rec: rr.RecordingStream, estimate: np.ndarray, cov: np.ndarray) -> None:
         e = np.asarray(estimate, dtype=np.float64)
@@ -676,7 +684,7 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = ()) -> rrb.Bluepri
         views = [rrb.TimeSeriesView(name="Stats", origin="/stats")]
     main = [v for g, v in zip([g for g in order if g in groups], views) if g in _MAIN_GROUPS] if groups else views
     rest = [v for v in views if all(v is not m for m in main)]
-    weights = rrb.BarChartView(name="Particle weights: how many particles per log10(w / w_max), this step",
+    weights = rrb.BarChartView(name="Particle weights: how many particles per log10(w / w_max) bin, this step",
                                origin="/weights", contents=["+ /weights/histogram"])
     about = rrb.TextDocumentView(name="About this recording", origin="/about", contents=["+ /about"])
     main.insert(min(3, len(main)), weights)
