@@ -322,7 +322,7 @@ class RerunLogger:
         rec.log("world", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
         rec.log(
             "world/particles",
-            rr.Points2D.from_fields(radii=rr.Radius.ui_points(1.5), draw_order=_DRAW_ORDER["particles"]),
+            rr.Points2D.from_fields(draw_order=_DRAW_ORDER["particles"]),  # radii per step, by weight
             static=True,
         )
         rec.log(
@@ -347,7 +347,6 @@ class RerunLogger:
             static=True,
         )
         rec.log("about", rr.TextDocument(ABOUT, media_type=rr.MediaType.MARKDOWN), static=True)
-        rec.log("weights/histogram", rr.BarChart.from_fields(values=np.zeros(1), color=[92, 200, 99]), static=True)
 
     # -- context manager ---------------------------------------------------------------
     def __enter__(self) -> RerunLogger:
@@ -569,7 +568,8 @@ class RerunLogger:
         counts, centres, width = weight_histogram(weights)
         rec.log(
             "weights/histogram",
-            rr.BarChart(counts.astype(np.float32), abscissa=centres, widths=np.full(centres.size, width)),
+            rr.BarChart(counts.astype(np.float32), abscissa=centres, widths=np.full(centres.size, width),
+                        color=[92, 200, 99]),
         )
 
     def _log_estimate(self, rec: rr.RecordingStream, estimate: np.ndarray, cov: np.ndarray) -> None:
@@ -626,6 +626,8 @@ class RerunLogger:
         for name, value in stats.items():
             if value is None:
                 continue
+            if name not in self._stat_names:  # its panel from the start, even while its values go to warmup/
+                self._stat_names.append(name)
             if stat_group(name) == "timings" and name not in self._warm:
                 # A stage's first real run (>= _WARM_MS; the first update has no motion to predict) compiles or
                 # loads its numba kernels: that time goes apart, to warmup/, so the plot's scale reads.
@@ -633,8 +635,6 @@ class RerunLogger:
                 if float(value) >= _WARM_MS:
                     self._warm.add(name)
                 continue
-            if name not in self._stat_names:
-                self._stat_names.append(name)
             rec.log(f"stats/{name}", rr.Scalars(float(value)))
 
     def _send_blueprint(self) -> None:
