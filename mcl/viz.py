@@ -75,7 +75,7 @@ _STAT_GROUPS = (
     ("error", "Error vs truth: position (m), heading (rad)"),
     ("quality", "Quality: scan vs map at the estimate (match 1 = fits, lost 1 = lost)"),
     ("ess", "Particles: count and effective sample size (ESS)"),
-    ("timings", "Time per update by stage (ms; the first update, which compiles, is left out)"),
+    ("timings", "Time per update by stage (ms; each stage's first run, which compiles, is left out)"),
     ("spread", "Spread of the particles (m): whole set and the estimate's cluster"),
     ("tries", "Map rejection tries"),
     ("other", "Other"),
