@@ -267,9 +267,9 @@ def test_bundled_demo_is_consistent():
 
     demo = Path(__file__).resolve().parent.parent / "data" / "demo"
     params = yaml.safe_load((demo / "sim.yaml").read_text())
-    assert params["seed"] == 6 and params["duration"] == 70.0 and params["kidnap"]["t"] == 50.0
+    assert params["seed"] == 7 and params["duration"] == 70.0 and params["kidnap"]["t"] == 50.0
     assert params["laser"]["range_max"] == 5.0 and params["dynamic_obstacles"] == 4
-    assert ("--seed 6 --duration 70 --range-max 5 --kidnap-at 50 --dynamic-obstacles 4"
+    assert ("--seed 7 --duration 70 --range-max 5 --kidnap-at 50 --dynamic-obstacles 4"
             in (demo / "README.md").read_text())
     g = load_map(demo / "map.yaml")
     log = read_carmen(demo / "log.clf")
