@@ -181,7 +181,7 @@ class RerunConfig:
     """What goes into the Rerun recording."""
 
     mode: Literal["save", "spawn", "serve", "off"] = "save"
-    particles_max: int = field(default=2000, metadata=_rng(0, 10_000_000))  # particles logged per step
+    particles_max: int = field(default=1000, metadata=_rng(0, 10_000_000))  # particles logged per step
     particles_every: int = field(default=1, metadata=_rng(1, 1_000_000))  # log the cloud every k-th update
     scan: bool = True  # log the scan endpoints seen from the estimate
     lines: bool = False  # extract line features from each scan (mcl.features, split-and-merge) and log them

@@ -437,6 +437,8 @@ def _run(
             log_scan=cfg.rerun.scan,
         )
         viz.log_map(grid)
+        if cfg.sensor.use:
+            viz.log_likelihood_field(grid, cfg.sensor)
         if landmark_map is not None:
             from mcl.viz import log_landmark_map
 
@@ -562,8 +564,12 @@ def _run(
                     scan_world = None
                     endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose)
                                  if not no_scan else np.zeros((2, 0)))
+                    expected_world = None
                     if cfg.rerun.scan and endpoints.shape[1]:
                         scan_world = _to_world(mean, endpoints)
+                        # the scan the map predicts at the estimate (the beam model's z*), next to the measured one
+                        expected_world = viz.expected_scan(grid, mean, laser_pose, scan.angles,
+                                                           scan.max_range or cfg.sensor.range_max)
                     viz.log_step(
                         counts["updates"] - 1,
                         scan.t,
@@ -574,6 +580,7 @@ def _run(
                         scan_world=scan_world,
                         skipped_world=(_to_world(mean, info.skipped_endpoints)
                                        if cfg.rerun.scan and info.skipped_endpoints is not None else None),
+                        expected_world=expected_world,
                         odom_pose=compose(odom_to_map, odom),
                         truth_pose=ref,
                         stats=stats,

@@ -4,15 +4,20 @@ Entity paths name things, not steps::
 
     world                 static Transform3D flipping y, so the 2D view shows y up
     world/map             static: the occupancy grid as a PNG image placed in metres
-    world/particles       Points2D, at most ``particles_max`` (evenly strided), coloured by weight
+    world/likelihood_field static: the likelihood field p(endpoint | map) as an image (hidden by default)
+    world/particles       Points2D, at most ``particles_max`` (evenly strided), coloured and sized by weight
     world/estimate        Points2D + Arrows2D (heading) + LineStrips2D (2-sigma ellipse of x, y)
     world/scan            Points2D, scan endpoints in the world frame
     world/scan/skipped    Points2D, the endpoints beam skipping ignored at this step (empty when none)
+    world/scan/expected   Points2D, where the scan's beams would end if the estimate were right (ray cast)
     world/truth           Points2D (current true pose); optional static LineStrips2D full path
     world/truth/trail     LineStrips2D, one segment per step (only when no static path was logged)
     world/odometry        Points2D (current odometry pose, in the map frame)
     world/odometry/trail  LineStrips2D, one segment per step
-    stats/<name>          Scalars, one per entry of the ``stats`` dict
+    stats/<name>          Scalars, one per entry of the ``stats`` dict; a ``time_ms/*`` stage from after its first
+                          real run on (that one compiles or loads the numba kernels: ``warmup/time_ms/*`` holds it)
+    weights/histogram     BarChart per step: how many particles have each log10(w / w_max) (all N, not the subsample)
+    about                 TextDocument: what each panel shows
 
 Timelines: ``step`` (sequence, from the loop) and ``time`` (from the log: a timestamp
 when ``t`` looks like Unix seconds, otherwise a duration in seconds).
@@ -27,6 +32,7 @@ not compress), about 2 KB per step for everything else with a 181-beam scan.  Lo
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import uuid
@@ -64,13 +70,48 @@ _VIRIDIS = np.array(
 # Weights are shown on a log scale spanning this many decades below the heaviest.
 _WEIGHT_DECADES = 3.0
 
+# Time-series groups (see stat_group) and the panel titles a newcomer reads, in panel order.
 _STAT_GROUPS = (
-    ("ess", "Particles and ESS"),
-    ("timings", "Timings (ms)"),
-    ("error", "Error vs truth"),
+    ("error", "Error vs truth: position (m), heading (rad)"),
+    ("quality", "Quality: scan vs map at the estimate (match 1 = fits, lost 1 = lost)"),
+    ("ess", "Particles: count and effective sample size (ESS)"),
+    ("timings", "Time per update by stage (ms; each stage's first run, which compiles, is left out)"),
+    ("spread", "Spread of the particles (m): whole set and the estimate's cluster"),
     ("tries", "Map rejection tries"),
     ("other", "Other"),
 )
+_MAIN_GROUPS = ("error", "quality", "ess", "timings")  # shown stacked; the others in tabs under them
+
+# Particle radii (UI points) by weight_scale: below _RADII_AT[0], up to _RADII_AT[1], above.
+_RADII = np.array([1.0, 2.0, 3.5], dtype=np.float32)
+_RADII_AT = np.array([0.5, 0.9])
+
+_WARM_MS = 0.1  # a stage timing below this did no work (the first update predicts nothing): still warming up
+
+# Weight histogram: _HIST_BINS bins of log10(w / w_max) over [-span, 0], span >= _HIST_DECADES (weight_histogram).
+_HIST_DECADES, _HIST_BINS = 6.0, 24
+
+ABOUT = """\
+# What this recording shows
+
+**World** (left): the map (grey), the particles (coloured, sized and made opaque by weight: yellow, large and
+opaque = heavy; faint purple = light), the estimate (magenta: point, heading, 2-sigma ellipse), the scan laid at
+the estimate (red), where the beams would end if the estimate were right (cyan, `world/scan/expected`), beams beam
+skipping ignored (yellow), the true pose and path (green) and dead-reckoned odometry (orange).
+Layer `world/likelihood_field` (hidden: tick it in the blueprint tree) is the sensor model's likelihood field,
+p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off with `sensor.sigma_hit`.
+
+**Error vs truth**: distance from the estimate to the reference pose (only when a truth file is given).
+**Quality**: the scan laid on the map at the estimate, without truth: `match` = fraction of beams ending near a
+mapped obstacle, `contradiction` = fraction that pass through one, `lost` = 1 while the filter believes it is lost.
+**Particles**: how many particles (KLD sampling shrinks the set once it converges) and the effective sample size.
+**Particle weights**: histogram of log10(w / w_max) over all particles at this step (the x range fits the step:
+one scan can put hundreds of decades between poses): one bar at 0 = every particle alike (no evidence yet, or just
+resampled); most particles far left and a few at 0 = the scan singled out a few poses.
+**Time per update**: milliseconds per filter stage. A stage's first real run compiles or loads its numba kernels
+(often over a second): that value (and any before it) is at `warmup/time_ms/*`, left out of the plot so the scale
+reads. Later peaks are real: a global search or a recovery weighs 20,000 particles instead of a few thousand.
+"""
 
 _DRAW_ORDER = {"map": -100.0, "trail": 5.0, "particles": 10.0, "scan": 20.0, "truth": 30.0, "estimate": 40.0}
 
@@ -105,21 +146,56 @@ def stat_group(name: str) -> str:
     return "other"
 
 
-def weight_colors(weights: np.ndarray) -> np.ndarray:
-    """(N, 3) uint8 viridis colours of linear weights on a log scale relative to the heaviest."""
+def weight_scale(weights: np.ndarray) -> np.ndarray:
+    """(N,) in [0, 1]: linear weights on a log scale, 1 the heaviest, 0 at ``_WEIGHT_DECADES`` below or lighter."""
     w = np.asarray(weights, dtype=np.float64)
     wmax = w.max() if w.size else 0.0
     if not np.isfinite(wmax) or wmax <= 0.0:
-        u = np.zeros(w.shape)
-    else:
+        return np.zeros(w.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.log10(np.where(w > 0, w / wmax, 0.0))
+    rel = np.nan_to_num(rel, nan=-_WEIGHT_DECADES, neginf=-_WEIGHT_DECADES)
+    return np.clip(1.0 + rel / _WEIGHT_DECADES, 0.0, 1.0)
+
+
+def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(counts (B,), bin centres (B,), bin width) of log10(w / w_max) over [-span, 0], ``_HIST_BINS`` bins.
+
+    span = the lightest non-zero weight's decades below the heaviest, rounded up to ``_HIST_DECADES`` times a power
+    of two (6, 12, 24, ... decades): one scan can set hundreds of decades between poses (60 beams of a few nats
+    each), so a fixed range would put nearly every particle in one bin. Zero weights count in the first bin;
+    equal weights put every particle in the last."""
+    w = np.asarray(weights, dtype=np.float64)
+    wmax = w.max() if w.size else 0.0
+    span = _HIST_DECADES
+    rel = None
+    if np.isfinite(wmax) and wmax > 0.0:
         with np.errstate(divide="ignore", invalid="ignore"):
             rel = np.log10(np.where(w > 0, w / wmax, 0.0))
-        rel = np.nan_to_num(rel, nan=-_WEIGHT_DECADES, neginf=-_WEIGHT_DECADES)
-        u = np.clip(1.0 + rel / _WEIGHT_DECADES, 0.0, 1.0)
+        finite = rel[np.isfinite(rel)]
+        if finite.size:
+            # a power-of-two multiple of _HIST_DECADES: the bins change only now and then (see _log_particles)
+            span = _HIST_DECADES * 2.0 ** max(0.0, math.ceil(math.log2(max(-float(finite.min()), 1e-9) / _HIST_DECADES)))
+    edges = np.linspace(-span, 0.0, _HIST_BINS + 1)
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    if rel is None:
+        return np.zeros(_HIST_BINS), centres, span / _HIST_BINS
+    rel = np.clip(np.nan_to_num(rel, nan=-span, neginf=-span), -span, 0.0)
+    counts, _ = np.histogram(rel, bins=edges)
+    return counts.astype(np.float64), centres, span / _HIST_BINS
+
+
+def weight_colors(weights: np.ndarray, alpha: bool = False) -> np.ndarray:
+    """(N, 3) uint8 viridis colours of linear weights on a log scale relative to the heaviest.
+
+    ``alpha``: (N, 4) with the opacity growing with the weight too (60 for the lightest, 255 the heaviest)."""
+    u = weight_scale(weights)
     pos = u * (len(_VIRIDIS) - 1)
     i0 = np.minimum(pos.astype(np.intp), len(_VIRIDIS) - 2)
     f = (pos - i0)[:, None]
     rgb = _VIRIDIS[i0] * (1.0 - f) + _VIRIDIS[i0 + 1] * f
+    if alpha:
+        rgb = np.concatenate([rgb, 60.0 + 195.0 * u[:, None]], axis=1)
     return np.rint(rgb).astype(np.uint8)
 
 
@@ -143,6 +219,10 @@ def covariance_ellipse(mean_xy: np.ndarray, cov_xy: np.ndarray, k: float = 2.0, 
 
 
 def _map_png(image: np.ndarray) -> bytes | None:
+    return _png(image, "L")
+
+
+def _png(image: np.ndarray, mode: str) -> bytes | None:
     try:
         from io import BytesIO
 
@@ -150,7 +230,7 @@ def _map_png(image: np.ndarray) -> bytes | None:
     except ImportError:  # pillow is a dependency, but stay usable without it
         return None
     buf = BytesIO()
-    PILImage.fromarray(image, mode="L").save(buf, format="PNG", optimize=False)
+    PILImage.fromarray(image, mode=mode).save(buf, format="PNG", optimize=False)
     return buf.getvalue()
 
 
@@ -199,6 +279,8 @@ class RerunLogger:
         self._skipped_shown = False  # world/scan/skipped holds points (a step without must clear them)
         self._time_kind: str | None = None
         self._stat_names: list[str] = []
+        self._warm: set[str] = set()
+        self._hist_width: float | None = None  # timings whose warm-up (first real run) is over
         self._blueprint_key: tuple[str, ...] | None = None
         self._truth_path_logged = False
         self._prev_truth: np.ndarray | None = None
@@ -242,7 +324,7 @@ class RerunLogger:
         rec.log("world", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
         rec.log(
             "world/particles",
-            rr.Points2D.from_fields(radii=rr.Radius.ui_points(1.5), draw_order=_DRAW_ORDER["particles"]),
+            rr.Points2D.from_fields(draw_order=_DRAW_ORDER["particles"]),  # radii per step, by weight
             static=True,
         )
         rec.log(
@@ -259,6 +341,14 @@ class RerunLogger:
             ),
             static=True,
         )
+        rec.log(
+            "world/scan/expected",
+            rr.Points2D.from_fields(
+                radii=rr.Radius.ui_points(1.5), colors=[60, 220, 240], draw_order=_DRAW_ORDER["scan"] - 0.5
+            ),
+            static=True,
+        )
+        rec.log("about", rr.TextDocument(ABOUT, media_type=rr.MediaType.MARKDOWN), static=True)
 
     # -- context manager ---------------------------------------------------------------
     def __enter__(self) -> RerunLogger:
@@ -300,6 +390,37 @@ class RerunLogger:
             image = rr.Image(img, color_model="L", draw_order=_DRAW_ORDER["map"])
         rec.log("world/map", image, static=True)
 
+    def log_likelihood_field(self, grid: Any, sensor_cfg: Any) -> None:
+        """Static image of the likelihood field (Prob. Rob. Table 6.3): p(endpoint | map) of an endpoint in each
+        cell, z_hit N(d; 0, sigma_hit^2) + z_rand / range_max with d the distance to the nearest obstacle, scaled
+        to [0, 1] by its value on an obstacle and drawn with the weight colormap (semi-transparent) over the map.
+        At ``world/likelihood_field``; the blueprint hides it (tick it in the viewer's blueprint tree)."""
+        rec = self._live()
+        if rec is None:
+            return
+        from mcl.sensors import point_log_likelihood
+
+        p = np.exp(point_log_likelihood(np.asarray(grid.distance), sensor_cfg))
+        p_top = float(np.exp(point_log_likelihood(0.0, sensor_cfg)))
+        u = np.clip(p / p_top, 0.0, 1.0)[::-1].ravel()  # image row 0 is the top
+        rgb = weight_colors(10.0 ** (_WEIGHT_DECADES * (u - 1.0)))  # weight_scale(...) == u: the same colours
+        img = np.empty((u.size, 4), dtype=np.uint8)
+        img[:, :3] = rgb
+        img[:, 3] = 200
+        h, w = np.asarray(grid.distance).shape
+        img = img.reshape(h, w, 4)
+        res = float(grid.resolution)
+        x0, y0 = (float(v) for v in grid.origin[:2])
+        rec.log(
+            "world/likelihood_field",
+            rr.Transform3D(translation=[x0, y0 + h * res, 0.0], scale=[res, -res, 1.0]),
+            static=True,
+        )
+        png = _png(img, "RGBA")
+        image: Any = (rr.EncodedImage(contents=png, media_type="image/png", draw_order=_DRAW_ORDER["map"] + 1.0)
+                      if png is not None else rr.Image(img, color_model="RGBA", draw_order=_DRAW_ORDER["map"] + 1.0))
+        rec.log("world/likelihood_field", image, static=True)
+
     def log_truth_path(self, poses: np.ndarray) -> None:
         """Static full true path (3, M); per-step truth trails are then not logged."""
         rec = self._live()
@@ -330,6 +451,7 @@ class RerunLogger:
         cov: np.ndarray,
         scan_world: np.ndarray | None = None,
         skipped_world: np.ndarray | None = None,
+        expected_world: np.ndarray | None = None,
         odom_pose: np.ndarray | None = None,
         truth_pose: np.ndarray | None = None,
         stats: Mapping[str, float] | None = None,
@@ -338,6 +460,8 @@ class RerunLogger:
 
         ``skipped_world`` (2, S): the endpoints beam skipping ignored, drawn in yellow over the scan; a step
         without any clears the previous step's (only once skipping has shown something, to keep recordings small).
+        ``expected_world`` (2, E): where the beams would end if the estimate were right (see ``expected_scan``).
+        The histogram of the weights (all N) is logged with the particles.
         """
         rec = self._live()
         if rec is None:
@@ -357,6 +481,9 @@ class RerunLogger:
             k = np.asarray(skipped_world, dtype=np.float64) if skipped_world is not None else np.zeros((2, 0))
             rec.log("world/scan/skipped", rr.Points2D(np.ascontiguousarray(k[:2].T, dtype=np.float32)))
             self._skipped_shown = k.shape[1] > 0
+        if self.log_scan and expected_world is not None:
+            x = np.asarray(expected_world, dtype=np.float64)
+            rec.log("world/scan/expected", rr.Points2D(np.ascontiguousarray(x[:2].T, dtype=np.float32)))
         if truth_pose is not None:
             self._prev_truth = self._log_pose(
                 rec, "world/truth", truth_pose, self._prev_truth, [40, 170, 40], trail=not self._truth_path_logged
@@ -389,6 +516,27 @@ class RerunLogger:
             return
         rec.disconnect()
 
+    def expected_scan(self, grid: Any, pose: np.ndarray, laser_pose: np.ndarray, angles: np.ndarray,
+                      range_max: float) -> np.ndarray:
+        """(2, E) world endpoints of the beams at ``angles`` (laser frame) cast on ``grid`` from the laser at
+        ``pose``: the scan the beam model expects (z*, Prob. Rob. 6.3) if the estimate were right. Rays that
+        hit nothing within ``range_max`` are left out."""
+        from mcl.kernels.raycast import cast_rays_serial
+
+        if getattr(self, "_blocked_of", None) is not grid:
+            self._blocked_of = grid
+            self._blocked = np.ascontiguousarray(grid.occupied, dtype=np.bool_)
+        e, lp = np.asarray(pose, dtype=np.float64), np.asarray(laser_pose, dtype=np.float64)
+        c, s = math.cos(e[2]), math.sin(e[2])
+        lx, ly = e[0] + c * lp[0] - s * lp[1], e[1] + s * lp[0] + c * lp[1]
+        a = np.ascontiguousarray(angles, dtype=np.float64)
+        z = np.empty((1, a.size))
+        cast_rays_serial(np.array([[lx], [ly], [e[2] + lp[2]]]), a, self._blocked, float(grid.origin[0]),
+                         float(grid.origin[1]), float(grid.resolution), float(range_max), z)
+        keep = z[0] < range_max
+        ang = e[2] + lp[2] + a[keep]
+        return np.vstack([lx + z[0, keep] * np.cos(ang), ly + z[0, keep] * np.sin(ang)])
+
     # -- helpers -----------------------------------------------------------------------
     def _live(self) -> rr.RecordingStream | None:
         if self._closed:
@@ -413,7 +561,20 @@ class RerunLogger:
         xy = np.empty((idx.size, 2), dtype=np.float32)
         xy[:, 0] = p[0, idx]
         xy[:, 1] = p[1, idx]
-        rec.log("world/particles", rr.Points2D(xy, colors=weight_colors(np.asarray(weights)[idx])))
+        w = np.asarray(weights)[idx]
+        # Size and opacity by weight too: among thousands of points of similar colour the heavy ones still stand out.
+        # Three sizes (1, 2, 3.5 UI points: below 1.5 decades under the heaviest, within it, within 0.3 decades):
+        # few distinct values keep the recording small (they compress), and still read at a glance.
+        radii = rr.Radius.ui_points(_RADII[np.searchsorted(_RADII_AT, weight_scale(w))])
+        rec.log("world/particles", rr.Points2D(xy, colors=weight_colors(w, alpha=True), radii=radii))
+        counts, centres, width = weight_histogram(weights)
+        if width != self._hist_width:  # the bins only when they change (the viewer takes the latest): ~2 ms saved
+            self._hist_width = width
+            chart = rr.BarChart(counts.astype(np.float32), abscissa=centres, widths=np.full(centres.size, width),
+                                color=[92, 200, 99])
+        else:
+            chart = rr.BarChart(counts.astype(np.float32))
+        rec.log("weights/histogram", chart)
 
     def _log_estimate(self, rec: rr.RecordingStream, estimate: np.ndarray, cov: np.ndarray) -> None:
         e = np.asarray(estimate, dtype=np.float64)
@@ -469,8 +630,15 @@ class RerunLogger:
         for name, value in stats.items():
             if value is None:
                 continue
-            if name not in self._stat_names:
+            if name not in self._stat_names:  # its panel from the start, even while its values go to warmup/
                 self._stat_names.append(name)
+            if stat_group(name) == "timings" and name not in self._warm:
+                # A stage's first real run (>= _WARM_MS; the first update has no motion to predict) compiles or
+                # loads its numba kernels: that time goes apart, to warmup/, so the plot's scale reads.
+                rec.log(f"warmup/{name}", rr.Scalars(float(value)))
+                if float(value) >= _WARM_MS:
+                    self._warm.add(name)
+                continue
             rec.log(f"stats/{name}", rr.Scalars(float(value)))
 
     def _send_blueprint(self) -> None:
@@ -499,6 +667,7 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = ()) -> rrb.Bluepri
         overrides={
             "world/truth/trail": rrb.VisibleTimeRanges(trail_range),
             "world/odometry/trail": rrb.VisibleTimeRanges(trail_range),
+            "world/likelihood_field": rrb.EntityBehavior(visible=False),
         },
     )
     groups: dict[str, list[str]] = {}
@@ -517,10 +686,17 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = ()) -> rrb.Bluepri
     ]
     if not views:
         views = [rrb.TimeSeriesView(name="Stats", origin="/stats")]
+    main = [v for g, v in zip([g for g in order if g in groups], views) if g in _MAIN_GROUPS] if groups else views
+    rest = [v for v in views if all(v is not m for m in main)]
+    weights = rrb.BarChartView(name="Particle weights: how many particles per log10(w / w_max) bin, this step",
+                               origin="/weights", contents=["+ /weights/histogram"])
+    about = rrb.TextDocumentView(name="About this recording", origin="/about", contents=["+ /about"])
+    main.insert(min(3, len(main)), weights)
     if any(stat_group(n) == "planes" for n in stat_names):  # plane features: a 3D view of the depth cloud
-        views = [rrb.Spatial3DView(name="Depth", origin="/", contents=["+ /depth/**"])] + views
+        rest = [rrb.Spatial3DView(name="Depth", origin="/", contents=["+ /depth/**"])] + rest
+    right = rrb.Vertical(*main, rrb.Tabs(about, *rest, active_tab=0))
     return rrb.Blueprint(
-        rrb.Horizontal(world, rrb.Vertical(*views), column_shares=[3, 2]),
+        rrb.Horizontal(world, right, column_shares=[3, 2]),
         collapse_panels=False,
     )
 

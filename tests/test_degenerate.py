@@ -187,7 +187,8 @@ def test_every_event_kind_is_counted_from_zero():
 
 
 def _doctor_demo(src: Path, dst: Path) -> dict:
-    """The demo log with one of each bad input; returns what was injected."""
+    """The demo log with one of each bad input, cut before the demo's kidnapping (scan 250, 50 s);
+    returns what was injected."""
     lines = src.read_text().splitlines(keepends=True)
     out, k = [], -1
     shift = 0.0
@@ -197,16 +198,18 @@ def _doctor_demo(src: Path, dst: Path) -> dict:
             if f[0] == "FLASER":
                 k += 1
                 n = int(f[1])
-                if k == 100:  # NaN and inf readings
+                if k == 240:  # the robot is kidnapped at scan 250: a tracking test stops before
+                    break
+                if k == 60:  # NaN and inf readings
                     f[2:2 + n:4] = ["nan"] * len(f[2:2 + n:4])
                     f[3:2 + n:7] = ["inf"] * len(f[3:2 + n:7])
-                if k == 150:  # a zero-length scan (poses and timestamps kept)
+                if k == 110:  # a zero-length scan (poses and timestamps kept)
                     f = ["FLASER", "0"] + f[2 + n:]
                     n = 0
-                if k == 200:  # time backwards by 0.5 s (as intel_lab's log, by less than a second)
+                if k == 160:  # time backwards by 0.5 s (as intel_lab's log, by less than a second)
                     f[-3] = f"{float(f[-3]) - 0.5:.6f}"
                     f[-1] = f"{float(f[-1]) - 0.5:.6f}"
-                if k == 250:
+                if k == 200:
                     shift = 10.0  # odometry resets 10 m away from here on
                 xi = 2 + n
                 for j in (xi, xi + 3):

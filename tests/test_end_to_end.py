@@ -156,19 +156,49 @@ def test_eval_command(tmp_path, capsys):
     assert r["ate_rmse"] == 0.0 and r["scored"] == 910 and r["convergence_time"] == 0.0
 
 
-@pytest.mark.parametrize("adaptive", [True, False], ids=["default", "fixed20000"])
-def test_global_localization_on_the_bundled_demo(tmp_path, adaptive):
-    # Issue 1: global localization on data/demo is within 0.3 m before 15 s of log time, and
-    # stays there (convergence_time is "the error falls below 0.3 m and never rises above it
-    # again"): with the default config (KLD from 100,000 down, lost recovery) and with a plain
-    # fixed 20,000-particle filter.
-    extra = [] if adaptive else ["filter.kld=false", "filter.recovery=false", "filter.particles=20000"]
-    cfg = load_config(CONFIGS / "default.yaml", ["rerun.mode=off"] + extra)
-    assert cfg.filter.global_localization and cfg.filter.particles == (100000 if adaptive else 20000)
+# The corpus-chosen defaults (particles 100,000 as the KLD maximum, `lost` recovery, a 5,000 floor, no beam
+# skipping), given explicitly so the test keeps its meaning if configs/default.yaml changes them.
+_NEW_DEFAULTS = ["filter.particles=100000", "filter.recovery=lost", "filter.min_particles=5000",
+                 "sensor.beam_skip=false"]
+
+
+def test_global_localization_on_the_bundled_demo(tmp_path):
+    # Issues 1 and 13: data/demo (seed 7, 5 m laser, kidnapped at 50 s) shows global localization taking
+    # seconds, then tracking, then a kidnapping and its recovery. With the defaults above (filter seed 1):
+    # - not localized by the first scan alone (error > 1 m at step 0; measured 7.6 m);
+    # - within 0.3 m between 3 s and 20 s and staying there until the kidnapping (measured 11.4 s);
+    # - tracking after that with position RMSE < 0.15 m (measured 0.065 m);
+    # - back within 0.3 m by 65 s (measured 57.8 s) and RMSE < 0.15 m from there (measured 0.08 m).
+    # One seed: the bounds leave a margin of several seconds / 2x on the measured values.
+    # The run also writes the recording `mcl run` makes: under 10 MB (measured 6-7 MB).
+    from mcl.trajectory import read_tum
+
+    cfg = load_config(CONFIGS / "default.yaml", ["rerun.mode=save"] + _NEW_DEFAULTS)
+    assert cfg.filter.global_localization
     s = run(cfg, tmp_path, progress=False, echo=_quiet)
-    ev = s["eval"]
-    assert ev["convergence_time"] is not None and ev["convergence_time"] < 15.0, ev
-    assert ev["scored"] >= 290
+    assert s["eval"]["scored"] >= 340
+    assert 1_000_000 < (tmp_path / "recording.rrd").stat().st_size < 10_000_000
+    te, pe = read_tum(tmp_path / "trajectory.tum")
+    tt, pt = read_tum(DEMO / "truth.tum")
+    i = np.clip(np.searchsorted(tt, te - 1e-6), 0, tt.size - 1)
+    assert np.allclose(tt[i], te)
+    err = np.hypot(pe[0] - pt[0, i], pe[1] - pt[1, i])
+    assert err[0] > 1.0, err[0]
+    before = te < 50.0
+    bad = np.flatnonzero(before & (err >= 0.3))
+    conv = te[bad[-1] + 1]
+    assert 3.0 <= conv <= 20.0, conv
+    track = before & (te >= conv)
+    assert np.sqrt(np.mean(err[track] ** 2)) < 0.15
+    after = te >= 65.0
+    assert err[after].max() < 0.3, err[after].max()
+    assert np.sqrt(np.mean(err[after] ** 2)) < 0.15
+
+
+def _demo_start() -> list[float]:
+    import yaml
+
+    return yaml.safe_load((DEMO / "sim.yaml").read_text())["start_pose"]
 
 
 def test_line_features_are_drawn_in_the_recording(tmp_path):
@@ -181,7 +211,7 @@ def test_line_features_are_drawn_in_the_recording(tmp_path):
 
     out = tmp_path / "run"
     assert main(["run", "--no-progress", "--out", str(out), "--particles", "300", "--set", "filter.kld=false",
-                 "--set", "rerun.lines=true", "--set", "rerun.particles_max=10", "--set", "filter.initial_pose=[18.961318, 9.225, 3.0954]",
+                 "--set", "rerun.lines=true", "--set", "rerun.particles_max=10", "--set", f"filter.initial_pose={_demo_start()}",
                  "--set", "filter.global_localization=false"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     grid = load_map(DEMO / "map.yaml")

@@ -267,12 +267,18 @@ def test_bundled_demo_is_consistent():
 
     demo = Path(__file__).resolve().parent.parent / "data" / "demo"
     params = yaml.safe_load((demo / "sim.yaml").read_text())
-    assert params["seed"] == 0 and params["duration"] == 60.0 and params["kidnap"] is None
-    assert "--seed 0 --duration 60" in (demo / "README.md").read_text()
+    assert params["seed"] == 7 and params["duration"] == 70.0 and params["kidnap"]["t"] == 50.0
+    assert params["laser"]["range_max"] == 5.0 and params["dynamic_obstacles"] == 4
+    assert ("--seed 7 --duration 70 --range-max 5 --kidnap-at 50 --dynamic-obstacles 4"
+            in (demo / "README.md").read_text())
     g = load_map(demo / "map.yaml")
     log = read_carmen(demo / "log.clf")
     t, p = read_tum(demo / "truth.tum")
-    assert len(log.scans) == t.size == params["scans"] == 301
+    assert len(log.scans) == t.size == params["scans"] == 351
+    # the kidnapping: truth jumps by more than 5 m between the scans around 50 s, as sim.yaml says
+    k = int(np.searchsorted(t, 50.0))
+    assert np.hypot(*(p[:2, k] - p[:2, k - 1])) > 5.0
+    np.testing.assert_allclose(p[:, k], params["kidnap"]["to"], atol=1e-6)
     np.testing.assert_allclose(p[:, 0], params["start_pose"], atol=1e-6)
     ix, iy = g.world_to_cell(p[0], p[1])
     assert g.distance[iy, ix].min() >= params["robot"]["radius"] + g.resolution / 2

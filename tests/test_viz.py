@@ -135,9 +135,12 @@ def test_particles_one_row_per_step_and_subsampled(run_every1):
     for _, comps in r:
         assert len(comps["Points2D:positions"]) == 200  # min(N, particles_max)
         assert len(comps["Points2D:colors"]) == 200
-    # radii and draw order are a static style, never per step
-    assert all("Points2D:radii" not in comps for _, comps in r)
-    assert any("Points2D:radii" in comps for _, comps in rows(path, "/world/particles", None))
+        # issue 13: the radius grows with the weight, per particle and per step (three sizes, UI points)
+        radii = -np.asarray(comps["Points2D:radii"], dtype=np.float64)
+        assert radii.size == 200 and set(np.unique(radii)) <= set(viz._RADII.tolist())
+    # draw order is a static style, never per step
+    assert all("Points2D:draw_order" not in comps for _, comps in r)
+    assert any("Points2D:draw_order" in comps for _, comps in rows(path, "/world/particles", None))
 
 
 def test_particles_every_third_step(tmp_path):
@@ -181,9 +184,16 @@ def test_stats_series_values(run_every1):
     path, logged = run_every1
     for name in logged[0]:
         r = rows(path, f"/stats/{name}", "step")
-        assert [t for t, _ in r] == list(range(STEPS)), name
+        # issue 13: a timing goes to warmup/ until its first real run (>= 0.1 ms) is over: time_ms/predict is
+        # 0.5 k ms at step k, so steps 0 (no work) and 1 (the compile) are apart and the series starts at 2
+        first = 2 if viz.stat_group(name) == "timings" else 0
+        assert [t for t, _ in r] == list(range(first, STEPS)), name
         values = [c["Scalars:scalars"][0] for _, c in r]
-        np.testing.assert_allclose(values, [s[name] for s in logged], err_msg=name)
+        np.testing.assert_allclose(values, [s[name] for s in logged[first:]], err_msg=name)
+        if first:
+            w = rows(path, f"/warmup/{name}", "step")
+            assert [t for t, _ in w] == [0, 1]
+            np.testing.assert_allclose([c["Scalars:scalars"][0] for _, c in w], [s[name] for s in logged[:2]])
 
 
 def test_time_timeline_from_log(run_every1):

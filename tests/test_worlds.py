@@ -103,7 +103,8 @@ def test_worlds_are_deterministic_for_a_seed(worlds, kind):
 def test_office_is_byte_identical_to_the_bundled_demo(tmp_path):
     demo = ROOT / "data" / "demo"
     params = yaml.safe_load((demo / "sim.yaml").read_text())
-    simulate(tmp_path, seed=params["seed"], duration=params["duration"])
+    simulate(tmp_path, seed=params["seed"], duration=params["duration"], range_max=params["laser"]["range_max"],
+             kidnap_at=params["kidnap"]["t"], dynamic_obstacles=params["dynamic_obstacles"])
     for name in ("log.clf", "truth.tum", "map.pgm", "map.yaml"):
         assert (tmp_path / name).read_bytes() == (demo / name).read_bytes(), name
 
