@@ -88,7 +88,12 @@ def scan_endpoints(scan, cfg, laser_pose=None) -> np.ndarray:
 
 
 def point_log_likelihood(d, cfg) -> np.ndarray:
-    """log(z_hit * N(min(d, likelihood_max_dist); 0, sigma_hit^2) + z_rand / range_max), float64."""
+    """log(z_hit * N(min(d, likelihood_max_dist); 0, sigma_hit^2) + z_rand / range_max), float64.
+
+    ``cfg``: a SensorConfig (its likelihood_field block is read) or a namespace with the keys flat."""
+    from mcl.config import sensor_model_view
+
+    cfg = sensor_model_view(cfg, "likelihood_field")
     sigma = float(cfg.sigma_hit)
     d = np.minimum(np.asarray(d, dtype=np.float64), float(cfg.likelihood_max_dist))
     gauss = np.exp(-0.5 * (d / sigma) ** 2) / (math.sqrt(2.0 * math.pi) * sigma)

@@ -99,7 +99,7 @@ opaque = heavy; faint purple = light), the estimate (magenta: point, heading, 2-
 the estimate (red), where the beams would end if the estimate were right (cyan, `world/scan/expected`), beams beam
 skipping ignored (yellow), the true pose and path (green) and dead-reckoned odometry (orange).
 Layer `world/likelihood_field` (hidden: tick it in the blueprint tree) is the sensor model's likelihood field,
-p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off with `sensor.sigma_hit`.
+p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off with `sensor.likelihood_field.sigma_hit`.
 
 **Error vs truth**: distance from the estimate to the reference pose (only when a truth file is given).
 **Quality**: the scan laid on the map at the estimate, without truth: `match` = fraction of beams ending near a
