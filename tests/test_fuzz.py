@@ -157,7 +157,7 @@ def _check_log(log, path) -> None:
     file_lines = _read_bytes(path, str(path), []).split(b"\n")
     for s in log.scans:
         assert s.kind in LASER_KINDS
-        assert 1 <= s.line <= len(file_lines)
+        assert 1 <= s.line <= len(file_lines)  # a real line of the file (0 or past the end is a reader bug)
         assert file_lines[s.line - 1].split()[0].decode() == s.kind, (s.line, file_lines[s.line - 1][:40])  # its own line
         assert s.ranges.dtype == np.float64 and s.ranges.ndim == 1
         assert s.odom is not None and s.odom.shape == (3,) and np.isfinite(s.odom).all(), s
