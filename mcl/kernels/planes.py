@@ -163,6 +163,24 @@ def _select(pts, rays, noise, active, plane, k_sigma, idx):
 
 
 @njit(cache=True)
+def _take_plane(idx, m, plane, found, active, labels, planes, alive):
+    """Accept ``plane`` as plane number ``found`` with its m inliers idx[:m]: delete its points (the seed's
+    "delete the points of that plane"), label them, store it; refill ``alive`` with the points left. Returns
+    how many are left."""
+    for k in range(m):
+        active[idx[k]] = False
+        labels[idx[k]] = found
+    for q in range(4):
+        planes[found, q] = plane[q]
+    n_alive = 0
+    for q in range(active.shape[0]):
+        if active[q]:
+            alive[n_alive] = q
+            n_alive += 1
+    return n_alive
+
+
+@njit(cache=True)
 def _refine(pts, rays, noise, active, plane, k_sigma, coarse, idx, w):
     """Inliers of a candidate plane and its weighted fit: points within ``coarse`` m first, then three rounds
     of (weighted fit, k_sigma selection). Returns the inlier count (0 when the fit fails)."""
@@ -288,17 +306,8 @@ def rht_detect(pts, rays, noise, pix, grid, uniforms, max_planes, min_points, mi
         cand[3] /= acc[cell]
         m = _refine(pts, rays, noise, active, cand, k_sigma, coarse, idx, w)
         if m >= min_inliers:
-            for k in range(m):
-                active[idx[k]] = False
-                labels[idx[k]] = found
-            for q in range(4):
-                planes[found, q] = cand[q]
+            n_alive = _take_plane(idx, m, cand, found, active, labels, planes, alive)
             found += 1
-            n_alive = 0
-            for q in range(m_pts):
-                if active[q]:
-                    alive[n_alive] = q
-                    n_alive += 1
         for k in range(n_votes):  # reset the Hough space
             acc[vote_cell[k]] = 0
         n_votes = 0
@@ -511,17 +520,8 @@ def ransac_detect(pts, rays, noise, uniforms, iterations, max_planes, min_points
         m = _refine(pts, rays, noise, active, best, k_sigma, coarse, idx, w)
         if m < min_inliers:
             break
-        for k in range(m):
-            active[idx[k]] = False
-            labels[idx[k]] = found
-        for q in range(4):
-            planes[found, q] = best[q]
+        n_alive = _take_plane(idx, m, best, found, active, labels, planes, alive)
         found += 1
-        n_alive = 0
-        for q in range(m_pts):
-            if active[q]:
-                alive[n_alive] = q
-                n_alive += 1
     return found, used
 
 
