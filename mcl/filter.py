@@ -286,6 +286,8 @@ class ParticleFilter:
         t_resample = lap()
         info.timings = {"predict": t_predict, "correct": t_correct, "estimate": t_estimate,
                         "resample": t_resample + t_normalize}
+        if control is None:  # the first update moves nothing: no prediction ran, none is timed
+            del info.timings["predict"]
         return info
 
     def predict(self, control: Control | None, info: StepInfo) -> None:

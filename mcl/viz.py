@@ -86,8 +86,6 @@ _MAIN_GROUPS = ("error", "quality", "ess", "timings")  # shown stacked; the othe
 _RADII = np.array([1.0, 2.0, 3.5], dtype=np.float32)
 _RADII_AT = np.array([0.5, 0.9])
 
-_WARM_MS = 0.1  # a stage timing below this did no work (the first update predicts nothing): still warming up
-
 # Weight histogram: _HIST_BINS bins of log10(w / w_max) over [-span, 0], span >= _HIST_DECADES (weight_histogram).
 _HIST_DECADES, _HIST_BINS = 6.0, 24
 
@@ -109,7 +107,7 @@ mapped obstacle, `contradiction` = fraction that pass through one, `lost` = 1 wh
 one scan can put hundreds of decades between poses): one bar at 0 = every particle alike (no evidence yet, or just
 resampled); most particles far left and a few at 0 = the scan singled out a few poses.
 **Time per update**: milliseconds per filter stage. A stage's first real run compiles or loads its numba kernels
-(often over a second): that value (and any before it) is at `warmup/time_ms/*`, left out of the plot so the scale
+(often over a second): that value is at `warmup/time_ms/*`, left out of the plot so the scale
 reads. Later peaks are real: a global search or a recovery weighs 20,000 particles instead of a few thousand.
 """
 
@@ -633,11 +631,11 @@ class RerunLogger:
             if name not in self._stat_names:  # its panel from the start, even while its values go to warmup/
                 self._stat_names.append(name)
             if stat_group(name) == "timings" and name not in self._warm:
-                # A stage's first real run (>= _WARM_MS; the first update has no motion to predict) compiles or
-                # loads its numba kernels: that time goes apart, to warmup/, so the plot's scale reads.
+                # A stage's first run (the filter times only stages that ran: no prediction at the first update)
+                # compiles or loads its numba kernels: that time goes apart, to warmup/, so the plot's scale reads.
+                # Not a threshold on the value: kernels another run in this process loaded are fast at once.
                 rec.log(f"warmup/{name}", rr.Scalars(float(value)))
-                if float(value) >= _WARM_MS:
-                    self._warm.add(name)
+                self._warm.add(name)
                 continue
             rec.log(f"stats/{name}", rr.Scalars(float(value)))
 

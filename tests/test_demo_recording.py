@@ -136,3 +136,20 @@ def test_timings_leave_the_compile_out(recording):
         assert set(steps) | set(w_steps) == set(range(s["updates"]))
         # the issue's spike was > 1,000 ms; the rest of a 3,000-particle run takes a few ms per stage
         assert max(v[0] for v in vals) < 500.0, stage
+
+
+def test_timings_warm_up_apart_when_the_kernels_are_already_loaded(recording, tmp_path):
+    """A second run in the same process (as in a long test session) loads no kernel: its first update is fast,
+    and still goes apart, so every stage has a plotted series from the second update on."""
+    log = _head(DEMO / "log.clf", tmp_path / "head.clf", 10)
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"log={log}", "filter.particles=3000", "filter.min_particles=500", "rerun.particles_max=100"])
+    s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
+    chunks = list(RrdReader(tmp_path / "out" / "recording.rrd").stream().to_chunks())
+    for stage in ("correct", "estimate", "resample"):
+        steps, _ = _rows(chunks, f"/stats/time_ms/{stage}", "Scalars:scalars")
+        w_steps, _ = _rows(chunks, f"/warmup/time_ms/{stage}", "Scalars:scalars")
+        assert w_steps == [0] and sorted(steps) == list(range(1, s["updates"])), stage
+    steps, _ = _rows(chunks, "/stats/time_ms/predict", "Scalars:scalars")
+    w_steps, _ = _rows(chunks, "/warmup/time_ms/predict", "Scalars:scalars")
+    assert w_steps == [1] and sorted(steps) == list(range(2, s["updates"]))  # nothing to predict at step 0
