@@ -382,7 +382,7 @@ class AugmentedMCL:
         else:
             self.averages.update(Recovery.log_mean_likelihood(logw_prior, loglik_per_beam))
 
-    def observe_lost(self, lost: bool) -> None:
+    def observe_lost(self, lost: bool, cluster_weight: float = 1.0) -> None:
         pass
 
     @property
@@ -417,17 +417,33 @@ class LostRecovery:
 
     name = "lost"
 
-    def __init__(self, fraction: float, local_std, global_after: int, lost_after: int):
+    def __init__(self, fraction: float, local_std, global_after: int, lost_after: int, settled_weight: float = 0.9,
+                 reseed: bool = False):
+        self.reseed = bool(reseed)
         self.fraction = float(fraction)
         self.base_std = np.asarray(local_std, dtype=np.float64)
         self.global_after = int(global_after)
         self.lost_after = max(int(lost_after), 1)
+        self.settled_weight = float(settled_weight)
         self.lost_updates = 0  # consecutive updates the filter has believed it is lost
+        self.searching = False  # a global search under way: the particles are the search, inject nothing
+
+    def start_search(self) -> None:
+        """Global localization starts: the set is already spread over the map, so nothing is injected (and
+        nothing forces a resample) until the search has settled on one hypothesis (the heaviest cluster holds
+        ``settled_weight`` of the weight) or the filter is no longer lost. Injecting around the estimate of a
+        still multi-modal cloud feeds whichever mode leads by chance and ends the search early."""
+        self.searching = True
+        self.lost_updates = 0
 
     def observe_likelihood(self, logw_prior, loglik_per_beam, injected) -> None:
         pass
 
-    def observe_lost(self, lost: bool) -> None:
+    def observe_lost(self, lost: bool, cluster_weight: float = 1.0) -> None:
+        if self.searching and (not lost or cluster_weight >= self.settled_weight):
+            self.searching = False
+        if self.searching:
+            return
         self.lost_updates = self.lost_updates + 1 if lost else 0
 
     @property
@@ -435,9 +451,15 @@ class LostRecovery:
         return self.fraction if self.lost_updates else 0.0
 
     @property
+    def reseed_due(self) -> bool:
+        """With ``reseed``: lost for ``global_after`` updates (the local spread did not find the pose), so the
+        next resample adds a whole global set and starts a search (``start_search``)."""
+        return self.reseed and not self.searching and self.lost_updates >= self.global_after
+
+    @property
     def global_share(self) -> float:
         """The share of the injected poses drawn uniformly over free space (the rest around the estimate)."""
-        return 0.5 if self.lost_updates >= self.global_after else 0.0
+        return 0.5 if self.lost_updates >= self.global_after and not self.reseed else 0.0
 
     @property
     def local_std(self) -> np.ndarray:
@@ -455,5 +477,6 @@ def make_recovery(fc, global_start: bool, lost_after: int = 3):
     if mode is True or mode == "augmented":
         return AugmentedMCL(fc.recovery_alpha_slow, fc.recovery_alpha_fast)
     if mode == "lost":
-        return LostRecovery(fc.recovery_fraction, fc.recovery_local_std, fc.recovery_global_after, lost_after)
+        return LostRecovery(fc.recovery_fraction, fc.recovery_local_std, fc.recovery_global_after, lost_after,
+                            reseed=fc.recovery_reseed)
     return None

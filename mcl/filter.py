@@ -78,6 +78,7 @@ class StepInfo:
     degenerate: bool = False  # every weight was zero; weights were reset to uniform
     particles: int = 0  # N weighted in this update (KLD sampling changes it at resampling)
     injected: int = 0  # particles drawn from the recovery sampler at this resampling
+    reseeded: bool = False  # lost recovery re-seeded globally at this resampling (filter._reseed)
     inject_p: float = 0.0  # the recovery policy's injection probability after this update
     mean: np.ndarray | None = None  # the estimate (x, y, theta), from the weighted set before resampling
     cov: np.ndarray | None = None  # its 3x3 covariance
@@ -98,6 +99,9 @@ class StepInfo:
         return self.fit.match if self.fit is not None else math.nan
 
 
+_SETTLED_WEIGHT = 0.9  # a global search has settled once the heaviest cluster holds this much of the weight
+
+
 class ParticleFilter:
     """MCL over a (3, N) particle array with log weights."""
 
@@ -114,6 +118,7 @@ class ParticleFilter:
         self.guard = InputGuard(fc.max_odom_step)
         self.kld = KLDSampling(fc, grid) if fc.kld else None
         self.recovery = make_recovery(fc, True, cfg.quality.lost_after)  # set again by init_gaussian / init_global
+        self.searching = False  # a global search under way (init_global until the heaviest cluster holds the weight)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
         self.quality = ScanQuality(grid, cfg.quality)
@@ -178,6 +183,7 @@ class ParticleFilter:
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
         self.recovery = make_recovery(self.cfg.filter, False, self.cfg.quality.lost_after)
+        self.searching = False
         self.quality.reset(lost=False)
 
     def kidnap(self, mean, std) -> None:
@@ -200,6 +206,7 @@ class ParticleFilter:
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
         self.recovery = make_recovery(self.cfg.filter, False, self.cfg.quality.lost_after)
+        self.searching = False
         self.quality.reset(lost=False)
 
     def init_global(self) -> None:
@@ -210,6 +217,9 @@ class ParticleFilter:
     def _start_global(self) -> None:
         if self.cfg.filter.recovery == "auto" and self.recovery is None:
             self.recovery = make_recovery(self.cfg.filter, True, self.cfg.quality.lost_after)
+        if self.recovery is not None and hasattr(self.recovery, "start_search"):
+            self.recovery.start_search()
+        self.searching = True
         self.quality.reset(lost=True)
 
     def sample_uniform(self, n: int, rng: np.random.Generator, observation=None) -> np.ndarray:
@@ -361,6 +371,8 @@ class ParticleFilter:
                 info.skipped_beams = skipped.shape[1]
                 info.skipped_endpoints = skipped
         loglik = self.sensor.log_likelihood(self.particles, observation)
+        if self.searching and self.cfg.filter.search_exponent != 1.0:
+            loglik *= self.cfg.filter.search_exponent  # tempered while the global search is under way
         if not np.isfinite(loglik).all():
             loglik = np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
         if self.recovery is not None:
@@ -439,8 +451,10 @@ class ParticleFilter:
             fit = self.quality.fit(self.last_estimate.mean, self.sensor.endpoints(obs), self._laser_pose[:2])
         info.fit = fit
         info.lost = self.quality.update(fit)
+        if self.searching and info.cluster_weight >= _SETTLED_WEIGHT:
+            self.searching = False
         if self.recovery is not None:
-            self.recovery.observe_lost(info.lost)
+            self.recovery.observe_lost(info.lost, info.cluster_weight)
 
     def resample(self, info: StepInfo) -> None:
         """Resample when ESS / N < resample_threshold (the scheme named in filter.resampling).
@@ -450,6 +464,9 @@ class ParticleFilter:
         new particles come from ``recovery_sampler`` instead of the weighted set.
         """
         fc = self.cfg.filter
+        if self.recovery is not None and getattr(self.recovery, "reseed_due", False):
+            self._reseed(info)
+            return
         p = self.recovery.inject_probability if self.recovery is not None else 0.0
         info.inject_p = p
         # Recovery resamples whenever it injects: a lost filter whose particles all explain the scan
@@ -472,6 +489,33 @@ class ParticleFilter:
         self._injected = fresh if n_inj else None
 
     maybe_resample = resample  # the name of earlier versions
+
+    def _reseed(self, info: StepInfo) -> None:
+        """Global re-seed of a filter lost for a while: the tracked cloud (resampled, equal weights) plus as many
+        poses from ``recovery_sampler`` (uniform over free space) as fill the set up to ``filter.particles`` (at
+        least as many as the cloud has), as a mixture prior:
+        the old cloud keeps ``recovery_reseed_keep`` of the mass, so a look-alike pose must out-score a track that
+        was right all along, and then a global search starts (no injection until it settles, laser likelihood
+        tempered by ``search_exponent``). A few per cent of uniform poses a step almost never lands near the
+        true pose on a building-sized map; a whole set does."""
+        fc = self.cfg.filter
+        n = self.n
+        idx = resample(fc.resampling, self.logw, self.rng, n=n)
+        m = max(fc.particles - n, n)
+        fresh = self.recovery_sampler(m, self.rng, self._observation)
+        self._set(np.ascontiguousarray(np.concatenate([self.particles[:, idx], fresh], axis=1)))
+        keep = fc.recovery_reseed_keep
+        self.logw = np.concatenate([np.full(n, math.log(keep / n)),
+                                    np.full(m, math.log(1.0 - keep) - math.log(m) if keep < 1.0 else -np.inf)])
+        self.weights = np.exp(self.logw)
+        self._injected = np.arange(n + m) >= n
+        if self.kld is not None:
+            self.kld.pending = None
+        info.resampled = True
+        info.injected = m
+        info.reseeded = True
+        self.recovery.start_search()
+        self.searching = True
 
     def _injection_sampler(self):
         """sampler(n) -> (3, n): the poses recovery injects now. The policy's ``global_share`` of them (a binomial

@@ -452,6 +452,7 @@ def _run(
     spread_sum, spread_max, multimodal, skipped_beams = 0.0, 0.0, 0, 0
     n_used: list[int] = []  # particles weighted at each update (KLD sampling varies it)
     injected = 0
+    reseeds = 0  # global re-seeds of lost recovery
     traj_t: list[float] = []
     traj_p: list[np.ndarray] = []
     interrupted = False
@@ -534,6 +535,7 @@ def _run(
                 tries_sum += info.tries
                 n_used.append(info.particles)
                 injected += info.injected
+                reseeds += int(info.reseeded)
                 for k, v in info.timings.items():
                     stage_totals[k] += v
                 if viz is not None:
@@ -631,6 +633,7 @@ def _run(
         "particles_min": int(min(n_used)) if n_used else pf.n,
         "particles_max": int(max(n_used)) if n_used else pf.n,
         "injected_particles": injected,
+        "reseeds": reseeds,
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / n_up,
         "rejected_particles": counts["rejected"],

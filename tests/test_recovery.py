@@ -1,9 +1,11 @@
-"""Augmented MCL recovers from a kidnapping (scripts/kidnap.py on a small subset)."""
+"""Recovery: augmented MCL recovers from a kidnapping (scripts/kidnap.py on a small subset); the default `lost`
+recovery injects nothing during a correct track, spreads locally, then re-seeds globally."""
 
 from __future__ import annotations
 
 import importlib.util
 
+import numpy as np
 import pytest
 
 from mcl.config import PROJECT_ROOT
@@ -74,3 +76,105 @@ def test_default_recovery_does_not_inject_while_the_track_is_correct_on_repeated
     assert s["injected_particles"] == 0
     a = _track(data, sim, tmp_path / "augmented", "filter.recovery=augmented")
     assert a["injected_particles"] > 0
+
+
+def _lost_recovery(reseed: bool):
+    from mcl.adaptive import LostRecovery
+
+    return LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=reseed)
+
+
+def test_lost_recovery_reseeds_once_the_local_spread_failed():
+    # Without reseed: 10 % of N a step, half of them uniform once lost for global_after = 10 updates (the old rule).
+    r = _lost_recovery(False)
+    for _ in range(10):
+        r.observe_lost(True)
+    assert r.inject_probability == 0.1 and r.global_share == 0.5 and not r.reseed_due
+    # With reseed: local only (global_share 0) until the 10th lost update, then one re-seed is due ...
+    r = _lost_recovery(True)
+    for k in range(1, 11):
+        assert not r.reseed_due and r.global_share == 0.0
+        r.observe_lost(True)
+        assert r.inject_probability == 0.1, k
+    assert r.reseed_due
+    # ... which starts a search: nothing injected, no second re-seed, while the cloud is multi-modal and lost
+    r.start_search()
+    for _ in range(20):
+        r.observe_lost(True, cluster_weight=0.5)
+        assert r.inject_probability == 0.0 and not r.reseed_due
+    # the search ends when one cluster holds 90 % of the weight; lost still, that update is the first of a new count
+    r.observe_lost(True, cluster_weight=0.95)
+    assert not r.searching and r.lost_updates == 1 and r.inject_probability == 0.1 and not r.reseed_due
+    # or when the filter is no longer lost
+    r.start_search()
+    r.observe_lost(False, cluster_weight=0.2)
+    assert not r.searching and r.lost_updates == 0
+
+
+def _filter_on_a_box(*sets):
+    from mcl.config import load_config
+    from mcl.filter import ParticleFilter
+    from mcl.maps import OccupancyGrid
+
+    occ = np.zeros((100, 100), dtype=np.int8)  # 10 m x 10 m at 0.1 m, walls (100 = occupied) on the border
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 100
+    grid = OccupancyGrid.from_occupancy(occ, resolution=0.1, origin=(0.0, 0.0))
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        "rerun.mode=off", "filter.particles=4000", "filter.min_particles=500", "filter.recovery=lost", *sets])
+    return ParticleFilter(cfg, grid, rng=np.random.default_rng(3))
+
+
+def test_reseed_adds_a_whole_global_set_with_the_old_cloud_keeping_its_share_of_the_mass():
+    from mcl.filter import StepInfo
+
+    pf = _filter_on_a_box("filter.recovery_reseed=true", "filter.recovery_reseed_keep=0.5")
+    pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1])
+    pf.logw = np.log(np.full(pf.n, 1.0 / pf.n))
+    n_old = pf.n
+    for _ in range(10):
+        pf.recovery.observe_lost(True)
+    info = StepInfo(particles=pf.n, ess=float(pf.n))
+    pf.resample(info)
+    # filled up to filter.particles, and at least doubled (here N was already 4,000: 4,000 more)
+    assert info.resampled and info.injected == max(4000 - n_old, n_old) == 4000 and pf.n == 8000
+    w = np.exp(pf.logw)
+    old = np.arange(pf.n) < n_old
+    assert w.sum() == pytest.approx(1.0) and w[old].sum() == pytest.approx(0.5)
+    # the old cloud is where it was; the new poses cover the box (free space, away from the walls)
+    assert np.abs(pf.particles[:2, old] - 5.0).max() < 1.0
+    new = pf.particles[:, ~old]
+    assert new[0].min() < 2.0 and new[0].max() > 8.0 and new[1].min() < 2.0 and new[1].max() > 8.0
+    assert pf.searching and pf.recovery.searching and not pf.recovery.reseed_due
+    # without reseed the same lost filter injects its 10 % (half uniform) and keeps N
+    pf = _filter_on_a_box("filter.recovery_reseed=false", "filter.kld=false")
+    pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1])
+    for _ in range(10):
+        pf.recovery.observe_lost(True)
+    info = StepInfo(particles=pf.n, ess=float(pf.n))
+    pf.resample(info)
+    assert pf.n == 4000 and 300 <= info.injected <= 500 and not pf.searching
+
+
+def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_way():
+    from mcl.datasets.carmen import Scan
+    from mcl.filter import StepInfo
+
+    scan = Scan(t=0.0, ranges=np.full(181, 4.0), angle_min=-np.pi / 2, angle_increment=np.pi / 180,
+                max_range=None, odom=np.zeros(3), laser_offset=None)
+    gains = {}
+    for e in (1.0, 0.2):
+        pf = _filter_on_a_box(f"filter.search_exponent={e}")
+        pf.init_global()
+        assert pf.searching
+        obs = pf.prepare(scan, np.zeros(3))
+        before = pf.logw.copy()
+        pf.correct(obs, StepInfo(particles=pf.n))
+        gains[e] = pf.logw - before
+        # settled (a cluster holds 90 % of the weight): the full likelihood again
+        pf.searching = False
+        before = pf.logw.copy()
+        pf.correct(obs, StepInfo(particles=pf.n))
+        gains[e, "settled"] = pf.logw - before
+    np.testing.assert_allclose(gains[0.2], 0.2 * gains[1.0], rtol=1e-12)
+    np.testing.assert_allclose(gains[0.2, "settled"], gains[1.0], rtol=1e-12)
+    assert np.ptp(gains[1.0]) > 10.0  # the scan does tell the poses apart
