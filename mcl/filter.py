@@ -384,26 +384,26 @@ class ParticleFilter:
     def correct_landmarks(self, marks, info: StepInfo | None = None) -> None:
         """w_t *= p(z_t | x_t, m) for a ``Landmarks`` record (mcl.landmarks.LandmarkModel), in log space."""
         self._marks = marks
-        if marks is None or self.landmarks is None:
-            return
-        prepared = self.landmarks.prepare(marks)
-        if prepared is None:
-            return
-        loglik = self.landmarks.log_likelihood(self.particles, prepared)
-        if self.recovery is not None and not self.cfg.sensor.use:  # landmark-only runs: they drive the averages
-            self.recovery.observe_likelihood(self.logw, loglik / prepared.shape[1], self._injected)
-        self.logw += loglik
+        if marks is not None and self.landmarks is not None:
+            # landmark-only runs: the landmarks drive the recovery averages
+            self._correct_features(self.landmarks, marks, per=1, drives=not self.cfg.sensor.use)
 
     def correct_planes(self, planes, info: StepInfo | None = None) -> None:
         """w_t *= p(z_t | x_t, m) for the planes extracted from a depth frame (mcl.planes.PlaneModel)."""
-        if planes is None or self.planes is None:
-            return
-        prepared = self.planes.prepare(planes)
+        if planes is not None and self.planes is not None:
+            self._correct_features(self.planes, planes, per=0,
+                                   drives=not self.cfg.sensor.use and not self.cfg.landmarks.use)
+
+    def _correct_features(self, model, record, per: int, drives: bool) -> None:
+        """logw += log p(record | x, m) under a feature model (``prepare`` then ``log_likelihood``); when this
+        model is the run's only sensor (``drives``), its mean log-likelihood per feature (``prepared.shape[per]``
+        features) feeds the recovery averages."""
+        prepared = model.prepare(record)
         if prepared is None:
             return
-        loglik = self.planes.log_likelihood(self.particles, prepared)
-        if self.recovery is not None and not self.cfg.sensor.use and not self.cfg.landmarks.use:
-            self.recovery.observe_likelihood(self.logw, loglik / prepared.shape[0], self._injected)
+        loglik = model.log_likelihood(self.particles, prepared)
+        if drives and self.recovery is not None:
+            self.recovery.observe_likelihood(self.logw, loglik / prepared.shape[per], self._injected)
         self.logw += loglik
 
     def normalize(self, info: StepInfo) -> None:
