@@ -119,6 +119,7 @@ class ParticleFilter:
         self.kld = KLDSampling(fc, grid) if fc.kld else None
         self.recovery = make_recovery(fc, True, cfg.quality.lost_after)  # set again by init_gaussian / init_global
         self.searching = False  # a global search under way (init_global until the heaviest cluster holds the weight)
+        self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
         self.quality = ScanQuality(grid, cfg.quality)
@@ -168,6 +169,7 @@ class ParticleFilter:
 
     def _set(self, particles: np.ndarray) -> None:
         self._injected = None
+        self._fresh = None
         self.particles = particles
         n = particles.shape[1]
         self.logw = np.full(n, -np.log(n))
@@ -212,6 +214,7 @@ class ParticleFilter:
     def init_global(self) -> None:
         """Particles uniform over the poses the map allows (global localization)."""
         self._set(self.sample_uniform(self.cfg.filter.particles, self.rng))
+        self._fresh = np.ones(self.n, dtype=bool)
         self._start_global()
 
     def _start_global(self) -> None:
@@ -375,11 +378,39 @@ class ParticleFilter:
             loglik *= self.cfg.filter.search_exponent  # tempered while the global search is under way
         if not np.isfinite(loglik).all():
             loglik = np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
+        if self._fresh is not None:
+            loglik = self._oversample_fresh(observation, loglik)
         if self.recovery is not None:
             self.recovery.observe_likelihood(self.logw, loglik / max(measurement_count(observation), 1),
                                              self._injected)
         self._observation = observation
         self.logw += loglik
+
+    def _oversample_fresh(self, observation, loglik: np.ndarray) -> np.ndarray:
+        """The uniform poses of a global start or re-seed, drawn better: ``global_oversample`` (k) uniform
+        candidates per fresh particle are scored with this scan, and the fresh particles are drawn from them in
+        proportion to that likelihood (importance resampling, as if the search had started with k times the
+        particles and resampled once). They then carry, instead of their own likelihood, the mean likelihood of
+        all the candidates (the fresh component's evidence), so the scan is counted once and the old cloud of a
+        re-seed keeps its fair share. Returns ``loglik`` with the fresh entries replaced."""
+        fresh, self._fresh = self._fresh, None
+        k = self.cfg.filter.global_oversample
+        idx = np.flatnonzero(fresh) if fresh.size == loglik.size else np.zeros(0, dtype=np.int64)
+        if k <= 1 or idx.size == 0:
+            return loglik
+        cand = self.sample_uniform(k * idx.size, self.rng)
+        lc = self.sensor.log_likelihood(cand, observation)
+        if self.searching and self.cfg.filter.search_exponent != 1.0:
+            lc *= self.cfg.filter.search_exponent
+        lc = np.where(np.isfinite(lc), lc, -np.inf)
+        top = float(lc.max())
+        if not np.isfinite(top):
+            return loglik
+        pick = resample(self.cfg.filter.resampling, lc, self.rng, n=idx.size)
+        self.particles[:, idx] = cand[:, pick]
+        loglik = loglik.copy()
+        loglik[idx] = top + math.log(np.mean(np.exp(lc - top)))  # log of the candidates' mean likelihood
+        return loglik
 
     def correct_landmarks(self, marks, info: StepInfo | None = None) -> None:
         """w_t *= p(z_t | x_t, m) for a ``Landmarks`` record (mcl.landmarks.LandmarkModel), in log space."""
@@ -509,6 +540,7 @@ class ParticleFilter:
                                     np.full(m, math.log(1.0 - keep) - math.log(m) if keep < 1.0 else -np.inf)])
         self.weights = np.exp(self.logw)
         self._injected = np.arange(n + m) >= n
+        self._fresh = self._injected.copy()
         if self.kld is not None:
             self.kld.pending = None
         info.resampled = True

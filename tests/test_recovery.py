@@ -178,3 +178,32 @@ def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_wa
     np.testing.assert_allclose(gains[0.2], 0.2 * gains[1.0], rtol=1e-12)
     np.testing.assert_allclose(gains[0.2, "settled"], gains[1.0], rtol=1e-12)
     assert np.ptp(gains[1.0]) > 10.0  # the scan does tell the poses apart
+
+
+def test_global_oversample_draws_the_fresh_poses_where_the_scan_fits_and_counts_the_scan_once():
+    from mcl.datasets.carmen import Scan
+    from mcl.filter import StepInfo
+
+    # a 10 m box and a scan of 2 m readings over 180 degrees: poses facing a wall 2 m away fit some of it
+    scan = Scan(t=0.0, ranges=np.full(181, 2.0), angle_min=-np.pi / 2, angle_increment=np.pi / 180,
+                max_range=None, odom=np.zeros(3), laser_offset=None)
+    own = {}
+    for k in (1, 10):
+        pf = _filter_on_a_box(f"filter.global_oversample={k}", "filter.search_exponent=1.0")
+        pf.init_global()
+        obs = pf.prepare(scan, np.zeros(3))
+        before = pf.particles.copy()
+        pf.correct(obs, StepInfo(particles=pf.n))
+        gain = pf.logw - np.log(1.0 / pf.n)
+        own[k] = pf.sensor.log_likelihood(pf.particles, obs)
+        if k == 1:
+            np.testing.assert_array_equal(pf.particles, before)  # off: nothing drawn again
+            np.testing.assert_allclose(gain, own[1])
+        else:
+            assert not np.array_equal(pf.particles, before)
+            # every fresh pose carries the same evidence, the candidates' mean likelihood: between the mean
+            # log-likelihood of uniform poses (Jensen) and the best of the poses drawn
+            assert np.ptp(gain) == 0.0
+            assert own[1].mean() < gain[0] < own[10].max()
+    # drawn in proportion to the likelihood of 10x as many candidates: the poses fit the scan far better
+    assert np.median(own[10]) > np.median(own[1]) + 20.0, (np.median(own[10]), np.median(own[1]))
