@@ -100,6 +100,7 @@ class StepInfo:
 
 
 _SETTLED_WEIGHT = 0.9  # a global search has settled once the heaviest cluster holds this much of the weight
+_MAX_OVERSAMPLE = 20  # global_density: at most this many candidates per fresh pose (2 million for 100,000)
 
 
 class ParticleFilter:
@@ -387,15 +388,16 @@ class ParticleFilter:
         self.logw += loglik
 
     def _oversample_fresh(self, observation, loglik: np.ndarray) -> np.ndarray:
-        """The uniform poses of a global start or re-seed, drawn better: ``global_oversample`` (k) uniform
-        candidates per fresh particle are scored with this scan, and the fresh particles are drawn from them in
-        proportion to that likelihood (importance resampling, as if the search had started with k times the
-        particles and resampled once). They then carry, instead of their own likelihood, the mean likelihood of
+        """The uniform poses of a global start or re-seed, drawn better on a big map: when they are sparser than
+        ``filter.global_density`` poses per m² of free space, k = density x area / count (at most
+        _MAX_OVERSAMPLE) uniform candidates per fresh particle are scored with this scan, and the fresh
+        particles are drawn from them in proportion to that likelihood (importance resampling, as if the search
+        had started with k times the particles and resampled once). They then carry, instead of their own likelihood, the mean likelihood of
         all the candidates (the fresh component's evidence), so the scan is counted once and the old cloud of a
         re-seed keeps its fair share. Returns ``loglik`` with the fresh entries replaced."""
         fresh, self._fresh = self._fresh, None
-        k = self.cfg.filter.global_oversample
         idx = np.flatnonzero(fresh) if fresh.size == loglik.size else np.zeros(0, dtype=np.int64)
+        k = min(math.ceil(self.cfg.filter.global_density * self.grid.free_area / max(idx.size, 1)), _MAX_OVERSAMPLE)
         if k <= 1 or idx.size == 0:
             return loglik
         cand = self.sample_uniform(k * idx.size, self.rng)

@@ -82,6 +82,11 @@ class OccupancyGrid:
         return (o >= 0) & (o < self.free_thresh * 100.0)
 
     @cached_property
+    def free_area(self) -> float:
+        """m² of free space."""
+        return float(np.count_nonzero(self.free)) * self.resolution ** 2
+
+    @cached_property
     def unknown(self) -> np.ndarray:
         return ~(self.occupied | self.free)
 

@@ -163,7 +163,7 @@ def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_wa
                 max_range=None, odom=np.zeros(3), laser_offset=None)
     gains = {}
     for e in (1.0, 0.2):
-        pf = _filter_on_a_box(f"filter.search_exponent={e}")
+        pf = _filter_on_a_box(f"filter.search_exponent={e}", "filter.global_density=0")
         pf.init_global()
         assert pf.searching
         obs = pf.prepare(scan, np.zeros(3))
@@ -180,7 +180,7 @@ def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_wa
     assert np.ptp(gains[1.0]) > 10.0  # the scan does tell the poses apart
 
 
-def test_global_oversample_draws_the_fresh_poses_where_the_scan_fits_and_counts_the_scan_once():
+def test_global_density_draws_the_fresh_poses_where_the_scan_fits_and_counts_the_scan_once():
     from mcl.datasets.carmen import Scan
     from mcl.filter import StepInfo
 
@@ -189,7 +189,9 @@ def test_global_oversample_draws_the_fresh_poses_where_the_scan_fits_and_counts_
                 max_range=None, odom=np.zeros(3), laser_offset=None)
     own = {}
     for k in (1, 10):
-        pf = _filter_on_a_box(f"filter.global_oversample={k}", "filter.search_exponent=1.0")
+        # 4,000 particles over the box's 96 m2 of free space: 41.6 per m2, so a density of 40 per m2 draws no
+        # candidates (k = 1) and one of 400 draws ceil(400 x 96 / 4,000) = 10 per particle
+        pf = _filter_on_a_box(f"filter.global_density={40 * k}", "filter.search_exponent=1.0")
         pf.init_global()
         obs = pf.prepare(scan, np.zeros(3))
         before = pf.particles.copy()
