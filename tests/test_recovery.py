@@ -155,12 +155,18 @@ def test_reseed_adds_a_whole_global_set_with_the_old_cloud_keeping_its_share_of_
     assert pf.n == 4000 and 300 <= info.injected <= 500 and not pf.searching
 
 
-def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_way():
+def _scan(r: float):
+    """181 readings of r metres over 180 degrees, the laser at the robot centre."""
     from mcl.datasets.carmen import Scan
+
+    return Scan(t=0.0, ranges=np.full(181, r), angle_min=-np.pi / 2, angle_increment=np.pi / 180,
+                max_range=None, odom=np.zeros(3), laser_offset=None)
+
+
+def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_way():
     from mcl.filter import StepInfo
 
-    scan = Scan(t=0.0, ranges=np.full(181, 4.0), angle_min=-np.pi / 2, angle_increment=np.pi / 180,
-                max_range=None, odom=np.zeros(3), laser_offset=None)
+    scan = _scan(4.0)
     gains = {}
     for e in (1.0, 0.2):
         pf = _filter_on_a_box(f"filter.search_exponent={e}", "filter.global_density=0")
@@ -181,12 +187,10 @@ def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_wa
 
 
 def test_global_density_draws_the_fresh_poses_where_the_scan_fits_and_counts_the_scan_once():
-    from mcl.datasets.carmen import Scan
     from mcl.filter import StepInfo
 
     # a 10 m box and a scan of 2 m readings over 180 degrees: poses facing a wall 2 m away fit some of it
-    scan = Scan(t=0.0, ranges=np.full(181, 2.0), angle_min=-np.pi / 2, angle_increment=np.pi / 180,
-                max_range=None, odom=np.zeros(3), laser_offset=None)
+    scan = _scan(2.0)
     own = {}
     for k in (1, 10):
         # 4,000 particles over the box's 96 m2 of free space: 41.6 per m2, so a density of 40 per m2 draws no
