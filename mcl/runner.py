@@ -545,7 +545,7 @@ def _run(
                     ref = truth.at(scan.t) if truth is not None else None
                     stats = {
                         "ess": info.ess,
-                        "particles": float(info.particles),
+                        "particles": float(pf.n),  # the set drawn below (a re-seed grows it at its resample)
                         "inject_p": info.inject_p,
                         "tries": info.tries,
                         "spread/full": spread_full,
