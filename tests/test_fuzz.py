@@ -155,6 +155,8 @@ def _check_log(log, path) -> None:
     assert log.scans, "a log without scans must be an error"
     # the file's lines as the reader sees them (gzip decompressed, a truncated stream as far as it goes)
     file_lines = _read_bytes(path, str(path), []).split(b"\n")
+    lines = [s.line for s in log.scans]
+    assert lines == sorted(set(lines)), lines  # one scan per laser line, in file order
     for s in log.scans:
         assert s.kind in LASER_KINDS
         assert 1 <= s.line <= len(file_lines)  # a real line of the file (0 or past the end is a reader bug)

@@ -98,3 +98,11 @@ def test_real_logs(name):
     # the reader's threshold takes every reading the data set calls no-return, and at most 0.1 % more
     assert np.count_nonzero(r >= thr) >= np.count_nonzero(r >= marker)
     assert np.count_nonzero(r >= thr) - np.count_nonzero(r >= marker) <= 1e-3 * r.size
+
+
+def test_absurd_readings_are_left_out_of_the_histogram():
+    # a corrupt 1e40 m reading (found by tests/test_fuzz.py) overflowed the centimetre bins; readings above
+    # 1 km are no laser's, and the marker is still found among the rest
+    r = np.r_[np.full(200, 50.0), np.linspace(0.5, 40.0, 2000), 1e40, 5e3]
+    nr = detect_no_return(r)
+    assert nr is not None and nr.spikes == (50.0,) and nr.total == 2200

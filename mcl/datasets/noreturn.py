@@ -10,7 +10,9 @@ of beams share one centimetre value at the top of the log's range, where real
 readings are few and spread out (a real reading never repeats to the
 centimetre that often: the sensor's noise spreads it). So:
 
-1. histogram the finite positive readings in 1 cm bins;
+1. histogram the finite positive readings up to ``_MAX_M`` (1 km: no 2D laser
+   reaches that; a corrupt 1e40 would ask for an impossible histogram) in
+   1 cm bins;
 2. a bin is a spike when it holds at least ``min_share`` of all readings
    (and at least ``min_count``) and ``spike_ratio`` times more than the
    median bin of the 2 m around it (the median, so that a band of
@@ -31,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["NoReturn", "detect_no_return"]
+
+_MAX_M = 1000.0  # readings above this are left out of the histogram (1e5 bins at most)
 
 
 @dataclass(frozen=True)
@@ -69,7 +73,7 @@ def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, sp
     """
     r = np.asarray(ranges, dtype=np.float64).ravel()
     with np.errstate(invalid="ignore"):
-        r = r[np.isfinite(r) & (r > 0.0)]
+        r = r[np.isfinite(r) & (r > 0.0) & (r <= _MAX_M)]
     total = int(r.size)
     if total == 0:
         return None
