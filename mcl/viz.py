@@ -216,10 +216,6 @@ def covariance_ellipse(mean_xy: np.ndarray, cov_xy: np.ndarray, k: float = 2.0, 
     return (pts + np.asarray(mean_xy, dtype=np.float64)[:, None]).T
 
 
-def _map_png(image: np.ndarray) -> bytes | None:
-    return _png(image, "L")
-
-
 def _png(image: np.ndarray, mode: str) -> bytes | None:
     try:
         from io import BytesIO
@@ -230,6 +226,21 @@ def _png(image: np.ndarray, mode: str) -> bytes | None:
     buf = BytesIO()
     PILImage.fromarray(image, mode=mode).save(buf, format="PNG", optimize=False)
     return buf.getvalue()
+
+
+def _log_grid_image(rec: Any, path: str, grid: Any, img: np.ndarray, mode: str, draw_order: float) -> None:
+    """Static image ``img`` (row 0 the top, one pixel per grid cell; ``mode`` L or RGBA) laid over the grid at
+    ``path``: PNG-encoded when pillow is there, raw otherwise."""
+    h = img.shape[0]
+    res = float(grid.resolution)
+    x0, y0 = (float(v) for v in grid.origin[:2])
+    # pixel (u, v) -> world (x0 + u res, y0 + h res - v res): with the y flip on `world`
+    # the image is drawn unmirrored with its top row at the top.
+    rec.log(path, rr.Transform3D(translation=[x0, y0 + h * res, 0.0], scale=[res, -res, 1.0]), static=True)
+    png = _png(img, mode)
+    image: Any = (rr.EncodedImage(contents=png, media_type="image/png", draw_order=draw_order)
+                  if png is not None else rr.Image(img, color_model=mode, draw_order=draw_order))
+    rec.log(path, image, static=True)
 
 
 class RerunLogger:
@@ -371,22 +382,7 @@ class RerunLogger:
         img[free] = _FREE
         img[occupied] = _OCCUPIED
         img = np.ascontiguousarray(img[::-1])  # grid row 0 is the bottom; image row 0 is the top
-        h, w = img.shape
-        res = float(grid.resolution)
-        x0, y0 = (float(v) for v in grid.origin[:2])
-        # pixel (u, v) -> world (x0 + u res, y0 + h res - v res): with the y flip on `world`
-        # the image is drawn unmirrored with its top row at the top.
-        rec.log(
-            "world/map",
-            rr.Transform3D(translation=[x0, y0 + h * res, 0.0], scale=[res, -res, 1.0]),
-            static=True,
-        )
-        png = _map_png(img)
-        if png is not None:
-            image: Any = rr.EncodedImage(contents=png, media_type="image/png", draw_order=_DRAW_ORDER["map"])
-        else:
-            image = rr.Image(img, color_model="L", draw_order=_DRAW_ORDER["map"])
-        rec.log("world/map", image, static=True)
+        _log_grid_image(rec, "world/map", grid, img, "L", _DRAW_ORDER["map"])
 
     def log_likelihood_field(self, grid: Any, sensor_cfg: Any) -> None:
         """Static image of the likelihood field (Prob. Rob. Table 6.3): p(endpoint | map) of an endpoint in each
@@ -405,19 +401,8 @@ class RerunLogger:
         img = np.empty((u.size, 4), dtype=np.uint8)
         img[:, :3] = rgb
         img[:, 3] = 200
-        h, w = np.asarray(grid.distance).shape
-        img = img.reshape(h, w, 4)
-        res = float(grid.resolution)
-        x0, y0 = (float(v) for v in grid.origin[:2])
-        rec.log(
-            "world/likelihood_field",
-            rr.Transform3D(translation=[x0, y0 + h * res, 0.0], scale=[res, -res, 1.0]),
-            static=True,
-        )
-        png = _png(img, "RGBA")
-        image: Any = (rr.EncodedImage(contents=png, media_type="image/png", draw_order=_DRAW_ORDER["map"] + 1.0)
-                      if png is not None else rr.Image(img, color_model="RGBA", draw_order=_DRAW_ORDER["map"] + 1.0))
-        rec.log("world/likelihood_field", image, static=True)
+        img = img.reshape(*np.asarray(grid.distance).shape, 4)
+        _log_grid_image(rec, "world/likelihood_field", grid, img, "RGBA", _DRAW_ORDER["map"] + 1.0)
 
     def log_truth_path(self, poses: np.ndarray) -> None:
         """Static full true path (3, M); per-step truth trails are then not logged."""
