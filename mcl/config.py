@@ -87,9 +87,11 @@ class FilterConfig:
     recovery_local_std: tuple[float, float, float] = (0.5, 0.5, 0.3)  # lost: std x, y (m), theta (rad) around the estimate
     recovery_global_after: int = field(default=10, metadata=_rng(0, 1_000_000))  # lost updates before uniform draws
     recovery_reseed: bool = True  # lost: after global_after lost updates add a whole global set (not 5 % a step)
+    recovery_probation: int = field(default=0, metadata=_rng(0, 1_000_000))  # updates after a search a lost call re-seeds
     recovery_reseed_keep: float = field(default=0.5, metadata=_rng(0.0, 1.0, lo_open=True))  # prior mass of the old cloud
     global_density: float = field(default=0.0, metadata=_rng(0.0, 1e6))  # uniform candidates per m2 of free space
     search_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # laser log-lik x this while searching
+    lost_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # ... while lost (lost recovery)
     recovery_alpha_slow: float = field(default=0.001, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_alpha_fast: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
 

@@ -375,8 +375,9 @@ class ParticleFilter:
                 info.skipped_beams = skipped.shape[1]
                 info.skipped_endpoints = skipped
         loglik = self.sensor.log_likelihood(self.particles, observation)
-        if self.searching and self.cfg.filter.search_exponent != 1.0:
-            loglik *= self.cfg.filter.search_exponent  # tempered while the global search is under way
+        exponent = self._laser_exponent()
+        if exponent != 1.0:
+            loglik *= exponent  # tempered while a global search is under way, or while lost
         if not np.isfinite(loglik).all():
             loglik = np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
         if self._fresh is not None:
@@ -386,6 +387,17 @@ class ParticleFilter:
                                              self._injected)
         self._observation = observation
         self.logw += loglik
+
+    def _laser_exponent(self) -> float:
+        """The factor on the laser log-likelihood this update: ``search_exponent`` during a global search,
+        ``lost_exponent`` while lost recovery spreads poses around the estimate (one scan must not hand the whole
+        set to a single injected pose: it must out-score the tracked cloud over several updates), else 1."""
+        fc = self.cfg.filter
+        if self.searching:
+            return fc.search_exponent
+        if getattr(self.recovery, "lost_updates", 0):
+            return fc.lost_exponent
+        return 1.0
 
     def _oversample_fresh(self, observation, loglik: np.ndarray) -> np.ndarray:
         """The uniform poses of a global start or re-seed, drawn better on a big map: when they are sparser than
@@ -402,8 +414,9 @@ class ParticleFilter:
             return loglik
         cand = self.sample_uniform(k * idx.size, self.rng)
         lc = self.sensor.log_likelihood(cand, observation)
-        if self.searching and self.cfg.filter.search_exponent != 1.0:
-            lc *= self.cfg.filter.search_exponent
+        exponent = self._laser_exponent()
+        if exponent != 1.0:
+            lc *= exponent
         lc = np.where(np.isfinite(lc), lc, -np.inf)
         top = float(lc.max())
         if not np.isfinite(top):
@@ -532,7 +545,7 @@ class ParticleFilter:
         tempered by ``search_exponent``). A few per cent of uniform poses a step almost never lands near the
         true pose on a building-sized map; a whole set does."""
         fc = self.cfg.filter
-        n = self.n
+        n = min(self.n, fc.particles)  # a set grown by an earlier re-seed is drawn back down: at most 2 x particles
         idx = resample(fc.resampling, self.logw, self.rng, n=n)
         m = max(fc.particles - n, n)
         fresh = self.recovery_sampler(m, self.rng, self._observation)

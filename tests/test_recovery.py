@@ -155,6 +155,70 @@ def test_reseed_adds_a_whole_global_set_with_the_old_cloud_keeping_its_share_of_
     assert pf.n == 4000 and 300 <= info.injected <= 500 and not pf.searching
 
 
+
+def test_a_second_reseed_draws_the_grown_set_back_down_so_the_set_stays_within_twice_the_particles():
+    # A re-seed doubles a full set; a filter that is lost again before any resample shrank it (kld off, or
+    # probation re-seeding at once) was re-seeded from 8,000 to 16,000, 32,000, ...: the 100,000-particle global
+    # search of a large world grew until it was killed for memory (24 GB). The old cloud is drawn down to
+    # `particles` first.
+    from mcl.filter import StepInfo
+
+    pf = _filter_on_a_box("filter.recovery_reseed=true", "filter.kld=false")
+    pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1])
+    for _ in range(3):
+        pf.recovery.searching = False
+        for _ in range(10):
+            pf.recovery.observe_lost(True)
+        info = StepInfo(particles=pf.n, ess=float(pf.n))
+        pf.resample(info)
+        assert info.reseeded and pf.n == 8000 and info.injected == 4000
+        w = np.exp(pf.logw)
+        assert w[:4000].sum() == pytest.approx(0.5)
+
+
+def test_probation_reseeds_at_the_first_lost_call_after_a_search_and_only_then():
+    from mcl.adaptive import LostRecovery
+
+    r = LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=True, probation=5)
+    r.observe_lost(True)  # a track that never searched: the usual 10 lost updates
+    assert not r.reseed_due and not r.on_probation
+    r.start_search()
+    r.observe_lost(True, cluster_weight=0.95)  # settles, and is lost at once: re-seed now
+    assert not r.searching and r.on_probation and r.reseed_due
+    r.start_search()
+    r.observe_lost(False)  # settles and fits ...
+    for _ in range(5):
+        r.observe_lost(False)
+    r.observe_lost(True)  # ... lost 6 updates after the search: probation is over, the usual count again
+    assert not r.on_probation and not r.reseed_due
+    for _ in range(9):
+        r.observe_lost(True)
+    assert r.reseed_due
+    off = LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=True, probation=0)
+    off.start_search()
+    off.observe_lost(True, cluster_weight=0.95)
+    assert not off.reseed_due  # probation 0: off (the update that ends the search is the 0th)
+
+
+def test_the_laser_likelihood_is_tempered_while_lost_recovery_spreads_poses():
+    from mcl.filter import StepInfo
+
+    scan = _scan(4.0)
+    gains = {}
+    for e in (1.0, 0.3):
+        pf = _filter_on_a_box(f"filter.lost_exponent={e}", "filter.search_exponent=1.0")
+        pf.init_gaussian([5.0, 5.0, 0.0], [1.0, 1.0, 1.0])
+        obs = pf.prepare(scan, np.zeros(3))
+        for lost in (False, True):
+            pf.recovery.observe_lost(lost)
+            before = pf.logw.copy()
+            pf.correct(obs, StepInfo(particles=pf.n))
+            gains[e, lost] = pf.logw - before
+    np.testing.assert_allclose(gains[0.3, True], 0.3 * gains[1.0, True], rtol=1e-12)
+    np.testing.assert_allclose(gains[0.3, False], gains[1.0, False], rtol=1e-12)
+    assert np.ptp(gains[1.0, False]) > 10.0
+
+
 def _scan(r: float):
     """181 readings of r metres over 180 degrees, the laser at the robot centre."""
     from mcl.datasets.carmen import Scan
