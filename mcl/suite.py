@@ -625,6 +625,7 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     """``mcl eval --suite``: plan, generate the worlds, run what is not finished, write and print the table.
     Returns the exit status (0, 130 interrupted, 2 when a run failed)."""
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
     import multiprocessing
 
     from tqdm import tqdm
@@ -697,8 +698,22 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                 try:
                     while pending:
                         done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                        dead = []
                         for f in done:
-                            take(futures[f], f.result())
+                            try:
+                                row = f.result()
+                            except BrokenProcessPool:
+                                dead.append(futures[f].key)
+                                continue
+                            take(futures[f], row)
+                        if dead:
+                            # A worker was killed (the kernel's OOM killer, a signal): the pool is unusable and
+                            # every run in flight is lost. Keep the finished rows and say which runs were cut.
+                            dead += [futures[f].key for f in pending]
+                            pending = set()
+                            errors.append(f"a worker process died abruptly (killed by the system, e.g. out of memory) "
+                                          f"with {len(dead)} run(s) unfinished, first {dead[0]}; the finished runs "
+                                          f"are saved, run the same command again (with fewer --jobs) to resume")
                 except KeyboardInterrupt:
                     interrupted = True
                     for f in pending:

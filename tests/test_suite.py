@@ -242,6 +242,47 @@ def test_suite_resumes_and_skips_finished_runs(evaluated, tmp_path, capsys):
     assert json.loads((out / "runs/good/tracking/default/seed1/row.json").read_text())["particles"] <= 1500
 
 
+
+def test_a_killed_worker_is_one_error_line_and_the_finished_runs_are_kept(evaluated, tmp_path, capsys, monkeypatch):
+    # The kernel's OOM killer ends a worker with SIGKILL: concurrent.futures then fails every run in flight with
+    # BrokenProcessPool, which used to escape as a traceback. A fake pool stands in for one (it runs jobs
+    # in-process, and its first run dies).
+    import concurrent.futures as cf
+    from concurrent.futures.process import BrokenProcessPool
+
+    class DyingPool:
+        def __init__(self, *a, **k):
+            self.calls = 0
+
+        def submit(self, fn, *args):
+            f = cf.Future()
+            self.calls += 1
+            if self.calls == 1:
+                f.set_exception(BrokenProcessPool("A process in the process pool was terminated abruptly"))
+            else:
+                f.set_result(fn(*args))
+            return f
+
+        def map(self, *a):
+            raise AssertionError("no world to generate")
+
+        def shutdown(self, **k):
+            pass
+
+    out, suite = tmp_path / "out", evaluated["suite"]
+    shutil.copytree(evaluated["out"], out)
+    for d in ("good/tracking/default/seed1", "planted/tracking/default/seed2"):
+        (out / "runs" / d / "row.json").unlink()
+    monkeypatch.setattr(cf, "ProcessPoolExecutor", DyingPool)
+    code = main(["eval", "--suite", str(suite), "--out", str(out), "--cache", str(evaluated["tmp"] / "worlds"),
+                 "--seeds", "2", "--jobs", "2", "--set", "filter.particles=2000", "--no-progress"])
+    printed = capsys.readouterr().out
+    assert code == 2
+    errors = [line for line in printed.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "worker process died" in errors[0] and "good/tracking/default/seed1" in errors[0]
+    rows = _rows(out)
+    assert len(rows) == 7 and ("planted", "default", 2) in {(r["dataset"], r["config"], r["seed"]) for r in rows}
+
 # ----------------------------------------------------------------------------- the runner's kidnap hook
 
 
