@@ -166,11 +166,13 @@ def test_global_localization_on_the_bundled_demo(tmp_path):
     # Issues 1 and 13: data/demo (seed 7, 5 m laser, kidnapped at 50 s) shows global localization taking
     # seconds, then tracking, then a kidnapping and its recovery. With the defaults above (filter seed 1):
     # - not localized by the first scan alone (error > 1 m at step 0; measured 7.5 m);
-    # - within 0.3 m between 3 s and 20 s and staying there until the kidnapping (measured 13.8 s, after
-    #   the global re-seed at 13.6 s);
-    # - tracking after that with position RMSE < 0.15 m (measured 0.066 m);
-    # - back within 0.3 m by 65 s (measured 57.4 s) and RMSE < 0.15 m from there (measured 0.058 m).
-    # One seed: the bounds leave a margin of several seconds / 2x on the measured values.
+    # - within 0.3 m between 0.5 s and 20 s and staying there until the kidnapping (measured 0.8 s: the search
+    #   settles on a place the first scan contradicts, and on probation that re-seeds at once, at step 1;
+    #   13.8 s without recovery_probation and lost_exponent);
+    # - tracking after that with position RMSE < 0.15 m (measured 0.061 m);
+    # - back within 0.3 m by 66 s (measured 63.4 s, after the re-seed at 62.8 s; 57.4 s without
+    #   recovery_probation and lost_exponent) and RMSE < 0.15 m from there (measured 0.056 m).
+    # One seed: the bounds leave a margin of seconds / 2x on the measured values.
     # The run also writes the recording `mcl run` makes: under 10 MB (measured 6-7 MB).
     from mcl.trajectory import read_tum
 
@@ -188,10 +190,10 @@ def test_global_localization_on_the_bundled_demo(tmp_path):
     before = te < 50.0
     bad = np.flatnonzero(before & (err >= 0.3))
     conv = te[bad[-1] + 1]
-    assert 3.0 <= conv <= 20.0, conv
+    assert 0.5 <= conv <= 20.0, conv
     track = before & (te >= conv)
     assert np.sqrt(np.mean(err[track] ** 2)) < 0.15
-    after = te >= 65.0
+    after = te >= 66.0
     assert err[after].max() < 0.3, err[after].max()
     assert np.sqrt(np.mean(err[after] ** 2)) < 0.15
 
