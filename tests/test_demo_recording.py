@@ -56,10 +56,12 @@ def recording(tmp_path_factory):
     log = _head(DEMO / "log.clf", tmp / "head.clf", SCANS)
     # global_density 0: the demo's 100,000 particles over its 259 m2 are 386 per m2, above the default density of
     # 50, so `mcl run` scores the first scan on the particles themselves; 3,000 would be drawn from 5x as many
-    # candidates, all with the same weight at step 0
+    # candidates, all with the same weight at step 0. recovery_probation 0: with 3,000 particles the search settles
+    # on the first scan, on a place that scan contradicts, and the probation re-seeds at that very step, so step 0
+    # would show the re-seed's equal weights (`mcl run`'s 100,000 settle one step later: step 0 is scored)
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
         f"log={log}", "filter.particles=3000", "filter.min_particles=500", "rerun.particles_max=1000",
-        "filter.global_density=0"])
+        "filter.global_density=0", "filter.recovery_probation=0"])
     s = run(cfg, tmp / "out", progress=False, echo=lambda *_: None)
     chunks = list(RrdReader(tmp / "out" / "recording.rrd").stream().to_chunks())
     return s, chunks
