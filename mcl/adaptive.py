@@ -458,6 +458,7 @@ class LostRecovery:
         synthetic worlds: settled 33 m off after 2 s, then lost and found again for 20 s without ever staying
         lost for ``global_after`` updates). A lost call then re-seeds at once."""
         return self.since_search is not None and self.since_search <= self.probation
+
     @property
     def inject_probability(self) -> float:
         return self.fraction if self.lost_updates else 0.0

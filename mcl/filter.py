@@ -374,12 +374,7 @@ class ParticleFilter:
             if skipped is not None and info is not None:
                 info.skipped_beams = skipped.shape[1]
                 info.skipped_endpoints = skipped
-        loglik = self.sensor.log_likelihood(self.particles, observation)
-        exponent = self._laser_exponent()
-        if exponent != 1.0:
-            loglik *= exponent  # tempered while a global search is under way, or while lost
-        if not np.isfinite(loglik).all():
-            loglik = np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
+        loglik = self._laser_loglik(self.particles, observation)
         if self._fresh is not None:
             loglik = self._oversample_fresh(observation, loglik)
         if self.recovery is not None:
@@ -387,6 +382,17 @@ class ParticleFilter:
                                              self._injected)
         self._observation = observation
         self.logw += loglik
+
+    def _laser_loglik(self, particles: np.ndarray, observation) -> np.ndarray:
+        """(N,) log p(z | x, m) of the laser at ``particles``, tempered by ``_laser_exponent``; a NaN or +inf
+        counts as weight zero (-inf)."""
+        loglik = self.sensor.log_likelihood(particles, observation)
+        exponent = self._laser_exponent()
+        if exponent != 1.0:
+            loglik *= exponent  # tempered while a global search is under way, or while lost
+        if not np.isfinite(loglik).all():
+            loglik = np.where(np.isnan(loglik) | (loglik == np.inf), -np.inf, loglik)
+        return loglik
 
     def _laser_exponent(self) -> float:
         """The factor on the laser log-likelihood this update: ``search_exponent`` during a global search,
@@ -404,20 +410,17 @@ class ParticleFilter:
         ``filter.global_density`` poses per m² of free space, k = density x area / count (at most
         _MAX_OVERSAMPLE) uniform candidates per fresh particle are scored with this scan, and the fresh
         particles are drawn from them in proportion to that likelihood (importance resampling, as if the search
-        had started with k times the particles and resampled once). They then carry, instead of their own likelihood, the mean likelihood of
-        all the candidates (the fresh component's evidence), so the scan is counted once and the old cloud of a
-        re-seed keeps its fair share. Returns ``loglik`` with the fresh entries replaced."""
+        had started with k times the particles and resampled once). They then carry, instead of their own
+        likelihood, the mean likelihood of all the candidates (the fresh component's evidence), so the scan is
+        counted once and the old cloud of a re-seed keeps its fair share. Returns ``loglik`` with the fresh
+        entries replaced."""
         fresh, self._fresh = self._fresh, None
         idx = np.flatnonzero(fresh) if fresh.size == loglik.size else np.zeros(0, dtype=np.int64)
         k = min(math.ceil(self.cfg.filter.global_density * self.grid.free_area / max(idx.size, 1)), _MAX_OVERSAMPLE)
         if k <= 1 or idx.size == 0:
             return loglik
         cand = self.sample_uniform(k * idx.size, self.rng)
-        lc = self.sensor.log_likelihood(cand, observation)
-        exponent = self._laser_exponent()
-        if exponent != 1.0:
-            lc *= exponent
-        lc = np.where(np.isfinite(lc), lc, -np.inf)
+        lc = self._laser_loglik(cand, observation)
         top = float(lc.max())
         if not np.isfinite(top):
             return loglik

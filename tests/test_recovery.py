@@ -201,8 +201,6 @@ def test_probation_reseeds_at_the_first_lost_call_after_a_search_and_only_then()
 
 
 def test_the_laser_likelihood_is_tempered_while_lost_recovery_spreads_poses():
-    from mcl.filter import StepInfo
-
     scan = _scan(4.0)
     gains = {}
     for e in (1.0, 0.3):
@@ -211,9 +209,7 @@ def test_the_laser_likelihood_is_tempered_while_lost_recovery_spreads_poses():
         obs = pf.prepare(scan, np.zeros(3))
         for lost in (False, True):
             pf.recovery.observe_lost(lost)
-            before = pf.logw.copy()
-            pf.correct(obs, StepInfo(particles=pf.n))
-            gains[e, lost] = pf.logw - before
+            gains[e, lost] = _correction_gain(pf, obs)
     np.testing.assert_allclose(gains[0.3, True], 0.3 * gains[1.0, True], rtol=1e-12)
     np.testing.assert_allclose(gains[0.3, False], gains[1.0, False], rtol=1e-12)
     assert np.ptp(gains[1.0, False]) > 10.0
@@ -227,9 +223,16 @@ def _scan(r: float):
                 max_range=None, odom=np.zeros(3), laser_offset=None)
 
 
-def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_way():
+def _correction_gain(pf, obs) -> np.ndarray:
+    """(N,) what one correction with ``obs`` adds to the log weights."""
     from mcl.filter import StepInfo
 
+    before = pf.logw.copy()
+    pf.correct(obs, StepInfo(particles=pf.n))
+    return pf.logw - before
+
+
+def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_way():
     scan = _scan(4.0)
     gains = {}
     for e in (1.0, 0.2):
@@ -237,14 +240,10 @@ def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_wa
         pf.init_global()
         assert pf.searching
         obs = pf.prepare(scan, np.zeros(3))
-        before = pf.logw.copy()
-        pf.correct(obs, StepInfo(particles=pf.n))
-        gains[e] = pf.logw - before
+        gains[e] = _correction_gain(pf, obs)
         # settled (a cluster holds 90 % of the weight): the full likelihood again
         pf.searching = False
-        before = pf.logw.copy()
-        pf.correct(obs, StepInfo(particles=pf.n))
-        gains[e, "settled"] = pf.logw - before
+        gains[e, "settled"] = _correction_gain(pf, obs)
     np.testing.assert_allclose(gains[0.2], 0.2 * gains[1.0], rtol=1e-12)
     np.testing.assert_allclose(gains[0.2, "settled"], gains[1.0], rtol=1e-12)
     assert np.ptp(gains[1.0]) > 10.0  # the scan does tell the poses apart
