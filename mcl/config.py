@@ -128,6 +128,8 @@ class LikelihoodFieldConfig:
     z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
     sigma_hit: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
     likelihood_max_dist: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
+    # d inside an occupied region: its depth (metres to the nearest non-occupied cell, less one cell) or zero (AMCL)
+    interior: Literal["depth", "zero"] = "depth"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

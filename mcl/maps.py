@@ -106,6 +106,44 @@ class OccupancyGrid:
         d *= self.resolution
         return d.astype(np.float32)
 
+    @cached_property
+    def surface_distance(self) -> np.ndarray:
+        """float32 (H, W): metres from each cell centre to the nearest obstacle *surface*.
+
+        ``distance`` off the obstacles; on an occupied cell its depth, the distance to the nearest
+        non-occupied cell centre less one cell (0 on a wall's face, 0.05 one cell in at 5 cm). A laser
+        return lies on a surface, so an endpoint deep inside a desk or a thick wall (seen through a thin
+        wall from the wrong side) is as unlikely as one that far out in free space: with depth 0 there
+        (AMCL's field), a pose 0.3 m too far forward put the far wall's returns into the furniture behind
+        it and scored *better* than the true pose (suites/synthetic.yaml large-02).
+        """
+        from scipy import ndimage
+
+        occ = self.occupied
+        d = np.array(self.distance, dtype=np.float32)
+        # only cells whose four neighbours are occupied lie deeper than one cell; the depth transform runs on the
+        # (one-cell padded) box of each obstacle holding such cells, not on the whole map (250 m map: 5 s -> 0.4 s)
+        inner = occ.copy()  # occupied with its four neighbours occupied (off the map counts as occupied)
+        inner[1:] &= occ[:-1]
+        inner[:-1] &= occ[1:]
+        inner[:, 1:] &= occ[:, :-1]
+        inner[:, :-1] &= occ[:, 1:]
+        if not inner.any():
+            return d
+        labels, _ = ndimage.label(occ, structure=np.ones((3, 3), dtype=bool))
+        boxes = ndimage.find_objects(labels)
+        h, w = occ.shape
+        for lab in np.unique(labels[inner]):
+            ys, xs = boxes[lab - 1]
+            y0, y1, x0, x1 = max(ys.start - 1, 0), min(ys.stop + 1, h), max(xs.start - 1, 0), min(xs.stop + 1, w)
+            mine = labels[y0:y1, x0:x1] == lab
+            if mine.all():  # no free cell in reach (a map that is one obstacle): depth 0 as before
+                continue
+            depth = ndimage.distance_transform_edt(mine)
+            block = d[y0:y1, x0:x1]
+            block[mine] = np.maximum(depth[mine] - 1.0, 0.0) * self.resolution
+        return d
+
     # --- coordinates -----------------------------------------------------
     def world_to_cell(self, x, y) -> tuple[np.ndarray, np.ndarray]:
         """Cell indices (ix, iy), int64, of world points (no bounds check: see :meth:`contains`)."""

@@ -6,7 +6,10 @@ A scan is turned once into beam endpoints in the robot frame
     log p(z | x, m) = exponent * sum_k log(z_hit * N(d_k; 0, sigma_hit^2) + z_rand / range_max)
 
 where d_k = min(distance from endpoint k (seen from pose x) to the nearest
-occupied cell centre, likelihood_max_dist). The per-cell term is tabulated
+obstacle surface, likelihood_max_dist): off the obstacles the distance to the
+nearest occupied cell centre, on an occupied cell its depth (to the nearest
+non-occupied cell, less one cell; ``interior: zero`` gives AMCL's 0 there, the
+book's field as printed). The per-cell term is tabulated
 once per map as float32, so scoring is one rotation per particle and one
 table gather per beam (``mcl.kernels.likelihood``).
 
@@ -101,15 +104,25 @@ def point_log_likelihood(d, cfg) -> np.ndarray:
         return np.log(float(cfg.z_hit) * gauss + float(cfg.z_rand) / float(cfg.range_max))
 
 
+def field_distance(grid, cfg) -> np.ndarray:
+    """The d the likelihood field scores, per cell: ``grid.surface_distance`` (to the nearest obstacle surface,
+    the depth inside an obstacle) or, with ``interior: zero``, ``grid.distance`` (0 on every occupied cell,
+    AMCL's field and the book's as printed). ``cfg``: a SensorConfig or a flat namespace."""
+    from mcl.config import sensor_model_view
+
+    interior = getattr(sensor_model_view(cfg, "likelihood_field"), "interior", "depth")
+    return grid.distance if interior == "zero" else grid.surface_distance
+
+
 SKIP_SUPPORT_PARTICLES = 500  # beam skipping estimates each beam's support from at most this many particles
 
 
 class LikelihoodField:
     """Likelihood field sensor model over an ``OccupancyGrid``.
 
-    ``grid`` needs ``distance`` (float (H, W), metres to the nearest occupied
-    cell centre, row 0 at the bottom), ``origin`` (x0, y0) and ``resolution``.
-    ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit, likelihood_max_dist,
+    ``grid`` needs ``surface_distance`` (or ``distance`` with ``interior: zero``;
+    float (H, W), row 0 at the bottom, see ``field_distance``), ``origin`` (x0, y0)
+    and ``resolution``. ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit, likelihood_max_dist, interior,
     range_max, exponent (a SensorConfig: its common keys and sensor.likelihood_field).
     """
 
@@ -118,7 +131,7 @@ class LikelihoodField:
 
         cfg = sensor_model_view(cfg, "likelihood_field")
         self.cfg = cfg
-        self.table = np.ascontiguousarray(point_log_likelihood(grid.distance, cfg), dtype=np.float32)
+        self.table = np.ascontiguousarray(point_log_likelihood(field_distance(grid, cfg), cfg), dtype=np.float32)
         # off-map endpoints: the value at likelihood_max_dist (float32 like the table)
         self.offmap = float(np.float32(point_log_likelihood(float(cfg.likelihood_max_dist), cfg)))
         self.origin = (float(grid.origin[0]), float(grid.origin[1]))

@@ -392,9 +392,9 @@ class RerunLogger:
         rec = self._live()
         if rec is None:
             return
-        from mcl.sensors import point_log_likelihood
+        from mcl.sensors import field_distance, point_log_likelihood
 
-        p = np.exp(point_log_likelihood(np.asarray(grid.distance), sensor_cfg))
+        p = np.exp(point_log_likelihood(np.asarray(field_distance(grid, sensor_cfg)), sensor_cfg))
         p_top = float(np.exp(point_log_likelihood(0.0, sensor_cfg)))
         u = np.clip(p / p_top, 0.0, 1.0)[::-1].ravel()  # image row 0 is the top
         rgb = weight_colors(10.0 ** (_WEIGHT_DECADES * (u - 1.0)))  # weight_scale(...) == u: the same colours

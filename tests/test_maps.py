@@ -143,6 +143,26 @@ def test_distance_field_against_brute_force():
     assert np.all(grid.distance[occ == 100] == 0)
 
 
+def test_surface_distance_is_depth_inside_obstacles_against_brute_force():
+    """Off the obstacles the same as ``distance``; on an occupied cell the distance to the nearest non-occupied
+    cell centre less one cell, so a wall's face is 0 and a block's interior grows by one cell per cell."""
+    rng = np.random.default_rng(4)
+    occ = np.where(rng.random((12, 14)) < 0.15, 100, 0).astype(np.int8)
+    occ[2:10, 1:10] = 0
+    occ[3:9, 2:9] = 100  # a 6 x 7 block in free space: depth up to 2 cells
+    occ[10, 10] = -1
+    grid = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
+    sd = grid.surface_distance
+    assert sd.dtype == np.float32 and sd.shape == occ.shape
+    off = occ != 100
+    np.testing.assert_array_equal(sd[off], grid.distance[off])
+    ny, nx = np.nonzero(off)
+    iy, ix = np.mgrid[0:12, 0:14]
+    brute = (np.min(np.hypot(ix[..., None] - nx, iy[..., None] - ny), axis=-1) - 1.0) * 0.1
+    np.testing.assert_allclose(sd[~off], np.maximum(brute[~off], 0.0), rtol=1e-6, atol=1e-7)
+    assert sd[5, 5] == pytest.approx(0.2) and sd[3, 5] == 0.0  # the block's centre 2 cells in; its face 0
+
+
 def test_distance_without_obstacles_is_large():
     grid = OccupancyGrid.from_occupancy(np.zeros((3, 4), np.int8), 0.5, (0, 0))
     assert np.all(grid.distance >= math.hypot(3, 4) * 0.5)

@@ -51,9 +51,16 @@ def test_table_is_log_of_hit_plus_random_at_clipped_distance():
     cfg = sensor_cfg()
     lf = LikelihoodField(g, cfg)
     assert lf.table.dtype == np.float32 and lf.table.shape == g.occupancy.shape
-    d = np.minimum(g.distance.astype(np.float64), cfg.likelihood_max_dist)
+    d = np.minimum(g.surface_distance.astype(np.float64), cfg.likelihood_max_dist)
     expected = np.log(cfg.z_hit * stats.norm.pdf(d, 0.0, cfg.sigma_hit) + cfg.z_rand / cfg.range_max)
     np.testing.assert_allclose(lf.table, expected, rtol=1e-6)
+    # interior: zero is AMCL's field, 0 on every occupied cell: the two differ only inside the pillar
+    zero = LikelihoodField(g, sensor_cfg(interior="zero"))
+    d0 = np.minimum(g.distance.astype(np.float64), cfg.likelihood_max_dist)
+    np.testing.assert_allclose(zero.table, np.log(cfg.z_hit * stats.norm.pdf(d0, 0.0, cfg.sigma_hit)
+                                                  + cfg.z_rand / cfg.range_max), rtol=1e-6)
+    differ = zero.table != lf.table
+    assert differ.any() and g.occupied[differ].all()
     # off-map: the value at likelihood_max_dist, which is also the table's minimum
     off = math.log(cfg.z_hit * stats.norm.pdf(1.0, 0.0, 0.2) + 0.1 / 10.0)
     assert lf.offmap == pytest.approx(off, rel=1e-6)
@@ -119,6 +126,29 @@ def test_true_pose_scores_best_among_perturbed_poses():
     poses = np.array([true + np.array(o) for o in offsets]).T.copy()
     ll = lf.log_likelihood(poses, e)
     assert np.argmax(ll) == offsets.index((0, 0, 0))
+
+
+def test_returns_seen_through_a_thin_wall_into_furniture_do_not_favour_a_pose_too_far_forward():
+    """A 1-cell wall with a 0.6 m deep desk against its far side (suites/synthetic.yaml large-02). Facing the
+    wall from 3 m, a pose 0.3 m too far forward puts the wall's returns 0.3 m into the desk: with AMCL's field
+    (d = 0 on every occupied cell) that pose scores as well as the true one, so odometry noise carries the
+    cloud forward unchecked. With the depth inside obstacles the returns land 0.3 m deep (6 cells from either
+    face, less one) and the forward pose loses by 3.9 nats a beam (0.3^2 / 2 / 0.1^2 = 4.5 less the z_rand
+    floor); the bound asks for 2, half of it, so it holds for any sigma_hit near 0.1 and fails on d = 0."""
+    occ = np.zeros((80, 100), dtype=np.int8)
+    occ[:, 60] = 100            # the wall at x = 3.0 (cell 60)
+    occ[20:60, 61:73] = 100     # the desk behind it, x 3.05-3.65, y 1.0-3.0
+    g = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
+    cfg = sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0)
+    ang = np.linspace(-0.25, 0.25, 11)  # beams at the wall in front of the desk
+    true = np.array([0.0, 2.0, 0.0])
+    ranges = (3.0 + 0.025) / np.cos(ang)  # to the wall cell's centre
+    e = beam_endpoints(ranges, ang, None, cfg, (0.0, 0.0, 0.0))
+    poses = np.array([true, true + [0.3, 0.0, 0.0]]).T.copy()
+    ll_depth = LikelihoodField(g, cfg).log_likelihood(poses, e)
+    ll_zero = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0, interior="zero")).log_likelihood(poses, e)
+    assert ll_zero[1] >= ll_zero[0] - 1e-6  # AMCL's field: the forward pose is no worse (the flaw)
+    assert ll_depth[0] - ll_depth[1] > 2.0 * e.shape[1]  # depth: the true pose wins by > 2 nats a beam
 
 
 # ---------------------------------------------------------------- endpoints
