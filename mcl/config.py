@@ -130,6 +130,7 @@ class LikelihoodFieldConfig:
     likelihood_max_dist: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
     # d inside an occupied region: its depth (metres to the nearest non-occupied cell, less one cell) or zero (AMCL)
     interior: Literal["depth", "zero"] = "depth"
+    interior_tolerance: float = field(default=0.05, metadata=_rng(0.0))  # m of that depth not counted (drawn walls)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -8,8 +8,8 @@ A scan is turned once into beam endpoints in the robot frame
 where d_k = min(distance from endpoint k (seen from pose x) to the nearest
 obstacle surface, likelihood_max_dist): off the obstacles the distance to the
 nearest occupied cell centre, on an occupied cell its depth (to the nearest
-non-occupied cell, less one cell; ``interior: zero`` gives AMCL's 0 there, the
-book's field as printed). The per-cell term is tabulated
+non-occupied cell, less one cell and less ``interior_tolerance``; ``interior:
+zero`` gives AMCL's 0 there, the book's field as printed). The per-cell term is tabulated
 once per map as float32, so scoring is one rotation per particle and one
 table gather per beam (``mcl.kernels.likelihood``).
 
@@ -106,12 +106,17 @@ def point_log_likelihood(d, cfg) -> np.ndarray:
 
 def field_distance(grid, cfg) -> np.ndarray:
     """The d the likelihood field scores, per cell: ``grid.surface_distance`` (to the nearest obstacle surface,
-    the depth inside an obstacle) or, with ``interior: zero``, ``grid.distance`` (0 on every occupied cell,
-    AMCL's field and the book's as printed). ``cfg``: a SensorConfig or a flat namespace."""
+    the depth inside an obstacle) less ``interior_tolerance`` on the occupied cells (a map draws its walls a
+    cell or so thicker than the surface the laser sees), or, with ``interior: zero``, ``grid.distance`` (0 on
+    every occupied cell, AMCL's field and the book's as printed). ``cfg``: a SensorConfig or a flat namespace."""
     from mcl.config import sensor_model_view
 
-    interior = getattr(sensor_model_view(cfg, "likelihood_field"), "interior", "depth")
-    return grid.distance if interior == "zero" else grid.surface_distance
+    cfg = sensor_model_view(cfg, "likelihood_field")
+    if getattr(cfg, "interior", "depth") == "zero":
+        return grid.distance
+    tol = float(getattr(cfg, "interior_tolerance", 0.0))
+    d = grid.surface_distance
+    return np.where(grid.occupied, np.maximum(d - np.float32(tol), np.float32(0.0)), d) if tol > 0 else d
 
 
 SKIP_SUPPORT_PARTICLES = 500  # beam skipping estimates each beam's support from at most this many particles
@@ -122,7 +127,7 @@ class LikelihoodField:
 
     ``grid`` needs ``surface_distance`` (or ``distance`` with ``interior: zero``;
     float (H, W), row 0 at the bottom, see ``field_distance``), ``origin`` (x0, y0)
-    and ``resolution``. ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit, likelihood_max_dist, interior,
+    and ``resolution``. ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit, likelihood_max_dist, interior(_tolerance),
     range_max, exponent (a SensorConfig: its common keys and sensor.likelihood_field).
     """
 

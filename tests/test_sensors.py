@@ -61,6 +61,13 @@ def test_table_is_log_of_hit_plus_random_at_clipped_distance():
                                                   + cfg.z_rand / cfg.range_max), rtol=1e-6)
     differ = zero.table != lf.table
     assert differ.any() and g.occupied[differ].all()
+    # interior_tolerance: that much of the depth is not counted, on occupied cells only
+    tol = LikelihoodField(g, sensor_cfg(interior_tolerance=0.1))
+    dt = np.where(g.occupied, np.maximum(g.surface_distance - 0.1, 0.0), g.surface_distance)
+    dt = np.minimum(dt.astype(np.float64), cfg.likelihood_max_dist)
+    np.testing.assert_allclose(tol.table, np.log(cfg.z_hit * stats.norm.pdf(dt, 0.0, cfg.sigma_hit)
+                                                 + cfg.z_rand / cfg.range_max), rtol=1e-6)
+    assert (tol.table != lf.table).any()
     # off-map: the value at likelihood_max_dist, which is also the table's minimum
     off = math.log(cfg.z_hit * stats.norm.pdf(1.0, 0.0, 0.2) + 0.1 / 10.0)
     assert lf.offmap == pytest.approx(off, rel=1e-6)
@@ -134,7 +141,8 @@ def test_returns_seen_through_a_thin_wall_into_furniture_do_not_favour_a_pose_to
     (d = 0 on every occupied cell) that pose scores as well as the true one, so odometry noise carries the
     cloud forward unchecked. With the depth inside obstacles the returns land 0.3 m deep (6 cells from either
     face, less one) and the forward pose loses by 3.9 nats a beam (0.3^2 / 2 / 0.1^2 = 4.5 less the z_rand
-    floor); the bound asks for 2, half of it, so it holds for any sigma_hit near 0.1 and fails on d = 0."""
+    floor); with the default interior_tolerance 0.05 m, by 2.7 (0.25 m). The bound asks for 2, so it fails on
+    d = 0; a pose 0.1 m forward (0.05 m deep, within the tolerance) loses only 0.12 a beam."""
     occ = np.zeros((80, 100), dtype=np.int8)
     occ[:, 60] = 100            # the wall at x = 3.0 (cell 60)
     occ[20:60, 61:73] = 100     # the desk behind it, x 3.05-3.65, y 1.0-3.0
@@ -146,9 +154,12 @@ def test_returns_seen_through_a_thin_wall_into_furniture_do_not_favour_a_pose_to
     e = beam_endpoints(ranges, ang, None, cfg, (0.0, 0.0, 0.0))
     poses = np.array([true, true + [0.3, 0.0, 0.0]]).T.copy()
     ll_depth = LikelihoodField(g, cfg).log_likelihood(poses, e)
+    ll_tol = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0,
+                                           interior_tolerance=0.05)).log_likelihood(poses, e)
     ll_zero = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0, interior="zero")).log_likelihood(poses, e)
     assert ll_zero[1] >= ll_zero[0] - 1e-6  # AMCL's field: the forward pose is no worse (the flaw)
     assert ll_depth[0] - ll_depth[1] > 2.0 * e.shape[1]  # depth: the true pose wins by > 2 nats a beam
+    assert ll_depth[0] - ll_depth[1] > ll_tol[0] - ll_tol[1] > 2.0 * e.shape[1]  # the tolerance: less, still > 2
 
 
 # ---------------------------------------------------------------- endpoints
