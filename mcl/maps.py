@@ -106,17 +106,24 @@ class OccupancyGrid:
         d *= self.resolution
         return d.astype(np.float32)
 
-    @cached_property
-    def surface_distance(self) -> np.ndarray:
-        """float32 (H, W): metres from each cell centre to the nearest obstacle *surface*.
+    def surface_distance(self, tolerance: float = 0.0) -> np.ndarray:
+        """float32 (H, W): metres from each cell centre to the nearest obstacle *surface* (cached per tolerance).
 
         ``distance`` off the obstacles; on an occupied cell its depth, the distance to the nearest
-        non-occupied cell centre less one cell (0 on a wall's face, 0.05 one cell in at 5 cm). A laser
+        non-occupied cell centre less one cell (0 on a wall's face, 0.05 one cell in at 5 cm) and less
+        ``tolerance`` metres (at least 0). A laser
         return lies on a surface, so an endpoint deep inside a desk or a thick wall (seen through a thin
         wall from the wrong side) is as unlikely as one that far out in free space: with depth 0 there
         (AMCL's field), a pose 0.3 m too far forward put the far wall's returns into the furniture behind
         it and scored *better* than the true pose (suites/synthetic.yaml large-02).
         """
+        cache = self.__dict__.setdefault("_surface_cache", {})
+        key = float(tolerance)
+        if key not in cache:
+            cache[key] = self._surface_distance(key / self.resolution)
+        return cache[key]
+
+    def _surface_distance(self, extra_cells: float) -> np.ndarray:
         from scipy import ndimage
 
         occ = self.occupied
@@ -141,7 +148,7 @@ class OccupancyGrid:
                 continue
             depth = ndimage.distance_transform_edt(mine)
             block = d[y0:y1, x0:x1]
-            block[mine] = np.maximum(depth[mine] - 1.0, 0.0) * self.resolution
+            block[mine] = np.maximum(depth[mine] - 1.0 - extra_cells, 0.0) * self.resolution
         return d
 
     # --- coordinates -----------------------------------------------------

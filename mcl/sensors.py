@@ -114,9 +114,7 @@ def field_distance(grid, cfg) -> np.ndarray:
     cfg = sensor_model_view(cfg, "likelihood_field")
     if getattr(cfg, "interior", "depth") == "zero":
         return grid.distance
-    tol = float(getattr(cfg, "interior_tolerance", 0.0))
-    d = grid.surface_distance
-    return np.where(grid.occupied, np.maximum(d - np.float32(tol), np.float32(0.0)), d) if tol > 0 else d
+    return grid.surface_distance(float(getattr(cfg, "interior_tolerance", 0.0)))
 
 
 SKIP_SUPPORT_PARTICLES = 500  # beam skipping estimates each beam's support from at most this many particles
@@ -125,7 +123,7 @@ SKIP_SUPPORT_PARTICLES = 500  # beam skipping estimates each beam's support from
 class LikelihoodField:
     """Likelihood field sensor model over an ``OccupancyGrid``.
 
-    ``grid`` needs ``surface_distance`` (or ``distance`` with ``interior: zero``;
+    ``grid`` needs ``surface_distance(tolerance)`` (or ``distance`` with ``interior: zero``;
     float (H, W), row 0 at the bottom, see ``field_distance``), ``origin`` (x0, y0)
     and ``resolution``. ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit, likelihood_max_dist, interior(_tolerance),
     range_max, exponent (a SensorConfig: its common keys and sensor.likelihood_field).

@@ -152,7 +152,7 @@ def test_surface_distance_is_depth_inside_obstacles_against_brute_force():
     occ[3:9, 2:9] = 100  # a 6 x 7 block in free space: depth up to 2 cells
     occ[10, 10] = -1
     grid = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
-    sd = grid.surface_distance
+    sd = grid.surface_distance()
     assert sd.dtype == np.float32 and sd.shape == occ.shape
     off = occ != 100
     np.testing.assert_array_equal(sd[off], grid.distance[off])
@@ -161,6 +161,11 @@ def test_surface_distance_is_depth_inside_obstacles_against_brute_force():
     brute = (np.min(np.hypot(ix[..., None] - nx, iy[..., None] - ny), axis=-1) - 1.0) * 0.1
     np.testing.assert_allclose(sd[~off], np.maximum(brute[~off], 0.0), rtol=1e-6, atol=1e-7)
     assert sd[5, 5] == pytest.approx(0.2) and sd[3, 5] == 0.0  # the block's centre 2 cells in; its face 0
+    # a tolerance takes that much off every depth (not below 0), and only on the obstacles
+    st = grid.surface_distance(0.15)
+    np.testing.assert_array_equal(st[off], sd[off])
+    np.testing.assert_allclose(st[~off], np.maximum(sd[~off] - 0.15, 0.0), atol=1e-6)
+    assert st[5, 5] == pytest.approx(0.05) and grid.surface_distance() is sd  # cached per tolerance
 
 
 def test_distance_without_obstacles_is_large():

@@ -51,7 +51,7 @@ def test_table_is_log_of_hit_plus_random_at_clipped_distance():
     cfg = sensor_cfg()
     lf = LikelihoodField(g, cfg)
     assert lf.table.dtype == np.float32 and lf.table.shape == g.occupancy.shape
-    d = np.minimum(g.surface_distance.astype(np.float64), cfg.likelihood_max_dist)
+    d = np.minimum(g.surface_distance().astype(np.float64), cfg.likelihood_max_dist)
     expected = np.log(cfg.z_hit * stats.norm.pdf(d, 0.0, cfg.sigma_hit) + cfg.z_rand / cfg.range_max)
     np.testing.assert_allclose(lf.table, expected, rtol=1e-6)
     # interior: zero is AMCL's field, 0 on every occupied cell: the two differ only inside the pillar
@@ -63,8 +63,8 @@ def test_table_is_log_of_hit_plus_random_at_clipped_distance():
     assert differ.any() and g.occupied[differ].all()
     # interior_tolerance: that much of the depth is not counted, on occupied cells only
     tol = LikelihoodField(g, sensor_cfg(interior_tolerance=0.1))
-    dt = np.where(g.occupied, np.maximum(g.surface_distance - 0.1, 0.0), g.surface_distance)
-    dt = np.minimum(dt.astype(np.float64), cfg.likelihood_max_dist)
+    sd = g.surface_distance().astype(np.float64)
+    dt = np.minimum(np.where(g.occupied, np.maximum(sd - 0.1, 0.0), sd), cfg.likelihood_max_dist)
     np.testing.assert_allclose(tol.table, np.log(cfg.z_hit * stats.norm.pdf(dt, 0.0, cfg.sigma_hit)
                                                  + cfg.z_rand / cfg.range_max), rtol=1e-6)
     assert (tol.table != lf.table).any()
