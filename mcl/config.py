@@ -128,9 +128,10 @@ class LikelihoodFieldConfig:
     z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
     sigma_hit: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
     likelihood_max_dist: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
-    # d inside an occupied region: its depth (metres to the nearest non-occupied cell, less one cell) or zero (AMCL)
-    interior: Literal["depth", "zero"] = "depth"
-    interior_tolerance: float = field(default=0.05, metadata=_rng(0.0))  # m of that depth not counted (drawn walls)
+    # d inside an occupied region: zero (AMCL's, the book's as printed) or its depth (to the nearest non-occupied
+    # cell, less one cell, less interior_tolerance metres: maps draw walls about a cell thicker than the surface)
+    interior: Literal["zero", "depth"] = "zero"
+    interior_tolerance: float = field(default=0.05, metadata=_rng(0.0))  # m
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -112,7 +112,7 @@ def field_distance(grid, cfg) -> np.ndarray:
     from mcl.config import sensor_model_view
 
     cfg = sensor_model_view(cfg, "likelihood_field")
-    if getattr(cfg, "interior", "depth") == "zero":
+    if getattr(cfg, "interior", "zero") == "zero":
         return grid.distance
     return grid.surface_distance(float(getattr(cfg, "interior_tolerance", 0.0)))
 

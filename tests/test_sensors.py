@@ -49,25 +49,25 @@ def numpy_loglik(grid, table, offmap, exponent, particles, endpoints):
 def test_table_is_log_of_hit_plus_random_at_clipped_distance():
     g = box_grid()
     cfg = sensor_cfg()
-    lf = LikelihoodField(g, cfg)
+    lf = LikelihoodField(g, cfg)  # interior: zero (the default, AMCL's field): d = 0 on every occupied cell
     assert lf.table.dtype == np.float32 and lf.table.shape == g.occupancy.shape
-    d = np.minimum(g.surface_distance().astype(np.float64), cfg.likelihood_max_dist)
+    d = np.minimum(g.distance.astype(np.float64), cfg.likelihood_max_dist)
     expected = np.log(cfg.z_hit * stats.norm.pdf(d, 0.0, cfg.sigma_hit) + cfg.z_rand / cfg.range_max)
     np.testing.assert_allclose(lf.table, expected, rtol=1e-6)
-    # interior: zero is AMCL's field, 0 on every occupied cell: the two differ only inside the pillar
-    zero = LikelihoodField(g, sensor_cfg(interior="zero"))
-    d0 = np.minimum(g.distance.astype(np.float64), cfg.likelihood_max_dist)
-    np.testing.assert_allclose(zero.table, np.log(cfg.z_hit * stats.norm.pdf(d0, 0.0, cfg.sigma_hit)
+    # interior: depth, d = the depth on occupied cells: the two differ only inside the pillar
+    deep = LikelihoodField(g, sensor_cfg(interior="depth", interior_tolerance=0.0))
+    dd = np.minimum(g.surface_distance().astype(np.float64), cfg.likelihood_max_dist)
+    np.testing.assert_allclose(deep.table, np.log(cfg.z_hit * stats.norm.pdf(dd, 0.0, cfg.sigma_hit)
                                                   + cfg.z_rand / cfg.range_max), rtol=1e-6)
-    differ = zero.table != lf.table
+    differ = deep.table != lf.table
     assert differ.any() and g.occupied[differ].all()
     # interior_tolerance: that much of the depth is not counted, on occupied cells only
-    tol = LikelihoodField(g, sensor_cfg(interior_tolerance=0.1))
+    tol = LikelihoodField(g, sensor_cfg(interior="depth", interior_tolerance=0.1))
     sd = g.surface_distance().astype(np.float64)
     dt = np.minimum(np.where(g.occupied, np.maximum(sd - 0.1, 0.0), sd), cfg.likelihood_max_dist)
     np.testing.assert_allclose(tol.table, np.log(cfg.z_hit * stats.norm.pdf(dt, 0.0, cfg.sigma_hit)
                                                  + cfg.z_rand / cfg.range_max), rtol=1e-6)
-    assert (tol.table != lf.table).any()
+    assert (tol.table != deep.table).any() and (tol.table != lf.table).any()
     # off-map: the value at likelihood_max_dist, which is also the table's minimum
     off = math.log(cfg.z_hit * stats.norm.pdf(1.0, 0.0, 0.2) + 0.1 / 10.0)
     assert lf.offmap == pytest.approx(off, rel=1e-6)
@@ -141,20 +141,20 @@ def test_returns_seen_through_a_thin_wall_into_furniture_do_not_favour_a_pose_to
     (d = 0 on every occupied cell) that pose scores as well as the true one, so odometry noise carries the
     cloud forward unchecked. With the depth inside obstacles the returns land 0.3 m deep (6 cells from either
     face, less one) and the forward pose loses by 3.9 nats a beam (0.3^2 / 2 / 0.1^2 = 4.5 less the z_rand
-    floor); with the default interior_tolerance 0.05 m, by 2.7 (0.25 m). The bound asks for 2, so it fails on
+    floor); with interior_tolerance 0.05 m (the config's), by 2.7 (0.25 m). The bound asks for 2, so it fails on
     d = 0; a pose 0.1 m forward (0.05 m deep, within the tolerance) loses only 0.12 a beam."""
     occ = np.zeros((80, 100), dtype=np.int8)
     occ[:, 60] = 100            # the wall at x = 3.0 (cell 60)
     occ[20:60, 61:73] = 100     # the desk behind it, x 3.05-3.65, y 1.0-3.0
     g = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
-    cfg = sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0)
+    cfg = sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0, interior="depth")
     ang = np.linspace(-0.25, 0.25, 11)  # beams at the wall in front of the desk
     true = np.array([0.0, 2.0, 0.0])
     ranges = (3.0 + 0.025) / np.cos(ang)  # to the wall cell's centre
     e = beam_endpoints(ranges, ang, None, cfg, (0.0, 0.0, 0.0))
     poses = np.array([true, true + [0.3, 0.0, 0.0]]).T.copy()
     ll_depth = LikelihoodField(g, cfg).log_likelihood(poses, e)
-    ll_tol = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0,
+    ll_tol = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0, interior="depth",
                                            interior_tolerance=0.05)).log_likelihood(poses, e)
     ll_zero = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0, interior="zero")).log_likelihood(poses, e)
     assert ll_zero[1] >= ll_zero[0] - 1e-6  # AMCL's field: the forward pose is no worse (the flaw)
