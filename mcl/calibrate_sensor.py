@@ -236,8 +236,8 @@ def collect(cfg, *, model: str):
     from mcl.kernels.raycast import cast_rays
     from mcl.maps import load_map
     from mcl.runner import Truth, _choose_scans
-    from mcl.trajectory import read_tum
     from mcl.sensors import field_distance
+    from mcl.trajectory import read_tum
 
     from mcl.errors import ConfigError
 
@@ -293,7 +293,7 @@ def collect(cfg, *, model: str):
     dmax = float(s.likelihood_field.likelihood_max_dist)
     inside = (ix >= 0) & (ix < grid.width) & (iy >= 0) & (iy < grid.height)
     d = np.full(ex.size, dmax)
-    d[inside] = field_distance(grid, s)[iy[inside], ix[inside]]  # the d the model scores (interior: depth or zero)
+    d[inside] = field_distance(grid, s)[iy[inside], ix[inside]]  # the d the model scores (interior: zero or depth)
     return np.minimum(d, dmax), None, None, used
 
 

@@ -111,11 +111,11 @@ class OccupancyGrid:
 
         ``distance`` off the obstacles; on an occupied cell its depth, the distance to the nearest
         non-occupied cell centre less one cell (0 on a wall's face, 0.05 one cell in at 5 cm) and less
-        ``tolerance`` metres (at least 0). A laser
-        return lies on a surface, so an endpoint deep inside a desk or a thick wall (seen through a thin
-        wall from the wrong side) is as unlikely as one that far out in free space: with depth 0 there
-        (AMCL's field), a pose 0.3 m too far forward put the far wall's returns into the furniture behind
-        it and scored *better* than the true pose (suites/synthetic.yaml large-02).
+        ``tolerance`` metres (at least 0). A laser return lies on a surface, so an endpoint deep inside a
+        desk or a thick wall (seen through a thin wall from the wrong side) is as unlikely as one that far
+        out in free space: with depth 0 there (``distance``, AMCL's field), a pose 0.3 m too far forward put
+        the far wall's returns into the furniture behind it and scored *better* than the true pose
+        (suites/synthetic.yaml large-02). Used by the likelihood field with ``interior: depth``.
         """
         cache = self.__dict__.setdefault("_surface_cache", {})
         key = float(tolerance)

@@ -6,11 +6,10 @@ A scan is turned once into beam endpoints in the robot frame
     log p(z | x, m) = exponent * sum_k log(z_hit * N(d_k; 0, sigma_hit^2) + z_rand / range_max)
 
 where d_k = min(distance from endpoint k (seen from pose x) to the nearest
-obstacle surface, likelihood_max_dist): off the obstacles the distance to the
-nearest occupied cell centre, on an occupied cell its depth (to the nearest
-non-occupied cell, less one cell and less ``interior_tolerance``; ``interior:
-zero`` gives AMCL's 0 there, the book's field as printed). The per-cell term is tabulated
-once per map as float32, so scoring is one rotation per particle and one
+occupied cell centre, likelihood_max_dist): 0 on an occupied cell (``interior:
+zero``, the default, AMCL's field and the book's as printed) or, with
+``interior: depth``, the cell's depth (``field_distance``). The per-cell term
+is tabulated once per map as float32, so scoring is one rotation per particle and one
 table gather per beam (``mcl.kernels.likelihood``).
 
 * Endpoints that fall off the map score the value at d = likelihood_max_dist.
@@ -105,10 +104,10 @@ def point_log_likelihood(d, cfg) -> np.ndarray:
 
 
 def field_distance(grid, cfg) -> np.ndarray:
-    """The d the likelihood field scores, per cell: ``grid.surface_distance`` (to the nearest obstacle surface,
-    the depth inside an obstacle) less ``interior_tolerance`` on the occupied cells (a map draws its walls a
-    cell or so thicker than the surface the laser sees), or, with ``interior: zero``, ``grid.distance`` (0 on
-    every occupied cell, AMCL's field and the book's as printed). ``cfg``: a SensorConfig or a flat namespace."""
+    """The d the likelihood field scores, per cell: ``grid.distance`` (``interior: zero``: 0 on every occupied
+    cell, AMCL's field and the book's as printed) or ``grid.surface_distance(interior_tolerance)`` (``interior:
+    depth``: on an occupied cell its depth less the tolerance, as a map draws its walls a cell or so thicker than
+    the surface the laser sees). ``cfg``: a SensorConfig or a flat namespace."""
     from mcl.config import sensor_model_view
 
     cfg = sensor_model_view(cfg, "likelihood_field")
@@ -123,10 +122,11 @@ SKIP_SUPPORT_PARTICLES = 500  # beam skipping estimates each beam's support from
 class LikelihoodField:
     """Likelihood field sensor model over an ``OccupancyGrid``.
 
-    ``grid`` needs ``surface_distance(tolerance)`` (or ``distance`` with ``interior: zero``;
-    float (H, W), row 0 at the bottom, see ``field_distance``), ``origin`` (x0, y0)
-    and ``resolution``. ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit, likelihood_max_dist, interior(_tolerance),
-    range_max, exponent (a SensorConfig: its common keys and sensor.likelihood_field).
+    ``grid`` needs ``distance`` (or ``surface_distance(tolerance)`` with ``interior:
+    depth``; float (H, W), row 0 at the bottom, see ``field_distance``), ``origin``
+    (x0, y0) and ``resolution``. ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit,
+    likelihood_max_dist, interior, interior_tolerance, range_max, exponent (a
+    SensorConfig: its common keys and sensor.likelihood_field).
     """
 
     def __init__(self, grid, cfg):

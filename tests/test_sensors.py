@@ -156,7 +156,8 @@ def test_returns_seen_through_a_thin_wall_into_furniture_do_not_favour_a_pose_to
     ll_depth = LikelihoodField(g, cfg).log_likelihood(poses, e)
     ll_tol = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0, interior="depth",
                                            interior_tolerance=0.05)).log_likelihood(poses, e)
-    ll_zero = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0, interior="zero")).log_likelihood(poses, e)
+    ll_zero = LikelihoodField(g, sensor_cfg(sigma_hit=0.1, likelihood_max_dist=2.0,
+                                            interior="zero")).log_likelihood(poses, e)
     assert ll_zero[1] >= ll_zero[0] - 1e-6  # AMCL's field: the forward pose is no worse (the flaw)
     assert ll_depth[0] - ll_depth[1] > 2.0 * e.shape[1]  # depth: the true pose wins by > 2 nats a beam
     assert ll_depth[0] - ll_depth[1] > ll_tol[0] - ll_tol[1] > 2.0 * e.shape[1]  # the tolerance: less, still > 2
