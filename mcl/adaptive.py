@@ -1,4 +1,4 @@
-"""Adaptive particle counts (KLD sampling) and recovery (augmented MCL).
+"""Adaptive particle counts (KLD sampling), recovery (augmented MCL, lost recovery) and the global search.
 
 KLD sampling (Fox 2003; Prob. Rob. Table 8.4)
 ---------------------------------------------
@@ -393,6 +393,51 @@ class AugmentedMCL:
     local_std = None
 
 
+SETTLED_WEIGHT = 0.9  # a global search has settled once the heaviest cluster holds this much of the weight
+
+
+class GlobalSearch:
+    """A global search under way: from a global start or a re-seed (``start``) until one hypothesis is left.
+
+    The filter owns one and feeds it every update (``observe``); the search ends in two steps, each with its own
+    test, because the two things it suspends answer different questions:
+
+    - ``tempering``, the laser log-likelihood times ``filter.search_exponent``, lasts until the heaviest cluster
+      holds ``settled_weight`` of the weight: a scan must not pick among hypotheses that are still competing;
+    - ``holding``, lost recovery neither injecting nor counting lost updates, lasts until then *or* until the
+      scan fits the map at the estimate (not lost), whichever is first: a filter that fits needs no injection,
+      and one that is still lost once a single cluster is left is lost in the ordinary sense.
+
+    ``since_end`` counts the updates since ``holding`` last ended (None before the first search): the probation
+    of ``LostRecovery``.
+    """
+
+    def __init__(self, settled_weight: float = SETTLED_WEIGHT):
+        self.settled_weight = float(settled_weight)
+        self.reset()
+
+    def reset(self) -> None:
+        """No search, none before (tracking from a known pose)."""
+        self.tempering = False
+        self.holding = False
+        self.since_end = None
+
+    def start(self) -> None:
+        self.tempering = True
+        self.holding = True
+
+    def observe(self, lost: bool, cluster_weight: float = 1.0) -> None:
+        """This update's lost belief and heaviest-cluster weight (after the estimate)."""
+        settled = cluster_weight >= self.settled_weight
+        if self.tempering and settled:
+            self.tempering = False
+        if self.holding and (not lost or settled):
+            self.holding = False
+            self.since_end = 0
+        if not self.holding and self.since_end is not None:
+            self.since_end += 1
+
+
 class LostRecovery:
     """Recovery only when lost, local before global.
 
@@ -417,38 +462,33 @@ class LostRecovery:
 
     name = "lost"
 
-    def __init__(self, fraction: float, local_std, global_after: int, lost_after: int, settled_weight: float = 0.9,
-                 reseed: bool = False, probation: int = 0):
+    def __init__(self, fraction: float, local_std, global_after: int, lost_after: int,
+                 reseed: bool = False, probation: int = 0, search: GlobalSearch | None = None):
         self.reseed = bool(reseed)
         self.probation = int(probation)
-        self.since_search = None  # updates since the last global search ended (None: no search yet)
+        # the filter's search (read only here); a policy used on its own gets one that never starts
+        self.search = search if search is not None else GlobalSearch()
         self.fraction = float(fraction)
         self.base_std = np.asarray(local_std, dtype=np.float64)
         self.global_after = int(global_after)
         self.lost_after = max(int(lost_after), 1)
-        self.settled_weight = float(settled_weight)
         self.lost_updates = 0  # consecutive updates the filter has believed it is lost
-        self.searching = False  # a global search under way: the particles are the search, inject nothing
 
     def start_search(self) -> None:
-        """Global localization starts: the set is already spread over the map, so nothing is injected (and
-        nothing forces a resample) until the search has settled on one hypothesis (the heaviest cluster holds
-        ``settled_weight`` of the weight) or the filter is no longer lost. Injecting around the estimate of a
-        still multi-modal cloud feeds whichever mode leads by chance and ends the search early."""
-        self.searching = True
+        """Global localization starts (the filter has started ``search``): the set is already spread over the
+        map, so nothing is injected (and nothing forces a resample) while ``search.holding``. Injecting around
+        the estimate of a still multi-modal cloud feeds whichever mode leads by chance and ends the search
+        early. The lost count starts again."""
         self.lost_updates = 0
 
     def observe_likelihood(self, logw_prior, loglik_per_beam, injected) -> None:
         pass
 
     def observe_lost(self, lost: bool, cluster_weight: float = 1.0) -> None:
-        if self.searching and (not lost or cluster_weight >= self.settled_weight):
-            self.searching = False
-            self.since_search = 0
-        if self.searching:
+        """This update's lost belief, after the filter's ``search`` has seen it (``cluster_weight`` is the
+        search's business)."""
+        if self.search.holding:
             return
-        if self.since_search is not None:
-            self.since_search += 1
         self.lost_updates = self.lost_updates + 1 if lost else 0
 
     @property
@@ -457,7 +497,8 @@ class LostRecovery:
         few scans, and on a big map of look-alike places a wrong one often fits them (measured on the large
         synthetic worlds: settled 33 m off after 2 s, then lost and found again for 20 s without ever staying
         lost for ``global_after`` updates). A lost call then re-seeds at once."""
-        return self.since_search is not None and self.since_search <= self.probation
+        since = self.search.since_end
+        return since is not None and since <= self.probation
 
     @property
     def inject_probability(self) -> float:
@@ -467,7 +508,7 @@ class LostRecovery:
     def reseed_due(self) -> bool:
         """With ``reseed``: lost for ``global_after`` updates (the local spread did not find the pose), so the
         next resample adds a whole global set and starts a search (``start_search``)."""
-        if not self.reseed or self.searching or not self.lost_updates:
+        if not self.reseed or self.search.holding or not self.lost_updates:
             return False
         return self.lost_updates >= self.global_after or self.on_probation
 
@@ -483,9 +524,10 @@ class LostRecovery:
         return self.base_std * 2.0 ** min(k, 3)
 
 
-def make_recovery(fc, global_start: bool, lost_after: int = 3):
+def make_recovery(fc, global_start: bool, lost_after: int = 3, search: GlobalSearch | None = None):
     """The recovery policy ``filter.recovery`` names (None: no recovery) for a run that starts globally or not;
-    ``lost_after`` is the quality section's (the local spread doubles at that pace)."""
+    ``lost_after`` is the quality section's (the local spread doubles at that pace); ``search`` the filter's
+    global search, which lost recovery reads."""
     mode = fc.recovery
     if mode == "auto":
         mode = "augmented" if global_start else False
@@ -493,5 +535,5 @@ def make_recovery(fc, global_start: bool, lost_after: int = 3):
         return AugmentedMCL(fc.recovery_alpha_slow, fc.recovery_alpha_fast)
     if mode == "lost":
         return LostRecovery(fc.recovery_fraction, fc.recovery_local_std, fc.recovery_global_after, lost_after,
-                            reseed=fc.recovery_reseed, probation=fc.recovery_probation)
+                            reseed=fc.recovery_reseed, probation=fc.recovery_probation, search=search)
     return None

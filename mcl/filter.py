@@ -12,8 +12,9 @@
 The policies are small objects the loop calls, each in its own module:
 ``InputGuard`` (mcl.degenerate: odometry jumps, time running backwards, NaN
 ranges, empty scans), ``KLDSampling`` and the recovery policies
-``LostRecovery`` / ``AugmentedMCL`` (mcl.adaptive), ``BeamSkipping``
-(mcl.sensors) and ``ScanQuality`` (mcl.quality). The filter owns the one
+``LostRecovery`` / ``AugmentedMCL`` with the ``GlobalSearch`` state they
+read (mcl.adaptive), ``BeamSkipping`` (mcl.sensors) and ``ScanQuality``
+(mcl.quality). The filter owns the one
 random generator, seeded from the config, so a seed gives the same
 trajectory whatever the numba thread count. It does no I/O.
 
@@ -36,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import KLDSampling, draw_injected, make_recovery, measurement_count
+from mcl.adaptive import GlobalSearch, KLDSampling, draw_injected, make_recovery, measurement_count
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard
@@ -99,7 +100,6 @@ class StepInfo:
         return self.fit.match if self.fit is not None else math.nan
 
 
-_SETTLED_WEIGHT = 0.9  # a global search has settled once the heaviest cluster holds this much of the weight
 _MAX_OVERSAMPLE = 20  # global_density: at most this many candidates per fresh pose (2 million for 100,000)
 
 
@@ -118,8 +118,8 @@ class ParticleFilter:
         # the policies
         self.guard = InputGuard(fc.max_odom_step)
         self.kld = KLDSampling(fc, grid) if fc.kld else None
-        self.recovery = make_recovery(fc, True, cfg.quality.lost_after)  # set again by init_gaussian / init_global
-        self.searching = False  # a global search under way (init_global until the heaviest cluster holds the weight)
+        self.search = GlobalSearch()  # a global start or re-seed until one hypothesis is left
+        self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
@@ -185,8 +185,8 @@ class ParticleFilter:
         p += np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
-        self.recovery = make_recovery(self.cfg.filter, False, self.cfg.quality.lost_after)
-        self.searching = False
+        self.recovery = self._make_recovery(False)
+        self.search.reset()
         self.quality.reset(lost=False)
 
     def kidnap(self, mean, std) -> None:
@@ -208,8 +208,8 @@ class ParticleFilter:
         p = root @ self.rng.standard_normal((3, n)) + np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
-        self.recovery = make_recovery(self.cfg.filter, False, self.cfg.quality.lost_after)
-        self.searching = False
+        self.recovery = self._make_recovery(False)
+        self.search.reset()
         self.quality.reset(lost=False)
 
     def init_global(self) -> None:
@@ -220,11 +220,14 @@ class ParticleFilter:
 
     def _start_global(self) -> None:
         if self.cfg.filter.recovery == "auto" and self.recovery is None:
-            self.recovery = make_recovery(self.cfg.filter, True, self.cfg.quality.lost_after)
+            self.recovery = self._make_recovery(True)
+        self.search.start()
         if self.recovery is not None and hasattr(self.recovery, "start_search"):
             self.recovery.start_search()
-        self.searching = True
         self.quality.reset(lost=True)
+
+    def _make_recovery(self, global_start: bool):
+        return make_recovery(self.cfg.filter, global_start, self.cfg.quality.lost_after, search=self.search)
 
     def sample_uniform(self, n: int, rng: np.random.Generator, observation=None) -> np.ndarray:
         """(3, n) poses uniform over free space, with the robot-radius clearance when map rejection is on."""
@@ -399,7 +402,7 @@ class ParticleFilter:
         ``lost_exponent`` while lost recovery spreads poses around the estimate (one scan must not hand the whole
         set to a single injected pose: it must out-score the tracked cloud over several updates), else 1."""
         fc = self.cfg.filter
-        if self.searching:
+        if self.search.tempering:
             return fc.search_exponent
         if getattr(self.recovery, "lost_updates", 0):
             return fc.lost_exponent
@@ -500,8 +503,7 @@ class ParticleFilter:
             fit = self.quality.fit(self.last_estimate.mean, self.sensor.endpoints(obs), self._laser_pose[:2])
         info.fit = fit
         info.lost = self.quality.update(fit)
-        if self.searching and info.cluster_weight >= _SETTLED_WEIGHT:
-            self.searching = False
+        self.search.observe(info.lost, info.cluster_weight)
         if self.recovery is not None:
             self.recovery.observe_lost(info.lost, info.cluster_weight)
 
@@ -564,8 +566,8 @@ class ParticleFilter:
         info.resampled = True
         info.injected = m
         info.reseeded = True
+        self.search.start()
         self.recovery.start_search()
-        self.searching = True
 
     def _injection_sampler(self):
         """sampler(n) -> (3, n): the poses recovery injects now. The policy's ``global_share`` of them (a binomial

@@ -78,10 +78,42 @@ def test_default_recovery_does_not_inject_while_the_track_is_correct_on_repeated
     assert a["injected_particles"] > 0
 
 
-def _lost_recovery(reseed: bool):
-    from mcl.adaptive import LostRecovery
+def _lost_recovery(reseed: bool, probation: int = 0):
+    from mcl.adaptive import GlobalSearch, LostRecovery
 
-    return LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=reseed)
+    return LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=reseed, probation=probation,
+                        search=GlobalSearch())
+
+
+def _start(r) -> None:
+    """A global search starts, as ParticleFilter._start_global does it."""
+    r.search.start()
+    r.start_search()
+
+
+def _observe(r, lost: bool, cluster_weight: float = 1.0) -> None:
+    """One update's lost belief, as ParticleFilter.assess passes it on: to the search, then to the policy."""
+    r.search.observe(lost, cluster_weight)
+    r.observe_lost(lost, cluster_weight)
+
+
+def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_settled_or_fitting():
+    from mcl.adaptive import GlobalSearch
+
+    s = GlobalSearch()
+    assert not s.tempering and not s.holding and s.since_end is None
+    s.start()
+    s.observe(True, 0.5)  # lost, several hypotheses: both go on
+    assert s.tempering and s.holding and s.since_end is None
+    s.observe(False, 0.5)  # the scan fits at the estimate: injections may resume, the laser stays tempered
+    assert s.tempering and not s.holding and s.since_end == 1
+    s.observe(True, 0.9)  # one cluster holds 90 % of the weight: settled
+    assert not s.tempering and not s.holding and s.since_end == 2
+    s.start()
+    s.observe(True, 0.95)  # settled while lost: both end at once
+    assert not s.tempering and not s.holding and s.since_end == 1
+    s.reset()
+    assert s.since_end is None
 
 
 def test_lost_recovery_reseeds_once_the_local_spread_failed():
@@ -98,17 +130,17 @@ def test_lost_recovery_reseeds_once_the_local_spread_failed():
         assert r.inject_probability == 0.1, k
     assert r.reseed_due
     # ... which starts a search: nothing injected, no second re-seed, while the cloud is multi-modal and lost
-    r.start_search()
+    _start(r)
     for _ in range(20):
-        r.observe_lost(True, cluster_weight=0.5)
+        _observe(r, True, cluster_weight=0.5)
         assert r.inject_probability == 0.0 and not r.reseed_due
     # the search ends when one cluster holds 90 % of the weight; lost still, that update is the first of a new count
-    r.observe_lost(True, cluster_weight=0.95)
-    assert not r.searching and r.lost_updates == 1 and r.inject_probability == 0.1 and not r.reseed_due
+    _observe(r, True, cluster_weight=0.95)
+    assert not r.search.holding and r.lost_updates == 1 and r.inject_probability == 0.1 and not r.reseed_due
     # or when the filter is no longer lost
-    r.start_search()
-    r.observe_lost(False, cluster_weight=0.2)
-    assert not r.searching and r.lost_updates == 0
+    _start(r)
+    _observe(r, False, cluster_weight=0.2)
+    assert not r.search.holding and r.lost_updates == 0
 
 
 def _filter_on_a_box(*sets):
@@ -144,7 +176,8 @@ def test_reseed_adds_a_whole_global_set_with_the_old_cloud_keeping_its_share_of_
     assert np.abs(pf.particles[:2, old] - 5.0).max() < 1.0
     new = pf.particles[:, ~old]
     assert new[0].min() < 2.0 and new[0].max() > 8.0 and new[1].min() < 2.0 and new[1].max() > 8.0
-    assert pf.searching and pf.recovery.searching and not pf.recovery.reseed_due
+    assert pf.search.tempering and pf.search.holding and pf.recovery.search is pf.search
+    assert not pf.recovery.reseed_due
     # without reseed the same lost filter injects its 10 % (half uniform) and keeps N
     pf = _filter_on_a_box("filter.recovery_reseed=false", "filter.kld=false")
     pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1])
@@ -152,7 +185,7 @@ def test_reseed_adds_a_whole_global_set_with_the_old_cloud_keeping_its_share_of_
         pf.recovery.observe_lost(True)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
-    assert pf.n == 4000 and 300 <= info.injected <= 500 and not pf.searching
+    assert pf.n == 4000 and 300 <= info.injected <= 500 and not pf.search.tempering
 
 
 
@@ -166,7 +199,7 @@ def test_a_second_reseed_draws_the_grown_set_back_down_so_the_set_stays_within_t
     pf = _filter_on_a_box("filter.recovery_reseed=true", "filter.kld=false")
     pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1])
     for _ in range(3):
-        pf.recovery.searching = False
+        pf.search.holding = False
         for _ in range(10):
             pf.recovery.observe_lost(True)
         info = StepInfo(particles=pf.n, ess=float(pf.n))
@@ -177,26 +210,24 @@ def test_a_second_reseed_draws_the_grown_set_back_down_so_the_set_stays_within_t
 
 
 def test_probation_reseeds_at_the_first_lost_call_after_a_search_and_only_then():
-    from mcl.adaptive import LostRecovery
-
-    r = LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=True, probation=5)
-    r.observe_lost(True)  # a track that never searched: the usual 10 lost updates
+    r = _lost_recovery(True, probation=5)
+    _observe(r, True)  # a track that never searched: the usual 10 lost updates
     assert not r.reseed_due and not r.on_probation
-    r.start_search()
-    r.observe_lost(True, cluster_weight=0.95)  # settles, and is lost at once: re-seed now
-    assert not r.searching and r.on_probation and r.reseed_due
-    r.start_search()
-    r.observe_lost(False)  # settles and fits ...
+    _start(r)
+    _observe(r, True, cluster_weight=0.95)  # settles, and is lost at once: re-seed now
+    assert not r.search.holding and r.on_probation and r.reseed_due
+    _start(r)
+    _observe(r, False)  # settles and fits ...
     for _ in range(5):
-        r.observe_lost(False)
-    r.observe_lost(True)  # ... lost 6 updates after the search: probation is over, the usual count again
+        _observe(r, False)
+    _observe(r, True)  # ... lost 6 updates after the search: probation is over, the usual count again
     assert not r.on_probation and not r.reseed_due
     for _ in range(9):
-        r.observe_lost(True)
+        _observe(r, True)
     assert r.reseed_due
-    off = LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=True, probation=0)
-    off.start_search()
-    off.observe_lost(True, cluster_weight=0.95)
+    off = _lost_recovery(True, probation=0)
+    _start(off)
+    _observe(off, True, cluster_weight=0.95)
     assert not off.reseed_due  # probation 0: off (the update that ends the search is the 0th)
 
 
@@ -238,11 +269,11 @@ def test_the_laser_likelihood_is_tempered_only_while_a_global_search_is_under_wa
     for e in (1.0, 0.2):
         pf = _filter_on_a_box(f"filter.search_exponent={e}", "filter.global_density=0")
         pf.init_global()
-        assert pf.searching
+        assert pf.search.tempering
         obs = pf.prepare(scan, np.zeros(3))
         gains[e] = _correction_gain(pf, obs)
         # settled (a cluster holds 90 % of the weight): the full likelihood again
-        pf.searching = False
+        pf.search.tempering = False
         gains[e, "settled"] = _correction_gain(pf, obs)
     np.testing.assert_allclose(gains[0.2], 0.2 * gains[1.0], rtol=1e-12)
     np.testing.assert_allclose(gains[0.2, "settled"], gains[1.0], rtol=1e-12)
