@@ -128,10 +128,13 @@ class LikelihoodFieldConfig:
     z_rand: float = field(default=0.05, metadata=_rng(0.0, 1.0))
     sigma_hit: float = field(default=0.1, metadata=_rng(0.0, lo_open=True))  # m
     likelihood_max_dist: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
-    # d inside an occupied region: zero (AMCL's, the book's as printed) or its depth (to the nearest non-occupied
-    # cell, less one cell, less interior_tolerance metres: maps draw walls about a cell thicker than the surface)
-    interior: Literal["zero", "depth"] = "zero"
+    # d inside an occupied region: its depth (to the nearest non-occupied cell, less one cell, less
+    # interior_tolerance metres: maps draw walls about a cell thicker than the surface) or zero (AMCL's, the
+    # book's as printed)
+    interior: Literal["zero", "depth"] = "depth"
     interior_tolerance: float = field(default=0.05, metadata=_rng(0.0))  # m
+    # the same choice while the laser is tempered (a global search, or lost recovery spreading poses)
+    search_interior: Literal["zero", "depth"] = "zero"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -389,7 +389,8 @@ class ParticleFilter:
     def _laser_loglik(self, particles: np.ndarray, observation) -> np.ndarray:
         """(N,) log p(z | x, m) of the laser at ``particles``, tempered by ``_laser_exponent``; a NaN or +inf
         counts as weight zero (-inf)."""
-        loglik = self.sensor.log_likelihood(particles, observation)
+        searching = self._laser_searching()
+        loglik = self.sensor.log_likelihood(particles, observation, searching=searching)
         exponent = self._laser_exponent()
         if exponent != 1.0:
             loglik *= exponent  # tempered while a global search is under way, or while lost
@@ -407,6 +408,11 @@ class ParticleFilter:
         if getattr(self.recovery, "lost_updates", 0):
             return fc.lost_exponent
         return 1.0
+
+    def _laser_searching(self) -> bool:
+        """A global search is under way or lost recovery spreads poses (the updates ``_laser_exponent`` tempers):
+        the likelihood field then scores with ``search_interior``'s field."""
+        return self.search.tempering or bool(getattr(self.recovery, "lost_updates", 0))
 
     def _oversample_fresh(self, observation, loglik: np.ndarray) -> np.ndarray:
         """The uniform poses of a global start or re-seed, drawn better on a big map: when they are sparser than

@@ -6,9 +6,10 @@ A scan is turned once into beam endpoints in the robot frame
     log p(z | x, m) = exponent * sum_k log(z_hit * N(d_k; 0, sigma_hit^2) + z_rand / range_max)
 
 where d_k = min(distance from endpoint k (seen from pose x) to the nearest
-occupied cell centre, likelihood_max_dist): 0 on an occupied cell (``interior:
-zero``, the default, AMCL's field and the book's as printed) or, with
-``interior: depth``, the cell's depth (``field_distance``). The per-cell term
+occupied cell centre, likelihood_max_dist). On an occupied cell d is the
+cell's depth (``interior: depth``, the default, ``field_distance``) or 0
+(``interior: zero``, AMCL's field and the book's as printed); while the filter
+searches or is lost, ``search_interior`` chooses (default zero). The per-cell term
 is tabulated once per map as float32, so scoring is one rotation per particle and one
 table gather per beam (``mcl.kernels.likelihood``).
 
@@ -103,15 +104,16 @@ def point_log_likelihood(d, cfg) -> np.ndarray:
         return np.log(float(cfg.z_hit) * gauss + float(cfg.z_rand) / float(cfg.range_max))
 
 
-def field_distance(grid, cfg) -> np.ndarray:
+def field_distance(grid, cfg, interior: str | None = None) -> np.ndarray:
     """The d the likelihood field scores, per cell: ``grid.distance`` (``interior: zero``: 0 on every occupied
     cell, AMCL's field and the book's as printed) or ``grid.surface_distance(interior_tolerance)`` (``interior:
     depth``: on an occupied cell its depth less the tolerance, as a map draws its walls a cell or so thicker than
-    the surface the laser sees). ``cfg``: a SensorConfig or a flat namespace."""
+    the surface the laser sees). ``cfg``: a SensorConfig or a flat namespace; ``interior`` overrides its
+    ``interior`` (the search field passes ``search_interior``)."""
     from mcl.config import sensor_model_view
 
     cfg = sensor_model_view(cfg, "likelihood_field")
-    if getattr(cfg, "interior", "zero") == "zero":
+    if (interior or getattr(cfg, "interior", "zero")) == "zero":
         return grid.distance
     return grid.surface_distance(float(getattr(cfg, "interior_tolerance", 0.0)))
 
@@ -125,8 +127,12 @@ class LikelihoodField:
     ``grid`` needs ``distance`` (or ``surface_distance(tolerance)`` with ``interior:
     depth``; float (H, W), row 0 at the bottom, see ``field_distance``), ``origin``
     (x0, y0) and ``resolution``. ``cfg`` is read duck-typed: z_hit, z_rand, sigma_hit,
-    likelihood_max_dist, interior, interior_tolerance, range_max, exponent (a
-    SensorConfig: its common keys and sensor.likelihood_field).
+    likelihood_max_dist, interior, interior_tolerance, search_interior, range_max,
+    exponent (a SensorConfig: its common keys and sensor.likelihood_field).
+
+    Two tables when ``search_interior`` differs from ``interior``: ``log_likelihood(...,
+    searching=True)`` reads the second, made on first use (a track that is never
+    lost never builds it).
     """
 
     def __init__(self, grid, cfg):
@@ -134,14 +140,15 @@ class LikelihoodField:
 
         cfg = sensor_model_view(cfg, "likelihood_field")
         self.cfg = cfg
-        self.table = np.ascontiguousarray(point_log_likelihood(field_distance(grid, cfg), cfg), dtype=np.float32)
+        self.table = self._make_table(grid, None)
+        self._search_table = None  # the search_interior table, when it differs (made on first use)
         # off-map endpoints: the value at likelihood_max_dist (float32 like the table)
         self.offmap = float(np.float32(point_log_likelihood(float(cfg.likelihood_max_dist), cfg)))
         self.origin = (float(grid.origin[0]), float(grid.origin[1]))
         self.resolution = float(grid.resolution)
         self.inv_res = 1.0 / self.resolution
         self.exponent = float(getattr(cfg, "exponent", 1.0))
-        self._grid = grid  # beam skipping: float32 distances and the occupied mask, made on first use
+        self._grid = grid  # beam skipping (float32 distances, the occupied mask) and the search table, on first use
         self.dist = None
         self.blocked = None
 
@@ -154,11 +161,26 @@ class LikelihoodField:
         """(2, K) robot-frame endpoints of the beams with a return (for the quality signal): the observation."""
         return observation
 
-    def log_likelihood(self, particles, endpoints, out=None) -> np.ndarray:
+    def _make_table(self, grid, interior: str | None) -> np.ndarray:
+        d = field_distance(grid, self.cfg, interior)
+        return np.ascontiguousarray(point_log_likelihood(d, self.cfg), dtype=np.float32)
+
+    def search_table(self) -> np.ndarray:
+        """The table scored while the filter searches or is lost: ``search_interior``'s field."""
+        interior = getattr(self.cfg, "interior", "zero")
+        search = getattr(self.cfg, "search_interior", interior)
+        if search == interior:
+            return self.table
+        if self._search_table is None:
+            self._search_table = self._make_table(self._grid, search)
+        return self._search_table
+
+    def log_likelihood(self, particles, endpoints, out=None, searching: bool = False) -> np.ndarray:
         """(N,) float64: exponent * sum over beams of the table value at each rotated endpoint.
 
         particles: (3, N) float64 world poses; endpoints: (2, K) robot-frame
         endpoints from ``beam_endpoints``. K = 0 gives zeros (no information).
+        ``searching``: score with ``search_interior``'s field (``search_table``).
         """
         p = np.ascontiguousarray(particles, dtype=np.float64)
         if p.ndim != 2 or p.shape[0] != 3:
@@ -170,7 +192,8 @@ class LikelihoodField:
         if out is None:
             out = np.empty(p.shape[1])
         kernel = choose(likelihood_field_loglik, likelihood_field_loglik_serial, p.shape[1] * e_cells.shape[1])
-        kernel(p, e_cells, self.table, self.origin[0], self.origin[1], self.inv_res, self.offmap, self.exponent, out)
+        table = self.search_table() if searching else self.table
+        kernel(p, e_cells, table, self.origin[0], self.origin[1], self.inv_res, self.offmap, self.exponent, out)
         return out
 
     def beam_support(self, particles, weights, endpoints) -> np.ndarray:
@@ -369,8 +392,9 @@ class BeamModel:
         r, a = ranges[keep], angles[keep] + lp[2]
         return np.vstack([lp[0] + r * np.cos(a), lp[1] + r * np.sin(a)])
 
-    def log_likelihood(self, particles, observation, out=None) -> np.ndarray:
-        """(N,) float64 log p(z | x, m) per particle; no beams gives zeros."""
+    def log_likelihood(self, particles, observation, out=None, searching: bool = False) -> np.ndarray:
+        """(N,) float64 log p(z | x, m) per particle; no beams gives zeros. ``searching`` changes nothing here
+        (the likelihood field's search table)."""
         from mcl.kernels.beam import beam_loglik, beam_loglik_lut, beam_loglik_lut_serial, beam_loglik_serial
 
         p = np.ascontiguousarray(particles, dtype=np.float64)

@@ -64,7 +64,8 @@ def test_all_weights_zero_respreads_around_the_last_estimate_and_warns_once():
     pf = _pf()
     obs = pf.prepare(_true_scan(pf), np.zeros(3))
     pf.step(None, obs)  # a good update: the estimate is near (5, 3)
-    pf.sensor.log_likelihood = lambda p, o, out=None: np.full(p.shape[1], -np.inf)  # a scan no pose explains
+    # a scan no pose explains
+    pf.sensor.log_likelihood = lambda p, o, out=None, searching=False: np.full(p.shape[1], -np.inf)
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
         infos = [pf.step(None, obs) for _ in range(2)]
@@ -82,7 +83,7 @@ def test_all_weights_zero_respreads_around_the_last_estimate_and_warns_once():
 def test_degenerate_three_times_in_a_row_reinitialises_globally():
     pf = _pf()
     pf.step(None, pf.prepare(_true_scan(pf), np.zeros(3)))
-    pf.sensor.log_likelihood = lambda p, o, out=None: np.full(p.shape[1], -np.inf)
+    pf.sensor.log_likelihood = lambda p, o, out=None, searching=False: np.full(p.shape[1], -np.inf)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for _ in range(4):

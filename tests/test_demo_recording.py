@@ -17,6 +17,7 @@ from rerun.chunk import RrdReader  # noqa: E402
 from mcl.config import PROJECT_ROOT, load_config  # noqa: E402
 from mcl.maps import load_map  # noqa: E402
 from mcl.runner import run  # noqa: E402
+from mcl.sensors import field_distance  # noqa: E402
 from mcl.viz import _HIST_BINS, _VIRIDIS, weight_histogram  # noqa: E402
 
 DEMO = PROJECT_ROOT / "data" / "demo"
@@ -116,9 +117,13 @@ def test_likelihood_field_layer_is_the_sensor_models(recording):
     assert img.shape == (grid.height, grid.width, 4)
     rows = img[::-1]  # image row 0 is the top, grid row 0 the bottom
     top, bottom = _VIRIDIS[-1], _VIRIDIS[0]
-    on_wall = rows[grid.occupied]
-    far = rows[np.asarray(grid.distance) > 1.0]  # 10 sigma_hit from any wall: p is z_rand's floor
-    assert np.abs(on_wall[:, :3].astype(int) - top).max() <= 1
+    # the d the model scores while tracking (interior: depth): 0 on a wall's faces, the depth inside a thick wall
+    d = field_distance(grid, load_config(PROJECT_ROOT / "configs" / "default.yaml").sensor)
+    on_face = rows[grid.occupied & (d == 0.0)]
+    deep = rows[grid.occupied & (d >= 0.2)]  # 2 sigma_hit inside a wall (315 cells): 2 nats below the peak
+    far = rows[d > 1.0]  # 10 sigma_hit from any wall's face: p is z_rand's floor
+    assert np.abs(on_face[:, :3].astype(int) - top).max() <= 1
+    assert len(deep) > 100 and (np.abs(deep[:, :3].astype(int) - top).max(axis=1) > 10).all()
     assert np.abs(far[:, :3].astype(int) - bottom).max() <= 1
 
 

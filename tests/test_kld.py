@@ -208,7 +208,8 @@ def test_filter_injects_from_the_hook_sampler():
     marker = np.array([[123.0], [456.0], [0.5]])
     pf.recovery_sampler = lambda n, rng, obs: np.repeat(marker, n, axis=1)
     near = np.array([[0.5, 0.0, -0.5], [0.0, 0.5, 0.0]])
-    pf.sensor.log_likelihood = lambda parts, obs: np.full(parts.shape[1], float(obs))  # stub: one value per scan
+    # stub: one value per scan
+    pf.sensor.log_likelihood = lambda parts, obs, searching=False: np.full(parts.shape[1], float(obs))
     pf.sensor.endpoints = lambda obs: np.zeros((2, 0))  # ... and no beams for the quality signal
     for _ in range(20):
         info = pf.step(None, -10.0)

@@ -307,3 +307,30 @@ def test_global_density_draws_the_fresh_poses_where_the_scan_fits_and_counts_the
             assert own[1].mean() < gain[0] < own[10].max()
     # drawn in proportion to the likelihood of 10x as many candidates: the poses fit the scan far better
     assert np.median(own[10]) > np.median(own[1]) + 20.0, (np.median(own[10]), np.median(own[1]))
+
+
+def test_the_likelihood_field_scores_with_the_search_field_exactly_while_the_laser_is_tempered():
+    # sensor.likelihood_field.search_interior applies while a global search runs or lost recovery spreads poses
+    # (the updates search_exponent / lost_exponent temper), and the interior field otherwise.
+    scan = _scan(4.0)
+    pf = _filter_on_a_box("filter.global_density=0")
+    seen = []
+    score = pf.sensor.log_likelihood
+
+    def spy(particles, observation, out=None, searching=False):
+        seen.append(searching)
+        return score(particles, observation, out, searching=searching)
+
+    pf.sensor.log_likelihood = spy
+    pf.init_gaussian([5.0, 5.0, 0.0], [0.2, 0.2, 0.1])
+    obs = pf.prepare(scan, np.zeros(3))
+    _correction_gain(pf, obs)  # tracking
+    pf.recovery.observe_lost(True)
+    _correction_gain(pf, obs)  # lost: poses spread around the estimate
+    pf.recovery.observe_lost(False)
+    _correction_gain(pf, obs)
+    pf.init_global()
+    _correction_gain(pf, obs)  # a global search
+    pf.search.tempering = False
+    _correction_gain(pf, obs)  # settled
+    assert seen == [False, True, False, True, False]

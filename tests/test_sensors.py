@@ -78,6 +78,23 @@ def test_table_is_log_of_hit_plus_random_at_clipped_distance():
     assert lf.table[40, 112] > lf.offmap  # 0.15 m from the wall at column 109
 
 
+def test_the_search_field_is_search_interiors_and_is_built_only_when_it_differs():
+    g = box_grid()
+    rng = np.random.default_rng(4)
+    poses = np.vstack([rng.uniform(-0.5, 4.5, 300), rng.uniform(-1.5, 1.5, 300), rng.uniform(-np.pi, np.pi, 300)])
+    e = np.vstack([rng.uniform(0.5, 3.0, 40), rng.uniform(-1.0, 1.0, 40)])
+    zero = LikelihoodField(g, sensor_cfg(interior="zero", search_interior="zero"))
+    deep = LikelihoodField(g, sensor_cfg(interior="depth", search_interior="depth", interior_tolerance=0.0))
+    assert zero.search_table() is zero.table and deep.search_table() is deep.table
+    # depth while tracking, zero while searching: each call scores with its own field
+    mixed = LikelihoodField(g, sensor_cfg(interior="depth", search_interior="zero", interior_tolerance=0.0))
+    assert mixed._search_table is None  # not built until a search needs it
+    np.testing.assert_array_equal(mixed.log_likelihood(poses, e), deep.log_likelihood(poses, e))
+    np.testing.assert_array_equal(mixed.log_likelihood(poses, e, searching=True), zero.log_likelihood(poses, e))
+    assert (zero.log_likelihood(poses, e) != deep.log_likelihood(poses, e)).any()  # the pillar tells them apart
+    np.testing.assert_array_equal(zero.log_likelihood(poses, e, searching=True), zero.log_likelihood(poses, e))
+
+
 # ---------------------------------------------------------------- the kernel against NumPy
 
 @pytest.mark.parametrize("exponent", [1.0, 0.3])

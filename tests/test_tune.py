@@ -35,7 +35,10 @@ SUITE = {
          "simulate": {"kind": "office", "seed": 4, "duration": 10, "range_sigma": RANGE_SIGMA}},
     ],
 }
-BASE = {"filter": {"particles": 300, "kld": False}, "sensor": {"likelihood_field": {"sigma_hit": 2.0}}}
+# interior: zero, AMCL's field, pinned: with the default depth field the RMSE of this short log is flat from
+# sigma_hit 0.014 to 0.2 m (0.036 -> 0.0671, 0.138 -> 0.0672), so which of the two wins says nothing of the tuner
+BASE = {"filter": {"particles": 300, "kld": False},
+        "sensor": {"likelihood_field": {"sigma_hit": 2.0, "interior": "zero"}}}
 SPACE = {"sensor.likelihood_field.sigma_hit": {"low": 0.005, "high": 3.0, "log": True}}
 TRIALS = 8
 
