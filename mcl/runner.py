@@ -69,6 +69,10 @@ def default_out_dir(root: Path | None = None) -> Path:
     return out
 
 
+# frames of mcl's own code have a file name starting with one of these
+_PACKAGE_DIR = tuple({str(Path(__file__).parent), str(Path(__file__).resolve().parent)})
+
+
 class _Interrupts:
     """SIGINT and SIGTERM during a run, both handled as Ctrl-C.
 
@@ -79,6 +83,13 @@ class _Interrupts:
     and counted together), which raise it as they end. So the closing of the
     outputs and the summary are never cut short, and a second Ctrl-C is noted
     rather than raised.
+
+    Inside :meth:`live` a signal that lands in another package's Python code
+    (rerun-sdk's wrappers, a finaliser the garbage collector runs) is noted
+    too, and raised as the next held block ends (within one update): an
+    exception there can leave that library's native state half-updated (once
+    in CI, SIGTERM during a recorded mit_csail run ended in a segfault, status
+    -11, instead of a clean stop).
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -87,6 +98,7 @@ class _Interrupts:
         self.caught = False  # a signal arrived
         self._raise = True  # raise at once (else note it)
         self._pending = False  # noted inside a held() block, to raise as it ends
+        self._live = False  # inside live(): the filter loop
         self._old: dict = {}
 
     def __enter__(self) -> "_Interrupts":
@@ -106,6 +118,9 @@ class _Interrupts:
         first = not self.caught
         self.caught = True
         if self._raise and first:
+            if self._live and frame is not None and not frame.f_code.co_filename.startswith(_PACKAGE_DIR):
+                self._pending = True  # inside another package's code: raised as the next held() block ends
+                return
             self._raise = False
             raise KeyboardInterrupt
         if first:
@@ -122,10 +137,12 @@ class _Interrupts:
             self._pending = False
             raise KeyboardInterrupt
         self._raise = True
+        self._live = True
         try:
             yield
         finally:
             self._raise = False
+            self._live = False
 
     @contextmanager
     def held(self):

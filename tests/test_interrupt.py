@@ -14,6 +14,7 @@ own process.
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import signal
@@ -162,6 +163,15 @@ DRIVER = textwrap.dedent("""
         before(viz.RerunLogger, "close")
     elif where == "summary":           # everything closed, the summary not yet written
         before(trajectory, "atomic_write_text", lambda path, *a: str(path).endswith("summary.json"))
+    elif where == "in_library":        # the signal lands in code outside mcl (here this driver's) mid-loop
+        orig_step, steps = viz.RerunLogger.log_step, [0]
+        def log_step(self, *a, **k):
+            steps[0] += 1
+            if steps[0] == 3:
+                hit()
+                print("after the signal, still in the wrapper", flush=True)
+            return orig_step(self, *a, **k)
+        viz.RerunLogger.log_step = log_step
     elif where == "twice":             # a second signal while the first one is being handled
         orig_close = trajectory.TumWriter.close
         def close(self):
@@ -213,6 +223,26 @@ def test_signal_at_exact_points(tmp_path, sig, where, full_updates):
         assert summary["updates"] + summary["predicted_poses"] == 3
     else:
         assert summary["updates"] == full_updates  # the signal came after the last update
+
+
+@needs_data
+@pytest.mark.parametrize("sig", SIGNALS)
+def test_a_signal_in_another_packages_code_stops_the_run_at_the_next_update(tmp_path, sig):
+    # During the loop, a signal that lands outside mcl's own code (rerun-sdk's Python wrappers, a finaliser) is
+    # not raised there, where it could leave the library's native state half-updated (once in CI: a segfault,
+    # status -11), but as the next scan's pose is written: that call goes on, and the run stops cleanly with
+    # exactly one pose after the third update's. On the code before this test the signal was raised in the
+    # wrapper: its print never ran and the third update's pose was the last.
+    proc, out = _drive(tmp_path, "in_library", sig.name)
+    assert proc.returncode == 130, (proc.returncode, proc.stderr)
+    _no_traceback(proc.stderr)
+    assert "after the signal, still in the wrapper" in proc.stdout
+    summary = check_outputs(out, interrupted=True)
+    with open(out / "quality.csv") as f:
+        updated = [row["updated"] == "1" for row in csv.DictReader(f)]
+    assert len(updated) == summary["updates"] + summary["predicted_poses"]
+    third = [i for i, u in enumerate(updated) if u][2]
+    assert len(updated) == third + 2
 
 
 @needs_data
