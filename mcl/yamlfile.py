@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import yaml
 
@@ -38,9 +39,17 @@ def short_repr(v, limit: int = 40) -> str:
     return s if len(s) <= limit else s[: limit - 3] + "..."
 
 
+# Exponent notation without a dot ("1e-5", "2E3"): a float in YAML 1.2 and to every user, a string to PyYAML's
+# YAML 1.1 resolver (which wants "1.0e-5").
+_EXPONENT_FLOAT = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+")
+
+
 def finite_number(value, label: str, error: type[MclError]) -> float:
     """``value`` (a parsed YAML scalar) as a finite float, else ``error`` with one line starting ``label: ``.
-    Booleans and strings are not numbers; an integer too large for a float is reported by its length."""
+    Booleans and other strings are not numbers, but exponent notation that YAML 1.1 leaves a string ("1e-5")
+    is; an integer too large for a float is reported by its length."""
+    if isinstance(value, str) and _EXPONENT_FLOAT.fullmatch(value.strip()):
+        value = float(value)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise error(f"{label}: expected a number, got {short_repr(value)}")
     try:

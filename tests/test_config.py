@@ -94,6 +94,17 @@ def test_override_errors():
         load_config(None, ["sensor.sigma=1"])
 
 
+def test_exponent_notation_without_a_dot_is_a_number(tmp_path):
+    # YAML 1.1 (PyYAML) resolves "1e-5" to a string; a user means the number, on the command line and in a file
+    cfg = load_config(None, ["sensor.likelihood_field.sigma_hit=1e-1", "filter.kld_delta=5E-3"])
+    assert cfg.sensor.likelihood_field.sigma_hit == 0.1 and cfg.filter.kld_delta == 0.005
+    p = tmp_path / "c.yaml"
+    p.write_text("sensor:\n  likelihood_field:\n    sigma_hit: 2e-1\n")
+    assert load_config(p).sensor.likelihood_field.sigma_hit == 0.2
+    with pytest.raises(ConfigError, match="sensor.beam.sigma_hit: expected a number"):
+        load_config(None, ["sensor.beam.sigma_hit=1e"])  # not a number still says so
+
+
 def test_a_bad_value_names_the_set_that_gave_it_else_the_file(tmp_path):
     p = tmp_path / "c.yaml"
     p.write_text("sensor:\n  beam:\n    sigma_hit: 0.1\n    z_hit: abc\n")
