@@ -334,18 +334,20 @@ class KLDSampling:
         self.pending = (inject_p, sampler)
 
     def draw(self, particles, logw, rng, move=None):
-        """The scheduled resample: (new (3, M), injected (M,) bool, ok (M,) bool | None, mean tries).
+        """The scheduled resample: (new (3, M), injected (M,) bool, ok (M,) bool | None, mean tries,
+        motion log-weights (M,) | None).
 
-        ``move(batch) -> (moved, ok | None, tries)`` applies the motion model to each batch before it
-        is binned (None: no motion, the ancestors are binned).
+        ``move(batch) -> (moved, ok | None, tries, log_weight | None)`` applies the motion model to each batch
+        before it is binned (None: no motion, the ancestors are binned); log_weight is the motion's importance
+        weight (an odometry-fault proposal), None when it is 1.
         """
         inject_p, sampler = self.pending
         self.pending = None
         moves: list = []
 
         def moved(batch):
-            new, ok, tries = move(batch)
-            moves.append((ok, tries, batch.shape[1]))
+            new, ok, tries, lw = move(batch)
+            moves.append((ok, tries, batch.shape[1], lw))
             return new
 
         new, fresh, _ = kld_resample(
@@ -355,10 +357,13 @@ class KLDSampling:
         )
         m = new.shape[1]
         ok = None
-        if any(o is not None for o, _, _ in moves):
-            ok = np.concatenate([np.ones(n, bool) if o is None else o for o, _, n in moves])[:m]
-        tries = sum(t * n for _, t, n in moves) / max(sum(n for _, _, n in moves), 1) if moves else 1.0
-        return np.ascontiguousarray(new), fresh, ok, tries
+        if any(o is not None for o, _, _, _ in moves):
+            ok = np.concatenate([np.ones(n, bool) if o is None else o for o, _, n, _ in moves])[:m]
+        lw = None
+        if any(w is not None for _, _, _, w in moves):
+            lw = np.concatenate([np.zeros(n) if w is None else w for _, _, n, w in moves])[:m]
+        tries = sum(t * n for _, t, n, _ in moves) / max(sum(n for _, _, n, _ in moves), 1) if moves else 1.0
+        return np.ascontiguousarray(new), fresh, ok, tries, lw
 
 
 class AugmentedMCL:
@@ -436,6 +441,58 @@ class GlobalSearch:
             self.since_end = 0
         if not self.holding and self.since_end is not None:
             self.since_end += 1
+
+
+class FaultWindow:
+    """When the motion model allows odometry faults (``mcl.motion.FaultProposal``, ``motion.fault_*``).
+
+    A track that slips because the odometry is wrong (fr079 at 305 s: 0.1 m forward per scan reported for 6 s
+    while the robot reverses) drifts 0.2 m a scan from a cloud a few centimetres wide: the scan pulls it back, but
+    no particle is where the robot is, and the lost call comes 2 m late. Allowing faults all the time lets a few
+    scans that fit a pose a metre or two away (a person next to the robot at a corridor junction, on
+    infinite_corridor) carry the track off. So faults are allowed only where the quality signal has shown that one
+    may be under way: from a lost call that ends at least ``fault_window`` updates of good tracking (not lost, no
+    global search) and whose scan contradicts the map at the estimate (at least ``fault_contradiction`` of the
+    beams went through a mapped wall: people and furniture the map lacks only shorten readings, so a lost call
+    they cause opens nothing), while the filter stays lost and for ``fault_window`` updates after. A lost call
+    during or just after a global search means a wrong hypothesis, not a slipping one; the search's re-seeds
+    handle it, and a search closes the window.
+    """
+
+    def __init__(self, mc, search: GlobalSearch):
+        from mcl.motion import FaultProposal
+
+        self.window = int(mc.fault_window)
+        self.contradiction = float(mc.fault_contradiction)
+        self.search = search
+        self.fault = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale))
+        self.reset()
+
+    def reset(self) -> None:
+        """Closed; a track from a known pose starts here (it has held since the start)."""
+        self.held = self.window  # consecutive updates of good tracking before this one
+        self.since_lost = None  # updates since the window's last lost update (None: closed)
+
+    def observe(self, lost: bool, contradiction: float = 1.0) -> None:
+        """This update's lost belief (after the filter's ``search`` has seen it) and the fraction of its beams that
+        contradict the map at the estimate (``mcl.quality.Fit.contradiction``)."""
+        if self.search.holding:
+            self.held, self.since_lost = 0, None
+        elif lost:
+            if self.since_lost is not None or (self.held >= self.window and contradiction >= self.contradiction):
+                self.since_lost = 0
+            self.held = 0
+        else:
+            self.held += 1
+            if self.since_lost is not None:
+                self.since_lost += 1
+                if self.since_lost > self.window:
+                    self.since_lost = None
+
+    @property
+    def proposal(self):
+        """The ``FaultProposal`` for the next motion update, or None (the plain motion model)."""
+        return self.fault if self.since_lost is not None else None
 
 
 class LostRecovery:

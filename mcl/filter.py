@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import GlobalSearch, KLDSampling, draw_injected, make_recovery, measurement_count
+from mcl.adaptive import FaultWindow, GlobalSearch, KLDSampling, draw_injected, make_recovery, measurement_count
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard
@@ -89,6 +89,7 @@ class StepInfo:
     cluster_weight: float = 1.0  # weight of the heaviest cluster, whose mean is the estimate
     fit: Fit | None = None  # the scan laid on the map at the estimate (mcl.quality); None without a laser scan
     lost: bool = False  # the filter believes it is lost (mcl.quality)
+    faults: bool = False  # the motion of this update allowed odometry faults (motion.fault_*, mcl.adaptive.FaultWindow)
     skipped_beams: int = 0  # beams ignored by beam skipping
     skipped_endpoints: np.ndarray | None = None  # (2, skipped_beams) their robot-frame endpoints (None: none skipped)
     events: tuple[str, ...] = ()  # degenerate-input events of this update (kinds of ParticleFilter.events)
@@ -119,6 +120,8 @@ class ParticleFilter:
         self.guard = InputGuard(fc.max_odom_step)
         self.kld = KLDSampling(fc, grid) if fc.kld else None
         self.search = GlobalSearch()  # a global start or re-seed until one hypothesis is left
+        # odometry faults allowed only around a lost call on a track that had held (motion.fault_*)
+        self.faults = FaultWindow(cfg.motion, self.search) if cfg.motion.fault_prob > 0.0 else None
         self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
@@ -188,6 +191,8 @@ class ParticleFilter:
         self.recovery = self._make_recovery(False)
         self.search.reset()
         self.quality.reset(lost=False)
+        if self.faults is not None:
+            self.faults.reset()
 
     def kidnap(self, mean, std) -> None:
         """Particles replaced by N(mean, diag(std^2)) with the policies untouched (recovery averages, lost
@@ -211,6 +216,8 @@ class ParticleFilter:
         self.recovery = self._make_recovery(False)
         self.search.reset()
         self.quality.reset(lost=False)
+        if self.faults is not None:
+            self.faults.reset()
 
     def init_global(self) -> None:
         """Particles uniform over the poses the map allows (global localization)."""
@@ -326,40 +333,46 @@ class ParticleFilter:
                 self.particles = self._draw_around(self.particles, np.asarray(self.cfg.filter.respread_std))
                 return
         if self.kld is not None and self.kld.pending is not None:
-            new, ok, tries = self._kld_draw(control, info)
+            new, ok, tries, lw = self._kld_draw(control, info)
             if control is None:
                 return
         elif control is None:
             return
         else:
-            new, ok, tries = self._move(self.particles, control)
+            new, ok, tries, lw = self._move(self.particles, control)
         self.particles = new
         info.tries = float(tries)
+        if lw is not None:  # the odometry-fault proposal's importance weights
+            self.logw += lw
+            info.faults = True
         if ok is not None and not ok.all():
             bad = ~ok
             info.rejected = int(np.count_nonzero(bad))
             self.logw[bad] = -np.inf
 
     def _move(self, particles: np.ndarray, control: Control):
-        """(moved (3, N), ok (N,) bool | None, mean tries): the motion model applied to ``particles``; a
-        non-finite sample keeps its ancestor's pose and is not ok (weight zero)."""
+        """(moved (3, N), ok (N,) bool | None, mean tries, log-weights (N,) | None): the motion model applied to
+        ``particles``, with the odometry-fault proposal while ``faults`` allows it (then the particles' importance
+        log-weights, else None); a non-finite sample keeps its ancestor's pose and is not ok (weight zero)."""
+        fault = self.faults.proposal if self.faults is not None else None
+        lw = np.empty(particles.shape[1]) if fault is not None else None
         new, ok, tries = self.motion.sample_control(particles, control, self.rng, allowed=self.allowed,
-                                                    grid=self.grid)
+                                                    grid=self.grid, fault=fault, log_weight=lw)
         fin = np.isfinite(new).all(axis=0)
         if not fin.all():
             new[:, ~fin] = particles[:, ~fin]
             ok = fin if ok is None else ok & fin
-        return new, ok, tries
+        return new, ok, tries, lw
 
     def _kld_draw(self, control: Control | None, info: StepInfo):
         """Draw the scheduled KLD resample (moved by ``control`` when there is one); the new set replaces the
-        particles with equal weights. Returns (particles, ok, tries) of the motion."""
+        particles with equal weights. Returns (particles, ok, tries, log-weights | None) of the motion."""
         move = (lambda batch: self._move(batch, control)) if control is not None else None
-        new, fresh, ok, tries = self.kld.draw(self.particles, self.logw, self.rng, move=move)
+        new, fresh, ok, tries, lw = self.kld.draw(self.particles, self.logw, self.rng, move=move)
         self._set(new)
         info.injected = int(np.count_nonzero(fresh))
         self._injected = fresh if info.injected else None
-        return new, ok, tries
+        return new, ok, tries, lw
 
     def correct(self, observation, info: StepInfo | None = None) -> None:
         """w_t = w_{t-1} * p(z_t | x_t, m), in log space. ``observation`` comes from :meth:`prepare`.
@@ -510,6 +523,9 @@ class ParticleFilter:
         info.fit = fit
         info.lost = self.quality.update(fit)
         self.search.observe(info.lost, info.cluster_weight)
+        if self.faults is not None:
+            c = fit.contradiction if fit is not None and fit.beams else 0.0
+            self.faults.observe(info.lost, c if c == c else 0.0)
         if self.recovery is not None:
             self.recovery.observe_lost(info.lost, info.cluster_weight)
 

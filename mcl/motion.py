@@ -23,6 +23,20 @@ radius from any occupied cell), a particle whose new pose lands outside it
 times. The loop runs over tries, never over particles. A particle that never
 lands gets ``ok = False``; the filter gives it weight zero.
 
+Odometry faults (an mcl extension; ``FaultProposal``): a wheel that slips,
+a bump or a bad encoder moves the robot far from where its odometry says, for
+seconds at a time (fr079 at 305 s reports 0.1 m forward per scan for 6 s
+while the robot reverses). The motion model is then the mixture
+
+    p_f(x' | u, x) = (1 - prob) p(x' | u, x) + prob p_k(x' | u, x),
+
+p_k the same model with every sigma times ``scale``. It is sampled with a
+``share`` of the particles drawn from p_k (a proposal q with the mixture
+weight ``share`` instead of ``prob``, so the wide component is explored
+although it is rare) and each particle carries the importance weight
+p_f / q of its noise (``fault_log_weights``): a pose off the ordinary cloud
+must out-score it by log(share / prob) before it is believed.
+
 All random numbers come from the caller's ``numpy.random.Generator``
 (standard normals, drawn outside the numba kernels), so one seed gives the
 same particles whatever the numba thread count.
@@ -31,6 +45,7 @@ same particles whatever the numba thread count.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -85,6 +100,47 @@ def noise_sigmas(rot1: float, trans: float, rot2: float, cfg) -> tuple[float, fl
     raise ValueError(f"motion.noise_form: unknown value {cfg.noise_form!r} (expected 'variance' or 'std')")
 
 
+@dataclass(frozen=True)
+class FaultProposal:
+    """The odometry-fault mixture of one update: model weight ``prob`` of p_k (sigmas times ``scale``), proposal
+    weight ``share`` (see the module docstring; built from the motion config by ``mcl.adaptive.FaultWindow``)."""
+
+    prob: float
+    share: float
+    scale: float
+
+
+def fault_scales(n: int, fault: FaultProposal | None, rng: np.random.Generator) -> np.ndarray | None:
+    """(n,) noise multipliers, ``fault.scale`` for the particles drawn from p_k (each with probability
+    ``fault.share``) and 1 for the others; None without a fault proposal."""
+    if fault is None or n == 0:
+        return None
+    return np.where(rng.random(n) < fault.share, float(fault.scale), 1.0)
+
+
+def fault_log_weights(noise: np.ndarray, sigmas, kind: str, fault: FaultProposal) -> np.ndarray:
+    """(N,) log p_f / q of each particle's motion noise ``noise`` (3, N), in units of the ordinary sigmas (the
+    standard noise times the particle's scale): p_f = (1 - prob) f(u) + prob f_k(u), q = (1 - share) f(u) +
+    share f_k(u), with f the product of the noise densities over the dimensions whose sigma is not zero and
+    f_k(u) = f(u / scale) / scale^d. A particle far out in the wide component weighs prob / share."""
+    dims = [d for d in range(3) if sigmas[d] > 0.0]
+    k = float(fault.scale)
+    if not dims or k == 1.0:
+        return np.zeros(noise.shape[1])
+    u = noise[dims]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_f = log_density(kind, u, 1.0).sum(axis=0)
+        log_fk = (log_density(kind, u / k, 1.0) - math.log(k)).sum(axis=0)
+    return _mixture_log(log_f, log_fk, fault.prob) - _mixture_log(log_f, log_fk, fault.share)
+
+
+def _mixture_log(log_f, log_fk, weight: float):
+    """log((1 - weight) f + weight f_k) from log f and log f_k."""
+    if weight <= 0.0:
+        return log_f
+    return np.logaddexp(math.log1p(-weight) + log_f, math.log(weight) + log_fk)
+
+
 def allowed_mask(grid, robot_radius: float) -> np.ndarray:
     """uint8 (H, W) mask of the cells a robot centre may occupy: free and distance > robot_radius.
 
@@ -118,18 +174,22 @@ class OdometryMotionModel:
             self._all = np.arange(n, dtype=np.int64)
         return self._noise, self._all
 
-    def sample_control(self, particles, control, rng, allowed=None, grid=None):
+    def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None):
         """``sample`` for a :class:`mcl.filter.Control` (uses its odometry pair)."""
-        return self.sample(particles, control.odom_prev, control.odom_now, rng, allowed=allowed, grid=grid)
+        return self.sample(particles, control.odom_prev, control.odom_now, rng, allowed=allowed, grid=grid,
+                           fault=fault, log_weight=log_weight)
 
     def sample(self, particles, odom_prev, odom_now, rng: np.random.Generator,
-               allowed=None, grid=None, out=None):
+               allowed=None, grid=None, out=None, fault: FaultProposal | None = None, log_weight=None):
         """Move every particle by the odometry step odom_prev -> odom_now, with noise.
 
         particles: (3, N) float64 (x, y, theta); odom_prev, odom_now: (x, y, theta).
         allowed: None, or an (H, W) mask from ``allowed_mask``; then ``grid``
         (anything with ``origin`` (x0, y0) and ``resolution``) places it in the world.
         out: optional (3, N) float64 C-contiguous array for the result (not ``particles``).
+
+        fault: a ``FaultProposal``: a share of the particles takes the fault component's noise; then
+        log_weight, an (N,) float64 array, receives their importance weights (``fault_log_weights``).
 
         Returns (new (3, N), ok (N,) bool, mean_tries): ok[i] is False when
         particle i never landed in an allowed cell in max_tries tries (its pose
@@ -143,6 +203,9 @@ class OdometryMotionModel:
         noise, idx_all = self._buffers(n)
         kind = getattr(self.cfg, "noise", "normal")
         standard_noise(kind, rng, out=noise)  # normal: rng.standard_normal
+        scales = fault_scales(n, fault, rng)
+        if scales is not None:
+            noise *= scales
 
         def move(nz, o):
             _k.sample_odometry(p, nz, rot1, trans, rot2, s1, st, s2, o)
@@ -150,7 +213,11 @@ class OdometryMotionModel:
         def move_map(nz, idx, mask, ox, oy, inv_res, o, ok):
             return _k.sample_odometry_map(p, nz, idx, rot1, trans, rot2, s1, st, s2, mask, ox, oy, inv_res, o, ok)
 
-        return _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, self.max_tries, allowed, grid, out)
+        result = _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, self.max_tries, allowed, grid, out,
+                                  scales)
+        if fault is not None and log_weight is not None:
+            log_weight[:] = fault_log_weights(noise, (s1, st, s2), kind, fault)
+        return result
 
 
 def make_motion_model(cfg):
@@ -262,7 +329,8 @@ def _odometry_pair(u):
 
 
 def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "odometry",
-                              jacobian: bool = True, min_trans: float = ROT1_MIN_TRANS) -> np.ndarray:
+                              jacobian: bool = True, min_trans: float = ROT1_MIN_TRANS,
+                              fault: FaultProposal | None = None) -> np.ndarray:
     """log p(x_new | u, x_prev) of the odometry model (Prob. Rob. Table 5.5, motion_model_odometry), (N,).
 
     u: the odometry pair (odom_prev, odom_now), or a ``Control``. The deltas
@@ -278,7 +346,9 @@ def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "odome
     over the odometry deltas, what ``mcl calibrate motion`` maximises), but
     over poses it integrates only to about 1 (1.17 for the variance form in
     tests/test_motion_density.py). ``sigma_from="hypothesis", jacobian=False``
-    is Table 5.5 literally. jacobian: see the section comment.
+    is Table 5.5 literally. jacobian: see the section comment. fault: the
+    odometry-fault mixture (1 - prob) p + prob p_k (``fault.share`` is the
+    sampler's business and plays no part here).
     """
     rot1, trans, rot2 = odometry_deltas(*_odometry_pair(u))
     h1, ht, h2 = odometry_deltas_array(x_prev, x_new, min_trans)
@@ -290,13 +360,22 @@ def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "odome
         raise ValueError(f"sigma_from: expected 'hypothesis' or 'odometry', got {sigma_from!r}")
     kind = getattr(cfg, "noise", "normal")
     d1, dtr, d2 = odometry_residuals(rot1, trans, rot2, h1, ht, h2)
-    out = (log_density(kind, d1, np.maximum(s1, SIGMA_MIN))
-           + log_density(kind, dtr, np.maximum(st, SIGMA_MIN))
-           + log_density(kind, d2, np.maximum(s2, SIGMA_MIN)))
+    out = _noise_log_density(kind, (d1, dtr, d2), (s1, st, s2), fault)
     if jacobian:
         with np.errstate(divide="ignore"):
             out = out - np.log(ht)
     return out
+
+
+def _noise_log_density(kind: str, residuals, sigmas, fault: FaultProposal | None) -> np.ndarray:
+    """sum_d log f(residual_d; sigma_d), or of the fault mixture (1 - prob) f(.; sigma) + prob f(.; scale sigma)."""
+    def log_f(k: float):
+        return sum(log_density(kind, r, np.maximum(np.asarray(sg, dtype=np.float64) * k, SIGMA_MIN))
+                   for r, sg in zip(residuals, sigmas))
+
+    if fault is None or fault.prob <= 0.0:
+        return log_f(1.0)
+    return _mixture_log(log_f(1.0), log_f(float(fault.scale)), fault.prob)
 
 
 def motion_model_odometry(x_new, u, x_prev, cfg, **kw) -> np.ndarray:
@@ -370,7 +449,8 @@ def _velocity_control(u):
     return float(v), float(w), float(dt)
 
 
-def log_motion_model_velocity(x_new, u, x_prev, cfg, *, jacobian: bool = True) -> np.ndarray:
+def log_motion_model_velocity(x_new, u, x_prev, cfg, *, jacobian: bool = True,
+                              fault: FaultProposal | None = None) -> np.ndarray:
     """log p(x_new | u, x_prev) of the velocity model (Prob. Rob. Table 5.1, motion_model_velocity), (N,).
 
     u: (v, w, dt) or a ``Control``. The noise stds come from the commanded
@@ -378,13 +458,13 @@ def log_motion_model_velocity(x_new, u, x_prev, cfg, *, jacobian: bool = True) -
     ``VelocityMotionModel`` samples from. jacobian=True divides by
     |d(x', y', theta') / d(v, w, gamma)| = |v_hat| dt^4 sinc(w_hat dt / 2)^2 / 2
     to give a density over poses; it is infinite where v_hat = 0 (turning on
-    the spot maps a 2-D set of controls onto one point).
+    the spot maps a 2-D set of controls onto one point). fault: the
+    odometry-fault mixture, as in ``log_motion_model_odometry``.
     """
     v, w, dt = _velocity_control(u)
     v_hat, w_hat, g_hat = velocity_inverse(x_prev, x_new, dt)
-    sv, sw, sg = (max(s, SIGMA_MIN) for s in velocity_sigmas(v, w, cfg))
     kind = getattr(cfg, "noise", "normal")
-    out = log_density(kind, v - v_hat, sv) + log_density(kind, w - w_hat, sw) + log_density(kind, g_hat, sg)
+    out = _noise_log_density(kind, (v - v_hat, w - w_hat, g_hat), velocity_sigmas(v, w, cfg), fault)
     if jacobian:
         jac = np.abs(v_hat) * dt ** 4 * 0.5 * _sinc(0.5 * w_hat * dt) ** 2
         with np.errstate(divide="ignore"):
@@ -435,12 +515,15 @@ def _particles_and_out(particles, out):
     return p, out
 
 
-def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, allowed, grid, out):
+def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, allowed, grid, out, scales=None):
     """Map-based sampling (seed 5.5) shared by the models: move all, then redraw the rejected.
 
     move(noise, out) moves every particle; move_map(noise, idx, mask, ox, oy,
     inv_res, out, ok) moves the particles idx and checks the map, returning
-    how many landed. Same semantics as ``OdometryMotionModel.sample``.
+    how many landed. Same semantics as ``OdometryMotionModel.sample``. With
+    ``scales`` (a fault proposal's per-particle multipliers) a redraw keeps
+    its particle's multiplier, and ``noise`` ends holding the noise each
+    particle last moved with (for its importance weight).
     """
     if allowed is None:
         move(noise, out)
@@ -461,6 +544,9 @@ def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, al
         idx = np.flatnonzero(~ok) if idx is None else idx[~ok[idx]]
         draws += idx.size
         fresh = standard_noise(kind, rng, (3, idx.size))
+        if scales is not None:
+            fresh *= scales[idx]
+            noise[:, idx] = fresh
         n_ok += move_map(fresh, idx, mask, ox, oy, inv_res, out, ok)
     return out, ok, draws / n if n else 0.0
 
@@ -482,12 +568,15 @@ class VelocityMotionModel:
         self._noise = np.empty((3, 0))
         self._all = np.empty(0, dtype=np.int64)
 
-    def sample_control(self, particles, control, rng, allowed=None, grid=None):
+    def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None):
         """``sample`` for a :class:`mcl.filter.Control` (uses its v, w, dt)."""
-        return self.sample(particles, control.v, control.w, control.dt, rng, allowed=allowed, grid=grid)
+        return self.sample(particles, control.v, control.w, control.dt, rng, allowed=allowed, grid=grid,
+                           fault=fault, log_weight=log_weight)
 
-    def sample(self, particles, v, w, dt, rng: np.random.Generator, allowed=None, grid=None, out=None):
-        """Move every particle by the command (v, w) for dt, with noise. Returns (new, ok, mean_tries)."""
+    def sample(self, particles, v, w, dt, rng: np.random.Generator, allowed=None, grid=None, out=None,
+               fault: FaultProposal | None = None, log_weight=None):
+        """Move every particle by the command (v, w) for dt, with noise. Returns (new, ok, mean_tries); ``fault``
+        and ``log_weight`` as for ``OdometryMotionModel.sample``."""
         from mcl.kernels import velocity as _kv
 
         p, out = _particles_and_out(particles, out)
@@ -498,6 +587,9 @@ class VelocityMotionModel:
             self._noise = np.empty((3, n))
             self._all = np.arange(n, dtype=np.int64)
         noise = standard_noise(self.noise_kind, rng, out=self._noise)
+        scales = fault_scales(n, fault, rng)
+        if scales is not None:
+            noise *= scales
 
         def move(nz, o):
             _kv.sample_velocity(p, nz, v, w, dt, sv, sw, sg, o)
@@ -505,8 +597,11 @@ class VelocityMotionModel:
         def move_map(nz, idx, mask, ox, oy, inv_res, o, ok):
             return _kv.sample_velocity_map(p, nz, idx, v, w, dt, sv, sw, sg, mask, ox, oy, inv_res, o, ok)
 
-        return _sample_with_map(move, move_map, n, noise, self._all, rng, self.noise_kind, self.max_tries,
-                                allowed, grid, out)
+        result = _sample_with_map(move, move_map, n, noise, self._all, rng, self.noise_kind, self.max_tries,
+                                  allowed, grid, out, scales)
+        if fault is not None and log_weight is not None:
+            log_weight[:] = fault_log_weights(noise, (sv, sw, sg), self.noise_kind, fault)
+        return result
 
 
 # ----------------------------------------------------------------------------- map-based density

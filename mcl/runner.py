@@ -470,6 +470,7 @@ def _run(
     n_used: list[int] = []  # particles weighted at each update (KLD sampling varies it)
     injected = 0
     reseeds = 0  # global re-seeds of lost recovery
+    fault_updates = 0  # updates whose motion allowed odometry faults (motion.fault_*)
     traj_t: list[float] = []
     traj_p: list[np.ndarray] = []
     interrupted = False
@@ -553,6 +554,7 @@ def _run(
                 n_used.append(info.particles)
                 injected += info.injected
                 reseeds += int(info.reseeded)
+                fault_updates += int(info.faults)
                 for k, v in info.timings.items():
                     stage_totals[k] += v
                 if viz is not None:
@@ -651,6 +653,7 @@ def _run(
         "particles_max": int(max(n_used)) if n_used else pf.n,
         "injected_particles": injected,
         "reseeds": reseeds,
+        "fault_updates": fault_updates,
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / n_up,
         "rejected_particles": counts["rejected"],

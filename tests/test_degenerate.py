@@ -256,8 +256,8 @@ def test_motion_model_output_that_is_not_finite_never_reaches_the_particles():
     pf = _pf()
     real = pf.motion.sample_control
 
-    def broken(particles, control, rng, allowed=None, grid=None):
-        new, ok, tries = real(particles, control, rng, allowed=allowed, grid=grid)
+    def broken(particles, control, rng, allowed=None, grid=None, **kw):
+        new, ok, tries = real(particles, control, rng, allowed=allowed, grid=grid, **kw)
         new = new.copy()
         new[:, ::7] = np.nan
         return new, ok, tries

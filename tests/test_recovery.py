@@ -116,6 +116,50 @@ def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_set
     assert s.since_end is None
 
 
+def test_odometry_faults_are_allowed_from_a_lost_call_on_a_held_track_for_the_window():
+    from types import SimpleNamespace
+
+    from mcl.adaptive import FaultWindow, GlobalSearch
+
+    s = GlobalSearch()
+    f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=3,
+                                    fault_contradiction=0.1), s)
+
+    def upd(lost, cluster_weight=1.0, contradiction=0.2):
+        s.observe(lost, cluster_weight)
+        f.observe(lost, contradiction)
+
+    upd(False)
+    assert f.proposal is None  # a track that fits: the plain motion model
+    upd(True, contradiction=0.05)  # lost, but no beam through a wall to speak of (people, furniture): nothing
+    assert f.proposal is None
+    for _ in range(3):
+        upd(False)
+    upd(True)  # a lost call whose scan goes through mapped walls, on a track that held: faults allowed ...
+    assert f.proposal is not None and f.proposal.prob == 1e-3 and f.proposal.share == 0.05
+    upd(True)
+    for _ in range(3):  # ... while lost and 3 updates after
+        upd(False)
+        assert f.proposal is not None
+    upd(False)
+    assert f.proposal is None
+    upd(True)  # lost again after 4 good updates: opens again
+    assert f.proposal is not None
+    s.start()  # a global search: a lost call means a wrong hypothesis, not a slipping one; it closes the window
+    upd(True, 0.5)
+    assert f.proposal is None
+    upd(False, 0.95)  # settled and fits
+    upd(False)
+    upd(True)  # lost after 2 good updates: not a held track yet
+    assert f.proposal is None
+    for _ in range(3):
+        upd(False)
+    upd(True)  # after 3: it had held for the window
+    assert f.proposal is not None
+    f.reset()
+    assert f.proposal is None
+
+
 def test_lost_recovery_reseeds_once_the_local_spread_failed():
     # Without reseed: 10 % of N a step, half of them uniform once lost for global_after = 10 updates (the old rule).
     r = _lost_recovery(False)
