@@ -51,7 +51,8 @@ def _add_run(sub) -> None:
     )
     p.add_argument("config", nargs="?", help="YAML config (default: configs/default.yaml, the bundled demo)")
     p.add_argument("--map", help="ROS map_server YAML of the occupancy grid")
-    p.add_argument("--log", help="CARMEN log (.clf, plain or gzip)")
+    p.add_argument("--log", help="CARMEN log (.clf, plain or gzip); replaces the config's log, and its truth "
+                   "unless --truth is given")
     p.add_argument("--bag", help="ROS bag instead of a log: .bag (ROS 1), .db3 / .mcap (ROS 2) or a rosbag2 folder; "
                    "its /map stands in for --map (see 'mcl bag info')")
     p.add_argument("--scan-topic", metavar="TOPIC", help="bag: LaserScan/PointCloud2 topic, or 'all' to fuse them (topics.scan)")
@@ -94,12 +95,13 @@ def cmd_run(args) -> int:
         config_path = _project_default_config()
         if args.bag:
             # a bag may hold its own map (/map): --map is optional
-            overrides += ["map=null", "log=null"] + (["truth=null"] if args.truth is None else [])
+            overrides += ["map=null", "log=null"]
         elif args.map or args.log:
             if not (args.map and args.log):
                 raise MclError("--map and --log go together when no config file is given")
-            if args.truth is None:
-                overrides.append("truth=null")
+    if (args.log or args.bag) and args.truth is None:
+        # The config's reference trajectory belongs to the config's log: scored against another, it is noise.
+        overrides.append("truth=null")
     if args.bag and args.log:
         raise MclError("--bag and --log: give one")
     if args.bag:

@@ -248,3 +248,20 @@ def test_map_and_log_without_a_config_use_the_documented_defaults(tmp_path, caps
     assert cfg.motion == default.motion and cfg.sensor == default.sensor
     assert main(["run", "--map", str(DEMO / "map.yaml"), "--rerun", "off"]) == 2
     assert "--map and --log go together" in capsys.readouterr().err
+
+
+def test_a_log_given_on_the_command_line_drops_the_config_files_truth(tmp_path):
+    # configs/baseline.yaml names the demo's truth; `--log` another log without `--truth` must not score that log
+    # against it (it did: infinite_corridor scored "ATE 65 m" against the demo's reference poses).
+    from mcl.simulate import simulate
+
+    sim = simulate(tmp_path / "w", seed=2, duration=6.0)
+    x, y, th = sim["start_pose"]
+    common = ["run", str(CONFIGS / "baseline.yaml"), "--map", str(tmp_path / "w" / "map.yaml"), "--log",
+              str(tmp_path / "w" / "log.clf"), "--initial-pose", str(x), str(y), str(th), "--particles", "300",
+              "--rerun", "off", "--no-progress"]
+    assert main([*common, "--out", str(tmp_path / "a")]) == 0
+    assert load_config(tmp_path / "a" / "config.yaml").truth is None
+    assert "eval" not in json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert main([*common, "--truth", str(tmp_path / "w" / "truth.tum"), "--out", str(tmp_path / "b")]) == 0
+    assert json.loads((tmp_path / "b" / "summary.json").read_text())["eval"]["ate_rmse"] < 0.3
