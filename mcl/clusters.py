@@ -61,10 +61,24 @@ def cluster_labels(particles: np.ndarray, cell_xy: float, cell_theta: float) -> 
     iy -= iy.min() - 1
     ny = int(iy.max()) + 2
     keys = (ix * ny + iy) * n_th + it
-    cells, inverse = np.unique(keys, return_inverse=True)
+    cells, inverse = _occupied_cells(keys, (int(ix.max()) + 2) * ny * n_th)
     cell_labels = np.empty(cells.size, dtype=np.int64)
     n_clusters = label_cells(cells, ny, n_th, cell_labels)
-    return cell_labels[inverse.ravel()], int(n_clusters)
+    return cell_labels[inverse], int(n_clusters)
+
+
+def _occupied_cells(keys: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
+    """(the sorted distinct keys, each key's index among them): ``np.unique(keys, return_inverse=True)``.
+
+    A compact cloud (a tracked one: a few cells) spans few keys, so they are counted instead of sorted, which
+    costs O(N + n_keys) instead of O(N log N); a spread cloud's range would not fit and takes the sort.
+    """
+    if n_keys <= 4 * keys.size + 4096:
+        occupied = np.bincount(keys, minlength=n_keys) > 0
+        rank = np.cumsum(occupied) - 1
+        return np.flatnonzero(occupied), rank[keys]
+    cells, inverse = np.unique(keys, return_inverse=True)
+    return cells, inverse.ravel()
 
 
 def cluster_estimate(particles: np.ndarray, w: np.ndarray, cell_xy: float = 0.5,

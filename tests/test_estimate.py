@@ -116,6 +116,19 @@ def test_labels_match_a_numpy_flood_fill_oracle():
         assert len(pairs) == k == len({a for a, _ in pairs}) == len({b for _, b in pairs}), trial
 
 
+def test_occupied_cells_counted_or_sorted_equal_numpys_unique():
+    # A compact cloud's cell keys are counted (no sort), a spread one's sorted: both must be np.unique's
+    # (sorted distinct keys, each key's index), so the labels do not depend on the path.
+    from mcl.clusters import _occupied_cells
+
+    rng = np.random.default_rng(6)
+    for n, span in ((5000, 600), (5000, 20_000), (300, 10**9), (1, 1)):
+        keys = rng.integers(0, span, n)
+        cells, inverse = _occupied_cells(keys, span)
+        u, inv = np.unique(keys, return_inverse=True)
+        assert np.array_equal(cells, u) and np.array_equal(inverse, inv.ravel()), (n, span)
+
+
 def test_huge_spread_keeps_full_resolution_without_a_dense_grid():
     # 1,000 particles over 10 km: 200,000 x 200,000 x 63 cells at full resolution (a dense grid could not be
     # allocated); only the occupied cells are stored, so every particle is its own cluster, and two particles
