@@ -180,6 +180,33 @@ def test_map_is_static_image_placed_in_world(run_every1):
     np.testing.assert_allclose(static["Transform3D:scale"][0], [RES, -RES, 1.0], atol=1e-6)
 
 
+def test_a_map_larger_than_a_texture_is_drawn_at_k_cells_per_pixel(tmp_path, monkeypatch):
+    # A viewer draws the map as one GPU texture (at most MAP_IMAGE_MAX_SIDE pixels a side): a larger grid is pooled
+    # k x k, a block occupied if any of its cells is, else free if any is, and placed with k times the cell size.
+    # Here the 20 x 30 grid with a limit of 16 pixels: k = 2, a 10 x 15 image covering the same 2 x 3 m.
+    assert viz.map_image_factor((8192, 100)) == 1 and viz.map_image_factor((100, 8193)) == 2
+    monkeypatch.setattr(viz, "MAP_IMAGE_MAX_SIDE", 16)
+    occ = make_occupancy()
+    occ[7, 11] = 100  # one occupied cell inside free space: its block must show it
+    from mcl.maps import OccupancyGrid
+
+    path = tmp_path / "big.rrd"
+    with RerunLogger("save", path) as log:
+        log.log_map(OccupancyGrid.from_occupancy(occ, RES, ORIGIN))
+    static = {}
+    for _, comps in rows(path, "/world/map", None):
+        static.update({k: v for k, v in comps.items() if v is not None})
+    from PIL import Image
+
+    img = np.asarray(Image.open(io.BytesIO(bytes(static["EncodedImage:blob"][0]))))
+    assert img.shape == (10, 15)
+    assert (img[-1] == 0).all() and (img[:, 0] == 0).all()  # the walls survive the pooling
+    assert img[10 - 1 - 7 // 2, 11 // 2] == 0  # the lone obstacle too
+    assert img[0, 12] == viz._UNKNOWN and img[-3, 12] == viz._FREE
+    np.testing.assert_allclose(static["Transform3D:translation"][0], [ORIGIN[0], ORIGIN[1] + 20 * RES, 0.0], atol=1e-6)
+    np.testing.assert_allclose(static["Transform3D:scale"][0], [2 * RES, -2 * RES, 1.0], atol=1e-6)
+
+
 def test_stats_series_values(run_every1):
     path, logged = run_every1
     for name in logged[0]:
