@@ -7,6 +7,7 @@ synthetic world (mcl simulate, 8 s, 41 scans)."""
 from __future__ import annotations
 
 import math
+import types
 from pathlib import Path
 
 import numpy as np
@@ -126,6 +127,36 @@ def test_laser_mounting_from_tf_static_gives_the_same_laser_poses(scans, tmp_pat
     for a, b in zip(scans, got):
         assert np.allclose(compose(b.odom, b.laser_offset), a.odom, atol=1e-9)
         assert not np.allclose(b.odom[:2], a.odom[:2], atol=0.05)
+
+
+def test_an_upside_down_laser_reads_the_same_beams_as_an_upright_one(scans, tmp_path):
+    # A laser rolled by pi (z down, as AMCL allows) at (0.1, -0.05) turned 0.4 rad on the base: its beam at angle a
+    # points at -a, so it reports the log's scan reversed (the log's beams are symmetric about 0). Read back, each
+    # record must be the log's: the same ranges and angles, and the laser's pose (odometry ∘ mounting) the same.
+    from mcl.datasets.bagwrite import _compose, _inverse
+    from mcl.runner import compose
+
+    mx, my, psi = 0.1, -0.05, 0.4
+    assert math.isclose(scans[0].angle_min, -(scans[0].angle_min + scans[0].angle_increment * (scans[0].ranges.size - 1)))
+    bag = tmp_path / "flipped.mcap"
+    with BagOut(bag) as b:
+        q = b.msg("geometry_msgs/msg/Quaternion", x=math.cos(psi / 2), y=math.sin(psi / 2), z=0.0, w=0.0)  # Rz Rx(pi)
+        tr = b.msg("geometry_msgs/msg/Transform", translation=b.msg("geometry_msgs/msg/Vector3", x=mx, y=my, z=0.3),
+                   rotation=q)
+        b.write("/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+            b.msg("geometry_msgs/msg/TransformStamped", header=b.header(scans[0].t, "base_link"),
+                  child_frame_id="laser", transform=tr)]))
+        for s in scans:
+            base = _compose(tuple(s.odom), _inverse((mx, my, psi)))
+            _odom(b, types.SimpleNamespace(t=s.t, odom=base))
+            _laser(b, "/scan", s, ranges=np.asarray(s.ranges)[::-1])
+    src = open_bag(bag)
+    assert any("upside down" in n for n in src.notes)
+    assert np.allclose(src.laser_offsets["/scan"], (mx, my, psi), atol=1e-12)
+    for a, g in zip(scans, src.scans):
+        np.testing.assert_array_equal(g.ranges, a.ranges)
+        assert math.isclose(g.angle_min, a.angle_min, abs_tol=1e-12) and g.angle_increment == a.angle_increment
+        assert np.allclose(compose(g.odom, g.laser_offset), a.odom, atol=1e-9)
 
 
 def test_a_laser_without_transform_falls_back_with_a_note(scans, tmp_path):

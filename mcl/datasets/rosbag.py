@@ -16,6 +16,9 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
   message's own pose). Velocities from the Odometry twist (0 from /tf: the runner derives them).
 * **laser mounting**: ``frames.base -> scan frame`` from ``/tf_static`` (or the first ``/tf`` that has it),
   through any chain of frames; None when absent (the runner then uses ``sensor.laser_pose`` or the centre).
+  A laser mounted upside down (the frame's z axis pointing down: rolled or pitched by pi, as AMCL allows)
+  sees the plane mirrored, a beam at angle a pointing at -a: its ranges are reversed and its angle_min
+  mirrored, so the records hold the beams counter-clockwise in an upright frame with the mounting's yaw.
 * **map** (``nav_msgs/OccupancyGrid`` on ``topics.map``), **initial pose** (the first
   ``PoseWithCovarianceStamped`` on ``topics.initial_pose``, with its x, y, yaw covariance) and **truth**
   (``PoseStamped``, ``PoseWithCovarianceStamped`` or ``Odometry`` on ``topics.truth``).
@@ -93,13 +96,27 @@ def _frame(name: str) -> str:
 
 
 def _compose(a, b):
+    """a ∘ b of planar transforms (x, y, theta[, m]), m = -1 for one that mirrors the plane (y -> -y before the
+    rotation: a frame upside down), +1 or absent otherwise; the result has m when either has."""
+    ma = a[3] if len(a) > 3 else 1
+    mb = b[3] if len(b) > 3 else 1
     c, s = math.cos(a[2]), math.sin(a[2])
-    th = a[2] + b[2]
-    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], math.atan2(math.sin(th), math.cos(th)))
+    th = a[2] + ma * b[2]
+    by = ma * b[1]
+    out = (a[0] + c * b[0] - s * by, a[1] + s * b[0] + c * by, math.atan2(math.sin(th), math.cos(th)))
+    return out + (ma * mb,) if len(a) > 3 or len(b) > 3 else out
 
 
 def _tf_pose(tr) -> tuple[float, float, float]:
     return (float(tr.translation.x), float(tr.translation.y), yaw_of(tr.rotation))
+
+
+def _tf_mount(tr) -> tuple[float, float, float, int]:
+    """(x, y, theta, m) of a transform in the plane: m = -1 when it turns the z axis down (rolled or pitched by
+    about pi: the plane seen mirrored), theta then the yaw that maps the mirrored x axis (the rotation's ZYX yaw)."""
+    q = tr.rotation
+    z_up = 1.0 - 2.0 * (float(q.x) ** 2 + float(q.y) ** 2)  # z component of the rotated z axis
+    return (*_tf_pose(tr), -1 if z_up < 0.0 else 1)
 
 
 def _open_reader(path: Path):
@@ -181,8 +198,9 @@ class BagScans:
     one message at a time (odometry interpolated at each stamp, the mounting pose of its topic)."""
 
     def __init__(self, path: Path, topics: list[str], count: int, odometry: np.ndarray, offsets: dict,
-                 cloud_z, cloud_beams: int, has_twist: bool):
+                 cloud_z, cloud_beams: int, has_twist: bool, mirrored=frozenset()):
         self.path, self.topics, self.count = path, topics, count
+        self.mirrored = frozenset(mirrored)  # topics whose frame is upside down
         self.odometry, self.offsets = odometry, offsets
         self.cloud_z, self.cloud_beams, self.has_twist = cloud_z, int(cloud_beams), has_twist
 
@@ -202,10 +220,14 @@ class BagScans:
 
     def _scan(self, conn, msg, k: int) -> Scan:
         t = stamp_seconds(msg.header.stamp)
+        flip = conn.topic in self.mirrored
         if conn.msgtype == LASER:
             ranges, amin, inc, rmax = laser_ranges(msg)
+            if flip:  # beam i at angle a points at -a: reversed, the beams run counter-clockwise again
+                ranges = np.ascontiguousarray(ranges[::-1])
+                amin = -(amin + inc * (ranges.size - 1))
         else:
-            ranges, amin, inc, rmax = cloud_ranges(msg, self.cloud_z, self.cloud_beams)
+            ranges, amin, inc, rmax = cloud_ranges(msg, self.cloud_z, self.cloud_beams, flip)
         odom, tv, rv = odometry_at(self.odometry, t)
         if not self.has_twist:
             tv = rv = 0.0
@@ -248,8 +270,9 @@ def snap_pi(v: float) -> float:
     return v
 
 
-def cloud_ranges(msg, z_band, beams: int):
-    """A PointCloud2 as a planar scan: points with z_band[0] <= z <= z_band[1], nearest per bearing bin."""
+def cloud_ranges(msg, z_band, beams: int, mirrored: bool = False):
+    """A PointCloud2 as a planar scan: points with z_band[0] <= z <= z_band[1], nearest per bearing bin.
+    ``mirrored``: the cloud's frame is upside down; its y and z are negated first (z_band is then upward)."""
     names = {f.name: f for f in msg.fields}
     if not all(n in names for n in "xyz"):
         raise DataError(f"PointCloud2 without x, y, z fields (has {', '.join(names)})")
@@ -268,6 +291,8 @@ def cloud_ranges(msg, z_band, beams: int):
         rows = data[: n * int(msg.point_step)]
         pts = np.frombuffer(rows.tobytes(), dtype=dt, count=n)
     x, y, z = (pts[c].astype(np.float64) for c in "xyz")
+    if mirrored:
+        y, z = -y, -z
     keep = np.isfinite(x) & np.isfinite(y) & (z >= z_band[0]) & (z <= z_band[1])
     x, y = x[keep], y[keep]
     inc = 2.0 * math.pi / beams
@@ -411,7 +436,7 @@ def _grid_from_msg(path, topic, msg):
 
 def _static_chain(static: dict, base: str, frame: str):
     """Pose of ``frame`` in ``base`` through the parent links of ``static`` (child -> (parent, pose)), or None."""
-    pose = (0.0, 0.0, 0.0)
+    pose = (0.0, 0.0, 0.0, 1)
     f, seen = frame, set()
     while f != base:
         if f in seen or f not in static:
@@ -493,7 +518,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                     odom_rows.append((t, *_tf_pose(ts.transform), 0.0, 0.0))
                 elif topic == "/tf_static" or child not in static:
                     if parent != odom_frame or child != base_frame:
-                        static[child] = (parent, _tf_pose(ts.transform))
+                        static[child] = (parent, _tf_mount(ts.transform))
         elif topic == odom_topic:
             t = stamp_seconds(msg.header.stamp)
             order.see(topic, t)
@@ -526,15 +551,20 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     if not np.isfinite(odometry).all():
         raise DataError(f"{path}: {odom_topic or '/tf'}: non-finite odometry")
     offsets: dict[str, np.ndarray | None] = {}
+    mirrored: set[str] = set()
     for t in scan_topics:
         f = scan_frames[t]
-        pose = (0.0, 0.0, 0.0) if f == base_frame else _static_chain(static, base_frame, f)
+        pose = (0.0, 0.0, 0.0, 1) if f == base_frame else _static_chain(static, base_frame, f)
         if pose is None:
             offsets[t] = None
             notes.append(f"{path}: {t}: no transform {base_frame} -> {f} in /tf_static or /tf; the laser pose comes "
                          "from sensor.laser_pose (else the robot centre)")
         else:
-            offsets[t] = np.array(pose, dtype=np.float64)
+            offsets[t] = np.array(pose[:3], dtype=np.float64)
+            if pose[3] < 0:
+                mirrored.add(t)
+                notes.append(f"{path}: {t}: frame {f} is mounted upside down ({base_frame} -> {f} turns z down); "
+                             "its beams are read mirrored")
     truth = None
     if truth_topic is not None:
         if not truth_rows:
@@ -543,7 +573,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
     src_name = f"{odom_topic} (nav_msgs/Odometry)" if odom_topic else f"/tf {odom_frame} -> {base_frame}"
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
-                     has_twist=odom_topic is not None)
+                     has_twist=odom_topic is not None, mirrored=mirrored)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped)
