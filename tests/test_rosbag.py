@@ -159,6 +159,40 @@ def test_an_upside_down_laser_reads_the_same_beams_as_an_upright_one(scans, tmp_
         assert np.allclose(compose(g.odom, g.laser_offset), a.odom, atol=1e-9)
 
 
+def test_nav2_frames_base_footprint_without_base_link_are_found_with_a_note(scans, tmp_path):
+    # nav2 robots move base_footprint: odometry on /tf as odom -> base_footprint and the laser hanging off it, no
+    # base_link at all. With the default frames (base_link) the bag is read through base_footprint, saying so; the
+    # records are the log's (same odometry, the laser 0.2 m ahead composed back to the log's pose).
+    from mcl.datasets.bagwrite import _compose, _inverse
+    from mcl.runner import compose
+
+    mount = (0.2, 0.0, 0.0)
+    for odom in ("tf", "topic"):
+        bag = tmp_path / f"nav2-{odom}.mcap"
+        with BagOut(bag) as b:
+            b.write("/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+                b.transform(scans[0].t, "base_footprint", "base_scan", mount)]))
+            for s in scans:
+                base = _compose(tuple(s.odom), _inverse(mount))
+                if odom == "tf":
+                    b.write("/tf", "tf2_msgs/msg/TFMessage", s.t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+                        b.transform(s.t, "odom", "base_footprint", base)]))
+                else:
+                    cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*base), covariance=np.zeros(36))
+                    v3 = b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)
+                    tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
+                               twist=b.msg("geometry_msgs/msg/Twist", linear=v3, angular=v3), covariance=np.zeros(36))
+                    b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg(
+                        "nav_msgs/msg/Odometry", header=b.header(s.t, "odom"), child_frame_id="base_footprint",
+                        pose=cov, twist=tw))
+                _laser(b, "/scan", s, frame="base_scan")
+        src = open_bag(bag)
+        assert any("base_footprint" in n for n in src.notes), src.notes
+        assert np.allclose(src.laser_offsets["/scan"], mount, atol=1e-12), odom
+        for a, g in zip(scans, src.scans):
+            assert np.allclose(compose(g.odom, g.laser_offset), a.odom, atol=1e-9)
+
+
 def test_a_laser_without_transform_falls_back_with_a_note(scans, tmp_path):
     bag = tmp_path / "nostatic.bag"
     with BagOut(bag) as b:

@@ -499,6 +499,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     counts: dict[str, int] = {t: 0 for t in scan_topics}
     grid = initial = None
     truth_rows: list[tuple] = []
+    other_rows: dict[str, list] = {}  # /tf odom -> child rows for children other than base_frame
+    odom_child = None  # the Odometry topic's child_frame_id
     seen: dict[str, int] = {}
     for conn, msg in _messages(reader, path, conns):
         topic = conn.topic
@@ -516,12 +518,18 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                     t = stamp_seconds(ts.header.stamp)
                     order.see(topic, t, f" {odom_frame} -> {base_frame}")
                     odom_rows.append((t, *_tf_pose(ts.transform), 0.0, 0.0))
+                elif topic == "/tf" and odom_topic is None and parent == odom_frame and not odom_rows:
+                    # odom -> another frame (nav2's base_footprint): kept in case frames.base never appears
+                    other_rows.setdefault(child, []).append((stamp_seconds(ts.header.stamp),
+                                                             *_tf_pose(ts.transform), 0.0, 0.0))
                 elif topic == "/tf_static" or child not in static:
                     if parent != odom_frame or child != base_frame:
                         static[child] = (parent, _tf_mount(ts.transform))
         elif topic == odom_topic:
             t = stamp_seconds(msg.header.stamp)
             order.see(topic, t)
+            if odom_child is None:
+                odom_child = _frame(msg.child_frame_id)
             odom_rows.append((t, *_pose_msg(msg), float(msg.twist.twist.linear.x), float(msg.twist.twist.angular.z)))
         if topic == map_topic and grid is None:
             grid = _grid_from_msg(path, topic, msg)
@@ -539,6 +547,14 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     empty = [t for t in scan_topics if counts[t] == 0]
     if empty:
         raise DataError(f"{path}: {empty[0]}: no messages")
+    if not odom_rows and odom_topic is None and len(other_rows) == 1 and base_frame == _frame(_Frames().base):
+        # the default frames.base never appears under odom, but one other frame does (nav2: base_footprint): that
+        # one (a frame the user named is not second-guessed)
+        odom_child, odom_rows = next(iter(other_rows.items()))
+        for row in odom_rows:
+            order.see("/tf", row[0], f" {odom_frame} -> {odom_child}")
+        notes.append(f"{path}: /tf: no {odom_frame} -> {base_frame}; the odometry is {odom_frame} -> {odom_child}, "
+                     "the only transform from the odometry frame (frames.base chooses)")
     if not odom_rows:
         if odom_topic is not None:
             raise DataError(f"{path}: {odom_topic}: no messages")
@@ -555,6 +571,12 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     for t in scan_topics:
         f = scan_frames[t]
         pose = (0.0, 0.0, 0.0, 1) if f == base_frame else _static_chain(static, base_frame, f)
+        if pose is None and odom_child and odom_child != base_frame:
+            # no frames.base -> scan frame chain: the frame the odometry moves, if the scan frame hangs off it
+            pose = (0.0, 0.0, 0.0, 1) if f == odom_child else _static_chain(static, odom_child, f)
+            if pose is not None:
+                notes.append(f"{path}: {t}: no transform {base_frame} -> {f}; mounted on {odom_child}, the frame "
+                             "the odometry moves")
         if pose is None:
             offsets[t] = None
             notes.append(f"{path}: {t}: no transform {base_frame} -> {f} in /tf_static or /tf; the laser pose comes "
