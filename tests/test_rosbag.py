@@ -188,6 +188,7 @@ def test_nav2_frames_base_footprint_without_base_link_are_found_with_a_note(scan
                 _laser(b, "/scan", s, frame="base_scan")
         src = open_bag(bag)
         assert any("base_footprint" in n for n in src.notes), src.notes
+        assert src.odom_source == ("/tf odom -> base_footprint" if odom == "tf" else "/odom (nav_msgs/Odometry)")
         assert np.allclose(src.laser_offsets["/scan"], mount, atol=1e-12), odom
         for a, g in zip(scans, src.scans):
             assert np.allclose(compose(g.odom, g.laser_offset), a.odom, atol=1e-9)

@@ -593,7 +593,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             raise DataError(f"{path}: {truth_topic}: no messages")
         a = np.array(truth_rows, dtype=np.float64)
         truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
-    src_name = f"{odom_topic} (nav_msgs/Odometry)" if odom_topic else f"/tf {odom_frame} -> {base_frame}"
+    src_name = f"{odom_topic} (nav_msgs/Odometry)" if odom_topic else f"/tf {odom_frame} -> {odom_child or base_frame}"
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
                      has_twist=odom_topic is not None, mirrored=mirrored)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
