@@ -387,7 +387,7 @@ class AugmentedMCL:
         else:
             self.averages.update(Recovery.log_mean_likelihood(logw_prior, loglik_per_beam))
 
-    def observe_lost(self, lost: bool, cluster_weight: float = 1.0) -> None:
+    def observe_lost(self, lost: bool, cluster_weight: float = 1.0, dt: float = 0.0) -> None:
         pass
 
     @property
@@ -520,7 +520,8 @@ class LostRecovery:
     name = "lost"
 
     def __init__(self, fraction: float, local_std, global_after: int, lost_after: int,
-                 reseed: bool = False, probation: int = 0, search: GlobalSearch | None = None):
+                 reseed: bool = False, probation: int = 0, search: GlobalSearch | None = None,
+                 global_after_s: float = 0.0):
         self.reseed = bool(reseed)
         self.probation = int(probation)
         # the filter's search (read only here); a policy used on its own gets one that never starts
@@ -528,8 +529,10 @@ class LostRecovery:
         self.fraction = float(fraction)
         self.base_std = np.asarray(local_std, dtype=np.float64)
         self.global_after = int(global_after)
+        self.global_after_s = float(global_after_s)
         self.lost_after = max(int(lost_after), 1)
         self.lost_updates = 0  # consecutive updates the filter has believed it is lost
+        self.lost_time = 0.0  # log seconds from the first of them to the last
 
     def start_search(self) -> None:
         """Global localization starts (the filter has started ``search``): the set is already spread over the
@@ -537,16 +540,31 @@ class LostRecovery:
         the estimate of a still multi-modal cloud feeds whichever mode leads by chance and ends the search
         early. The lost count starts again."""
         self.lost_updates = 0
+        self.lost_time = 0.0
 
     def observe_likelihood(self, logw_prior, loglik_per_beam, injected) -> None:
         pass
 
-    def observe_lost(self, lost: bool, cluster_weight: float = 1.0) -> None:
+    def observe_lost(self, lost: bool, cluster_weight: float = 1.0, dt: float = 0.0) -> None:
         """This update's lost belief, after the filter's ``search`` has seen it (``cluster_weight`` is the
-        search's business)."""
+        search's business); ``dt`` the log time since the previous update."""
         if self.search.holding:
             return
-        self.lost_updates = self.lost_updates + 1 if lost else 0
+        if not lost:
+            self.lost_updates, self.lost_time = 0, 0.0
+            return
+        if self.lost_updates:
+            self.lost_time += max(float(dt), 0.0)
+        self.lost_updates += 1
+
+    @property
+    def global_due(self) -> bool:
+        """Lost for ``global_after`` updates, or for ``global_after_s`` log seconds over at least ``lost_after``
+        updates (the local spread has had its first round): the local spread did not find the pose."""
+        if self.lost_updates >= self.global_after:
+            return True
+        return (self.global_after_s > 0.0 and self.lost_updates >= self.lost_after
+                and self.lost_time >= self.global_after_s)
 
     @property
     def on_probation(self) -> bool:
@@ -563,16 +581,16 @@ class LostRecovery:
 
     @property
     def reseed_due(self) -> bool:
-        """With ``reseed``: lost for ``global_after`` updates (the local spread did not find the pose), so the
-        next resample adds a whole global set and starts a search (``start_search``)."""
+        """With ``reseed``: ``global_due`` (the local spread did not find the pose), so the next resample adds a
+        whole global set and starts a search (``start_search``)."""
         if not self.reseed or self.search.holding or not self.lost_updates:
             return False
-        return self.lost_updates >= self.global_after or self.on_probation
+        return self.global_due or self.on_probation
 
     @property
     def global_share(self) -> float:
         """The share of the injected poses drawn uniformly over free space (the rest around the estimate)."""
-        return 0.5 if self.lost_updates >= self.global_after and not self.reseed else 0.0
+        return 0.5 if self.global_due and not self.reseed else 0.0
 
     @property
     def local_std(self) -> np.ndarray:
@@ -592,5 +610,6 @@ def make_recovery(fc, global_start: bool, lost_after: int = 3, search: GlobalSea
         return AugmentedMCL(fc.recovery_alpha_slow, fc.recovery_alpha_fast)
     if mode == "lost":
         return LostRecovery(fc.recovery_fraction, fc.recovery_local_std, fc.recovery_global_after, lost_after,
-                            reseed=fc.recovery_reseed, probation=fc.recovery_probation, search=search)
+                            reseed=fc.recovery_reseed, probation=fc.recovery_probation, search=search,
+                            global_after_s=fc.recovery_global_after_s)
     return None

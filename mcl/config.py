@@ -86,6 +86,9 @@ class FilterConfig:
     recovery_fraction: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_local_std: tuple[float, float, float] = (0.5, 0.5, 0.3)  # lost: std x, y (m), theta (rad) around the estimate
     recovery_global_after: int = field(default=10, metadata=_rng(0, 1_000_000))  # lost updates before uniform draws
+    # ... or this many seconds of log time lost (after at least quality.lost_after lost updates), whichever comes
+    # first: a log with a scan every 3 s (intel_lab) is otherwise lost for 30 s before the re-seed. 0: updates only
+    recovery_global_after_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))
     recovery_reseed: bool = True  # lost: after global_after lost updates add a whole global set (not 5 % a step)
     recovery_probation: int = field(default=0, metadata=_rng(0, 1_000_000))  # updates after a search a lost call re-seeds
     recovery_reseed_keep: float = field(default=0.5, metadata=_rng(0.0, 1.0, lo_open=True))  # prior mass of the old cloud

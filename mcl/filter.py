@@ -137,6 +137,7 @@ class ParticleFilter:
         self.degenerate_events = 0
         self._degenerate_run = 0  # consecutive updates where every weight was zero
         self._delta = None  # this update's odometry step in the robot frame, for re-spreading
+        self._dt = 0.0  # this update's log time since the previous one (lost recovery's clock)
         self.last_estimate: ClusterEstimate | None = None
         self._observation = None  # the last scan's observation (the recovery sampler may use it)
         self._scan_observation = None  # this update's full observation, before beam skipping (for the quality)
@@ -324,6 +325,7 @@ class ParticleFilter:
         update) moves nothing.
         """
         self._delta = None
+        self._dt = float(control.dt) if control is not None else 0.0  # log time since the last update (recovery)
         if control is not None:
             control, self._delta = self.guard.check_control(control)
             if control is None:  # a jump: not motion
@@ -527,7 +529,7 @@ class ParticleFilter:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
             self.faults.observe(info.lost, c if c == c else 0.0)
         if self.recovery is not None:
-            self.recovery.observe_lost(info.lost, info.cluster_weight)
+            self.recovery.observe_lost(info.lost, info.cluster_weight, self._dt)
 
     def resample(self, info: StepInfo) -> None:
         """Resample when ESS / N < resample_threshold (the scheme named in filter.resampling).

@@ -97,6 +97,34 @@ def _observe(r, lost: bool, cluster_weight: float = 1.0) -> None:
     r.observe_lost(lost, cluster_weight)
 
 
+def test_the_reseed_comes_after_global_after_updates_or_global_after_s_seconds_whichever_first():
+    # global_after 10 updates or 10 s of log time (after lost_after = 3 updates). A log with a scan every 3 s
+    # (intel_lab) re-seeds at the 5th lost update (12 s from the first), not the 10th (27 s); one at 5 Hz at the
+    # 10th (1.8 s): the clock never comes first there. A good update starts both counts again.
+    from mcl.adaptive import GlobalSearch, LostRecovery
+
+    def due_at(dt, seconds):
+        r = LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=True, search=GlobalSearch(),
+                         global_after_s=seconds)
+        for k in range(1, 30):
+            r.search.observe(True, 1.0)
+            r.observe_lost(True, 1.0, dt)
+            if r.reseed_due:
+                return k
+        return None
+
+    assert due_at(3.0, 10.0) == 5
+    assert due_at(3.0, 0.0) == 10  # the clock off: updates only
+    assert due_at(0.2, 10.0) == 10
+    assert due_at(30.0, 10.0) == 3  # never before lost_after updates, however sparse the log
+    r = LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=True, search=GlobalSearch(),
+                     global_after_s=10.0)
+    for lost in (True, True, True, False, True, True, True):
+        r.search.observe(lost, 1.0)
+        r.observe_lost(lost, 1.0, 4.0)
+    assert r.lost_updates == 3 and r.lost_time == 8.0 and not r.reseed_due
+
+
 def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_settled_or_fitting():
     from mcl.adaptive import GlobalSearch
 
