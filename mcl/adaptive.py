@@ -97,6 +97,20 @@ def kld_quantile(delta: float) -> float:
     return NormalDist().inv_cdf(1.0 - delta)
 
 
+_BOUND_TABLES: dict[tuple[float, float], np.ndarray] = {}
+
+
+def _bound_table(epsilon: float, z: float, k_max: int) -> np.ndarray:
+    """M_chi(k) for k = 0..k_max (at least), computed once per (epsilon, z) and grown by doubling: a resample
+    looks the bound up for each drawn pose instead of evaluating it (the same values, element for element)."""
+    table = _BOUND_TABLES.get((epsilon, z))
+    if table is None or table.size <= k_max:
+        size = max(2 * (table.size if table is not None else 0), k_max + 1, 1024)
+        table = kld_bound(np.arange(size), epsilon, z)
+        _BOUND_TABLES[(epsilon, z)] = table
+    return table
+
+
 def kld_bound(k, epsilon: float, z: float) -> np.ndarray:
     """M_chi(k): particles needed for k occupied bins (Fox 2003, Wilson-Hilferty). 0 for k <= 1.
 
@@ -268,8 +282,16 @@ def kld_resample(
     its poses are binned, as Table 8.4 does: without it, bins are counted on
     the resampled ancestors, which after a peaked correction are copies of a
     few poses (AMCL does this, and its sets shrink to the minimum too early).
+
+    With ``min_particles >= max_particles`` the size is fixed: one batch of
+    ``max_particles``, the same draws, and no bins counted (k = 0).
     """
     counter.reset()
+    if min_particles >= max_particles:  # N fixed (e.g. --particles at or below min_particles): nothing to count
+        batch, mask = _kld_batch(particles, logw, rng, max(int(max_particles), 1), scheme, inject_p, sampler)
+        if move is not None:
+            batch = move(batch)
+        return np.ascontiguousarray(batch), mask, 0
     k = 0
     total = 0
     batches: list[np.ndarray] = []
@@ -277,19 +299,12 @@ def kld_resample(
     b = max(int(min_particles), 1)
     while total < max_particles:
         b = min(b, max_particles - total)
-        idx = resample(scheme, logw, rng, n=b)
-        batch = particles[:, rng.permutation(idx)]
-        n_inj = draw_injected(b, inject_p, rng) if sampler is not None else 0
-        mask = np.zeros(b, dtype=bool)
-        if n_inj:
-            slots = rng.choice(b, size=n_inj, replace=False)
-            batch[:, slots] = sampler(n_inj)
-            mask[slots] = True
+        batch, mask = _kld_batch(particles, logw, rng, b, scheme, inject_p, sampler)
         if move is not None:
             batch = move(batch)
         ks = counter.add(batch)
         drawn = total + np.arange(1, b + 1)
-        need = np.clip(kld_bound(ks, epsilon, z), min_particles, max_particles)
+        need = np.clip(_bound_table(epsilon, z, int(ks[-1]))[ks], min_particles, max_particles)
         done = np.flatnonzero(drawn >= need)
         if done.size:
             stop = int(done[0]) + 1
@@ -305,6 +320,20 @@ def kld_resample(
         b = total  # double
     out = np.ascontiguousarray(np.concatenate(batches, axis=1))
     return out, np.concatenate(masks), k
+
+
+def _kld_batch(particles, logw, rng, b: int, scheme: str, inject_p: float, sampler):
+    """One batch of ``kld_resample``: (b ancestors drawn with ``scheme`` and shuffled, with a Binomial(b,
+    inject_p) of its slots taken by ``sampler``; the injected mask)."""
+    idx = resample(scheme, logw, rng, n=b)
+    batch = particles[:, rng.permutation(idx)]
+    n_inj = draw_injected(b, inject_p, rng) if sampler is not None else 0
+    mask = np.zeros(b, dtype=bool)
+    if n_inj:
+        slots = rng.choice(b, size=n_inj, replace=False)
+        batch[:, slots] = sampler(n_inj)
+        mask[slots] = True
+    return batch, mask
 
 
 # ----------------------------------------------------------------------------- the filter's policies

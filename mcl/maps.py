@@ -121,32 +121,38 @@ class OccupancyGrid:
             cache[key] = self._surface_distance(key / self.resolution)
         return cache[key]
 
-    def _surface_distance(self, extra_cells: float) -> np.ndarray:
-        from scipy import ndimage
-
+    def _surface_distance(self, extra_cells: float, tile: int = 128, margin: int = 16) -> np.ndarray:
         occ = self.occupied
         d = np.array(self.distance, dtype=np.float32)
-        # only cells whose four neighbours are occupied lie deeper than one cell; the depth transform runs on the
-        # (one-cell padded) box of each obstacle holding such cells, not on the whole map (250 m map: 5 s -> 0.4 s)
+        # only cells whose four neighbours are occupied lie deeper than one cell; the depth transform runs on
+        # the tiles holding such cells, each in a window ``margin`` cells wider (250 m map: 0.17 s, against 0.6 s
+        # for scipy.ndimage's labelling and import and 1.2 s for a whole-map transform; the same values)
         inner = occ.copy()  # occupied with its four neighbours occupied (off the map counts as occupied)
         inner[1:] &= occ[:-1]
         inner[:-1] &= occ[1:]
         inner[:, 1:] &= occ[:, :-1]
         inner[:, :-1] &= occ[:, 1:]
-        if not inner.any():
+        ys, xs = np.nonzero(inner)
+        if ys.size == 0:
             return d
-        labels, _ = ndimage.label(occ, structure=np.ones((3, 3), dtype=bool))
-        boxes = ndimage.find_objects(labels)
         h, w = occ.shape
-        for lab in np.unique(labels[inner]):
-            ys, xs = boxes[lab - 1]
-            y0, y1, x0, x1 = max(ys.start - 1, 0), min(ys.stop + 1, h), max(xs.start - 1, 0), min(xs.stop + 1, w)
-            mine = labels[y0:y1, x0:x1] == lab
-            if mine.all():  # no free cell in reach (a map that is one obstacle): depth 0 as before
-                continue
-            depth = np.sqrt(_edt_squared(mine), dtype=np.float64)
+        per_row = -(-w // tile)
+        for t in np.unique((ys // tile) * per_row + xs // tile):
+            ty, tx = divmod(int(t), per_row)
+            y0, y1, x0, x1 = ty * tile, min(ty * tile + tile, h), tx * tile, min(tx * tile + tile, w)
+            m = margin
+            while True:
+                wy0, wy1, wx0, wx1 = max(y0 - m, 0), min(y1 + m, h), max(x0 - m, 0), min(x1 + m, w)
+                sq = _edt_squared(occ[wy0:wy1, wx0:wx1])[y0 - wy0:y1 - wy0, x0 - wx0:x1 - wx0]
+                # exact wherever it is <= m: a non-occupied cell nearer than m lies inside the window; deeper
+                # values may be too deep, so the window grows (up to the whole map)
+                if float(sq.max()) <= m * m or (wy0, wy1, wx0, wx1) == (0, h, 0, w):
+                    break
+                m *= 2
+            mine = occ[y0:y1, x0:x1] & np.isfinite(sq)  # inf: no non-occupied cell on the map, depth 0 as before
+            depth = np.sqrt(sq[mine], dtype=np.float64)
             block = d[y0:y1, x0:x1]
-            block[mine] = np.maximum(depth[mine] - 1.0 - extra_cells, 0.0) * self.resolution
+            block[mine] = np.maximum(depth - 1.0 - extra_cells, 0.0) * self.resolution
         return d
 
     # --- coordinates -----------------------------------------------------

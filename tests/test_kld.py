@@ -239,3 +239,31 @@ def test_kld_filter_is_deterministic_with_one_and_two_threads(tmp_path):
     assert outs[0] == outs[1]
     lo, hi, _ = (int(v) for v in outs[0][1].split())
     assert lo < hi  # the count really changed during the run
+
+
+def test_a_fixed_size_resample_draws_the_same_set_without_counting_bins():
+    # min_particles >= max_particles: the bound cannot change N, so kld_resample skips the bins (k = 0) but draws
+    # exactly what the batch loop drew: the scheme's ancestors, shuffled by the same generator, then moved.
+    from mcl.resampling import resample
+
+    rng = np.random.default_rng(5)
+    p = _cloud(rng, 3000, 0.5)
+    logw = rng.normal(size=3000)
+    counter = BinCounter((0.0, 0.0), (10.0, 10.0), 0.5, math.radians(10))
+    shift = lambda b: b + np.array([[0.1], [0.0], [0.0]])  # noqa: E731
+    out, mask, k = kld_resample(p, logw, np.random.default_rng(6), counter, scheme="systematic", min_particles=3000,
+                                max_particles=3000, epsilon=0.05, z=kld_quantile(0.01), move=shift)
+    ref_rng = np.random.default_rng(6)
+    ref = p[:, ref_rng.permutation(resample("systematic", logw, ref_rng, n=3000))] + np.array([[0.1], [0.0], [0.0]])
+    assert k == 0 and counter.k == 0 and not mask.any() and out.flags.c_contiguous
+    np.testing.assert_array_equal(out, ref)
+
+
+def test_the_bound_table_holds_the_bound_element_for_element():
+    from mcl.adaptive import _bound_table
+
+    z = kld_quantile(0.01)
+    ks = np.array([0, 1, 2, 3, 50, 999, 5000, 70_000])
+    table = _bound_table(0.05, z, int(ks.max()))
+    np.testing.assert_array_equal(table[ks], kld_bound(ks, 0.05, z))
+    assert table.size > ks.max()

@@ -168,6 +168,29 @@ def test_surface_distance_is_depth_inside_obstacles_against_brute_force():
     assert st[5, 5] == pytest.approx(0.05) and grid.surface_distance() is sd  # cached per tolerance
 
 
+def test_surface_distance_by_tiles_is_exact_when_obstacles_are_deeper_than_the_window():
+    """The depth runs per tile in a window ``margin`` cells wider; a block deeper than the margin (and one wider
+    than a tile) widens the window until the depth is exact: the brute force, with tiles of 4 and a margin of 1."""
+    rng = np.random.default_rng(7)
+    occ = np.where(rng.random((40, 45)) < 0.2, 100, 0).astype(np.int8)
+    occ[5:30, 8:38] = 100  # 25 x 30 cells: depth up to 13 cells, far past a margin of 1 and a tile of 4
+    occ[0:3, 0:45] = 100  # along the map's edge: off the map is not a free cell
+    occ[35, 40] = -1
+    grid = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
+    ny, nx = np.nonzero(occ != 100)
+    iy, ix = np.mgrid[0:40, 0:45]
+    brute = np.maximum(np.min(np.hypot(ix[..., None] - nx, iy[..., None] - ny), axis=-1) - 1.0 - 0.5, 0.0) * 0.05
+    on = occ == 100
+    for tile, margin in ((4, 1), (7, 3), (128, 16)):
+        sd = grid._surface_distance(0.5, tile=tile, margin=margin)
+        np.testing.assert_allclose(sd[on], brute[on], rtol=1e-6, atol=1e-7)
+        np.testing.assert_array_equal(sd[~on], grid.distance[~on])
+    assert sd[17, 22] == pytest.approx((13 - 1.5) * 0.05)  # 13 cells from row 4 and row 30
+    # a map with no non-occupied cell: no depth to measure, 0 everywhere as AMCL's field has it
+    full = OccupancyGrid.from_occupancy(np.full((6, 7), 100, np.int8), 0.05, (0.0, 0.0))
+    assert np.all(full._surface_distance(0.0, tile=4, margin=1) == 0.0)
+
+
 def test_distance_is_scipys_euclidean_transform_to_the_bit():
     # The edt package replaced scipy.ndimage.distance_transform_edt (7x faster on a 250 m map): the likelihood
     # table, and so every trajectory, must stay what it was. A random grid with a thick block and map edges.
