@@ -168,9 +168,10 @@ class BinCounter:
         return counts
 
     def reset(self) -> None:
-        from mcl.kernels.kld import clear_bins
+        if self._n_touched:
+            from mcl.kernels.kld import clear_bins
 
-        clear_bins(self.flags, self._touched, self._n_touched)
+            clear_bins(self.flags, self._touched, self._n_touched)
         self._n_touched = 0
         self.k = 0
 

@@ -254,7 +254,7 @@ def _printable(s: str) -> str:
 
 
 def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """Return (value (H, W) int, alpha (H, W) uint8 | None), image row 0 = top."""
+    """Return (value (H, W) uint8, alpha (H, W) uint8 | None), image row 0 = top."""
     from PIL import Image
 
     label = f"{where}: image: {_printable(str(img_path))}"
@@ -290,7 +290,7 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | No
             scaled = np.nan_to_num(arr.astype(np.float64) * (255.0 / top))
             value = np.clip(np.rint(scaled), 0, 255).astype(np.int32)
         else:
-            value = arr.astype(np.int32)
+            value = arr
     elif arr.ndim == 3 and arr.shape[2] in (2, 4):
         value = arr[:, :, :-1].astype(np.int32).sum(axis=2) // (arr.shape[2] - 1)
         alpha = arr[:, :, -1]
@@ -300,7 +300,7 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | No
         raise DataError(f"{label}: unsupported image layout {arr.shape} (mode {mode})")
     if value.size == 0:
         raise DataError(f"{label}: empty image")
-    return value, alpha
+    return value.astype(np.uint8, copy=False), alpha  # every branch gives 0..255
 
 
 def load_map(path: str | os.PathLike) -> OccupancyGrid:
@@ -367,7 +367,23 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
 
 def _classify(value: np.ndarray, alpha: np.ndarray | None, mode: str, negate: bool,
               occ_th: float, free_th: float) -> np.ndarray:
-    """Pixel values (0..255) -> int8 occupancy, exactly as ROS map_server."""
+    """Pixel values (0..255) -> int8 occupancy, exactly as ROS map_server.
+
+    8-bit images go through a 256-entry table built by the same rule (a 250 m map's 25 M pixels: one gather
+    instead of float64 arrays of the whole image)."""
+    if value.dtype == np.uint8:
+        out = _classify_values(np.arange(256, dtype=np.uint8), mode, negate, occ_th, free_th)[value]
+        if mode == "scale" and alpha is not None:
+            out[alpha == 0] = -1
+        return out
+    out = _classify_values(value, mode, negate, occ_th, free_th)
+    if mode == "scale" and alpha is not None:
+        out[alpha == 0] = -1
+    return out
+
+
+def _classify_values(value: np.ndarray, mode: str, negate: bool, occ_th: float, free_th: float) -> np.ndarray:
+    """map_server's rule for each pixel value (alpha aside)."""
     if mode == "raw":
         out = np.where((value >= 0) & (value <= 100), value, -1)
         return out.astype(np.int8)
@@ -382,8 +398,6 @@ def _classify(value: np.ndarray, alpha: np.ndarray | None, mode: str, negate: bo
         out[between] = (99.0 * ratio).astype(np.int8)
     out[occ] = 100
     out[free] = 0
-    if mode == "scale" and alpha is not None:
-        out[alpha == 0] = -1
     return out
 
 

@@ -393,3 +393,22 @@ def test_mask_at_reads_the_cell_of_each_world_point_and_is_false_off_the_map():
     x = np.array([0.5, 0.99, 0.49, 0.7, -1.01, 1.5, np.nan, 0.7])
     y = np.array([2.5, 2.99, 2.7, 3.0, 2.2, 2.2, 2.7, np.inf])
     assert grid.mask_at(mask, x, y).tolist() == [True, True, False, False, False, False, False, False]
+
+
+@pytest.mark.parametrize("mode", ["trinary", "scale", "raw"])
+@pytest.mark.parametrize("negate", [False, True])
+def test_an_8_bit_map_is_classified_by_its_table_as_pixel_by_pixel(mode, negate):
+    # 8-bit images take a 256-entry table; every value, with thresholds between pixel steps and on them, must
+    # give what map_server's rule gives pixel by pixel (the int32 path), alpha 0 unknown in scale mode.
+    from mcl.maps import _classify, _classify_values
+
+    rng = np.random.default_rng(8)
+    value = np.concatenate([np.arange(256), rng.integers(0, 256, 500)]).astype(np.uint8).reshape(-1, 12)
+    alpha = np.where(rng.random(value.shape) < 0.2, 0, 255).astype(np.uint8)
+    for occ_th, free_th in ((0.65, 0.196), (100 / 255, 50 / 255)):
+        got = _classify(value, alpha, mode, negate, occ_th, free_th)
+        want = _classify_values(value.astype(np.int32), mode, negate, occ_th, free_th)
+        if mode == "scale":
+            want[alpha == 0] = -1
+        assert got.dtype == np.int8
+        np.testing.assert_array_equal(got, want)
