@@ -230,6 +230,8 @@ class ParticleFilter:
         if self.cfg.filter.recovery == "auto" and self.recovery is None:
             self.recovery = self._make_recovery(True)
         self.search.start()
+        if hasattr(self.sensor, "search_table"):  # the search's field, made now (a map-sized table) and not
+            self.sensor.search_table()  # inside the first update's correction
         if self.recovery is not None and hasattr(self.recovery, "start_search"):
             self.recovery.start_search()
         self.quality.reset(lost=True)

@@ -406,3 +406,13 @@ def test_the_likelihood_field_scores_with_the_search_field_exactly_while_the_las
     pf.search.tempering = False
     _correction_gain(pf, obs)  # settled
     assert seen == [False, True, False, True, False]
+
+
+def test_a_global_start_builds_the_search_field_before_the_first_update_and_tracking_does_not():
+    # The search field (search_interior's table, map-sized) is made when a global search starts, so its cost is
+    # the start's and not the first update's; a track started from a known pose builds it only if it gets lost.
+    pf = _filter_on_a_box("sensor.likelihood_field.interior=depth", "sensor.likelihood_field.search_interior=zero")
+    pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1])
+    assert pf.sensor._search_table is None
+    pf.init_global()
+    assert pf.sensor._search_table is not None and pf.sensor._search_table is not pf.sensor.table
