@@ -412,3 +412,22 @@ def test_an_8_bit_map_is_classified_by_its_table_as_pixel_by_pixel(mode, negate)
             want[alpha == 0] = -1
         assert got.dtype == np.int8
         np.testing.assert_array_equal(got, want)
+
+
+def test_the_map_tables_are_built_without_numpys_huge_page_advice_and_the_advice_comes_back():
+    # mcl.runner.small_pages turns NumPy's madvise(MADV_HUGEPAGE) off while the filter builds its map tables
+    # (compaction stalls on a 250 m map) and restores whatever was set, even when the block raises.
+    from numpy._core import multiarray
+
+    from mcl.runner import small_pages
+
+    before = multiarray._set_madvise_hugepage(True)
+    try:
+        with small_pages():
+            assert multiarray._get_madvise_hugepage() is False
+        assert multiarray._get_madvise_hugepage() is True
+        with pytest.raises(RuntimeError), small_pages():
+            raise RuntimeError
+        assert multiarray._get_madvise_hugepage() is True
+    finally:
+        multiarray._set_madvise_hugepage(before)
