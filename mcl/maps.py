@@ -373,10 +373,8 @@ def _classify(value: np.ndarray, alpha: np.ndarray | None, mode: str, negate: bo
     instead of float64 arrays of the whole image)."""
     if value.dtype == np.uint8:
         out = _classify_values(np.arange(256, dtype=np.uint8), mode, negate, occ_th, free_th)[value]
-        if mode == "scale" and alpha is not None:
-            out[alpha == 0] = -1
-        return out
-    out = _classify_values(value, mode, negate, occ_th, free_th)
+    else:
+        out = _classify_values(value, mode, negate, occ_th, free_th)
     if mode == "scale" and alpha is not None:
         out[alpha == 0] = -1
     return out
