@@ -137,18 +137,24 @@ class OccupancyGrid:
             return d
         h, w = occ.shape
         per_row = -(-w // tile)
-        for t in np.unique((ys // tile) * per_row + xs // tile):
+        tiles = np.unique((ys // tile) * per_row + xs // tile)
+        # the whole map's transform, made once, where the windows would cover more cells than the map (a map
+        # painted solid outside its walls) or an obstacle is deeper than the margin
+        whole = _edt_squared(occ) if tiles.size * (tile + 2 * margin) ** 2 >= occ.size else None
+        for t in tiles:
             ty, tx = divmod(int(t), per_row)
             y0, y1, x0, x1 = ty * tile, min(ty * tile + tile, h), tx * tile, min(tx * tile + tile, w)
-            m = margin
-            while True:
-                wy0, wy1, wx0, wx1 = max(y0 - m, 0), min(y1 + m, h), max(x0 - m, 0), min(x1 + m, w)
+            sq = None
+            if whole is None:
+                wy0, wy1, wx0, wx1 = max(y0 - margin, 0), min(y1 + margin, h), max(x0 - margin, 0), min(x1 + margin, w)
                 sq = _edt_squared(occ[wy0:wy1, wx0:wx1])[y0 - wy0:y1 - wy0, x0 - wx0:x1 - wx0]
-                # exact wherever it is <= m: a non-occupied cell nearer than m lies inside the window; deeper
-                # values may be too deep, so the window grows (up to the whole map)
-                if float(sq.max()) <= m * m or (wy0, wy1, wx0, wx1) == (0, h, 0, w):
-                    break
-                m *= 2
+                # exact wherever it is <= margin: a non-occupied cell that near lies inside the window
+                if float(sq.max()) > margin * margin and (wy0, wy1, wx0, wx1) != (0, h, 0, w):
+                    sq = None
+            if sq is None:
+                if whole is None:
+                    whole = _edt_squared(occ)
+                sq = whole[y0:y1, x0:x1]
             mine = occ[y0:y1, x0:x1] & np.isfinite(sq)  # inf: no non-occupied cell on the map, depth 0 as before
             depth = np.sqrt(sq[mine], dtype=np.float64)
             block = d[y0:y1, x0:x1]

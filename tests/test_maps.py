@@ -169,19 +169,23 @@ def test_surface_distance_is_depth_inside_obstacles_against_brute_force():
 
 
 def test_surface_distance_by_tiles_is_exact_when_obstacles_are_deeper_than_the_window():
-    """The depth runs per tile in a window ``margin`` cells wider; a block deeper than the margin (and one wider
-    than a tile) widens the window until the depth is exact: the brute force, with tiles of 4 and a margin of 1."""
+    """The depth runs per tile in a window ``margin`` cells wider; a tile whose obstacle is deeper than the
+    margin, and a map whose windows would cover more than the map, take the whole map's transform: each way the
+    reference (scipy.ndimage's exact transform to the nearest non-occupied cell)."""
+    from scipy.ndimage import distance_transform_edt
+
     rng = np.random.default_rng(7)
-    occ = np.where(rng.random((40, 45)) < 0.2, 100, 0).astype(np.int8)
-    occ[5:30, 8:38] = 100  # 25 x 30 cells: depth up to 13 cells, far past a margin of 1 and a tile of 4
-    occ[0:3, 0:45] = 100  # along the map's edge: off the map is not a free cell
-    occ[35, 40] = -1
+    occ = np.where(rng.random((120, 150)) < 0.2, 100, 0).astype(np.int8)
+    occ[5:30, 8:38] = 100  # 25 x 30 cells: depth up to 13 cells, past a margin of 2
+    occ[60:66, 100:106] = 100  # 6 x 6: depth 3, within a margin of 3 only
+    occ[0:3, :] = 100  # along the map's edge: off the map is not a free cell
+    occ[100, 140] = -1
     grid = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
-    ny, nx = np.nonzero(occ != 100)
-    iy, ix = np.mgrid[0:40, 0:45]
-    brute = np.maximum(np.min(np.hypot(ix[..., None] - nx, iy[..., None] - ny), axis=-1) - 1.0 - 0.5, 0.0) * 0.05
+    brute = np.maximum(distance_transform_edt(occ == 100) - 1.0 - 0.5, 0.0) * 0.05
     on = occ == 100
-    for tile, margin in ((4, 1), (7, 3), (128, 16)):
+    # (8, 2): windows, then the whole map from the big block's first tile on; (8, 3): windows exact for the small block too;
+    # (4, 1): windows would cover more than the map, so the whole map from the start
+    for tile, margin in ((8, 2), (8, 3), (4, 1), (128, 16)):
         sd = grid._surface_distance(0.5, tile=tile, margin=margin)
         np.testing.assert_allclose(sd[on], brute[on], rtol=1e-6, atol=1e-7)
         np.testing.assert_array_equal(sd[~on], grid.distance[~on])
@@ -189,6 +193,7 @@ def test_surface_distance_by_tiles_is_exact_when_obstacles_are_deeper_than_the_w
     # a map with no non-occupied cell: no depth to measure, 0 everywhere as AMCL's field has it
     full = OccupancyGrid.from_occupancy(np.full((6, 7), 100, np.int8), 0.05, (0.0, 0.0))
     assert np.all(full._surface_distance(0.0, tile=4, margin=1) == 0.0)
+    assert np.all(full._surface_distance(0.0, tile=2, margin=1) == 0.0)
 
 
 def test_distance_is_scipys_euclidean_transform_to_the_bit():
