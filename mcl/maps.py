@@ -138,21 +138,21 @@ class OccupancyGrid:
         h, w = occ.shape
         per_row = -(-w // tile)
         tiles = np.unique((ys // tile) * per_row + xs // tile)
-        # the whole map's transform, made once, where the windows would cover more cells than the map (a map
-        # painted solid outside its walls) or an obstacle is deeper than the margin
-        whole = _edt_squared(occ) if tiles.size * (tile + 2 * margin) ** 2 >= occ.size else None
+        whole = None  # the whole map's transform, made once when windows do not do (see below)
+        widened = 0
         for t in tiles:
             ty, tx = divmod(int(t), per_row)
             y0, y1, x0, x1 = ty * tile, min(ty * tile + tile, h), tx * tile, min(tx * tile + tile, w)
-            sq = None
-            if whole is None:
-                wy0, wy1, wx0, wx1 = max(y0 - margin, 0), min(y1 + margin, h), max(x0 - margin, 0), min(x1 + margin, w)
+            sq, m = None, margin
+            while whole is None and m <= tile and widened <= _MAX_WIDENED:
+                wy0, wy1, wx0, wx1 = max(y0 - m, 0), min(y1 + m, h), max(x0 - m, 0), min(x1 + m, w)
                 sq = _edt_squared(occ[wy0:wy1, wx0:wx1])[y0 - wy0:y1 - wy0, x0 - wx0:x1 - wx0]
-                # exact wherever it is <= margin: a non-occupied cell that near lies inside the window
-                if float(sq.max()) > margin * margin and (wy0, wy1, wx0, wx1) != (0, h, 0, w):
-                    sq = None
-            if sq is None:
-                if whole is None:
+                # exact wherever it is <= m: a non-occupied cell that near lies inside the window
+                if float(sq.max()) <= m * m or (wy0, wy1, wx0, wx1) == (0, h, 0, w):
+                    break
+                sq, m, widened = None, 2 * m, widened + 1
+            if sq is None:  # deeper than a tile, or windows widened on many tiles (a map painted solid outside
+                if whole is None:  # its walls): from here on one transform of the whole map serves every tile
                     whole = _edt_squared(occ)
                 sq = whole[y0:y1, x0:x1]
             mine = occ[y0:y1, x0:x1] & np.isfinite(sq)  # inf: no non-occupied cell on the map, depth 0 as before
@@ -231,6 +231,9 @@ class OccupancyGrid:
 
 def _num(doc: dict, key: str, where: str) -> float:
     return finite_number(doc[key], f"{where}: {key}", DataError)
+
+
+_MAX_WIDENED = 64  # window widenings in OccupancyGrid._surface_distance before the whole map's transform
 
 
 def _edt_squared(mask: np.ndarray) -> np.ndarray:

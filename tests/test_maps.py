@@ -169,9 +169,8 @@ def test_surface_distance_is_depth_inside_obstacles_against_brute_force():
 
 
 def test_surface_distance_by_tiles_is_exact_when_obstacles_are_deeper_than_the_window():
-    """The depth runs per tile in a window ``margin`` cells wider; a tile whose obstacle is deeper than the
-    margin, and a map whose windows would cover more than the map, take the whole map's transform: each way the
-    reference (scipy.ndimage's exact transform to the nearest non-occupied cell)."""
+    """The depth runs per tile in a window ``margin`` cells wider; from the first tile whose obstacle is deeper
+    than the margin on, the whole map's transform: each way the reference (scipy.ndimage's exact transform to the nearest non-occupied cell)."""
     from scipy.ndimage import distance_transform_edt
 
     rng = np.random.default_rng(7)
@@ -183,8 +182,8 @@ def test_surface_distance_by_tiles_is_exact_when_obstacles_are_deeper_than_the_w
     grid = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
     brute = np.maximum(distance_transform_edt(occ == 100) - 1.0 - 0.5, 0.0) * 0.05
     on = occ == 100
-    # (8, 2): windows, then the whole map from the big block's first tile on; (8, 3): windows exact for the small block too;
-    # (4, 1): windows would cover more than the map, so the whole map from the start
+    # (8, 2): windows, then the whole map from the big block's first tile on; (8, 3): windows exact for the
+    # small block too; (4, 1) and (128, 16): other tile and window sizes
     for tile, margin in ((8, 2), (8, 3), (4, 1), (128, 16)):
         sd = grid._surface_distance(0.5, tile=tile, margin=margin)
         np.testing.assert_allclose(sd[on], brute[on], rtol=1e-6, atol=1e-7)
