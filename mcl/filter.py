@@ -46,7 +46,7 @@ from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
 from mcl.motion import allowed_mask, make_motion_model
 from mcl.quality import Fit, ScanQuality
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
-from mcl.sensors import BeamSkipping, make_sensor_model
+from mcl.sensors import BeamSkipping, UnmappedObjects, make_sensor_model
 
 __all__ = ["Control", "StepInfo", "ParticleFilter", "EVENT_KINDS"]
 
@@ -127,6 +127,9 @@ class ParticleFilter:
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
         self.quality = ScanQuality(grid, cfg.quality)
+        self.unmapped = (UnmappedObjects(grid, cfg.sensor, dist=self.quality.dist)
+                         if cfg.sensor.unmapped_skip and cfg.sensor.model == "likelihood_field" else None)
+        self._unmapped_candidates = None  # (observation, (K,) bool) of the scan last prepared
         # Recovery draws injected poses from this: sampler(n, rng, observation) -> (3, n). Uniform over the free
         # space the motion model allows unless replaced (a landmark-based pose sampler when landmarks are used).
         self.recovery_sampler = self.sample_uniform
@@ -279,7 +282,10 @@ class ParticleFilter:
         if not self.guard.usable_scan(scan):
             return None
         self._laser_pose = np.asarray(laser_pose, dtype=np.float64)
-        return self.sensor.prepare(scan, laser_pose)
+        observation = self.sensor.prepare(scan, laser_pose)
+        if self.unmapped is not None:
+            self._unmapped_candidates = (observation, self.unmapped.candidates(scan))
+        return observation
 
     def time_backwards(self, dt: float) -> None:
         """Count (and warn once about) time running backwards between updates."""
@@ -388,12 +394,18 @@ class ParticleFilter:
         self._scan_observation = observation
         if observation is None:
             return
+        if self._tracking_unmapped(observation):
+            observation, skipped = self._skip_unmapped(observation)
+            if skipped is not None and info is not None:
+                info.skipped_beams = skipped.shape[1]
+                info.skipped_endpoints = skipped
         if self.skipping is not None and self.last_estimate is not None:
             observation, skipped = self.skipping.select(self.particles, self.weights, observation,
                                                         self._moved_estimate(), self._laser_pose[:2])
             if skipped is not None and info is not None:
-                info.skipped_beams = skipped.shape[1]
-                info.skipped_endpoints = skipped
+                info.skipped_beams += skipped.shape[1]
+                info.skipped_endpoints = (skipped if info.skipped_endpoints is None
+                                          else np.hstack([info.skipped_endpoints, skipped]))
         loglik = self._laser_loglik(self.particles, observation)
         if self._fresh is not None:
             loglik = self._oversample_fresh(observation, loglik)
@@ -402,6 +414,25 @@ class ParticleFilter:
                                              self._injected)
         self._observation = observation
         self.logw += loglik
+
+    def _tracking_unmapped(self, observation) -> bool:
+        """Whether ``unmapped`` skips beams of this observation: on, prepared by :meth:`prepare`, and tracking (an
+        estimate, no global search under way, not lost)."""
+        return (self.unmapped is not None and self.last_estimate is not None
+                and self._unmapped_candidates is not None and self._unmapped_candidates[0] is observation
+                and not self._laser_searching() and not self.quality.lost)
+
+    def _skip_unmapped(self, observation):
+        """``unmapped.select`` from the estimate moved by this update's odometry, if the whole scan fits the map
+        there (the quality test): after a kidnap the first scan fits badly, and skipping what does not fit would
+        hide the evidence that calls the filter lost (the demo came back 4 s later)."""
+        candidates = self._unmapped_candidates[1]
+        if candidates is None or not candidates.any():
+            return observation, None
+        pose = self._moved_estimate()
+        if self.quality.bad(self.quality.fit(pose, observation, self._laser_pose[:2])):
+            return observation, None
+        return self.unmapped.select(observation, candidates, pose)
 
     def _laser_loglik(self, particles: np.ndarray, observation) -> np.ndarray:
         """(N,) log p(z | x, m) of the laser at ``particles``, tempered by ``_laser_exponent``; a NaN or +inf

@@ -29,7 +29,37 @@ import numpy as np
 
 from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik, likelihood_field_loglik_serial
 from mcl.kernels.raycast import segments_blocked
+from mcl.kernels.segments import small_segments
 from mcl.parallel import choose
+
+
+def beam_selection(ranges, angles, max_range, cfg) -> np.ndarray:
+    """(K,) int64 indices into the scan of the beams a model scores: up to ``max_beams`` evenly spaced over all
+    B beams (AMCL: indices round(linspace(0, B-1, max_beams))), then those without a valid return dropped
+    (range_min < r < range_max, r < max_range if given, finite), so the chosen directions do not depend on which
+    beams happen to have returns."""
+    r = np.asarray(ranges, dtype=np.float64).ravel()
+    a = np.asarray(angles, dtype=np.float64).ravel()
+    if r.shape != a.shape:
+        raise ValueError(f"ranges and angles differ in length: {r.size} vs {a.size}")
+    b = r.size
+    max_beams = int(cfg.max_beams)
+    if max_beams < 1:
+        raise ValueError(f"sensor.max_beams: must be >= 1, got {max_beams}")
+    sel = (np.unique(np.rint(np.linspace(0.0, b - 1, max_beams)).astype(np.int64)) if b > max_beams
+           else np.arange(b, dtype=np.int64))
+    return sel[valid_returns(r[sel], max_range, cfg)]
+
+
+def valid_returns(ranges, max_range, cfg) -> np.ndarray:
+    """(B,) bool: the readings with a return, range_min < r < range_max, r < max_range (the scan's own no-return
+    value, if given), finite."""
+    r = np.asarray(ranges, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(r) & (r > float(cfg.range_min)) & (r < float(cfg.range_max))
+        if max_range is not None:
+            valid &= r < float(max_range)
+    return valid
 
 
 def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -40,29 +70,13 @@ def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0)) -
     cfg: reads range_min, range_max, max_beams.
     laser_pose: (x, y, theta) of the laser in the robot frame.
 
-    Subsampling follows AMCL: first up to ``max_beams`` beams evenly spaced
-    over *all* B beams (indices round(linspace(0, B-1, max_beams))), then the
-    invalid ones among them are dropped, so K <= max_beams and the chosen
-    directions do not depend on which beams happen to have returns.
-    A beam is valid when range_min < r < range_max, r < max_range (if
-    given), and r is finite.
+    The beams are ``beam_selection``'s (AMCL's subsampling: evenly spaced over *all* B beams, then the invalid
+    ones among them dropped, so K <= max_beams).
     """
     r = np.asarray(ranges, dtype=np.float64).ravel()
     a = np.asarray(angles, dtype=np.float64).ravel()
-    if r.shape != a.shape:
-        raise ValueError(f"ranges and angles differ in length: {r.size} vs {a.size}")
-    b = r.size
-    max_beams = int(cfg.max_beams)
-    if max_beams < 1:
-        raise ValueError(f"sensor.max_beams: must be >= 1, got {max_beams}")
-    if b > max_beams:
-        sel = np.unique(np.rint(np.linspace(0.0, b - 1, max_beams)).astype(np.int64))
-        r, a = r[sel], a[sel]
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(r) & (r > float(cfg.range_min)) & (r < float(cfg.range_max))
-        if max_range is not None:
-            valid &= r < float(max_range)
-    r, a = r[valid], a[valid]
+    sel = beam_selection(r, a, max_range, cfg)
+    r, a = r[sel], a[sel]
     lx, ly, lth = (float(v) for v in laser_pose)
     ang = a + lth
     out = np.empty((2, r.size))
@@ -290,6 +304,68 @@ class BeamSkipping:
         skip = self.sensor.skip_mask(particles, weights, observation, pose=pose, laser_xy=laser_xy)
         if not skip.any():
             return observation, None
+        return np.ascontiguousarray(observation[:, ~skip]), observation[:, skip]
+
+
+class UnmappedObjects:
+    """Skip the beams that hit small objects the map lacks, while tracking (``sensor.unmapped_skip``).
+
+    A person standing at a corridor's junction hides the junction's opening from a few beams; scored against
+    the likelihood field, those short readings fit the junction's walls better from a pose 1-3 m along the
+    corridor than from the true pose (suites/synthetic.yaml corridor-05: by 8-40 nats an update for seconds),
+    and the cloud follows. A beam is skipped when
+
+    * it belongs to a small foreground segment of the whole scan (``mcl.kernels.segments.small_segments``:
+      narrower than ``unmapped_width``, with a jump of more than ``unmapped_jump`` to a farther reading or to
+      no return on at least one side: an object in front of what is behind it), and
+    * seen from the estimate, its endpoint lies farther than ``unmapped_distance`` from every mapped obstacle
+      (a mapped pillar or door post fits the map and is kept; an endpoint inside a wall says the pose is wrong
+      and is kept; so is an endpoint off the map).
+
+    Unlike beam skipping it asks nothing of the particles, and it leaves a corridor's far wall alone when the
+    cloud lags behind the robot (a wide segment). If it would skip half the beams or more, the estimate is
+    more likely wrong than the world full of people: none is skipped. The filter calls it only while tracking
+    (no global search under way, not lost): from a wrong estimate the map test means nothing.
+    """
+
+    def __init__(self, grid, cfg, dist=None):
+        self.cfg = cfg
+        self.dist = dist if dist is not None else np.ascontiguousarray(grid.distance, dtype=np.float32)
+        self.origin = (float(grid.origin[0]), float(grid.origin[1]))
+        self.inv_res = 1.0 / float(grid.resolution)
+
+    def candidates(self, scan) -> np.ndarray | None:
+        """(K,) bool over the beams ``beam_endpoints`` keeps for ``scan``: those in a small foreground segment;
+        None when the scan's beams are not in angular order (a fused scan: no neighbours to compare)."""
+        r = np.asarray(scan.ranges, dtype=np.float64).ravel()
+        a = np.asarray(scan.angles, dtype=np.float64).ravel()
+        if r.size < 3 or not np.all(np.diff(a) > 0.0):
+            return None
+        max_range = getattr(scan, "max_range", None)
+        small = np.empty(r.size, dtype=np.bool_)
+        small_segments(r, a, valid_returns(r, max_range, self.cfg), float(self.cfg.unmapped_jump),
+                       float(self.cfg.unmapped_width), small)
+        return small[beam_selection(r, a, max_range, self.cfg)]
+
+    def select(self, observation, candidates, pose):
+        """(the observation to score, the skipped robot-frame endpoints (2, k) or None) for the robot-frame
+        endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``."""
+        if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
+            return observation, None
+        idx = np.flatnonzero(candidates)
+        e = observation[:, idx]
+        x, y, th = (float(v) for v in pose[:3])
+        c, s = math.cos(th), math.sin(th)
+        fx = np.floor((x + c * e[0] - s * e[1] - self.origin[0]) * self.inv_res)
+        fy = np.floor((y + s * e[0] + c * e[1] - self.origin[1]) * self.inv_res)
+        h, w = self.dist.shape
+        inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
+        far = np.zeros(idx.size, dtype=bool)
+        far[inside] = self.dist[fy[inside].astype(np.int64), fx[inside].astype(np.int64)] > self.cfg.unmapped_distance
+        if not far.any() or 2 * np.count_nonzero(far) >= observation.shape[1]:
+            return observation, None
+        skip = np.zeros(observation.shape[1], dtype=bool)
+        skip[idx[far]] = True
         return np.ascontiguousarray(observation[:, ~skip]), observation[:, skip]
 
 
