@@ -200,7 +200,7 @@ class SensorConfig:
     beam_skip_rule: Literal["short", "amcl"] = "short"
     # unmapped objects (mcl.sensors.UnmappedObjects): while tracking, skip the beams of small foreground segments of
     # the scan (people, chairs) whose endpoints, seen from the estimate, lie off every mapped obstacle
-    unmapped_skip: bool = False
+    unmapped_skip: bool = True
     unmapped_width: float = field(default=1.2, metadata=_rng(0.0, lo_open=True))  # m: segments narrower than this
     unmapped_jump: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m: a range step this big splits
     unmapped_distance: float = field(default=0.3, metadata=_rng(0.0))  # m: skipped only if this far from the map

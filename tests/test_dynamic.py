@@ -255,7 +255,7 @@ def test_beam_skipping_keeps_augmented_mcl_on_track_through_unmapped_clutter(tmp
             f"map={d / 'map.yaml'}", f"log={d / 'log.clf'}", f"truth={d / 'truth.tum'}", "rerun.mode=off",
             "filter.global_localization=false", f"filter.initial_pose={start}",
             "filter.initial_std=[0.05,0.05,0.05]", "filter.particles=2000", f"sensor.beam_skip={str(skip).lower()}",
-            "filter.recovery=augmented"])
+            "filter.recovery=augmented", "sensor.unmapped_skip=false"])  # beam skipping alone
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res[skip] = run(cfg, tmp_path / f"run{skip}", progress=False, echo=lambda *_: None)
