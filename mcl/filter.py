@@ -200,11 +200,15 @@ class ParticleFilter:
 
     def kidnap(self, mean, std) -> None:
         """Particles replaced by N(mean, diag(std^2)) with the policies untouched (recovery averages, lost
-        belief): the filter is not told. The kidnapping test of ``mcl eval --suite`` on real logs."""
+        belief): the filter is not told. The kidnapping test of ``mcl eval --suite`` on real logs. The estimate
+        is the cloud's, so there is none until the next update makes it: the one from before would still be the
+        true pose, and the policies that look from the estimate (beam skipping, unmapped objects) would judge the
+        scan from where the particles no longer are."""
         p = self.rng.standard_normal((3, self.n)) * np.asarray(std, dtype=np.float64)[:, None]
         p += np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
+        self.last_estimate = None
 
     def init_gaussian_cov(self, mean, cov) -> None:
         """Particles drawn from N(mean, cov) with a full 3x3 covariance (x, y, theta), e.g. a ROS /initialpose:

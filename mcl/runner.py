@@ -361,15 +361,19 @@ def _particles_text(summary: dict) -> str:
 
 def _kidnap(pf, truth, t: float, estimate, min_distance: float) -> dict:
     """Replace the particles by a cloud around a free pose >= min_distance from the truth at t (the estimate
-    when there is no truth); the pose is the first of a batch of uniform free-space draws that is far enough."""
+    when there is no truth); the pose is the first of a batch of uniform free-space draws that is far enough.
+    The draws come from a generator of their own, seeded by the config's seed: two configs run with the same seed
+    are kidnapped to the same place, whatever their filters drew before (with the filter's generator a change that
+    altered the particle counts sent the robot elsewhere, and a comparison of recovery times compared places)."""
     if truth is not None and truth.t.size:
         ref = np.array([np.interp(t, truth.t, truth.poses[0]), np.interp(t, truth.t, truth.poses[1])])
     elif estimate is not None:
         ref = np.asarray(estimate[:2])
     else:
         ref = np.zeros(2)
+    rng = np.random.default_rng((int(pf.cfg.seed), 0x6B1D))  # "kidnap": not the filter's stream
     for _ in range(20):
-        cand = pf.sample_uniform(512, pf.rng)
+        cand = pf.sample_uniform(512, rng)
         far = np.flatnonzero(np.hypot(cand[0] - ref[0], cand[1] - ref[1]) >= min_distance)
         if far.size:
             pose = cand[:, far[0]]

@@ -301,3 +301,16 @@ def test_runner_kidnaps_the_filter_far_from_the_truth(evaluated, tmp_path):
     t, e, _ = position_errors(*read_tum(tmp_path / "k" / "trajectory.tum"), *read_tum(w / "truth.tum"))
     assert e[t < 7.5].max() < 0.5  # tracked before (measured ~0.1 m)
     assert e[t >= k["t"]][0] > 4.0  # and 5 m off right after (one update's correction is < 1 m)
+    # the place comes from a generator of its own: a config whose filter drew other numbers before (300 particles,
+    # not 500) is kidnapped to the same place with the same seed, and to another with another seed
+    other = run(load_config(CONFIGS / "baseline.yaml", [*cfg_sets(w, evaluated), "filter.particles=300"]),
+                tmp_path / "k300", progress=False, echo=lambda m: None, kidnap_filter_at=(7.5, 5.0))["kidnap"]
+    assert other["to"][:2] == k["to"][:2]
+    seed2 = run(load_config(CONFIGS / "baseline.yaml", [*cfg_sets(w, evaluated), "filter.particles=300", "seed=2"]),
+                tmp_path / "k2", progress=False, echo=lambda m: None, kidnap_filter_at=(7.5, 5.0))["kidnap"]
+    assert seed2["to"][:2] != k["to"][:2]
+
+
+def cfg_sets(w, evaluated) -> list[str]:
+    return [f"map={w / 'map.yaml'}", f"log={w / 'log.clf'}", f"truth={w / 'truth.tum'}", "rerun.mode=off",
+            f"filter.initial_pose={list(evaluated['start'])}", "filter.global_localization=false"]
