@@ -433,8 +433,7 @@ class ParticleFilter:
             return False
         # Not within unmapped_after updates of a lost call (a kidnap, a global search, a slip): the place found since
         # has fit a few scans only, and at a look-alike room the walls fit while the furniture does not; skipping the
-        # furniture's beams (small segments off the map) throws away what tells the rooms apart, and the filter
-        # settles there (suites/synthetic.yaml kidnapped: office-short-range-01 back after 38 s instead of 10 s)
+        # furniture's beams (small segments off the map) would throw away what tells the rooms apart
         return self._since_lost is None or self._since_lost >= self.cfg.sensor.unmapped_after
 
     def _skip_unmapped(self, observation):
