@@ -198,8 +198,8 @@ class SensorConfig:
     # short: skip only unexplained beams that end in free space in front of the map (unmapped obstacles only shorten
     # readings; a beam through a mapped wall says the pose is wrong); amcl: every unexplained beam, as AMCL
     beam_skip_rule: Literal["short", "amcl"] = "short"
-    # unmapped objects (mcl.sensors.UnmappedObjects): while tracking, skip the beams of small foreground segments of
-    # the scan (people, chairs) whose endpoints, seen from the estimate, lie off every mapped obstacle
+    # unmapped objects (mcl.sensors.UnmappedObjects): while tracking, skip the beams of small segments of the scan
+    # (people, chairs) whose endpoints, seen from the estimate, lie off every mapped obstacle
     unmapped_skip: bool = True
     unmapped_width: float = field(default=1.2, metadata=_rng(0.0, lo_open=True))  # m: segments narrower than this
     unmapped_jump: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m: a range step this big splits

@@ -130,7 +130,6 @@ class ParticleFilter:
         self.unmapped = (UnmappedObjects(grid, cfg.sensor, dist=self.quality.dist)
                          if cfg.sensor.unmapped_skip and cfg.sensor.model == "likelihood_field" else None)
         self._unmapped_candidates = None  # (observation, (K,) bool) of the scan last prepared
-        self._since_lost: int | None = None  # updates since the filter last believed it was lost (None: never)
         # Recovery draws injected poses from this: sampler(n, rng, observation) -> (3, n). Uniform over the free
         # space the motion model allows unless replaced (a landmark-based pose sampler when landmarks are used).
         self.recovery_sampler = self.sample_uniform
@@ -196,7 +195,6 @@ class ParticleFilter:
         self.recovery = self._make_recovery(False)
         self.search.reset()
         self.quality.reset(lost=False)
-        self._since_lost = None
         if self.faults is not None:
             self.faults.reset()
 
@@ -226,7 +224,6 @@ class ParticleFilter:
         self.recovery = self._make_recovery(False)
         self.search.reset()
         self.quality.reset(lost=False)
-        self._since_lost = None
         if self.faults is not None:
             self.faults.reset()
 
@@ -237,7 +234,6 @@ class ParticleFilter:
         self._start_global()
 
     def _start_global(self) -> None:
-        self._since_lost = 0
         if self.cfg.filter.recovery == "auto" and self.recovery is None:
             self.recovery = self._make_recovery(True)
         self.search.start()
@@ -434,7 +430,8 @@ class ParticleFilter:
         # Not within unmapped_after updates of a lost call (a kidnap, a global search, a slip): the place found since
         # has fit a few scans only, and at a look-alike room the walls fit while the furniture does not; skipping the
         # furniture's beams (small segments off the map) would throw away what tells the rooms apart
-        return self._since_lost is None or self._since_lost >= self.cfg.sensor.unmapped_after
+        since = self.quality.since_lost
+        return since is None or since >= self.cfg.sensor.unmapped_after
 
     def _skip_unmapped(self, observation):
         """``unmapped.select`` from the estimate moved by this update's odometry, if the rest of the scan fits the
@@ -577,10 +574,6 @@ class ParticleFilter:
             fit = self.quality.fit(self.last_estimate.mean, self.sensor.endpoints(obs), self._laser_pose[:2])
         info.fit = fit
         info.lost = self.quality.update(fit)
-        if info.lost:
-            self._since_lost = 0
-        elif self._since_lost is not None:
-            self._since_lost += 1
         self.search.observe(info.lost, info.cluster_weight)
         if self.faults is not None:
             c = fit.contradiction if fit is not None and fit.beams else 0.0

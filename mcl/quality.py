@@ -44,6 +44,21 @@ import numpy as np
 from mcl.kernels.raycast import segments_blocked
 
 
+def endpoint_distances(dist, origin, resolution: float, pose, endpoints) -> np.ndarray:
+    """(K,) float32: the distance field ``dist`` (m to the nearest mapped obstacle, row 0 at y = origin[1]) at the
+    robot-frame ``endpoints`` (2, K) seen from ``pose`` (x, y, theta); NaN off the map (no comparison holds)."""
+    e = np.asarray(endpoints, dtype=np.float64)
+    x, y, th = (float(v) for v in pose[:3])
+    c, s = math.cos(th), math.sin(th)
+    fx = np.floor((x + c * e[0] - s * e[1] - origin[0]) / resolution)
+    fy = np.floor((y + s * e[0] + c * e[1] - origin[1]) / resolution)
+    h, w = dist.shape
+    inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
+    out = np.full(e.shape[1], np.nan, dtype=np.float32)
+    out[inside] = dist[fy[inside].astype(np.int64), fx[inside].astype(np.int64)]
+    return out
+
+
 @dataclass(frozen=True)
 class Fit:
     """The scan laid on the map at one pose."""
@@ -73,6 +88,7 @@ class ScanQuality:
         self.origin = (float(grid.origin[0]), float(grid.origin[1]))
         self.resolution = float(grid.resolution)
         self.lost = False
+        self.since_lost: int | None = None  # updates since the belief was last lost (None: not since the reset)
         self._recent: deque[bool] = deque(maxlen=2 * cfg.lost_after - 1)  # bad or not, last updates with a scan
 
     def fit(self, pose, endpoints, laser_xy=(0.0, 0.0)) -> Fit:
@@ -82,13 +98,7 @@ class ScanQuality:
         if k == 0:
             return Fit(0, math.nan, math.nan)
         x, y, th = (float(v) for v in pose[:3])
-        c, s = math.cos(th), math.sin(th)
-        fx = np.floor((x + c * e[0] - s * e[1] - self.origin[0]) / self.resolution)
-        fy = np.floor((y + s * e[0] + c * e[1] - self.origin[1]) / self.resolution)
-        h, w = self.dist.shape
-        inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
-        matched = np.zeros(k, dtype=bool)
-        matched[inside] = self.dist[fy[inside].astype(np.int64), fx[inside].astype(np.int64)] <= self.cfg.distance
+        matched = endpoint_distances(self.dist, self.origin, self.resolution, pose, e) <= self.cfg.distance
         rest = np.flatnonzero(~matched)
         through = np.zeros(rest.size, dtype=np.bool_)
         if rest.size:
@@ -102,19 +112,23 @@ class ScanQuality:
 
     def update(self, fit: Fit | None) -> bool:
         """Fold one update's fit into the lost belief (None or fewer than ``min_beams`` beams: no evidence, the
-        belief stays); return it."""
-        if fit is None or fit.beams < self.cfg.min_beams:
-            return self.lost
-        self._recent.append(self.bad(fit))
-        n_bad = sum(self._recent)
-        k = self.cfg.lost_after
-        if not self.lost and n_bad >= k:
-            self.lost = True
-        elif self.lost and n_bad <= k // 2 and len(self._recent) >= k:
-            self.lost = False
+        belief stays) and count ``since_lost``; return the belief."""
+        if fit is not None and fit.beams >= self.cfg.min_beams:
+            self._recent.append(self.bad(fit))
+            n_bad = sum(self._recent)
+            k = self.cfg.lost_after
+            if not self.lost and n_bad >= k:
+                self.lost = True
+            elif self.lost and n_bad <= k // 2 and len(self._recent) >= k:
+                self.lost = False
+        if self.lost:
+            self.since_lost = 0
+        elif self.since_lost is not None:
+            self.since_lost += 1
         return self.lost
 
     def reset(self, lost: bool) -> None:
         """Start over with a belief (lost after a global initialisation, not lost when tracking from a pose)."""
         self.lost = lost
+        self.since_lost = 0 if lost else None
         self._recent.clear()

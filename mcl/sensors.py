@@ -31,6 +31,7 @@ from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_logli
 from mcl.kernels.raycast import segments_blocked
 from mcl.kernels.segments import small_segments
 from mcl.parallel import choose
+from mcl.quality import endpoint_distances
 
 
 def beam_selection(ranges, angles, max_range, cfg) -> np.ndarray:
@@ -315,28 +316,27 @@ class UnmappedObjects:
     corridor than from the true pose (suites/synthetic.yaml corridor-05: by 8-40 nats an update for seconds),
     and the cloud follows. A beam is skipped when
 
-    * it belongs to a small foreground segment of the whole scan (``mcl.kernels.segments.small_segments``:
-      narrower than ``unmapped_width``, with a jump of more than ``unmapped_jump`` to a farther reading or to
-      no return on at least one side: an object in front of what is behind it), and
+    * it belongs to a small segment of the whole scan (``mcl.kernels.segments.small_segments``: consecutive
+      readings within ``unmapped_jump`` of each other, end to end narrower than ``unmapped_width``), and
     * seen from the estimate, its endpoint lies farther than ``unmapped_distance`` from every mapped obstacle
       (a mapped pillar or door post fits the map and is kept; an endpoint inside a wall says the pose is wrong
       and is kept; so is an endpoint off the map).
 
     Unlike beam skipping it asks nothing of the particles, and it leaves a corridor's far wall alone when the
     cloud lags behind the robot (a wide segment). If it would skip half the beams or more, the estimate is
-    more likely wrong than the world full of people: none is skipped. The filter calls it only while tracking
-    (no global search under way, not lost): from a wrong estimate the map test means nothing.
+    more likely wrong than the world full of people: none is skipped. The filter decides when to call it
+    (``ParticleFilter._tracking_unmapped``, ``_skip_unmapped``): from a wrong estimate the map test means nothing.
     """
 
     def __init__(self, grid, cfg, dist=None):
         self.cfg = cfg
         self.dist = dist if dist is not None else np.ascontiguousarray(grid.distance, dtype=np.float32)
         self.origin = (float(grid.origin[0]), float(grid.origin[1]))
-        self.inv_res = 1.0 / float(grid.resolution)
+        self.resolution = float(grid.resolution)
 
     def candidates(self, scan) -> np.ndarray | None:
-        """(K,) bool over the beams ``beam_endpoints`` keeps for ``scan``: those in a small foreground segment;
-        None when the scan's beams are not in angular order (a fused scan: no neighbours to compare)."""
+        """(K,) bool over the beams ``beam_endpoints`` keeps for ``scan``: those in a small segment; None when the
+        scan's beams are not in angular order (a fused scan: no neighbours to compare)."""
         r = np.asarray(scan.ranges, dtype=np.float64).ravel()
         a = np.asarray(scan.angles, dtype=np.float64).ravel()
         if r.size < 3 or not np.all(np.diff(a) > 0.0):
@@ -353,15 +353,9 @@ class UnmappedObjects:
         if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
             return observation, None
         idx = np.flatnonzero(candidates)
-        e = observation[:, idx]
-        x, y, th = (float(v) for v in pose[:3])
-        c, s = math.cos(th), math.sin(th)
-        fx = np.floor((x + c * e[0] - s * e[1] - self.origin[0]) * self.inv_res)
-        fy = np.floor((y + s * e[0] + c * e[1] - self.origin[1]) * self.inv_res)
-        h, w = self.dist.shape
-        inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
-        far = np.zeros(idx.size, dtype=bool)
-        far[inside] = self.dist[fy[inside].astype(np.int64), fx[inside].astype(np.int64)] > self.cfg.unmapped_distance
+        # NaN off the map: not far, kept
+        far = endpoint_distances(self.dist, self.origin, self.resolution, pose, observation[:, idx]) \
+            > self.cfg.unmapped_distance
         if not far.any() or 2 * np.count_nonzero(far) >= observation.shape[1]:
             return observation, None
         skip = np.zeros(observation.shape[1], dtype=bool)

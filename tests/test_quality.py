@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mcl.config import PROJECT_ROOT, load_config
-from mcl.quality import Fit, ScanQuality
+from mcl.quality import Fit, ScanQuality, endpoint_distances
 
 
 def _box_grid(size=10.0, res=0.05):
@@ -62,6 +62,37 @@ def test_no_beam_is_no_evidence():
     assert not q.lost
     assert q.update(f) is False  # does not count as bad
     assert q.update(Fit(10, 0.0, 1.0)) is True
+
+
+def test_since_lost_counts_every_update_after_the_last_lost_one_and_none_before_any():
+    # sensor.unmapped_skip waits this many updates after a lost call; a track from a known pose has none (None)
+    q = ScanQuality(_box_grid(), QCFG)
+    good, bad = Fit(60, 0.95, 0.0), Fit(60, 0.2, 0.3)
+    q.reset(lost=False)
+    for _ in range(4):
+        q.update(good)
+    assert q.since_lost is None
+    for f in (bad, bad, bad):
+        q.update(f)
+    assert q.lost and q.since_lost == 0
+    seen = []
+    for f in (good, good, good, None, good, good, None):  # an update without evidence still counts as one
+        q.update(f)
+        seen.append(q.since_lost)
+    # lost until at most 1 of the last 5 fits is bad (the fourth good), then counting, the no-evidence update too
+    assert seen == [0, 0, 0, 0, 1, 2, 3]
+    q.reset(lost=True)  # a global start is a lost call
+    assert q.since_lost == 0
+
+
+def test_endpoint_distances_read_the_field_seen_from_the_pose_and_nan_off_the_map():
+    g = _box_grid()
+    d = np.ascontiguousarray(g.distance, dtype=np.float32)
+    e = np.array([[1.0, 0.0, 20.0], [0.0, 2.0, 0.0]])  # robot frame
+    out = endpoint_distances(d, g.origin, g.resolution, (3.0, 4.0, np.pi / 2), e)
+    assert out.dtype == np.float32
+    # turned by 90 degrees: (1, 0) lands at (3, 5), (0, 2) at (1, 4), (20, 0) at (3, 24), off the map
+    assert out[0] == d[100, 60] and out[1] == d[80, 20] and np.isnan(out[2])
 
 
 def test_lost_belief_needs_three_bad_of_five_and_clears_at_one_of_five():

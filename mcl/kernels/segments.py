@@ -1,4 +1,4 @@
-"""Numba kernel: the beams of a scan that hit small objects standing in front of their surroundings.
+"""Numba kernel: the beams of a scan that belong to small segments of it (people, chairs, lone readings).
 
 Used by ``mcl.sensors.UnmappedObjects`` (``sensor.unmapped_skip``). Pure function over arrays.
 """
