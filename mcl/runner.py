@@ -389,10 +389,15 @@ def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
 
     Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at``, ``write_bag``, ``compile_note`` (see
     :func:`_run`). SIGINT and
-    SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true.
+    SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true. A signal
+    that came after the summary was made (the run is whole) sets ``summary["late_signal"]`` instead.
     """
     with _Interrupts() as signals:
-        return _run(cfg, out_dir, signals, **kwargs)
+        summary = _run(cfg, out_dir, signals, **kwargs)
+    # A signal noted after the summary was made (while it was written): the run is whole, but the caller must
+    # still hear of the Ctrl-C (mcl eval and mcl tune run jobs in this process with --jobs 1).
+    summary["late_signal"] = signals.caught and not summary["interrupted"]
+    return summary
 
 
 def _run(

@@ -39,6 +39,7 @@ import io
 import json
 import math
 import os
+import signal
 import statistics
 import time
 import warnings
@@ -448,6 +449,11 @@ def run_job(job: Job) -> dict:
         "warnings": sorted({str(w.message) for w in caught}),
     })
     atomic_write_text(out / "row.json", json.dumps(row, indent=1) + "\n")
+    if summary.get("late_signal"):
+        # Ctrl-C while the run closed its outputs: the row is kept (a resume reads it back), and the signal goes
+        # on to this process's own handler: KeyboardInterrupt here with --jobs 1, ignored in a pool worker (the
+        # parent process got the same Ctrl-C)
+        signal.raise_signal(signal.SIGINT)
     return row
 
 

@@ -314,3 +314,32 @@ def test_runner_kidnaps_the_filter_far_from_the_truth(evaluated, tmp_path):
 def cfg_sets(w, evaluated) -> list[str]:
     return [f"map={w / 'map.yaml'}", f"log={w / 'log.clf'}", f"truth={w / 'truth.tum'}", "rerun.mode=off",
             f"filter.initial_pose={list(evaluated['start'])}", "filter.global_localization=false"]
+
+
+def test_ctrl_c_while_a_run_writes_its_summary_stops_the_evaluation(evaluated, tmp_path, capsys, monkeypatch):
+    """A Ctrl-C that lands after a run's loop, while its summary is written, is only noted by the run (the
+    outputs are whole). It used to go no further: with --jobs 1 the evaluation (and `mcl tune`, where CI once
+    saw exit 0 instead of 130) went on as if no key had been pressed. Now the run's row is kept and the
+    evaluation stops with 130; a resume reads the row back."""
+    import os
+    import signal
+
+    import mcl.trajectory
+
+    real = mcl.trajectory.atomic_write_text
+
+    def write(path, text):
+        if Path(path).name == "summary.json":
+            os.kill(os.getpid(), signal.SIGINT)  # the handler runs here, inside the run's signal context
+        return real(path, text)
+
+    monkeypatch.setattr(mcl.trajectory, "atomic_write_text", write)
+    out = tmp_path / "out"
+    args = ["eval", "--suite", str(evaluated["suite"]), "--out", str(out), "--cache", str(evaluated["tmp"] / "worlds"),
+            "--seeds", "1", "--jobs", "1", "--no-baseline", "--set", "filter.particles=300", "--no-progress"]
+    assert main(args) == 130
+    assert "interrupted" in capsys.readouterr().out
+    assert len(list(out.glob("runs/*/*/*/seed*/row.json"))) == 1  # the first run is kept, the second not started
+    monkeypatch.setattr(mcl.trajectory, "atomic_write_text", real)
+    assert main(args) == 0
+    assert "1 of 2 runs already finished" in capsys.readouterr().out
