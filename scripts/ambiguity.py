@@ -1,0 +1,118 @@
+#!/usr/bin/env python
+"""Was a failed run of ``mcl eval`` a miss, or could no scan have told the places apart?
+
+For every lost run in an evaluation folder (``mcl eval --out DIR``), the scans of the 30 s the suite allows
+(from the kidnap, or from the start in global mode; the first 2 s left out) are laid on the map twice with
+``mcl.quality`` (the filter's quality signal: score = match - 2 contradiction), once at the reference pose
+and once at the run's estimate, for the scans where the estimate is more than 1 m off. Printed per run:
+the median score at each, and the share of those scans the estimate fits at least as well as the
+reference does.
+
+* **ambiguous**: the wrong estimate fits at least as well as the reference in half the scans or more, and
+  its median score is within 0.02 of the reference's. Over that window the scans are as well explained
+  from the wrong place (a featureless corridor's other end, an identical room): a filter that weighs
+  scans against the map has no evidence to move on, whatever its policies.
+* **miss**: the reference fits better; the filter stayed at a worse place (its quality signal was above
+  ``quality.lost_below``, so no recovery ran), or searched and did not settle in time.
+
+Usage::
+
+    .venv/bin/python scripts/ambiguity.py DIR [--only NAME,...]
+
+Reads each run's ``config.yaml`` (map, log, truth: synthetic worlds must still be in the cache the
+evaluation used), ``row.json`` and ``trajectory.tum``; writes nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from mcl.config import load_config  # noqa: E402
+from mcl.filter import ParticleFilter  # noqa: E402
+from mcl.runner import _open_source  # noqa: E402  (the scans a run uses, from a CARMEN log or a bag)
+from mcl.suite import WITHIN_S  # noqa: E402
+from mcl.trajectory import read_tum  # noqa: E402
+
+SKIP_S = 2.0  # the first scans after the kidnap or the start: every filter is still moving there
+OFF_M = 1.0  # an estimate this far from the reference is a wrong place, not a noisy track
+SAME = 0.02  # medians closer than this are the same fit
+
+
+def _at(t_ref: np.ndarray, t: float) -> int | None:
+    i = int(np.searchsorted(t_ref, t))
+    for j in (i - 1, i):
+        if 0 <= j < t_ref.size and abs(t_ref[j] - t) <= 1e-3:
+            return j
+    return None
+
+
+def classify(run_dir: Path, row: dict, cache: dict) -> dict | None:
+    """The scores at the reference and at the estimate over the window, for one lost run (None: no scan)."""
+    cfg = load_config(run_dir / "config.yaml", [])
+    key = (cfg.map, cfg.log, cfg.bag)
+    if key not in cache:
+        _, grid, scans, _, truth, _ = _open_source(cfg, echo=lambda msg: None)
+        cache[key] = (ParticleFilter(cfg, grid), scans, truth.t, truth.poses)
+    pf, scans, tt, tp = cache[key]
+    te, pe = read_tum(run_dir / "trajectory.tum")
+    t0 = row.get("kidnap_t") if row["mode"] == "kidnapped" else te[0]
+    ref, est = [], []
+    for s in scans:
+        if not t0 + SKIP_S <= s.t <= t0 + WITHIN_S:
+            continue
+        i, j = _at(tt, s.t), _at(te, s.t)
+        if i is None or j is None or np.hypot(*(pe[:2, j] - tp[:2, i])) <= OFF_M:
+            continue
+        laser = s.laser_offset if s.laser_offset is not None else np.zeros(3)
+        obs = pf.prepare(s, laser)
+        if obs is None:
+            continue
+        e = pf.sensor.endpoints(obs)
+        fr, fe = pf.quality.fit(tp[:, i], e, laser[:2]), pf.quality.fit(pe[:, j], e, laser[:2])
+        if fr.beams >= pf.cfg.quality.min_beams:
+            ref.append(fr.score)
+            est.append(fe.score)
+    if not ref:
+        return None
+    ref, est = np.array(ref), np.array(est)
+    m_ref, m_est, share = float(np.median(ref)), float(np.median(est)), float(np.mean(est >= ref - 1e-9))
+    return {"scans": int(ref.size), "reference": m_ref, "estimate": m_est, "share": share,
+            "kind": "ambiguous" if share >= 0.5 and m_est >= m_ref - SAME else "miss"}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("folder", type=Path, help="an mcl eval output folder (with runs/)")
+    p.add_argument("--only", help="only these datasets (comma separated)")
+    a = p.parse_args(argv)
+    only = set(a.only.split(",")) if a.only else None
+    cache: dict = {}
+    kinds: Counter = Counter()
+    for row_file in sorted(a.folder.glob("runs/*/*/*/seed*/row.json")):
+        row = json.loads(row_file.read_text())
+        if not row.get("lost") or (only and row["dataset"] not in only) or row["mode"] == "tracking":
+            continue
+        c = classify(row_file.parent, row, cache)
+        if c is None:
+            print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: no scan "
+                  f"more than {OFF_M:g} m off in the window (lost later, or scored on the last poses)")
+            kinds["late"] += 1
+            continue
+        kinds[c["kind"]] += 1
+        print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: {c['kind']:9s} "
+              f"{c['scans']:4d} scans, median score reference {c['reference']:.3f} estimate {c['estimate']:.3f}, "
+              f"estimate fits as well in {c['share']:.0%}")
+    print("lost runs: " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
