@@ -36,6 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from mcl.config import load_config  # noqa: E402
+from mcl.errors import MclError  # noqa: E402
 from mcl.filter import ParticleFilter  # noqa: E402
 from mcl.runner import _open_source  # noqa: E402  (the scans a run uses, from a CARMEN log or a bag)
 from mcl.suite import WITHIN_S  # noqa: E402
@@ -100,7 +101,12 @@ def main(argv=None) -> int:
         row = json.loads(row_file.read_text())
         if not row.get("lost") or (only and row["dataset"] not in only) or row["mode"] == "tracking":
             continue
-        c = classify(row_file.parent, row, cache)
+        try:
+            c = classify(row_file.parent, row, cache)
+        except (MclError, OSError) as e:  # a synthetic world no longer in its cache, a moved log
+            print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: cannot read: {e}")
+            kinds["unread"] += 1
+            continue
         if c is None:
             print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: no scan "
                   f"more than {OFF_M:g} m off in the window (lost later, or scored on the last poses)")
