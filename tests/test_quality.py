@@ -37,7 +37,7 @@ def _scan_from(pose, grid, n=90):
 
 
 T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
-QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5)
+QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5, doubt_margin=0.0, doubt_updates=50)
 
 
 def test_fit_is_high_at_the_true_pose_and_low_away_from_it():
@@ -154,3 +154,46 @@ def test_a_fit_of_fewer_than_min_beams_returns_is_no_evidence():
     assert not q.bad(few)
     assert [q.update(few) for _ in range(6)] == [False] * 6
     assert q.bad(Fit(QCFG.min_beams, 0.0, 1.0))
+
+
+def _feed(q, fits):
+    return [q.update(f) for f in fits]
+
+
+def test_after_a_lost_episode_a_place_that_fits_worse_than_the_track_did_stays_lost_for_a_while():
+    # A kidnapped robot: the track held at 0.98, three bad updates, then the recovery finds a place that fits at 0.7,
+    # above lost_below (0.6) but 0.28 below the track's 0.98. With doubt_margin 0.25 it is still bad for
+    # doubt_updates (20 here) updates from the episode's start, so the recovery goes on (and re-seeds); after that
+    # the plain test rules again. Without the margin the belief clears after lost_after good-enough updates.
+    cfg = SimpleNamespace(**{**vars(QCFG), "doubt_margin": 0.25, "doubt_updates": 20})
+    held, bad, worse = Fit(60, 0.98, 0.0), Fit(60, 0.3, 0.2), Fit(60, 0.7, 0.0)
+    q = ScanQuality(_box_grid(), cfg)
+    q.reset(lost=False)
+    assert _feed(q, [held] * 40 + [bad] * 2) == [False] * 42
+    assert q.update(bad)  # the lost call: the episode starts here
+    lost = _feed(q, [worse] * 30)
+    assert lost[:19] == [True] * 19  # 19 more updates in doubt: 0.7 < 0.98 - 0.25
+    assert lost[-5:] == [False] * 5  # doubt over: 0.7 >= lost_below, the belief clears within 2 lost_after - 1
+    off = ScanQuality(_box_grid(), QCFG)  # doubt_margin 0
+    off.reset(lost=False)
+    _feed(off, [held] * 40 + [bad] * 3)
+    assert _feed(off, [worse] * 5)[-1] is False
+    # the place the recovery found fits as well as the track did: no doubt
+    q2 = ScanQuality(_box_grid(), cfg)
+    q2.reset(lost=False)
+    _feed(q2, [held] * 40 + [bad] * 3)
+    assert _feed(q2, [Fit(60, 0.8, 0.0)] * 5)[-1] is False  # 0.8 >= 0.98 - 0.25
+    # a track that always fitted at 0.7 (a cluttered place) is not doubted at 0.7 after an episode
+    q3 = ScanQuality(_box_grid(), cfg)
+    q3.reset(lost=False)
+    _feed(q3, [worse] * 40 + [bad] * 3)
+    assert _feed(q3, [worse] * 5)[-1] is False
+    # too short a history before the episode (fewer than DOUBT_HISTORY // 2 held updates): no reference, no doubt
+    q4 = ScanQuality(_box_grid(), cfg)
+    q4.reset(lost=False)
+    _feed(q4, [held] * 10 + [bad] * 3)
+    assert _feed(q4, [worse] * 5)[-1] is False
+    # reset forgets the track
+    q.reset(lost=False)
+    _feed(q, [bad] * 3)
+    assert _feed(q, [worse] * 5)[-1] is False
