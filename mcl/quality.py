@@ -132,9 +132,7 @@ class ScanQuality:
     def _bad_now(self, fit: Fit) -> bool:
         """:meth:`bad`, or, in doubt after a lost episode, a score ``doubt_margin`` below the track's before it: a
         place the recovery found that fits, but worse than the track fitted (a kidnapped robot's look-alike)."""
-        if self.bad(fit):
-            return True
-        return self._doubting() and fit.beams >= self.cfg.min_beams and fit.score < self._before - self.cfg.doubt_margin
+        return self.bad(fit) or (self._doubting() and fit.score < self._before - self.cfg.doubt_margin)
 
     def update(self, fit: Fit | None) -> bool:
         """Fold one update's fit into the lost belief (None or fewer than ``min_beams`` beams: no evidence, the

@@ -178,21 +178,20 @@ def test_after_a_lost_episode_a_place_that_fits_worse_than_the_track_did_stays_l
     off.reset(lost=False)
     _feed(off, [held] * 40 + [bad] * 3)
     assert _feed(off, [worse] * 5)[-1] is False
-    # the place the recovery found fits as well as the track did: no doubt
-    q2 = ScanQuality(_box_grid(), cfg)
-    q2.reset(lost=False)
-    _feed(q2, [held] * 40 + [bad] * 3)
-    assert _feed(q2, [Fit(60, 0.8, 0.0)] * 5)[-1] is False  # 0.8 >= 0.98 - 0.25
+    def after_episode(track: Fit, n_track: int, then: Fit) -> bool:
+        """The belief after n_track updates of ``track``, a lost episode (3 bad) and 5 updates of ``then``."""
+        qq = ScanQuality(_box_grid(), cfg)
+        qq.reset(lost=False)
+        _feed(qq, [track] * n_track + [bad] * 3)
+        return _feed(qq, [then] * 5)[-1]
+
+    # the place the recovery found fits as well as the track did (0.8 >= 0.98 - 0.25): no doubt
+    assert after_episode(held, 40, Fit(60, 0.8, 0.0)) is False
     # a track that always fitted at 0.7 (a cluttered place) is not doubted at 0.7 after an episode
-    q3 = ScanQuality(_box_grid(), cfg)
-    q3.reset(lost=False)
-    _feed(q3, [worse] * 40 + [bad] * 3)
-    assert _feed(q3, [worse] * 5)[-1] is False
+    assert after_episode(worse, 40, worse) is False
     # too short a history before the episode (fewer than DOUBT_HISTORY // 2 held updates): no reference, no doubt
-    q4 = ScanQuality(_box_grid(), cfg)
-    q4.reset(lost=False)
-    _feed(q4, [held] * 10 + [bad] * 3)
-    assert _feed(q4, [worse] * 5)[-1] is False
+    assert after_episode(held, 10, worse) is False
+    assert after_episode(held, 40, worse) is True  # (the same with enough history: doubted)
     # reset forgets the track
     q.reset(lost=False)
     _feed(q, [bad] * 3)
