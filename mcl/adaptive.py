@@ -67,6 +67,7 @@ poses from landmarks).
 from __future__ import annotations
 
 import math
+from collections import deque
 from statistics import NormalDist
 from typing import Callable
 
@@ -456,10 +457,12 @@ class GlobalSearch:
         self.tempering = False
         self.holding = False
         self.since_end = None
+        self.starts = 0  # searches started so far
 
     def start(self) -> None:
         self.tempering = True
         self.holding = True
+        self.starts += 1
 
     def observe(self, lost: bool, cluster_weight: float = 1.0) -> None:
         """This update's lost belief and heaviest-cluster weight (after the estimate)."""
@@ -471,6 +474,88 @@ class GlobalSearch:
             self.since_end = 0
         if not self.holding and self.since_end is not None:
             self.since_end += 1
+
+
+class StallCheck:
+    """After a global search: does the estimate follow the odometry?
+
+    A search can settle on a place that fits the scans well enough never to be called lost (0.84-0.91 in the
+    synthetic corridor worlds, against 0.98 at the true pose) and there the map stops the cloud: the robot drives
+    40 m down a corridor while the estimate, in a dead-end corridor the walls of which fit as well, is pulled back
+    by every scan and moves 1 m. Odometry drifts, but a correct track's estimate moves with it: over 5 s it went
+    0.91 times as far as the truth or more in 99.9 % of the synthetic suite's windows. The distance between two
+    poses does not depend on the frame, so the odometry's own poses give the distance the robot drove, whatever the
+    odometry frame.
+
+    ``stalled`` is True when, over the last ``window`` seconds of log time, the odometry moved at least
+    ``min_travel`` and the estimate less than ``ratio`` times as far, at ``CONSECUTIVE`` updates in a row (only
+    a compact cluster's estimate counts). The test runs only for ``active`` seconds
+    after a global search ended (from a global start or a re-seed): a track from a known pose is never tested, and
+    neither is a place that has held that long. Some real odometry over-reports motion for seconds at a time
+    (fr079: 1.9 m reported over 5 s while the robot moved 0.14 m, on a correct track), so a stall means "the place
+    the search found is wrong" only while that place is new. Lost recovery re-seeds on it (``LostRecovery``).
+    """
+
+    COMPACT = 1.0  # m: an estimate whose cluster is wider than this (x or y std) is not yet a place
+    CONSECUTIVE = 3  # updates in a row whose window comes up short: the estimate of a cloud that still has two
+    # modes jumps between them for an update (corridor-01: 2.2 m for one scan, 1 s after the search)
+
+    def __init__(self, ratio: float, window: float, min_travel: float, active: float, search: GlobalSearch):
+        self.ratio = float(ratio)
+        self.window = float(window)
+        self.min_travel = float(min_travel)
+        self.active = float(active)
+        self.search = search
+        self.reset()
+
+    def reset(self) -> None:
+        self.clock = 0.0  # log seconds since the filter started
+        self.since = None  # log time the last search ended (None: none ended yet)
+        self.starts = 0  # the search's count of starts when ``since`` was set
+        self.history: deque = deque()  # (t, estimate x, y, odometry x, y) since then, covering one window
+        self.run = 0  # consecutive updates whose window came up short
+        self.stalled = False
+
+    def interrupt(self) -> None:
+        """The odometry jumped (an update without motion): the window starts again."""
+        self.history.clear()
+        self.run = 0
+        self.stalled = False
+
+    def observe(self, dt: float, estimate, cov, odom) -> None:
+        """This update's log time step, estimate (x, y, ...) and its covariance (3x3), and odometry pose (x, y, ...)
+        or None. Only a compact estimate (x and y std under ``COMPACT`` m) is a place: the mean of a cloud still
+        spread over the map moves for no reason."""
+        self.clock += max(float(dt), 0.0)
+        self.stalled = False
+        search = self.search
+        compact = cov is not None and max(cov[0][0], cov[1][1]) <= self.COMPACT ** 2
+        if (search.holding or search.since_end is None or odom is None or search.starts != self.starts
+                or not compact):
+            self.history.clear()  # a new search (which may have ended in this very update), no odometry, no place
+            self.run = 0
+        if search.holding or search.since_end is None or search.starts != self.starts:
+            self.since = None
+        if search.holding or search.since_end is None or odom is None or not compact:
+            return
+        if self.since is None:
+            self.since, self.starts = self.clock, search.starts
+        if self.clock - self.since > self.active:
+            self.history.clear()
+            self.run = 0
+            return
+        h = self.history
+        h.append((self.clock, float(estimate[0]), float(estimate[1]), float(odom[0]), float(odom[1])))
+        start = self.clock - self.window
+        while len(h) >= 2 and h[1][0] <= start:  # keep the last entry at or before the window's start
+            h.popleft()
+        t0, ex, ey, ox, oy = h[0]
+        if t0 > start:
+            return
+        travel = math.hypot(odom[0] - ox, odom[1] - oy)
+        short = travel >= self.min_travel and math.hypot(estimate[0] - ex, estimate[1] - ey) < self.ratio * travel
+        self.run = self.run + 1 if short else 0
+        self.stalled = self.run >= self.CONSECUTIVE
 
 
 class FaultWindow:
@@ -551,8 +636,9 @@ class LostRecovery:
 
     def __init__(self, fraction: float, local_std, global_after: int, lost_after: int,
                  reseed: bool = False, probation: int = 0, search: GlobalSearch | None = None,
-                 global_after_s: float = 0.0):
+                 global_after_s: float = 0.0, stall: StallCheck | None = None):
         self.reseed = bool(reseed)
+        self.stall = stall  # the filter's (read only here): a new place whose estimate does not follow the odometry
         self.probation = int(probation)
         # the filter's search (read only here); a policy used on its own gets one that never starts
         self.search = search if search is not None else GlobalSearch()
@@ -612,8 +698,13 @@ class LostRecovery:
     @property
     def reseed_due(self) -> bool:
         """With ``reseed``: ``global_due`` (the local spread did not find the pose), so the next resample adds a
-        whole global set and starts a search (``start_search``)."""
-        if not self.reseed or self.search.holding or not self.lost_updates:
+        whole global set and starts a search (``start_search``). So does a place a search found, lost or not,
+        when its estimate stalls while the odometry drives on (``StallCheck``)."""
+        if not self.reseed or self.search.holding:
+            return False
+        if self.stall is not None and self.stall.stalled:
+            return True
+        if not self.lost_updates:
             return False
         return self.global_due or self.on_probation
 
@@ -629,10 +720,11 @@ class LostRecovery:
         return self.base_std * 2.0 ** min(k, 3)
 
 
-def make_recovery(fc, global_start: bool, lost_after: int = 3, search: GlobalSearch | None = None):
+def make_recovery(fc, global_start: bool, lost_after: int = 3, search: GlobalSearch | None = None,
+                  stall: StallCheck | None = None):
     """The recovery policy ``filter.recovery`` names (None: no recovery) for a run that starts globally or not;
     ``lost_after`` is the quality section's (the local spread doubles at that pace); ``search`` the filter's
-    global search, which lost recovery reads."""
+    global search and ``stall`` its stall test, which lost recovery reads."""
     mode = fc.recovery
     if mode == "auto":
         mode = "augmented" if global_start else False
@@ -641,5 +733,5 @@ def make_recovery(fc, global_start: bool, lost_after: int = 3, search: GlobalSea
     if mode == "lost":
         return LostRecovery(fc.recovery_fraction, fc.recovery_local_std, fc.recovery_global_after, lost_after,
                             reseed=fc.recovery_reseed, probation=fc.recovery_probation, search=search,
-                            global_after_s=fc.recovery_global_after_s)
+                            global_after_s=fc.recovery_global_after_s, stall=stall)
     return None

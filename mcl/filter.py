@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import FaultWindow, GlobalSearch, KLDSampling, draw_injected, make_recovery, measurement_count
+from mcl.adaptive import FaultWindow, GlobalSearch, KLDSampling, StallCheck, draw_injected, make_recovery, measurement_count
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard
@@ -80,6 +80,7 @@ class StepInfo:
     particles: int = 0  # N weighted in this update (KLD sampling changes it at resampling)
     injected: int = 0  # particles drawn from the recovery sampler at this resampling
     reseeded: bool = False  # lost recovery re-seeded globally at this resampling (filter._reseed)
+    stalled: bool = False  # the estimate of a place a search found did not follow the odometry (filter.stall_*)
     inject_p: float = 0.0  # the recovery policy's injection probability after this update
     mean: np.ndarray | None = None  # the estimate (x, y, theta), from the weighted set before resampling
     cov: np.ndarray | None = None  # its 3x3 covariance
@@ -122,6 +123,10 @@ class ParticleFilter:
         self.search = GlobalSearch()  # a global start or re-seed until one hypothesis is left
         # odometry faults allowed only around a lost call on a track that had held (motion.fault_*)
         self.faults = FaultWindow(cfg.motion, self.search) if cfg.motion.fault_prob > 0.0 else None
+        # a place a search found whose estimate does not follow the odometry is re-seeded (filter.stall_*)
+        self.stall = (StallCheck(fc.stall_ratio, fc.stall_window, fc.stall_travel, fc.stall_active, self.search)
+                      if fc.stall_ratio > 0.0 else None)
+        self._odom = None  # this update's odometry pose (x, y, theta), None without motion (the stall test)
         self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
@@ -197,6 +202,8 @@ class ParticleFilter:
         self.quality.reset(lost=False)
         if self.faults is not None:
             self.faults.reset()
+        if self.stall is not None:
+            self.stall.reset()
 
     def kidnap(self, mean, std) -> None:
         """Particles replaced by N(mean, diag(std^2)) with the policies untouched (recovery averages, lost
@@ -244,7 +251,8 @@ class ParticleFilter:
         self.quality.reset(lost=True)
 
     def _make_recovery(self, global_start: bool):
-        return make_recovery(self.cfg.filter, global_start, self.cfg.quality.lost_after, search=self.search)
+        return make_recovery(self.cfg.filter, global_start, self.cfg.quality.lost_after, search=self.search,
+                             stall=self.stall)
 
     def sample_uniform(self, n: int, rng: np.random.Generator, observation=None) -> np.ndarray:
         """(3, n) poses uniform over free space, with the robot-radius clearance when map rejection is on."""
@@ -338,9 +346,12 @@ class ParticleFilter:
         """
         self._delta = None
         self._dt = float(control.dt) if control is not None else 0.0  # log time since the last update (recovery)
+        self._odom = None
         if control is not None:
             control, self._delta = self.guard.check_control(control)
             if control is None:  # a jump: not motion
+                if self.stall is not None:
+                    self.stall.interrupt()
                 self._delta = np.zeros(3)
                 if self.kld is not None and self.kld.pending is not None:
                     self._kld_draw(None, info)
@@ -354,6 +365,7 @@ class ParticleFilter:
             return
         else:
             new, ok, tries, lw = self._move(self.particles, control)
+        self._odom = control.odom_now
         self.particles = new
         info.tries = float(tries)
         if lw is not None:  # the odometry-fault proposal's importance weights
@@ -580,6 +592,9 @@ class ParticleFilter:
             self.faults.observe(info.lost, c if c == c else 0.0)
         if self.recovery is not None:
             self.recovery.observe_lost(info.lost, info.cluster_weight, self._dt)
+        if self.stall is not None:
+            self.stall.observe(self._dt, self.last_estimate.mean, self.last_estimate.cov, self._odom)
+            info.stalled = self.stall.stalled
 
     def resample(self, info: StepInfo) -> None:
         """Resample when ESS / N < resample_threshold (the scheme named in filter.resampling).
@@ -622,15 +637,17 @@ class ParticleFilter:
         the old cloud keeps ``recovery_reseed_keep`` of the mass, so a look-alike pose must out-score a track that
         was right all along, and then a global search starts (no injection until it settles, laser likelihood
         tempered by ``search_exponent``). A few per cent of uniform poses a step almost never lands near the
-        true pose on a building-sized map; a whole set does."""
+        true pose on a building-sized map; a whole set does. A re-seed on a stalled estimate (``info.stalled``:
+        the odometry drove on while the place the last search found held the cloud back) keeps nothing of the old
+        cloud: the motion has already ruled that place out, and its scans fit as well as anywhere else's."""
         fc = self.cfg.filter
-        n = min(self.n, fc.particles)  # a set grown by an earlier re-seed is drawn back down: at most 2 x particles
+        keep = 0.0 if info.stalled else fc.recovery_reseed_keep
+        n = min(self.n, fc.particles) if keep > 0.0 else 0  # a set grown by an earlier re-seed is drawn back down
         idx = resample(fc.resampling, self.logw, self.rng, n=n)
         m = max(fc.particles - n, n)
         fresh = self.recovery_sampler(m, self.rng, self._observation)
         self._set(np.ascontiguousarray(np.concatenate([self.particles[:, idx], fresh], axis=1)))
-        keep = fc.recovery_reseed_keep
-        self.logw = np.concatenate([np.full(n, math.log(keep / n)),
+        self.logw = np.concatenate([np.full(n, math.log(keep / n) if n else 0.0),
                                     np.full(m, math.log(1.0 - keep) - math.log(m) if keep < 1.0 else -np.inf)])
         self.weights = np.exp(self.logw)
         self._injected = np.arange(n + m) >= n

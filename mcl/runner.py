@@ -503,6 +503,7 @@ def _run(
     n_used: list[int] = []  # particles weighted at each update (KLD sampling varies it)
     injected = 0
     reseeds = 0  # global re-seeds of lost recovery
+    stall_reseeds = 0  # ... of them on a stalled estimate (filter.stall_*)
     fault_updates = 0  # updates whose motion allowed odometry faults (motion.fault_*)
     traj_t: list[float] = []
     traj_p: list[np.ndarray] = []
@@ -587,6 +588,7 @@ def _run(
                 n_used.append(info.particles)
                 injected += info.injected
                 reseeds += int(info.reseeded)
+                stall_reseeds += int(info.reseeded and info.stalled)
                 fault_updates += int(info.faults)
                 for k, v in info.timings.items():
                     stage_totals[k] += v
@@ -686,6 +688,7 @@ def _run(
         "particles_max": int(max(n_used)) if n_used else pf.n,
         "injected_particles": injected,
         "reseeds": reseeds,
+        "stall_reseeds": stall_reseeds,
         "fault_updates": fault_updates,
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / n_up,
