@@ -94,7 +94,7 @@ class FilterConfig:
     # lost: after a global search, re-seed when over stall_window s of log time the odometry moved >= stall_travel m
     # and the estimate less than stall_ratio times as far (mcl.adaptive.StallCheck; 0: off); for stall_active s
     stall_ratio: float = field(default=0.0, metadata=_rng(0.0, 1.0))
-    stall_window: float = field(default=5.0, metadata=_rng(0.0, 1e6, lo_open=True))
+    stall_window: float = field(default=3.0, metadata=_rng(0.0, 1e6, lo_open=True))
     stall_travel: float = field(default=1.5, metadata=_rng(0.0, 1e6, lo_open=True))
     stall_active: float = field(default=60.0, metadata=_rng(0.0, 1e9))
     recovery_reseed_keep: float = field(default=0.5, metadata=_rng(0.0, 1.0, lo_open=True))  # prior mass of the old cloud
