@@ -288,6 +288,8 @@ class QualityConfig:
     lost_below: float = field(default=0.6, metadata=_rng(-2.0, 1.0))  # an update is bad when match - 2 contradiction < this
     lost_after: int = field(default=3, metadata=_rng(1, 10_000))  # lost when this many of the last 2k-1 updates were bad
     min_beams: int = field(default=5, metadata=_rng(1, 100_000))  # a fit of fewer beams with a return is no evidence
+    # an update is bad also when this share of its beams or more went through mapped walls (0: off)
+    contradiction_above: float = field(default=0.0, metadata=_rng(0.0, 1.0))
     doubt_margin: float = field(default=0.25, metadata=_rng(0.0, 2.0))  # after a lost episode: bad also this far below
     # the score the track had before it (0: off)
     doubt_updates: int = field(default=50, metadata=_rng(1, 100_000))  # ... for this many updates after the episode

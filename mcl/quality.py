@@ -120,7 +120,10 @@ class ScanQuality:
 
     def bad(self, fit: Fit) -> bool:
         """Whether one update's fit says the estimate is wrong (no beam: no evidence either way, not bad)."""
-        return fit.beams >= self.cfg.min_beams and fit.score < self.cfg.lost_below
+        if fit.beams < self.cfg.min_beams:
+            return False
+        c = self.cfg.contradiction_above
+        return fit.score < self.cfg.lost_below or (c > 0.0 and fit.contradiction >= c)
 
     def _doubting(self) -> bool:
         """Within ``doubt_updates`` updates from the start of a lost episode, with a score from before it (bounded
