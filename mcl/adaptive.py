@@ -483,15 +483,15 @@ class StallCheck:
     synthetic corridor worlds, against 0.98 at the true pose) and there the map stops the cloud: the robot drives
     40 m down a corridor while the estimate, in a dead-end corridor the walls of which fit as well, is pulled back
     by every scan and moves 1 m. Odometry drifts, but a correct track's estimate moves with it: over 3 s it went
-    0.87 times as far as the truth or more in 99.9 % of the synthetic suite's windows, and never under 0.6. The distance between two
-    poses does not depend on the frame, so the odometry's own poses give the distance the robot drove, whatever the
-    odometry frame.
+    0.87 times as far as the truth or more in 99.9 % of the synthetic suite's windows, and never under 0.6. The
+    distance between two poses does not depend on the frame, so the odometry's own poses give the distance the
+    robot drove, whatever the odometry frame.
 
     ``stalled`` is True when, over the last ``window`` seconds of log time, the odometry moved at least
-    ``min_travel`` and the estimate less than ``ratio`` times as far, at ``CONSECUTIVE`` updates in a row (only
-    a compact cluster's estimate counts). The test runs only for ``active`` seconds
-    after a global search ended (from a global start or a re-seed): a track from a known pose is never tested, and
-    neither is a place that has held that long. Some real odometry over-reports motion for seconds at a time
+    ``min_travel`` and the estimate less than ``ratio`` times as far, at ``CONSECUTIVE`` updates in a row (only a
+    compact cluster's estimate counts). The test runs only for ``active`` seconds after a global search ended (from
+    a global start or a re-seed): a track from a known pose is never tested, and neither is a place that has held
+    that long. Some real odometry over-reports motion for seconds at a time
     (fr079: 1.9 m reported over 5 s while the robot moved 0.14 m, on a correct track), so a stall means "the place
     the search found is wrong" only while that place is new. Lost recovery re-seeds on it (``LostRecovery``).
     """
@@ -516,10 +516,14 @@ class StallCheck:
         self.run = 0  # consecutive updates whose window came up short
         self.stalled = False
 
-    def interrupt(self) -> None:
-        """The odometry jumped (an update without motion): the window starts again."""
+    def _forget(self) -> None:
+        """The window starts again."""
         self.history.clear()
         self.run = 0
+
+    def interrupt(self) -> None:
+        """The odometry jumped (an update without motion): the window starts again."""
+        self._forget()
         self.stalled = False
 
     def observe(self, dt: float, estimate, cov, odom) -> None:
@@ -529,20 +533,18 @@ class StallCheck:
         self.clock += max(float(dt), 0.0)
         self.stalled = False
         search = self.search
-        compact = cov is not None and max(cov[0][0], cov[1][1]) <= self.COMPACT ** 2
-        if (search.holding or search.since_end is None or odom is None or search.starts != self.starts
-                or not compact):
-            self.history.clear()  # a new search (which may have ended in this very update), no odometry, no place
-            self.run = 0
-        if search.holding or search.since_end is None or search.starts != self.starts:
+        no_place = search.holding or search.since_end is None  # a track from a pose, or a search under way
+        if no_place or search.starts != self.starts:  # ... or a new search ended (perhaps in this very update)
             self.since = None
-        if search.holding or search.since_end is None or odom is None or not compact:
+        compact = cov is not None and max(cov[0][0], cov[1][1]) <= self.COMPACT ** 2
+        if no_place or odom is None or not compact:
+            self._forget()
             return
-        if self.since is None:
+        if self.since is None:  # the new search's place: a window of its own
+            self._forget()
             self.since, self.starts = self.clock, search.starts
         if self.clock - self.since > self.active:
-            self.history.clear()
-            self.run = 0
+            self._forget()
             return
         h = self.history
         h.append((self.clock, float(estimate[0]), float(estimate[1]), float(odom[0]), float(odom[1])))

@@ -37,7 +37,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import FaultWindow, GlobalSearch, KLDSampling, StallCheck, draw_injected, make_recovery, measurement_count
+from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, StallCheck, draw_injected, make_recovery,
+                          measurement_count)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard
