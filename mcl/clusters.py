@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcl.estimate import estimate
-from mcl.kernels.clusters import label_cells
+from mcl.kernels.clusters import cell_keys, label_cells
 
 
 
@@ -53,15 +53,9 @@ def cluster_labels(particles: np.ndarray, cell_xy: float, cell_theta: float) -> 
     if not (cell_xy > 0 and cell_theta > 0):
         raise ValueError(f"cluster cell sizes must be > 0, got {cell_xy}, {cell_theta}")
     n_th = max(1, int(round(2.0 * math.pi / cell_theta)))
-    th_cell = 2.0 * math.pi / n_th
-    it = np.floor((p[2] + math.pi) / th_cell).astype(np.int64) % n_th
-    ix = np.floor(p[0] / cell_xy).astype(np.int64)
-    iy = np.floor(p[1] / cell_xy).astype(np.int64)
-    ix -= ix.min() - 1  # a free border row and column: neighbours never wrap into the next row
-    iy -= iy.min() - 1
-    ny = int(iy.max()) + 2
-    keys = (ix * ny + iy) * n_th + it
-    cells, inverse = _occupied_cells(keys, (int(ix.max()) + 2) * ny * n_th)
+    keys = np.empty(n, dtype=np.int64)
+    ny, n_keys = cell_keys(np.ascontiguousarray(p), float(cell_xy), n_th, keys)
+    cells, inverse = _occupied_cells(keys, int(n_keys))
     cell_labels = np.empty(cells.size, dtype=np.int64)
     n_clusters = label_cells(cells, ny, n_th, cell_labels)
     return cell_labels[inverse], int(n_clusters)
