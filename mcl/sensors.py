@@ -23,6 +23,7 @@ table gather per beam (``mcl.kernels.likelihood``).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -47,9 +48,18 @@ def beam_selection(ranges, angles, max_range, cfg) -> np.ndarray:
     max_beams = int(cfg.max_beams)
     if max_beams < 1:
         raise ValueError(f"sensor.max_beams: must be >= 1, got {max_beams}")
+    sel = _evenly_spaced(b, max_beams)
+    return sel[valid_returns(r[sel], max_range, cfg)]
+
+
+@functools.lru_cache(maxsize=64)
+def _evenly_spaced(b: int, max_beams: int) -> np.ndarray:
+    """(K,) int64, read-only: round(linspace(0, b - 1, max_beams)) without repeats, or every beam when b <= max_beams.
+    Made once per scan geometry: a log's scans all have the same beam count."""
     sel = (np.unique(np.rint(np.linspace(0.0, b - 1, max_beams)).astype(np.int64)) if b > max_beams
            else np.arange(b, dtype=np.int64))
-    return sel[valid_returns(r[sel], max_range, cfg)]
+    sel.setflags(write=False)
+    return sel
 
 
 def valid_returns(ranges, max_range, cfg) -> np.ndarray:
