@@ -521,14 +521,9 @@ class StallCheck:
         self.history.clear()
         self.run = 0
 
-    def interrupt(self) -> None:
-        """The odometry jumped (an update without motion): the window starts again."""
-        self._forget()
-        self.stalled = False
-
     def observe(self, dt: float, estimate, cov, odom) -> None:
         """This update's log time step, estimate (x, y, ...) and its covariance (3x3), and odometry pose (x, y, ...)
-        or None. Only a compact estimate (x and y std under ``COMPACT`` m) is a place: the mean of a cloud still
+        or None (no motion, or an odometry jump: the window starts again). Only a compact estimate (x and y std under ``COMPACT`` m) is a place: the mean of a cloud still
         spread over the map moves for no reason."""
         self.clock += max(float(dt), 0.0)
         self.stalled = False

@@ -350,9 +350,7 @@ class ParticleFilter:
         self._odom = None
         if control is not None:
             control, self._delta = self.guard.check_control(control)
-            if control is None:  # a jump: not motion
-                if self.stall is not None:
-                    self.stall.interrupt()
+            if control is None:  # a jump: not motion (no odometry pose for the stall test either)
                 self._delta = np.zeros(3)
                 if self.kld is not None and self.kld.pending is not None:
                     self._kld_draw(None, info)

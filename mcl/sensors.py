@@ -403,7 +403,7 @@ def beam_observation(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0))
         raise ValueError(f"ranges and angles differ in length: {r.size} vs {a.size}")
     max_beams = int(cfg.max_beams)
     if r.size > max_beams:
-        sel = np.unique(np.rint(np.linspace(0.0, r.size - 1, max_beams)).astype(np.int64))
+        sel = _evenly_spaced(r.size, max_beams)
         r, a = r[sel], a[sel]
     zmax = float(cfg.range_max)
     if max_range is not None and 0.0 < float(max_range) < zmax:
