@@ -7,14 +7,17 @@ in:
 - ``tracking``: from the start pose with the config's ``filter.initial_std``; scored by the ATE over the
   whole run; *lost* when the maximum error exceeds the dataset's ``lost_m`` (default 1 m);
 - ``global``: global localization (particles uniform over free space); scored by the convergence time,
-  from the first scored pose until the error falls below ``SETTLE_M`` and stays there; *lost* unless it
-  converged within ``WITHIN_S``; RMSE and max from the convergence on;
+  from the first scored pose until the error falls below ``SETTLE_M`` and never again exceeds the larger of
+  ``SETTLE_M`` and ``lost_m`` (the tracking run's bound: a later excursion a tracking run is allowed does not
+  undo the convergence); *lost* unless it converged within ``WITHIN_S``; RMSE and max from the convergence on;
 - ``kidnapped``: tracking, then the robot (a synthetic world made again with ``kidnap_at`` = half its
   duration) or the filter (a real log: the particles moved at mid-truth to a cloud around a free pose
   >= ``KIDNAP_M`` away, the runner's ``kidnap_filter_at``) is kidnapped; scored by the recovery time, from
-  the kidnap until the error falls below ``SETTLE_M`` and stays; *lost* unless it recovered within
-  ``WITHIN_S`` (or the maximum error before the kidnap exceeds ``lost_m``); RMSE and max over the poses
-  before the kidnap and after the recovery.
+  the kidnap until the error falls below ``SETTLE_M`` and stays within the same bound; *lost* unless it
+  recovered within ``WITHIN_S`` (or the maximum error before the kidnap exceeds ``lost_m``); RMSE and max
+  over the poses before the kidnap and after the recovery.
+
+``lost_m`` is the dataset's, else the suite's (``lost_m:`` at the top of the file), else ``LOST_M``.
 
 A dataset marked ``held_out: true`` is evaluated like the others here; ``mcl tune`` (mcl.tune) never tunes on
 it and scores its best and its base config on it at the end.
@@ -54,7 +57,7 @@ WITHIN_S = 30.0  # s: ... within this long (global: from the start; kidnapped: f
 KIDNAP_M = 5.0  # m: a real log's filter is kidnapped at least this far from the truth
 LOST_M = 1.0  # m: default lost threshold of a dataset (tracking: max error above it)
 
-SUITE_KEYS = ("name", "root", "modes", "datasets")
+SUITE_KEYS = ("name", "root", "modes", "lost_m", "datasets")
 DATASET_KEYS = ("name", "map", "config", "log", "truth", "initial_pose", "lost_m", "set", "modes", "simulate", "held_out")
 BASELINE = "baseline"
 
@@ -120,6 +123,11 @@ def load_suite(path: str | os.PathLike) -> Suite:
     base = path.resolve().parent
     root = base / str(doc["root"]) if doc.get("root") is not None else base
     modes = _modes(doc["modes"], f"{path}: modes") if "modes" in doc else ("tracking",)
+    lost_m = LOST_M
+    if "lost_m" in doc:
+        lost_m = finite_number(doc["lost_m"], f"{path}: lost_m", ConfigError)
+        if not lost_m > 0:
+            raise ConfigError(f"{path}: lost_m: must be positive, got {lost_m}")
     entries = doc.get("datasets")
     if not isinstance(entries, list) or not entries:
         raise ConfigError(f"{path}: datasets: expected a non-empty list")
@@ -138,7 +146,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
         if name in names:
             raise ConfigError(f"{label}: name: {name!r} appears twice")
         names.add(name)
-        d = Dataset(name=name, modes=modes)
+        d = Dataset(name=name, modes=modes, lost_m=lost_m)
         if "modes" in e:
             d.modes = _modes(e["modes"], f"{label}: modes")
         if "lost_m" in e:
@@ -353,18 +361,27 @@ def _finish_plan(jobs: list[Job]) -> None:
 # ----------------------------------------------------------------------------- scoring
 
 
-def settle_time(t, e, t0: float, below: float = SETTLE_M):
-    """Seconds from t0 until the error e (at times t >= t0) falls below ``below`` and stays; None if it
-    does not (it is above at the last pose); 0 if it never rises above."""
+def settle_time(t, e, t0: float, below: float = SETTLE_M, stay: float | None = None):
+    """Seconds from t0 until the error e (at times t >= t0) falls below ``below`` and stays below it (or,
+    with ``stay`` > ``below``, never again exceeds ``stay``); None if it does not; 0 if it is below at the
+    first pose and stays."""
     import numpy as np
 
     t, e = np.asarray(t), np.asarray(e)
-    above = np.flatnonzero(e >= below)
-    if above.size == 0:
-        return 0.0
-    if above[-1] == e.size - 1:
+    if stay is None or stay <= below:
+        above = np.flatnonzero(e >= below)
+        if above.size == 0:
+            return 0.0
+        if above[-1] == e.size - 1:
+            return None
+        return float(t[above[-1] + 1] - t0)
+    over = np.flatnonzero(e > stay)
+    start = over[-1] + 1 if over.size else 0  # the last excursion past `stay` ...
+    within = np.flatnonzero(e[start:] < below)  # ... then the first pose within `below`
+    if within.size == 0:
         return None
-    return float(t[above[-1] + 1] - t0)
+    i = start + within[0]
+    return 0.0 if i == 0 else float(t[i] - t0)
 
 
 def score(mode: str, t, e, *, lost_m: float, kidnap_t: float | None = None) -> dict:
@@ -380,14 +397,14 @@ def score(mode: str, t, e, *, lost_m: float, kidnap_t: float | None = None) -> d
         ok = None
         lost = bool(e.max() > lost_m)
     elif mode == "global":
-        conv = settle_time(t, e, t[0])
+        conv = settle_time(t, e, t[0], stay=lost_m)
         ok = conv is not None and conv <= WITHIN_S
         if conv is not None:
             keep = t >= t[0] + conv
         lost = not ok
     elif mode == "kidnapped":
         before = t < kidnap_t
-        conv = settle_time(t[~before], e[~before], kidnap_t) if (~before).any() else None
+        conv = settle_time(t[~before], e[~before], kidnap_t, stay=lost_m) if (~before).any() else None
         ok = conv is not None and conv <= WITHIN_S
         keep = (before | (t >= kidnap_t + conv)) if conv is not None else keep  # never recovered: every pose
         lost = (not ok) or bool(before.any() and e[before].max() > lost_m)
@@ -559,8 +576,8 @@ def write_results(out: Path, suite: Suite, rows: list[dict], planned: int) -> li
 
     table = aggregate(rows)
     legend = (f"lost: tracking max error > lost_m; global / kidnapped: not below {SETTLE_M} m within "
-              f"{WITHIN_S:g} s of the start / kidnap. conv: s until the error stays below {SETTLE_M} m "
-              "(kidnapped: from the kidnap).")
+              f"{WITHIN_S:g} s of the start / kidnap. conv: s until the error is below {SETTLE_M} m and stays "
+              f"below lost_m (kidnapped: from the kidnap).")
     doc = {"suite": suite.name, "suite_file": str(suite.path), "planned_runs": planned, "finished_runs": len(rows),
            "settle_m": SETTLE_M, "within_s": WITHIN_S, "runs": rows, "table": table}
     atomic_write_text(out / "results.json", json.dumps(doc, indent=1) + "\n")

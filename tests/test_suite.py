@@ -79,6 +79,39 @@ def test_score_per_mode():
     assert s["lost"] and s["conv_s"] is None and s["max"] == pytest.approx(7.0)
 
 
+def test_a_later_excursion_within_lost_m_does_not_undo_a_convergence():
+    # infinite_corridor kidnapped: back within 0.5 m 2.4 s after the kidnap, then 0.6-0.9 m for a few scans
+    # 170 s later, as its tracking runs are (lost_m 1 m). It recovered; a tracking run would not be lost.
+    t = np.arange(0.0, 300.0, 1.0)
+    e = np.where((t >= 100) & (t < 103), 40.0, 0.1)
+    e[250:254] = 0.8
+    s = score("kidnapped", t, e, lost_m=1.0, kidnap_t=100.0)
+    assert s["conv_s"] == pytest.approx(3.0) and not s["lost"] and s["max"] == pytest.approx(0.8)
+    assert score("kidnapped", t, e, lost_m=0.5, kidnap_t=100.0)["conv_s"] == pytest.approx(154.0)  # 0.5: stays below
+    e[250] = 1.2  # past lost_m: the convergence starts again after it
+    s = score("kidnapped", t, e, lost_m=1.0, kidnap_t=100.0)
+    assert s["conv_s"] == pytest.approx(154.0) and s["lost"]
+    # global: within 0.5 m at 5 s, 0.9 m at 100 s: converged at 5 s; past lost_m at 100 s: after it
+    e = np.where(t < 5, 6.0, 0.2)
+    e[100] = 0.9
+    assert score("global", t, e, lost_m=1.0)["conv_s"] == pytest.approx(5.0)
+    e[100] = 1.1
+    assert score("global", t, e, lost_m=1.0)["conv_s"] == pytest.approx(101.0)
+    e[101:] = 0.7  # never back within 0.5 m after the last excursion: not converged
+    assert score("global", t, e, lost_m=1.0)["conv_s"] is None
+
+
+def test_suite_lost_m_is_every_datasets_default(tmp_path):
+    demo = PROJECT_ROOT / "data" / "demo"
+    files = {"map": str(demo / "map.yaml"), "log": str(demo / "log.clf"), "truth": str(demo / "truth.tum")}
+    suite = load_suite(_write(tmp_path / "s.yaml", {"lost_m": 0.5, "datasets": [
+        {"name": "a", **files}, {"name": "b", **files, "lost_m": 1.5}]}))
+    assert [d.lost_m for d in suite.datasets] == [0.5, 1.5]
+    assert [d.lost_m for d in load_suite(_write(tmp_path / "t.yaml", {"datasets": [{"name": "a", **files}]})).datasets] == [1.0]
+    synthetic = yaml.safe_load((PROJECT_ROOT / "suites" / "synthetic.yaml").read_text())
+    assert synthetic["lost_m"] == 0.5  # issue 8's bar for the generated worlds' tracking runs
+
+
 def test_table_median_and_worst():
     def row(seed, rmse, mx, lost, conv, wall, n, config="default"):
         return {"dataset": "a", "mode": "tracking", "config": config, "seed": seed, "rmse": rmse, "max": mx,
@@ -119,6 +152,7 @@ def test_bad_suite_files_exit_2_naming_file_and_key(tmp_path, capsys):
         ({"datasets": [{"name": "s", "simulate": {"seed": 1, "durations": 5}}]},
          "datasets[0] (s): simulate.durations: unknown key (did you mean duration?)"),
         ({"datasets": [{**good, "set": {"filter.particle": 10}}]}, "filter.particle: unknown key"),
+        ({"lost_m": -1, "datasets": [good]}, "lost_m: must be positive, got -1"),
     ]
     for i, (doc, expected) in enumerate(cases):
         path = _write(tmp_path / f"bad{i}.yaml", doc)
