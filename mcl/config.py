@@ -287,6 +287,8 @@ class QualityConfig:
     distance: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m: a beam matches the map within this
     lost_below: float = field(default=0.6, metadata=_rng(-2.0, 1.0))  # an update is bad when match - 2 contradiction < this
     lost_after: int = field(default=3, metadata=_rng(1, 10_000))  # lost when this many of the last 2k-1 updates were bad
+    # ... or at once when one update's score is below this (-2: never, no score is lower)
+    lost_at_once_below: float = field(default=-2.0, metadata=_rng(-2.0, 1.0))
     min_beams: int = field(default=5, metadata=_rng(1, 100_000))  # a fit of fewer beams with a return is no evidence
     # an update is bad also when this share of its beams or more went through mapped walls (0: off)
     contradiction_above: float = field(default=0.0, metadata=_rng(0.0, 1.0))

@@ -38,7 +38,7 @@ def _scan_from(pose, grid, n=90):
 
 T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
 QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5, doubt_margin=0.0, doubt_updates=50,
-                       contradiction_above=0.0)
+                       contradiction_above=0.0, lost_at_once_below=-2.0)
 
 
 def test_fit_is_high_at_the_true_pose_and_low_away_from_it():
@@ -105,6 +105,25 @@ def test_lost_belief_needs_three_bad_of_five_and_clears_at_one_of_five():
     assert q.update(good) is True  # good, bad, good, bad, good: still 2 bad
     assert q.update(good) is True  # bad, good, bad, good, good: 2
     assert q.update(good) is False  # good, bad, good, good, good: 1 of 5 -> no longer lost
+
+
+def test_a_scan_far_below_any_correct_track_calls_lost_at_once():
+    # quality.lost_at_once_below: one update whose score is below it is enough (a kidnapped robot's first scan
+    # scores -0.9 to 0.3 in most synthetic worlds; correct tracks never fell below 0.3 in the synthetic suite nor
+    # below 0.5 on the real logs), where 3 bad of 5 take 7-10 s on a log with a scan every 2.5-3.5 s.
+    at_once = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(QCFG), "lost_at_once_below": 0.0}))
+    plain = ScanQuality(_box_grid(), QCFG)
+    good, awful, poor = Fit(60, 0.95, 0.0), Fit(60, 0.3, 0.4), Fit(60, 0.3, 0.1)  # scores 0.95, -0.5, 0.1
+    assert _feed(at_once, [good] * 5 + [awful]) == [False] * 5 + [True]
+    assert _feed(plain, [good] * 5 + [awful]) == [False] * 6
+    # a bad update above the threshold still needs 3 of 5
+    q = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(QCFG), "lost_at_once_below": 0.0}))
+    assert _feed(q, [good] * 5 + [poor, poor, poor]) == [False] * 7 + [True]
+    # one awful scan in a good track is lost for that update only (1 bad of 5 clears it); a second keeps it lost
+    q = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(QCFG), "lost_at_once_below": 0.0}))
+    assert _feed(q, [good] * 5 + [awful, good, good]) == [False] * 5 + [True, False, False]
+    q = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(QCFG), "lost_at_once_below": 0.0}))
+    assert _feed(q, [good] * 5 + [awful, poor, good]) == [False] * 5 + [True, True, True]
 
 
 @pytest.fixture(scope="module")
