@@ -516,3 +516,40 @@ def test_a_reseed_on_a_stalled_estimate_keeps_nothing_of_the_old_cloud():
     assert p[0].min() < 2.0 and p[0].max() > 8.0 and p[1].min() < 2.0 and p[1].max() > 8.0
     assert np.mean(np.hypot(p[0] - 5.0, p[1] - 5.0) < 1.0) < 0.1  # nothing left of the cloud at (5, 5)
     assert pf.search.tempering and pf.search.holding
+
+
+FR101 = PROJECT_ROOT.parent / "shared" / "data" / "fr101"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (FR101 / "log.clf").is_file(), reason=f"fr101 data set not found at {FR101}")
+def test_a_sparse_log_kidnapped_is_called_lost_at_its_first_scan_and_back_sooner(tmp_path):
+    # fr101 has a scan every 2.6 s. Kidnapped as `mcl eval` kidnaps a real log (the filter's particles moved at
+    # mid-truth, 620.9 s, to a cloud 6.4 m away), seed 1, the default config: its first scan after the kidnap
+    # scores -0.77 (0.27 match, 0.52 of the beams through walls), so quality.lost_at_once_below (0) calls it lost
+    # at once and the global re-seed follows 3 lost updates and recovery_global_after_s (3 s) later: back within
+    # 0.5 m after 7.6 s (seeds 1-5: 7.6 s each). With the rules before (3 bad of 5 scans, then 10 s lost):
+    # 30.4 s (seeds 1-5: 26.3-32.0 s; the log also has 17 s without a scan after the kidnap). Bounds 15 and
+    # 20 s: each clear of its measured values by more than 5 s.
+    from mcl.config import load_config
+    from mcl.evaluate import position_errors
+    from mcl.runner import run
+    from mcl.suite import KIDNAP_M, _mid_truth, settle_time
+    from mcl.trajectory import read_tum
+
+    def kidnapped(*sets):
+        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+            f"map={FR101 / 'map.yaml'}", f"log={FR101 / 'log.clf'}", f"truth={FR101 / 'truth.tum'}",
+            "filter.initial_pose=[0.108623, -0.034410, 0.552197]", "filter.global_localization=false",
+            "rerun.mode=off", *sets])
+        out = tmp_path / str(len(sets))
+        s = run(cfg, out, progress=False, echo=lambda *_: None, kidnap_filter_at=(_mid_truth(cfg.truth), KIDNAP_M))
+        t, e, _ = position_errors(*read_tum(out / "trajectory.tum"), *read_tum(cfg.truth))
+        k = s["kidnap"]["t"]
+        assert e[t < k].max() < 0.5  # tracked before the kidnap
+        return settle_time(t[t >= k], e[t >= k], k, stay=1.0)
+
+    now = kidnapped()
+    assert now is not None and now <= 15.0, now
+    before = kidnapped("quality.lost_at_once_below=-2", "filter.recovery_global_after_s=10")
+    assert before is None or before >= 20.0, before
