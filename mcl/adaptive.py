@@ -523,8 +523,8 @@ class StallCheck:
 
     def observe(self, dt: float, estimate, cov, odom) -> None:
         """This update's log time step, estimate (x, y, ...) and its covariance (3x3), and odometry pose (x, y, ...)
-        or None (no motion, or an odometry jump: the window starts again). Only a compact estimate (x and y std under ``COMPACT`` m) is a place: the mean of a cloud still
-        spread over the map moves for no reason."""
+        or None (no motion, or an odometry jump: the window starts again). Only a compact estimate (x and y std
+        under ``COMPACT`` m) is a place: the mean of a cloud still spread over the map moves for no reason."""
         self.clock += max(float(dt), 0.0)
         self.stalled = False
         search = self.search

@@ -46,19 +46,34 @@ def position_errors(est_t, est_poses, ref_t, ref_poses):
     return tq, e_pos, e_th
 
 
+def settle_time(t, e, t0: float, below: float, stay: float | None = None):
+    """Seconds from t0 until the error e (at times t >= t0) falls below ``below`` and stays below it (or,
+    with ``stay`` > ``below``, never again exceeds ``stay``); None if it does not; 0 if it is below at the
+    first pose and stays."""
+    t, e = np.asarray(t), np.asarray(e)
+    if stay is None or stay <= below:
+        above = np.flatnonzero(e >= below)
+        if above.size == 0:
+            return 0.0
+        if above[-1] == e.size - 1:
+            return None
+        return float(t[above[-1] + 1] - t0)
+    over = np.flatnonzero(e > stay)
+    start = over[-1] + 1 if over.size else 0  # the last excursion past `stay` ...
+    within = np.flatnonzero(e[start:] < below)  # ... then the first pose within `below`
+    if within.size == 0:
+        return None
+    i = start + within[0]
+    return 0.0 if i == 0 else float(t[i] - t0)
+
+
 def evaluate(est_t, est_poses, ref_t, ref_poses, *, converged_within: float = 0.3) -> dict:
     """ATE figures of an estimated trajectory against a reference one (see module doc)."""
     tq, e_pos, e_th = position_errors(est_t, est_poses, ref_t, ref_poses)
     n_ref = int(np.asarray(ref_t).size)
     if tq.size == 0:
         raise DataError("evaluation: no reference timestamp lies inside the estimated trajectory's time span")
-    above = np.flatnonzero(e_pos >= converged_within)
-    if above.size == 0:
-        conv = 0.0
-    elif above[-1] == e_pos.size - 1:
-        conv = None
-    else:
-        conv = float(tq[above[-1] + 1] - tq[0])
+    conv = settle_time(tq, e_pos, tq[0], converged_within)
     return {
         "ate_rmse": float(math.sqrt(np.mean(e_pos**2))),
         "ate_mean": float(np.mean(e_pos)),

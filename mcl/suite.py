@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcl.errors import ConfigError, MclError
+from mcl.evaluate import settle_time
 
 MODES = ("tracking", "global", "kidnapped")
 SETTLE_M = 0.5  # m: converged / recovered once the error falls below this and stays
@@ -106,6 +107,16 @@ def _modes(value, where: str) -> tuple[str, ...]:
     return tuple(dict.fromkeys(value))
 
 
+def _lost_m(value, where: str) -> float:
+    """A suite's or a dataset's ``lost_m``: a positive number of metres."""
+    from mcl.yamlfile import finite_number
+
+    v = finite_number(value, where, ConfigError)
+    if not v > 0:
+        raise ConfigError(f"{where}: must be positive, got {v}")
+    return v
+
+
 def load_suite(path: str | os.PathLike) -> Suite:
     """Read and check a suite file: every key known, every file present, every simulate keyword one of
     :func:`mcl.simulate.simulate`'s. Errors name the file and the key (ConfigError)."""
@@ -123,11 +134,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
     base = path.resolve().parent
     root = base / str(doc["root"]) if doc.get("root") is not None else base
     modes = _modes(doc["modes"], f"{path}: modes") if "modes" in doc else ("tracking",)
-    lost_m = LOST_M
-    if "lost_m" in doc:
-        lost_m = finite_number(doc["lost_m"], f"{path}: lost_m", ConfigError)
-        if not lost_m > 0:
-            raise ConfigError(f"{path}: lost_m: must be positive, got {lost_m}")
+    lost_m = _lost_m(doc["lost_m"], f"{path}: lost_m") if "lost_m" in doc else LOST_M
     entries = doc.get("datasets")
     if not isinstance(entries, list) or not entries:
         raise ConfigError(f"{path}: datasets: expected a non-empty list")
@@ -150,9 +157,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
         if "modes" in e:
             d.modes = _modes(e["modes"], f"{label}: modes")
         if "lost_m" in e:
-            d.lost_m = finite_number(e["lost_m"], f"{label}: lost_m", ConfigError)
-            if not d.lost_m > 0:
-                raise ConfigError(f"{label}: lost_m: must be positive, got {d.lost_m}")
+            d.lost_m = _lost_m(e["lost_m"], f"{label}: lost_m")
         if "held_out" in e:
             if not isinstance(e["held_out"], bool):
                 raise ConfigError(f"{label}: held_out: expected true or false, got {e['held_out']!r}")
@@ -361,29 +366,6 @@ def _finish_plan(jobs: list[Job]) -> None:
 # ----------------------------------------------------------------------------- scoring
 
 
-def settle_time(t, e, t0: float, below: float = SETTLE_M, stay: float | None = None):
-    """Seconds from t0 until the error e (at times t >= t0) falls below ``below`` and stays below it (or,
-    with ``stay`` > ``below``, never again exceeds ``stay``); None if it does not; 0 if it is below at the
-    first pose and stays."""
-    import numpy as np
-
-    t, e = np.asarray(t), np.asarray(e)
-    if stay is None or stay <= below:
-        above = np.flatnonzero(e >= below)
-        if above.size == 0:
-            return 0.0
-        if above[-1] == e.size - 1:
-            return None
-        return float(t[above[-1] + 1] - t0)
-    over = np.flatnonzero(e > stay)
-    start = over[-1] + 1 if over.size else 0  # the last excursion past `stay` ...
-    within = np.flatnonzero(e[start:] < below)  # ... then the first pose within `below`
-    if within.size == 0:
-        return None
-    i = start + within[0]
-    return 0.0 if i == 0 else float(t[i] - t0)
-
-
 def score(mode: str, t, e, *, lost_m: float, kidnap_t: float | None = None) -> dict:
     """A run's figures from its position errors e (m) at times t (see the module doc)."""
     import numpy as np
@@ -393,18 +375,18 @@ def score(mode: str, t, e, *, lost_m: float, kidnap_t: float | None = None) -> d
         return {"rmse": None, "max": None, "lost": True, "conv_s": None, "ok": False}
     keep = np.ones(e.size, bool)
     if mode == "tracking":
-        conv = settle_time(t, e, t[0])
+        conv = settle_time(t, e, t[0], SETTLE_M)
         ok = None
         lost = bool(e.max() > lost_m)
     elif mode == "global":
-        conv = settle_time(t, e, t[0], stay=lost_m)
+        conv = settle_time(t, e, t[0], SETTLE_M, stay=lost_m)
         ok = conv is not None and conv <= WITHIN_S
         if conv is not None:
             keep = t >= t[0] + conv
         lost = not ok
     elif mode == "kidnapped":
         before = t < kidnap_t
-        conv = settle_time(t[~before], e[~before], kidnap_t, stay=lost_m) if (~before).any() else None
+        conv = settle_time(t[~before], e[~before], kidnap_t, SETTLE_M, stay=lost_m) if (~before).any() else None
         ok = conv is not None and conv <= WITHIN_S
         keep = (before | (t >= kidnap_t + conv)) if conv is not None else keep  # never recovered: every pose
         lost = (not ok) or bool(before.any() and e[before].max() > lost_m)
@@ -577,7 +559,7 @@ def write_results(out: Path, suite: Suite, rows: list[dict], planned: int) -> li
     table = aggregate(rows)
     legend = (f"lost: tracking max error > lost_m; global / kidnapped: not below {SETTLE_M} m within "
               f"{WITHIN_S:g} s of the start / kidnap. conv: s until the error is below {SETTLE_M} m and stays "
-              f"below lost_m (kidnapped: from the kidnap).")
+              "below lost_m (kidnapped: from the kidnap).")
     doc = {"suite": suite.name, "suite_file": str(suite.path), "planned_runs": planned, "finished_runs": len(rows),
            "settle_m": SETTLE_M, "within_s": WITHIN_S, "runs": rows, "table": table}
     atomic_write_text(out / "results.json", json.dumps(doc, indent=1) + "\n")

@@ -44,16 +44,10 @@ def make_world(root: Path, seed: int, kidnap_at: float, duration: float, range_m
 
 def recovery_time(t: np.ndarray, err: np.ndarray, t_jump: float, within: float) -> float | None:
     """Seconds after t_jump until err < within and stays so to the end (None if it never does)."""
+    from mcl.evaluate import settle_time
+
     after = t >= t_jump
-    ta, ea = t[after], err[after]
-    if ta.size == 0:
-        return None
-    above = np.flatnonzero(ea >= within)
-    if above.size == 0:
-        return 0.0
-    if above[-1] == ea.size - 1:
-        return None
-    return float(ta[above[-1] + 1] - t_jump)
+    return settle_time(t[after], err[after], t_jump, within) if after.any() else None
 
 
 def run_case(data: Path, sim: dict, recovery: bool, overrides: list[str], out: Path) -> dict:

@@ -532,9 +532,9 @@ def test_a_sparse_log_kidnapped_is_called_lost_at_its_first_scan_and_back_sooner
     # 30.4 s (seeds 1-5: 26.3-32.0 s; the log also has 17 s without a scan after the kidnap). Bounds 15 and
     # 20 s: each clear of its measured values by more than 5 s.
     from mcl.config import load_config
-    from mcl.evaluate import position_errors
+    from mcl.evaluate import position_errors, settle_time
     from mcl.runner import run
-    from mcl.suite import KIDNAP_M, _mid_truth, settle_time
+    from mcl.suite import KIDNAP_M, SETTLE_M, _mid_truth
     from mcl.trajectory import read_tum
 
     def kidnapped(*sets):
@@ -547,7 +547,7 @@ def test_a_sparse_log_kidnapped_is_called_lost_at_its_first_scan_and_back_sooner
         t, e, _ = position_errors(*read_tum(out / "trajectory.tum"), *read_tum(cfg.truth))
         k = s["kidnap"]["t"]
         assert e[t < k].max() < 0.5  # tracked before the kidnap
-        return settle_time(t[t >= k], e[t >= k], k, stay=1.0)
+        return settle_time(t[t >= k], e[t >= k], k, SETTLE_M, stay=1.0)
 
     now = kidnapped()
     assert now is not None and now <= 15.0, now
