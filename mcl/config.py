@@ -290,6 +290,9 @@ class QualityConfig:
     # ... or at once when one update's score is below this (-2: never, no score is lower)
     lost_at_once_below: float = field(default=-2.0, metadata=_rng(-2.0, 1.0))
     min_beams: int = field(default=5, metadata=_rng(1, 100_000))  # a fit of fewer beams with a return is no evidence
+    # a scan with no beam through a mapped wall is bad only below this (when lower than lost_below): readings short
+    # of the map are what people and furniture the map lacks give; 1.0: no such rule
+    occluded_below: float = field(default=1.0, metadata=_rng(-2.0, 1.0))
     # an update is bad also when this share of its beams or more went through mapped walls (0: off)
     contradiction_above: float = field(default=0.0, metadata=_rng(0.0, 1.0))
     doubt_margin: float = field(default=0.25, metadata=_rng(0.0, 2.0))  # after a lost episode: bad also this far below

@@ -125,11 +125,18 @@ class ScanQuality:
         return Fit(k, float(np.count_nonzero(matched)) / k, float(np.count_nonzero(through)) / k)
 
     def bad(self, fit: Fit) -> bool:
-        """Whether one update's fit says the estimate is wrong (no beam: no evidence either way, not bad)."""
+        """Whether one update's fit says the estimate is wrong (no beam: no evidence either way, not bad).
+
+        A scan with no beam through a mapped wall is bad only below ``occluded_below`` (when that is lower than
+        ``lost_below``): its unmatched readings all end short of the map, as readings of people and furniture the
+        map lacks do, and nothing it saw contradicts the place."""
         if fit.beams < self.cfg.min_beams:
             return False
         c = self.cfg.contradiction_above
-        return fit.score < self.cfg.lost_below or (c > 0.0 and fit.contradiction >= c)
+        below = self.cfg.lost_below
+        if fit.contradiction == 0.0:
+            below = min(below, self.cfg.occluded_below)
+        return fit.score < below or (c > 0.0 and fit.contradiction >= c)
 
     def _doubting(self) -> bool:
         """Within ``doubt_updates`` updates from the start of a lost episode, with a score from before it (bounded

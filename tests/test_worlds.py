@@ -261,3 +261,18 @@ def test_suite_entries_generate(suite, kind, tmp_path):
     s = simulate(tmp_path, **kw, kidnap_at=3.0)
     assert s["scans"] == 31 and s["kidnap"] is not None
     assert yaml.safe_load((tmp_path / "sim.yaml").read_text())["kind"] == kind
+
+
+def test_the_held_out_suite_has_every_kind_and_no_world_of_the_tuning_suite(suite):
+    # suites/heldout.yaml checks that a default chosen on suites/synthetic.yaml carries over to other worlds:
+    # that holds only if no (kind, seed) of it is a world the defaults were chosen on.
+    from mcl.suite import load_suite
+
+    held = yaml.safe_load((ROOT / "suites" / "heldout.yaml").read_text())
+    tuned = {(e["simulate"]["kind"], e["simulate"]["seed"]) for e in suite["datasets"]}
+    worlds = [(e["simulate"]["kind"], e["simulate"]["seed"]) for e in held["datasets"]]
+    assert len(set(worlds)) == len(worlds) >= 18
+    assert not set(worlds) & tuned
+    assert {k for k, _ in worlds} == set(KINDS)
+    assert held["lost_m"] == suite["lost_m"] and held["modes"] == suite["modes"]
+    assert len(load_suite(ROOT / "suites" / "heldout.yaml").datasets) == len(worlds)
