@@ -25,7 +25,11 @@ simulated worlds, ``score < 0.6`` flagged none of the updates at the
 reference pose on the real logs and 2.3 % in the worst cluttered world,
 and 94-100 % of the poses 1 m off (``match < 0.6`` alone: 81-99 %).
 
-An update is **bad** when its score is below ``quality.lost_below``. The
+An update is **bad** when its score is below ``quality.lost_below`` (or,
+when not one of its beams went through a mapped wall, below
+``quality.occluded_below``: every unmatched reading ends short of the map,
+as people crowding the robot make them, and nothing contradicts the place;
+see :meth:`ScanQuality.bad`). The
 filter believes it is **lost** once ``lost_after`` of the last
 ``2 lost_after - 1`` updates with a scan were bad, and no longer lost once
 at most ``lost_after // 2`` of them were (3 of 5, and 1 of 5, by default):
