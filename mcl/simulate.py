@@ -433,6 +433,27 @@ def _landmark_line(obs: tuple[np.ndarray, np.ndarray, np.ndarray], ts: str) -> s
 # Entry point
 # --------------------------------------------------------------------------
 
+def resample_occupancy(occupancy: np.ndarray, resolution: float, new_resolution: float) -> np.ndarray:
+    """The grid ``occupancy`` (-1 unknown, 0 free, 100 occupied; ``resolution`` m cells, row 0 at the bottom) drawn
+    with ``new_resolution`` m cells over the same origin, as a mapper would: a new cell is occupied when any
+    world cell it overlaps is, else free when any is free, else unknown. Coarser cells thicken walls by up to one
+    new cell; finer ones repeat the world's cells."""
+    rank = np.where(occupancy > 0, 2, np.where(occupancy == 0, 1, 0)).astype(np.int8)
+
+    def pooled(rank: np.ndarray, axis: int) -> np.ndarray:
+        # new cell i overlaps world cells first[i] .. last[i]; reduceat takes [first[i], first[i+1]) (first[i]
+        # alone when a new cell lies inside one world cell), and last[i] adds a partly overlapped last cell
+        n = rank.shape[axis]
+        n_new = max(int(math.ceil(n * resolution / new_resolution - 1e-9)), 1)
+        edges = np.arange(n_new + 1) * (new_resolution / resolution)
+        first = np.minimum(np.floor(edges[:-1] + 1e-9).astype(np.int64), n - 1)
+        last = np.minimum(np.ceil(edges[1:] - 1e-9).astype(np.int64) - 1, n - 1)
+        return np.maximum(np.maximum.reduceat(rank, first, axis=axis), np.take(rank, last, axis=axis))
+
+    rank = pooled(pooled(rank, 0), 1)
+    return np.array([-1, 0, 100], dtype=np.int8)[rank]
+
+
 def _check(cond, key, msg):
     if not cond:
         raise ConfigError(f"simulate: {key}: {msg}")
@@ -446,7 +467,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              robot_radius: float = 0.2, dynamic_obstacles: int | None = None,
              unmapped_furniture: int | None = None, landmarks: int = 0,
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
-             landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None) -> dict:
+             landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
+             map_resolution: float | None = None) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -474,7 +496,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     ``landmark_fp``. K = 0 leaves every output byte-identical. ``depth`` renders a Kinect-like depth
     image (mcl.depthsim; ``depth_camera`` a mcl.planes.DepthCamera, default Kinect v1 on a 0.6 m mount) at
     every ``depth_every``-th scan into ``depth/<t>.npz`` with ``depth/camera.yaml``; without it every output
-    is byte-identical.
+    is byte-identical. ``map_resolution`` (m) writes the map at another cell size than the world's 0.05 m, as a
+    mapping run at that resolution would have drawn it (``resample_occupancy``); the laser still sees the world.
 
     Returns a summary: scans, duration, path length, start pose, kidnap.
     """
@@ -510,6 +533,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            "noise must be >= 0 and the probabilities in [0, 1]")
     _check(isinstance(depth_every, (int, np.integer)) and depth_every >= 1, "depth_every",
            f"expected an integer >= 1, got {depth_every!r}")
+    _check(map_resolution is None or (math.isfinite(map_resolution) and 0.01 <= map_resolution <= 0.5),
+           "map_resolution", f"expected 0.01..0.5 m, got {map_resolution}")
     n_ticks = int(round(duration * _ODOM_RATE)) + 1
     kidnap_tick = None
     if kidnap_at is not None:
@@ -565,7 +590,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     # --- write
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
-    grid = OccupancyGrid.from_occupancy(world.occupancy, world.resolution, world.origin)
+    occupancy, map_res = world.occupancy, world.resolution
+    if map_resolution is not None and abs(map_resolution - world.resolution) > 1e-12:
+        map_res = float(map_resolution)
+        occupancy = resample_occupancy(world.occupancy, world.resolution, map_res)
+    grid = OccupancyGrid.from_occupancy(occupancy, map_res, world.origin)
     save_map(grid, out / "map.yaml")
 
     host = "sim"
@@ -625,8 +654,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
                      "alphas": [float(a) for a in odom_alphas], "scale": float(odom_scale),
                      "yaw_drift_per_m": float(odom_yaw_drift), "rate_hz": _ODOM_RATE},
         "robot": {"radius": float(robot_radius), "speed": float(speed), "turn_rate": float(turn_rate)},
-        "map": {"resolution": world.resolution, "origin": [world.origin[0], world.origin[1]],
-                "width": int(world.occupancy.shape[1]), "height": int(world.occupancy.shape[0])},
+        "map": {"resolution": map_res, "origin": [world.origin[0], world.origin[1]],
+                "width": int(occupancy.shape[1]), "height": int(occupancy.shape[0])},
         "scans": int(scan_ticks.size),
         "path_length": round(length, 3),
         "dynamic_obstacles": int(dynamic_obstacles),
@@ -799,6 +828,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--format", choices=["clf", "bag1", "db3", "mcap"], default="clf",
                         help="the log as a CARMEN log.clf (default) or a ROS bag: log.bag (ROS 1), log.db3 or "
                         "log.mcap (ROS 2), with /scan, /odom, /tf_static and the truth as /ground_truth")
+    parser.add_argument("--map-resolution", type=float, default=None, metavar="M",
+                        help="write the map with M metre cells (0.01-0.5) instead of the world's 0.05 m, as a "
+                        "mapper at that resolution would (walls thicken on coarser maps); the laser still sees "
+                        "the world")
 
 
 def write_log_as_bag(outdir, fmt: str) -> Path:
@@ -822,7 +855,7 @@ def run_from_args(args: argparse.Namespace) -> int:
                  n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
                  dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                  landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
-                 depth_every=args.depth_every)
+                 depth_every=args.depth_every, map_resolution=args.map_resolution)
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
         write_log_as_bag(s["outdir"], fmt)

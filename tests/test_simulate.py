@@ -11,7 +11,7 @@ from mcl.datasets.carmen import read_carmen
 from mcl.errors import ConfigError
 from mcl.kernels.raycast import cast_rays
 from mcl.maps import load_map
-from mcl.simulate import _odometry, add_arguments, beam_angles, run_from_args, simulate
+from mcl.simulate import _odometry, add_arguments, beam_angles, resample_occupancy, run_from_args, simulate
 from mcl.trajectory import read_tum
 
 NOISE_FREE = dict(range_sigma=0.0, p_short=0.0, p_max=0.0)
@@ -255,11 +255,47 @@ def test_short_range_and_robotlaser_geometry_via_cli_arguments(tmp_path, capsys)
     (dict(duration=-1.0), "duration"),
     (dict(n_beams=1), "n_beams"),
     (dict(range_max=0.0), "range_max"),
+    (dict(map_resolution=0.001), "map_resolution"),
 ])
 def test_bad_options_raise_config_error(tmp_path, kw, key):
     with pytest.raises(ConfigError, match=key):
         simulate(tmp_path, **kw)
     assert not (tmp_path / "log.clf").exists()
+
+
+# -1 unknown, 0 free, 100 occupied; row 0 at the bottom
+GRID = np.array([[0, 0, 100, 0],
+                 [0, -1, -1, 0],
+                 [-1, -1, -1, -1]], dtype=np.int8)
+
+
+@pytest.mark.parametrize("new_res, expected", [
+    # 0.1 m: each new cell pools 2x2 world cells (the last row alone): occupied > free > unknown
+    (0.1, [[0, 100], [-1, -1]]),
+    # 0.075 m: new cells overlap world cells partly; every cell a new one touches counts
+    (0.075, [[0, 100, 0], [0, -1, 0]]),
+    # 0.025 m: each world cell repeated 2x2
+    (0.025, np.repeat(np.repeat(GRID, 2, axis=0), 2, axis=1)),
+])
+def test_resample_occupancy_draws_the_grid_as_a_mapper_at_another_resolution(new_res, expected):
+    np.testing.assert_array_equal(resample_occupancy(GRID, 0.05, new_res), np.asarray(expected, dtype=np.int8))
+
+
+def test_map_resolution_changes_only_the_map(sim, tmp_path):
+    """--map-resolution writes the map with other cells; the world, drive, laser and odometry stay the same."""
+    out, _ = sim
+    simulate(tmp_path, seed=4, duration=40.0, map_resolution=0.1)
+    for name in ("log.clf", "truth.tum"):
+        assert (tmp_path / name).read_bytes() == (out / name).read_bytes(), name
+    fine, coarse = load_map(out / "map.yaml"), load_map(tmp_path / "map.yaml")
+    assert coarse.resolution == 0.1 and coarse.origin == fine.origin
+    assert coarse.occupancy.shape == tuple(math.ceil(n / 2) for n in fine.occupancy.shape)
+    np.testing.assert_array_equal(coarse.occupancy, resample_occupancy(fine.occupancy, 0.05, 0.1))
+    # every wall cell of the world is inside a wall cell of the coarse map
+    iy, ix = np.nonzero(fine.occupancy > 0)
+    assert np.all(coarse.occupancy[iy // 2, ix // 2] > 0)
+    meta = yaml.safe_load((tmp_path / "sim.yaml").read_text())["map"]
+    assert meta["resolution"] == 0.1 and [meta["height"], meta["width"]] == list(coarse.occupancy.shape)
 
 
 def test_bundled_demo_is_consistent():
