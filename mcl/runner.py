@@ -400,6 +400,23 @@ def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     return summary
 
 
+def _check_start_pose(grid, pose, where: str, echo) -> None:
+    """A tracking start pose off the map is a mistake (another frame, x and y swapped): one error line naming
+    ``where`` it came from, before anything is written. On the map but not on a free cell: a warning, and the
+    filter starts there (its recovery searches if the scans disagree)."""
+    x, y = float(pose[0]), float(pose[1])
+    x0, y0 = grid.origin
+    x1, y1 = x0 + grid.width * grid.resolution, y0 + grid.height * grid.resolution
+    if not (x0 <= x < x1 and y0 <= y < y1):
+        raise ConfigError(f"{where}: ({x:.3f}, {y:.3f}) lies outside the map {grid.path} "
+                          f"(x {x0:.2f}..{x1:.2f} m, y {y0:.2f}..{y1:.2f} m)")
+    ix, iy = grid.world_to_cell(x, y)
+    if not grid.free[iy, ix]:
+        what = "an occupied" if grid.occupied[iy, ix] else "an unknown"
+        echo(f"mcl: warning: {where}: ({x:.3f}, {y:.3f}) lies on {what} cell of {grid.path}; tracking starts "
+             "there")
+
+
 def _run(
     cfg: Config,
     out_dir: Path,
@@ -436,6 +453,12 @@ def _run(
         from mcl.landmarks import load_landmarks
 
         landmark_map = load_landmarks(cfg.landmarks.map)
+    fc = cfg.filter
+    from_bag = bag_initial is not None and not initial_pose_override
+    if from_bag:
+        _check_start_pose(grid, bag_initial[0], f"{cfg.bag}: {cfg.topics.initial_pose}", echo)
+    elif not fc.global_localization and fc.initial_pose is not None:
+        _check_start_pose(grid, fc.initial_pose, "filter.initial_pose", echo)
     updates = _updates(scans, marks_all)
     plane_sensor = None
     if cfg.planes.use:
@@ -458,8 +481,7 @@ def _run(
     with small_pages():  # the map tables (see small_pages)
         pf = ParticleFilter(cfg, grid, landmark_map=landmark_map,
                             plane_model=plane_sensor.model if plane_sensor is not None else None)
-    fc = cfg.filter
-    if bag_initial is not None and not initial_pose_override:  # the bag's /initialpose, covariance included
+    if from_bag:  # the bag's /initialpose, covariance included
         mean0, cov0 = bag_initial
         if not np.any(cov0):  # no covariance given: filter.initial_std
             cov0 = np.diag(np.square(fc.initial_std))

@@ -148,6 +148,30 @@ def test_missing_map_is_one_line_and_exit_2(tmp_path, capsys):
     assert err.count("\n") == 0 and "nope.yaml" in err
 
 
+def test_a_start_pose_off_the_map_is_one_line_and_nothing_written(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["run", "--map", str(DEMO / "map.yaml"), "--log", str(DEMO / "log.clf"), "--out", str(out),
+                 "--rerun", "off", "--no-progress", "--initial-pose", "1000", "12", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert "filter.initial_pose: (1000.000, 12.000) lies outside the map" in err and "map.yaml (x -1.00..21.00 m" in err
+    assert not out.exists()
+
+
+def test_a_start_pose_on_a_cell_that_is_not_free_is_a_warning():
+    from mcl.maps import load_map
+    from mcl.runner import _check_start_pose
+
+    grid = load_map(DEMO / "map.yaml")
+    said = []
+    _check_start_pose(grid, (-0.9, -0.9, 0.0), "filter.initial_pose", said.append)  # the unknown border
+    import yaml
+
+    start = yaml.safe_load((DEMO / "sim.yaml").read_text())["start_pose"]  # free: the robot starts there
+    _check_start_pose(grid, start, "filter.initial_pose", said.append)
+    assert len(said) == 1 and "(-0.900, -0.900) lies on an unknown cell" in said[0]
+
+
 @needs_shared
 def test_eval_command(tmp_path, capsys):
     truth = SHARED / "intel_lab" / "truth.tum"
