@@ -1,8 +1,8 @@
 """Evaluating a config over a corpus of datasets: ``mcl eval --suite SUITE.yaml``.
 
-A suite file lists datasets (a map, a log and a truth, or a synthetic world
-``mcl.simulate`` generates once into a cache folder) and the modes to run each
-in:
+A suite file lists datasets (a map, a log and a truth; a ROS bag with a truth file or a truth topic of the
+bag, and a map file or the bag's map; or a synthetic world ``mcl.simulate`` generates once into a cache folder)
+and the modes to run each in:
 
 - ``tracking``: from the start pose with the config's ``filter.initial_std``; scored by the ATE over the
   whole run; *lost* when the maximum error exceeds the dataset's ``lost_m`` (default 1 m);
@@ -35,6 +35,7 @@ fingerprint is not run again, so an interrupted evaluation resumes where it stop
 from __future__ import annotations
 
 import csv
+import dataclasses
 import difflib
 import hashlib
 import inspect
@@ -59,7 +60,8 @@ KIDNAP_M = 5.0  # m: a real log's filter is kidnapped at least this far from the
 LOST_M = 1.0  # m: default lost threshold of a dataset (tracking: max error above it)
 
 SUITE_KEYS = ("name", "root", "modes", "lost_m", "datasets")
-DATASET_KEYS = ("name", "map", "config", "log", "truth", "initial_pose", "lost_m", "set", "modes", "simulate", "held_out")
+DATASET_KEYS = ("name", "map", "config", "log", "bag", "truth", "truth_topic", "initial_pose", "lost_m", "set", "modes",
+                "simulate", "held_out")
 BASELINE = "baseline"
 
 
@@ -71,9 +73,11 @@ class Dataset:
     """One entry of a suite: real files or a synthetic world (``simulate`` kwargs)."""
 
     name: str
-    map: str | None = None
+    map: str | None = None  # None with a bag: the bag's map topic
     log: str | None = None
+    bag: str | None = None  # a ROS bag instead of a CARMEN log
     truth: str | None = None
+    truth_topic: str | None = None  # a bag's reference poses (written once as TUM into the cache)
     laser: str | None = None  # from a dataset config
     initial_pose: tuple[float, float, float] | None = None
     lost_m: float = LOST_M
@@ -178,7 +182,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
             for k in kw:
                 if k not in sim_keys:
                     raise _unknown(f"{label}: simulate.", k, sim_keys)
-            for k in ("map", "log", "truth", "config"):
+            for k in ("map", "log", "bag", "truth", "truth_topic", "config"):
                 if k in e:
                     raise ConfigError(f"{label}: {k}: not with simulate (the world gives map, log and truth)")
             d.simulate = dict(kw)
@@ -188,17 +192,43 @@ def load_suite(path: str | os.PathLike) -> Suite:
                 if not cpath.is_file():
                     raise ConfigError(f"{label}: config: no such file {cpath}")
                 dc = load_config(cpath)
-                d.map, d.log, d.truth, d.laser = dc.map, dc.log, dc.truth, dc.laser
+                d.map, d.log, d.bag, d.truth, d.laser = dc.map, dc.log, dc.bag, dc.truth, dc.laser
+                if dc.bag is not None:  # a bag's topic and frame names describe the data: kept, as its paths are
+                    if dc.truth is None:
+                        d.truth_topic = dc.topics.truth
+                    for sec in ("topics", "frames"):
+                        for f in dataclasses.fields(getattr(dc, sec)):
+                            if (sec, f.name) != ("topics", "truth"):
+                                d.set.setdefault(f"{sec}.{f.name}", getattr(getattr(dc, sec), f.name))
                 if d.initial_pose is None and dc.filter.initial_pose is not None:
                     d.initial_pose = tuple(dc.filter.initial_pose)
-            for k in ("map", "log", "truth"):
+            if "log" in e and "bag" in e:
+                raise ConfigError(f"{label}: bag: give a CARMEN log (log) or a ROS bag (bag), not both")
+            if "truth" in e and "truth_topic" in e:
+                raise ConfigError(f"{label}: truth_topic: give a truth file (truth) or a bag's topic (truth_topic), "
+                                  "not both")
+            for k in ("map", "log", "bag", "truth"):
                 if k in e:
                     setattr(d, k, str((root / str(e[k])).resolve()))
-            for k in ("map", "log", "truth"):
+            if "log" in e:
+                d.bag = None
+            if "bag" in e:
+                d.log = None
+            if "truth" in e:
+                d.truth_topic = None
+            if "truth_topic" in e:
+                if not isinstance(e["truth_topic"], str) or not e["truth_topic"]:
+                    raise ConfigError(f"{label}: truth_topic: expected a topic name, got {e['truth_topic']!r}")
+                d.truth, d.truth_topic = None, e["truth_topic"]
+            if d.bag is not None and d.truth_topic is None and d.truth is None:
+                raise ConfigError(f"{label}: truth: missing (give a truth file, or truth_topic: a topic of the bag)")
+            need = ("bag",) if d.bag is not None else ("map", "log")
+            for k in need + ("map",) * (d.bag is not None and d.map is not None) + ("truth",) * (d.truth_topic is None):
                 v = getattr(d, k)
                 if v is None:
-                    raise ConfigError(f"{label}: {k}: missing (give map, log and truth, a config or simulate)")
-                if not Path(v).is_file():
+                    raise ConfigError(f"{label}: {k}: missing (give map, log and truth, a bag and its truth, a config "
+                                      "or simulate)")
+                if not (Path(v).exists() if k == "bag" else Path(v).is_file()):  # a rosbag2 bag may be a folder
                     raise ConfigError(f"{label}: {k}: no such file {v}")
         out.append(d)
     return Suite(name=str(doc.get("name") or path.stem), path=path, datasets=out)
@@ -275,6 +305,31 @@ def _value_text(v) -> str:
     return yaml.safe_dump(v, default_flow_style=True, width=10**9).strip().removesuffix("...").strip()
 
 
+def _bag_truth(suite: Suite, d: Dataset, cache: Path) -> str:
+    """A bag dataset's ``truth_topic`` as a TUM file in ``cache/truth`` (read from the bag once per bag file
+    and topic), so that runs, kidnaps and scores read it like any truth file. Errors name the suite and the
+    dataset."""
+    from mcl.config import load_config, shipped
+    from mcl.datasets.rosbag import open_bag
+    from mcl.trajectory import write_tum
+
+    bag = Path(d.bag)
+    st = bag.stat()
+    key = hashlib.sha1(f"{bag.resolve()}|{st.st_size}|{st.st_mtime_ns}|{d.truth_topic}".encode()).hexdigest()[:10]
+    dest = cache / "truth" / f"{d.name}-{key}.tum"
+    if not dest.is_file():
+        names = [f"{k}={_value_text(v)}" for k, v in d.set.items() if k.startswith(("topics.", "frames."))]
+        try:
+            cfg = load_config(shipped("configs/default.yaml"),
+                              ["log=null", f"bag={bag}", f"topics.truth={d.truth_topic}", *names])
+            t, poses = open_bag(bag, cfg.topics, cfg.frames).truth
+        except MclError as e:
+            raise ConfigError(f"{suite.path}: {d.name}: {e}") from None
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        write_tum(dest, t, poses)
+    return str(dest)
+
+
 def _truth_start(truth: str) -> tuple[float, float, float]:
     from mcl.trajectory import read_tum
 
@@ -317,10 +372,13 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: 
                 data = {"map": str(wdir / "map.yaml"), "log": str(wdir / "log.clf"), "truth": str(wdir / "truth.tum")}
                 pose = d.initial_pose  # None: from sim.yaml once generated
             else:
-                data = {"map": d.map, "log": d.log, "truth": d.truth}
-                pose = d.initial_pose or _truth_start(d.truth)
+                truth = d.truth if d.truth is not None else _bag_truth(suite, d, cache)
+                data = {"map": d.map, "log": d.log, "truth": truth}
+                if d.bag is not None:
+                    data["bag"] = d.bag
+                pose = d.initial_pose or _truth_start(truth)
             for clabel, cpath, extra in configs:
-                overrides = [f"{k}={v}" for k, v in data.items()]
+                overrides = [f"{k}={'null' if v is None else v}" for k, v in data.items()]
                 if d.laser is not None:
                     overrides.append(f"laser={d.laser}")
                 overrides += [f"{k}={_value_text(v)}" for k, v in d.set.items()]

@@ -196,6 +196,79 @@ def test_plan_modes_only_and_configs(tmp_path):
     assert [(j.dataset, j.mode, j.config) for j in only] == [("b", "global", "default")]
 
 
+# ----------------------------------------------------------------------------- ROS bags in a suite
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory):
+    """A 15 s world written as an MCAP bag (no map in it, the truth on /ground_truth), and the same world's CARMEN
+    log converted to MCAP with its map and truth inside."""
+    from mcl.datasets.bagwrite import convert
+    from mcl.maps import load_map
+    from mcl.simulate import write_log_as_bag
+
+    tmp = tmp_path_factory.mktemp("bags")
+    simulate(tmp / "w", seed=4, duration=15)
+    convert(tmp / "w" / "log.clf", tmp / "w" / "all.mcap", grid=load_map(tmp / "w" / "map.yaml"),
+            truth=read_tum(tmp / "w" / "truth.tum"), echo=lambda m: None)
+    write_log_as_bag(tmp / "w", "mcap")  # log.clf -> log.mcap
+    return tmp
+
+
+def test_bag_datasets_score_against_their_truth_topic(bags, tmp_path):
+    """bag + map + truth_topic, and bag + truth_topic with the map from the bag: the truth is read from the bag
+    once into the cache, equal to the world's truth.tum, and the runs track it (measured 0.05 m; bound 0.2 m)."""
+    suite = _write(tmp_path / "bags.yaml", {"name": "bags", "root": str(bags), "modes": ["tracking"], "datasets": [
+        {"name": "sim-bag", "bag": "w/log.mcap", "map": "w/map.yaml", "truth_topic": "/ground_truth"},
+        {"name": "map-in-bag", "bag": "w/all.mcap", "truth_topic": "/ground_truth"},
+    ]})
+    out = tmp_path / "out"
+    assert main(["eval", "--suite", str(suite), "--out", str(out), "--jobs", "1", "--no-baseline", "--no-progress",
+                 "--set", "filter.particles=2000"]) == 0
+    rows = {r["dataset"]: r for r in _rows(out)}
+    assert set(rows) == {"sim-bag", "map-in-bag"}
+    assert all(not r["lost"] and r["rmse"] < 0.2 and r["scored"] >= 70 for r in rows.values())
+    cached = sorted((out / "worlds" / "truth").glob("*.tum"))
+    assert [c.name.split("-")[0] for c in cached] == ["map", "sim"]
+    t0, p0 = read_tum(bags / "w" / "truth.tum")
+    for c in cached:
+        t, p = read_tum(c)
+        np.testing.assert_allclose(t, t0, atol=1e-6)
+        np.testing.assert_allclose(p, p0, atol=1e-6)
+    cfg = load_config(out / "runs" / "map-in-bag" / "tracking" / "default" / "seed1" / "config.yaml")
+    assert cfg.bag == str(bags / "w" / "all.mcap") and cfg.log is None and cfg.map is None  # the bag's map
+
+
+def test_a_bag_dataset_config_gives_its_bag_topics_and_truth_topic(bags, tmp_path):
+    _write(tmp_path / "ds.yaml", {"map": str(bags / "w" / "map.yaml"), "log": None, "bag": str(bags / "w" / "log.mcap"),
+                                  "topics": {"scan": "/scan", "truth": "/ground_truth"}, "filter": {"particles": 123}})
+    jobs = plan(load_suite(_write(tmp_path / "c.yaml", {"datasets": [{"name": "c", "config": "ds.yaml"}]})),
+                config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", baseline=False)
+    cfg = jobs[0].cfg
+    assert cfg.bag == str(bags / "w" / "log.mcap") and cfg.log is None and cfg.topics.scan == "/scan"
+    assert cfg.filter.particles == load_config(CONFIGS / "default.yaml").filter.particles  # not its tuned values
+    assert Path(cfg.truth).parent == tmp_path / "w" / "truth"
+    _, p0 = read_tum(bags / "w" / "truth.tum")
+    assert cfg.filter.initial_pose == pytest.approx(tuple(p0[:, 0]), abs=1e-6)  # the start: the truth topic's first
+
+
+@pytest.mark.parametrize("entry, expected", [
+    ({"bag": "w/log.mcap", "log": "w/log.clf", "map": "w/map.yaml", "truth": "w/truth.tum"},
+     "bag: give a CARMEN log (log) or a ROS bag (bag), not both"),
+    ({"bag": "w/log.mcap", "map": "w/map.yaml"}, "truth: missing (give a truth file, or truth_topic"),
+    ({"bag": "w/log.mcap", "truth": "w/truth.tum", "truth_topic": "/ground_truth"}, "truth_topic: give a truth file"),
+    ({"bag": "w/nothing.mcap", "truth_topic": "/ground_truth"}, "bag: no such file"),
+    ({"bag": "w/log.mcap", "map": "w/map.yaml", "truth_topic": "/gt"}, "bag1: " + "{bags}/w/log.mcap: no truth topic /gt (pose and odometry topics: /ground_truth, /odom)"),
+])
+def test_bad_bag_datasets_are_one_line_before_any_run(bags, tmp_path, capsys, entry, expected):
+    suite = _write(tmp_path / "bag1.yaml", {"name": "b", "root": str(bags), "datasets": [{"name": "bag1", **entry}]})
+    assert main(["eval", "--suite", str(suite), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    expected = expected.replace("{bags}", str(bags))
+    assert err.count("\n") == 1 and str(suite) in err and expected in err, err
+    assert not (tmp_path / "o" / "results.json").exists()
+
+
 # ----------------------------------------------------------------------------- end to end
 
 
