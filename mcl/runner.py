@@ -405,12 +405,12 @@ def _check_start_pose(grid, pose, where: str, echo) -> None:
     ``where`` it came from, before anything is written. On the map but not on a free cell: a warning, and the
     filter starts there (its recovery searches if the scans disagree)."""
     x, y = float(pose[0]), float(pose[1])
-    x0, y0 = grid.origin
-    x1, y1 = x0 + grid.width * grid.resolution, y0 + grid.height * grid.resolution
-    if not (x0 <= x < x1 and y0 <= y < y1):
+    ix, iy = grid.world_to_cell(x, y)
+    if not grid.contains(ix, iy):
+        x0, y0 = grid.origin
+        x1, y1 = x0 + grid.width * grid.resolution, y0 + grid.height * grid.resolution
         raise ConfigError(f"{where}: ({x:.3f}, {y:.3f}) lies outside the map {grid.path} "
                           f"(x {x0:.2f}..{x1:.2f} m, y {y0:.2f}..{y1:.2f} m)")
-    ix, iy = grid.world_to_cell(x, y)
     if not grid.free[iy, ix]:
         what = "an occupied" if grid.occupied[iy, ix] else "an unknown"
         echo(f"mcl: warning: {where}: ({x:.3f}, {y:.3f}) lies on {what} cell of {grid.path}; tracking starts "

@@ -222,8 +222,11 @@ def load_suite(path: str | os.PathLike) -> Suite:
                 d.truth, d.truth_topic = None, e["truth_topic"]
             if d.bag is not None and d.truth_topic is None and d.truth is None:
                 raise ConfigError(f"{label}: truth: missing (give a truth file, or truth_topic: a topic of the bag)")
-            need = ("bag",) if d.bag is not None else ("map", "log")
-            for k in need + ("map",) * (d.bag is not None and d.map is not None) + ("truth",) * (d.truth_topic is None):
+            # a bag's map is optional (its map topic stands in), and a truth topic is checked when it is read
+            need = ["log", "map"] if d.bag is None else ["bag"] + (["map"] if d.map is not None else [])
+            if d.truth_topic is None:
+                need.append("truth")
+            for k in need:
                 v = getattr(d, k)
                 if v is None:
                     raise ConfigError(f"{label}: {k}: missing (give map, log and truth, a bag and its truth, a config "

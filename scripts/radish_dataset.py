@@ -38,18 +38,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from mcl.datasets.carmen import read_carmen  # noqa: E402
 from mcl.datasets.noreturn import detect_no_return  # noqa: E402
+from mcl.estimate import wrap_angle  # noqa: E402
 from mcl.maps import OccupancyGrid, save_map  # noqa: E402
 from mcl.trajectory import atomic_write_text, write_tum  # noqa: E402
 
 
-def _wrap(a):
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
-
-
 def _compose(a, b):
-    """a (+) b for planar poses (3,) and (3, K)."""
+    """a (+) b for a pose (3,) and poses (3, K) (mcl.runner.compose, for many poses at once)."""
     c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], _wrap(a[2] + b[2])])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])])
 
 
 def simulated_odometry(truth: np.ndarray, rng: np.random.Generator, step: float = 0.08) -> np.ndarray:
@@ -63,8 +60,8 @@ def simulated_odometry(truth: np.ndarray, rng: np.random.Generator, step: float 
         a, b = truth[:, k - 1], truth[:, k]
         m = max(1, int(math.ceil(math.hypot(b[0] - a[0], b[1] - a[1]) / step)))
         f = np.arange(1, m + 1) / m
-        dth = _wrap(b[2] - a[2])
-        fine.append(np.vstack([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), _wrap(a[2] + f * dth)]))
+        dth = wrap_angle(b[2] - a[2])
+        fine.append(np.vstack([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), wrap_angle(a[2] + f * dth)]))
         at.append(at[-1] + m)
     path = np.hstack(fine).T
     odom, _, _ = _odometry(path, path, rng, (0.05, 0.05, 0.05, 0.02), 1.01, 0.01)
