@@ -15,6 +15,15 @@ reference does.
 * **miss**: the reference fits better; the filter stayed at a worse place (its quality signal was above
   ``quality.lost_below``, so no recovery ran), or searched and did not settle in time.
 
+A lost **tracking** run (maximum error above the dataset's ``lost_m``, which can be well under 1 m) is judged
+on the scans where its error exceeds ``lost_m``, with the filter's own laser log-likelihood (the weight it
+gives a pose): the reference's advantage over the estimate, summed over those scans.
+
+* **ambiguous**: the scans favour the reference by less than ``LL_SAME`` nats in all (the weight of the two
+  poses within a factor e^3 = 20 over the whole excursion): a long featureless corridor, where every pose
+  along it explains the scans alike and the error is the odometry's drift since the last feature.
+* **miss**: the scans favoured the reference and the filter did not follow.
+
 Usage::
 
     .venv/bin/python scripts/ambiguity.py DIR [--only NAME,...]
@@ -45,6 +54,7 @@ from mcl.trajectory import read_tum  # noqa: E402
 SKIP_S = 2.0  # the first scans after the kidnap or the start: every filter is still moving there
 OFF_M = 1.0  # an estimate this far from the reference is a wrong place, not a noisy track
 SAME = 0.02  # medians closer than this are the same fit
+LL_SAME = 3.0  # tracking: nats of evidence for the reference, over the whole excursion, below which it is ambiguous
 
 
 def _at(t_ref: np.ndarray, t: float) -> int | None:
@@ -89,6 +99,38 @@ def classify(run_dir: Path, row: dict, cache: dict) -> dict | None:
             "kind": "ambiguous" if share >= 0.5 and m_est >= m_ref - SAME else "miss"}
 
 
+def classify_tracking(run_dir: Path, row: dict, cache: dict) -> dict | None:
+    """The laser log-likelihood at the reference against the estimate, over the scans of a lost tracking run
+    whose error exceeds its ``lost_m`` (None: no such scan has a reference)."""
+    cfg = load_config(run_dir / "config.yaml", [])
+    key = (cfg.map, cfg.log, cfg.bag)
+    if key not in cache:
+        _, grid, scans, _, truth, _ = _open_source(cfg, echo=lambda msg: None)
+        cache[key] = (ParticleFilter(cfg, grid), scans, truth.t, truth.poses)
+    pf, scans, tt, tp = cache[key]
+    te, pe = read_tum(run_dir / "trajectory.tum")
+    gain, off = [], []
+    for s in scans:
+        i, j = _at(tt, s.t), _at(te, s.t)
+        if i is None or j is None:
+            continue
+        err = float(np.hypot(*(pe[:2, j] - tp[:2, i])))
+        if err <= row["lost_m"]:
+            continue
+        laser = s.laser_offset if s.laser_offset is not None else np.zeros(3)
+        obs = pf.prepare(s, laser)
+        if obs is None:
+            continue
+        ll = pf.sensor.log_likelihood(np.column_stack([tp[:, i], pe[:, j]]), obs)
+        gain.append(float(ll[0] - ll[1]))
+        off.append(err)
+    if not gain:
+        return None
+    total = float(np.sum(gain))
+    return {"scans": len(gain), "gain": total, "per_scan_max": float(np.max(gain)), "max_err": float(np.max(off)),
+            "kind": "ambiguous" if total < LL_SAME else "miss"}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("folder", type=Path, help="an mcl eval output folder (with runs/)")
@@ -99,13 +141,19 @@ def main(argv=None) -> int:
     kinds: Counter = Counter()
     for row_file in sorted(a.folder.glob("runs/*/*/*/seed*/row.json")):
         row = json.loads(row_file.read_text())
-        if not row.get("lost") or (only and row["dataset"] not in only) or row["mode"] == "tracking":
+        if not row.get("lost") or (only and row["dataset"] not in only):
             continue
+        tracking = row["mode"] == "tracking"
         try:
-            c = classify(row_file.parent, row, cache)
+            c = (classify_tracking if tracking else classify)(row_file.parent, row, cache)
         except (MclError, OSError) as e:  # a synthetic world no longer in its cache, a moved log
             print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: cannot read: {e}")
             kinds["unread"] += 1
+            continue
+        if c is None and tracking:
+            print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: no scan with a "
+                  f"reference more than {row['lost_m']:g} m off")
+            kinds["late"] += 1
             continue
         if c is None:
             print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: no scan "
@@ -113,6 +161,11 @@ def main(argv=None) -> int:
             kinds["late"] += 1
             continue
         kinds[c["kind"]] += 1
+        if tracking:
+            print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: {c['kind']:9s} "
+                  f"{c['scans']:4d} scans more than {row['lost_m']:g} m off (max {c['max_err']:.2f} m), the scans "
+                  f"favour the reference by {c['gain']:.1f} nats in all (at most {c['per_scan_max']:.1f} in one)")
+            continue
         print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: {c['kind']:9s} "
               f"{c['scans']:4d} scans, median score reference {c['reference']:.3f} estimate {c['estimate']:.3f}, "
               f"estimate fits as well in {c['share']:.0%}")

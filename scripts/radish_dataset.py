@@ -49,10 +49,11 @@ def _compose(a, b):
     return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])])
 
 
-def simulated_odometry(truth: np.ndarray, rng: np.random.Generator, step: float = 0.08) -> np.ndarray:
+def simulated_odometry(truth: np.ndarray, rng: np.random.Generator, step: float = 0.08,
+                       noise: float = 1.0) -> np.ndarray:
     """(3, K) odometry poses for the corrected poses ``truth`` (3, K), anchored at the first: the path between
     scans cut into steps of at most ``step`` m (the simulator's 10 Hz ticks at 0.8 m/s), each moved with
-    mcl.simulate's odometry noise, then read at the scans."""
+    mcl.simulate's odometry noise (its alphas, scale error and yaw drift times ``noise``), then read at the scans."""
     from mcl.simulate import _odometry
 
     fine, at = [truth[:, :1]], [0]
@@ -64,7 +65,8 @@ def simulated_odometry(truth: np.ndarray, rng: np.random.Generator, step: float 
         fine.append(np.vstack([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), wrap_angle(a[2] + f * dth)]))
         at.append(at[-1] + m)
     path = np.hstack(fine).T
-    odom, _, _ = _odometry(path, path, rng, (0.05, 0.05, 0.05, 0.02), 1.01, 0.01)
+    alphas = tuple(noise * a for a in (0.05, 0.05, 0.05, 0.02))
+    odom, _, _ = _odometry(path, path, rng, alphas, 1.0 + noise * 0.01, noise * 0.01)
     return _compose(truth[:, 0], odom[at].T)
 
 
@@ -95,7 +97,7 @@ def _trace(hits, rays, x0, y0, xs, ys, ends, res, ox, oy, stop):
 
 
 def build(src: Path, out: Path, res: float = 0.05, min_hits: int = 2, hit_share: float = 0.25,
-          free_range: float = 20.0, seed: int = 0) -> dict:
+          free_range: float = 20.0, seed: int = 0, noise: float = 1.0) -> dict:
     log = read_carmen(src)
     scans = [s for s in log.scans if s.kind == "FLASER"]
     if not scans:
@@ -104,7 +106,7 @@ def build(src: Path, out: Path, res: float = 0.05, min_hits: int = 2, hit_share:
     truth = np.array([s.odom for s in scans]).T  # the corrected poses (both slots)
     if not np.all(np.diff(t) > 0):  # no usable clock (freiburg-campus, orebro: every stamp 0; csail: %g)
         t = np.arange(len(scans)) * 0.2
-    replay = simulated_odometry(truth, np.random.default_rng(seed))
+    replay = simulated_odometry(truth, np.random.default_rng(seed), noise=noise)
 
     marker = detect_no_return(np.concatenate([s.ranges for s in scans]))
     no_return = marker.threshold if marker is not None else None
@@ -161,8 +163,15 @@ def main(argv=None) -> int:
     ap.add_argument("--hit-share", type=float, default=0.25)
     ap.add_argument("--free-range", type=float, default=20.0)
     ap.add_argument("--seed", type=int, default=0, help="the simulated odometry's noise")
+    ap.add_argument("--odom-noise", type=float, default=1.0,
+                    help="scale of the simulated odometry error: its alphas, scale error and yaw drift times this "
+                         "(default 1: mcl simulate's; 0.25: a quarter of the variance, closer to the shared logs' "
+                         "real odometry)")
     a = ap.parse_args(argv)
-    info = build(a.src, a.out, min_hits=a.min_hits, hit_share=a.hit_share, free_range=a.free_range, seed=a.seed)
+    if not a.odom_noise >= 0:
+        ap.error(f"--odom-noise: {a.odom_noise} (expected a value >= 0)")
+    info = build(a.src, a.out, min_hits=a.min_hits, hit_share=a.hit_share, free_range=a.free_range, seed=a.seed,
+                 noise=a.odom_noise)
     print(f"{a.out}: {info['scans']} scans over {info['duration_s']:.0f} s, map {info['cells'][0]} x "
           f"{info['cells'][1]} cells, no-return {info['no_return']}, start {info['start']}")
     return 0
