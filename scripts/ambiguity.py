@@ -65,15 +65,21 @@ def _at(t_ref: np.ndarray, t: float) -> int | None:
     return None
 
 
-def classify(run_dir: Path, row: dict, cache: dict) -> dict | None:
-    """The scores at the reference and at the estimate over the window, for one lost run (None: no scan)."""
+def _run(run_dir: Path, cache: dict):
+    """(filter, scans, reference t, reference poses, estimate t, estimate poses) of a run folder; the filter, the
+    scans and the reference are read once per dataset into ``cache``."""
     cfg = load_config(run_dir / "config.yaml", [])
     key = (cfg.map, cfg.log, cfg.bag)
     if key not in cache:
         _, grid, scans, _, truth, _ = _open_source(cfg, echo=lambda msg: None)
         cache[key] = (ParticleFilter(cfg, grid), scans, truth.t, truth.poses)
-    pf, scans, tt, tp = cache[key]
     te, pe = read_tum(run_dir / "trajectory.tum")
+    return (*cache[key], te, pe)
+
+
+def classify(run_dir: Path, row: dict, cache: dict) -> dict | None:
+    """The scores at the reference and at the estimate over the window, for one lost run (None: no scan)."""
+    pf, scans, tt, tp, te, pe = _run(run_dir, cache)
     t0 = row.get("kidnap_t") if row["mode"] == "kidnapped" else te[0]
     ref, est = [], []
     for s in scans:
@@ -102,13 +108,7 @@ def classify(run_dir: Path, row: dict, cache: dict) -> dict | None:
 def classify_tracking(run_dir: Path, row: dict, cache: dict) -> dict | None:
     """The laser log-likelihood at the reference against the estimate, over the scans of a lost tracking run
     whose error exceeds its ``lost_m`` (None: no such scan has a reference)."""
-    cfg = load_config(run_dir / "config.yaml", [])
-    key = (cfg.map, cfg.log, cfg.bag)
-    if key not in cache:
-        _, grid, scans, _, truth, _ = _open_source(cfg, echo=lambda msg: None)
-        cache[key] = (ParticleFilter(cfg, grid), scans, truth.t, truth.poses)
-    pf, scans, tt, tp = cache[key]
-    te, pe = read_tum(run_dir / "trajectory.tum")
+    pf, scans, tt, tp, te, pe = _run(run_dir, cache)
     gain, off = [], []
     for s in scans:
         i, j = _at(tt, s.t), _at(te, s.t)
