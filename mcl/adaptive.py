@@ -464,6 +464,13 @@ class GlobalSearch:
         self.holding = True
         self.starts += 1
 
+    def confirm(self) -> None:
+        """The search a re-seed started lost to the track it kept (``ParticleFilter.protect``): it ends now, and the
+        track is not on probation (it is not a place a search just found)."""
+        self.tempering = False
+        self.holding = False
+        self.since_end = None
+
     def observe(self, lost: bool, cluster_weight: float = 1.0) -> None:
         """This update's lost belief and heaviest-cluster weight (after the estimate)."""
         settled = cluster_weight >= self.settled_weight
