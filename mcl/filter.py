@@ -582,14 +582,15 @@ class ParticleFilter:
 
         A re-seed of a trusted track (one started from a known pose, or held past the probation of the search that
         found it) keeps that track as its own component: the two are resampled apart, so each keeps its particles
-        and its share of the weight is the Bayesian evidence for it over the scans since the re-seed: the prior
-        ``recovery_reseed_keep`` times the likelihood of every scan that also fits the map better (the quality
-        score) at the estimate of the side it favours, each scan moving the log-odds by ``_PROTECT_STEP`` nats at
-        most. The estimate stays on the track until the search leads by
-        ``reseed_odds`` nats of log-odds; then the track is dropped and the search goes on as any other. If the
-        track leads by as much, the search is dropped instead, and the track is not put on probation. After ``_MAX_PROTECTED`` updates the heavier side wins. Outdoors a correct track fits
-        poorly for seconds (freiburg-campus: match 0.2-0.7); on one scan a place 170 m away fitted better, took the
-        whole set at the next resample, and the estimate jumped there (RMSE 15 m)."""
+        and its share of the weight is the evidence for it since the re-seed: the prior ``recovery_reseed_keep``
+        times the likelihood of every scan that also fits the map better (the quality score) at the estimate of
+        the side it favours. One scan moves the log-odds by ``_PROTECT_STEP`` nats at most, unless it fits the
+        search's place at ``_DECISIVE_FIT`` or better and the track's below ``quality.lost_below``. The estimate
+        stays on the track until one side leads by ``reseed_odds`` nats (or the heavier after ``_MAX_PROTECTED``
+        updates); the loser is dropped, and a track that wins is not put on probation. Outdoors a correct track
+        fits poorly for seconds (freiburg-campus: match 0.2-0.7); on one scan a place 170 m away fitted better,
+        took the whole set at the next resample, and the estimate jumped there (RMSE 15 m).
+        """
         track, fc = self._track, self.cfg.filter
         if track is None or info.degenerate:
             return
