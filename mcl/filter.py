@@ -57,14 +57,6 @@ _PROTECT_STEP = 3.0  # nats: the most one scan may move its log-odds (with resee
 _DECISIVE_FIT = 0.9  # ... unless the search's place fits it at least this well (quality score) and the track is bad
 
 
-def _log_sum(logw: np.ndarray) -> float:
-    """log(sum(exp(logw))), -inf for no weight."""
-    top = float(logw.max()) if logw.size else -math.inf
-    if not math.isfinite(top):
-        return -math.inf
-    return top + math.log(float(np.exp(logw - top).sum()))
-
-
 @dataclass(frozen=True)
 class Control:
     """u_t for the motion model: the odometry pair, and the velocities with their duration.
@@ -598,7 +590,7 @@ class ParticleFilter:
             self._track = None
             return
         # the two sides' log masses (log-sum-exp: a side can hold e^-50 of the weight and still come back)
-        log_m = [_log_sum(self.logw[side]) for side in (track, ~track)]
+        log_m = [normalize_log_weights(self.logw[side])[1] for side in (track, ~track)]
         raw = log_m[1] - log_m[0]
         odds = raw
         if not (math.isfinite(log_m[0]) and math.isfinite(log_m[1])):  # a side with no weight at all lost
@@ -743,7 +735,7 @@ class ParticleFilter:
             sel = np.flatnonzero(self._track == side)
             idx = sel[resample(fc.resampling, self.logw[sel], self.rng, n=sel.size)]
             parts.append(self.particles[:, idx])
-            logw.append(np.full(sel.size, _log_sum(self.logw[sel]) - math.log(sel.size)))
+            logw.append(np.full(sel.size, normalize_log_weights(self.logw[sel])[1] - math.log(sel.size)))
             track.append(np.full(sel.size, side))
         self.particles = np.ascontiguousarray(np.concatenate(parts, axis=1))
         self.logw = np.concatenate(logw)

@@ -115,10 +115,9 @@ def build(src: Path, out: Path, res: float = 0.05, min_hits: int = 2, hit_share:
     for s, p in zip(scans, truth.T):
         r = np.asarray(s.ranges, dtype=np.float64)
         a = s.angles + p[2]
-        ok = r > 0.05
-        hit = ok & (r < top - 1e-6)
+        keep = r > 0.05
+        hit = keep & (r < top - 1e-6)
         rr = np.where(hit, r, np.minimum(r, free_range))
-        keep = ok
         lx = p[0] + (s.laser_offset[0] if s.laser_offset is not None else 0.0)
         ly = p[1] + (s.laser_offset[1] if s.laser_offset is not None else 0.0)
         xs.append(lx + rr[keep] * np.cos(a[keep]))
@@ -144,8 +143,9 @@ def build(src: Path, out: Path, res: float = 0.05, min_hits: int = 2, hit_share:
     out.mkdir(parents=True, exist_ok=True)
     save_map(OccupancyGrid.from_occupancy(occ, res, (float(lo[0]), float(lo[1]))), out / "map.yaml")
     write_tum(out / "truth.tum", t, truth)
-    lines = [f"# built by scripts/radish_dataset.py from {src.name}: simulated odometry (seed {seed}) from the first "
-             "corrected pose\n"]
+    scaled = "" if noise == 1.0 else f", error x {noise:g}"  # (the default's header as before: the same bytes)
+    lines = [f"# built by scripts/radish_dataset.py from {src.name}: simulated odometry (seed {seed}{scaled}) from the "
+             "first corrected pose\n"]
     for s, p, tk in zip(scans, replay.T, t):
         rs = " ".join(f"{v:.3f}" for v in s.ranges)
         pose = f"{p[0]:.6f} {p[1]:.6f} {p[2]:.6f}"
