@@ -37,8 +37,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, StallCheck, draw_injected, make_recovery,
-                          measurement_count)
+from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, StallCheck, draw_injected, kld_resample,
+                          make_recovery, measurement_count)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard
@@ -727,16 +727,26 @@ class ParticleFilter:
     maybe_resample = resample  # the name of earlier versions
 
     def _resample_apart(self, info: StepInfo) -> None:
-        """A protected re-seed's resample: the kept track and the search each drawn from its own particles, as many
-        as it has, each keeping its share of the weight (spread evenly over its particles). Nothing is injected."""
+        """A protected re-seed's resample: the kept track and the search each drawn from its own particles, each
+        keeping its share of the weight (spread evenly over its particles). The track keeps its count; the search
+        draws as many as KLD sampling asks (with ``filter.kld``), at most the count it has. Nothing is injected."""
         fc = self.cfg.filter
         parts, logw, track = [], [], []
         for side in (True, False):
             sel = np.flatnonzero(self._track == side)
-            idx = sel[resample(fc.resampling, self.logw[sel], self.rng, n=sel.size)]
-            parts.append(self.particles[:, idx])
-            logw.append(np.full(sel.size, normalize_log_weights(self.logw[sel])[1] - math.log(sel.size)))
-            track.append(np.full(sel.size, side))
+            if side or self.kld is None or sel.size <= self.kld.min_particles:
+                new = self.particles[:, sel[resample(fc.resampling, self.logw[sel], self.rng, n=sel.size)]]
+            else:
+                # the search's poses by KLD sampling, at most as many as it has: its 100,000 fresh poses gather on
+                # a few places within a scan or two, and scoring them all for up to _MAX_PROTECTED updates cost a
+                # campus run four times the baseline's CPU (bins counted on the drawn ancestors, not moved)
+                new, _, _ = kld_resample(self.particles[:, sel], self.logw[sel], self.rng, self.kld.counter,
+                                         scheme=fc.resampling, min_particles=self.kld.min_particles,
+                                         max_particles=sel.size, epsilon=self.kld.epsilon, z=self.kld.z)
+            m = new.shape[1]
+            parts.append(new)
+            logw.append(np.full(m, normalize_log_weights(self.logw[sel])[1] - math.log(m)))
+            track.append(np.full(m, side))
         self.particles = np.ascontiguousarray(np.concatenate(parts, axis=1))
         self.logw = np.concatenate(logw)
         self.weights = np.exp(self.logw)

@@ -663,6 +663,22 @@ def test_while_neither_side_leads_the_estimate_stays_on_the_track_and_each_side_
     assert info.confirmed and pf.n == 4000
 
 
+def test_with_kld_a_protected_search_shrinks_to_what_its_places_need_and_keeps_its_mass():
+    # On the campus the search side kept its 100,000 fresh poses for every update of a protected re-seed, though a
+    # scan or two gathers them on a few places. With KLD sampling it now draws what its occupied bins ask for: here
+    # one exact scan puts the search's weight on one place, so it drops to min_particles, the track keeps its 4,000,
+    # and each side keeps its mass (the odds after one scan, 3 nats: e^3 / (1 + e^3) on the search).
+    pf, grid = _reseeded([6.0, 3.0, -0.5], "filter.kld=true", "filter.min_particles=500")
+    obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
+    info = pf.step(None, obs)
+    assert not info.switched and pf._odds == 3.0
+    assert pf._track.sum() == 4000 and (~pf._track).sum() == 500 and pf.n == 4500
+    assert np.exp(pf.logw[~pf._track]).sum() == pytest.approx(np.exp(3.0) / (1.0 + np.exp(3.0)))
+    assert np.hypot(*(info.mean[:2] - [6.0, 3.0])) < 0.1  # the estimate still on the track
+    info = pf.step(None, obs)
+    assert info.switched and np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.3
+
+
 def test_a_reseed_of_a_place_a_search_just_found_is_not_protected_nor_with_reseed_odds_0():
     pf, _ = _reseeded(TRUE_POSE, "filter.reseed_odds=0")
     assert pf._track is None
