@@ -704,7 +704,9 @@ class ParticleFilter:
         (large-03: held 98 m off for 40 s); a right one with people or clutter around fits as low, and keeps
         itself in the protected search."""
         fc = self.cfg.filter
-        if fc.probation_fit <= 0.0 or self.recovery is None or self._track is not None:
+        # only where a re-seed can run protected (lost recovery with recovery_reseed, reseed_odds > 0)
+        if (fc.probation_fit <= 0.0 or fc.reseed_odds <= 0.0 or not getattr(self.recovery, "reseed", False)
+                or self._track is not None):
             return
         if self._judged_search != self.search.starts:  # a search since: the place it finds is judged afresh
             self._judged_search = self.search.starts

@@ -712,7 +712,8 @@ def test_a_place_a_search_found_fitting_poorly_on_probation_is_challenged_once_b
     assert info.reseeded and pf._track is not None and pf._track.sum() == 4000
     assert pf._probation_scores is None  # once: the place is not challenged again on this probation
     # a place fitting at 0.75, or the rule off (probation_fit 0): no challenge in 40 updates
-    for score, sets in ((0.75, ()), (0.65, ("filter.probation_fit=0",))):
+    for score, sets in ((0.75, ()), (0.65, ("filter.probation_fit=0",)), (0.65, ("filter.reseed_odds=0",)),
+                        (0.65, ("filter.recovery_reseed=false",))):
         pf, obs = _found_place(score, *sets)
         assert not any(pf.step(None, obs).reseeded for _ in range(40)), (score, sets)
 
