@@ -562,6 +562,42 @@ class StallCheck:
         self.stalled = self.run >= self.CONSECUTIVE
 
 
+class ProbationChallenge:
+    """``filter.probation_fit``: a place a search found that fits ``WINDOW`` scans in a row on probation at a median
+    quality score (``mcl.quality``: match - 2 contradiction) below ``fit`` is challenged once: ``due`` asks the filter
+    for a protected re-seed (``ParticleFilter.protect``), in which the place keeps its cloud and a place found anew
+    must out-score it by ``reseed_odds``. A wrong place on a big map fits 0.65-0.75 for many seconds without ever
+    staying lost for ``recovery_global_after`` updates (large-03: held 98 m off for 40 s); a right one with people or
+    clutter around fits as low, and keeps itself in the protected search.
+    """
+
+    WINDOW = 10  # updates in a row whose median score is judged
+
+    def __init__(self, fit: float, search: GlobalSearch):
+        self.fit = float(fit)
+        self.search = search
+        self.reset()
+
+    def reset(self) -> None:
+        self.starts = 0  # the search's count of starts when the scores were last reset
+        self.scores: deque | None = None  # the place's last scores on probation (None: no place, or challenged)
+        self.due = False
+
+    def observe(self, fit, on_probation: bool) -> None:
+        """This update's scan fit at the estimate (``mcl.quality.Fit`` or None) and whether the place a search found
+        is on probation (``LostRecovery.on_probation``)."""
+        if self.starts != self.search.starts:  # a search since: the place it finds is judged afresh
+            self.starts = self.search.starts
+            self.scores = deque(maxlen=self.WINDOW)
+        if self.scores is None or self.search.holding or not on_probation:
+            return
+        if fit is not None and fit.beams and math.isfinite(fit.score):
+            self.scores.append(fit.score)
+        if len(self.scores) == self.WINDOW and float(np.median(self.scores)) < self.fit:
+            self.due = True
+            self.scores = None  # challenged once
+
+
 class FaultWindow:
     """When the motion model allows odometry faults (``mcl.motion.FaultProposal``, ``motion.fault_*``).
 

@@ -100,7 +100,7 @@ class FilterConfig:
     recovery_reseed_keep: float = field(default=0.5, metadata=_rng(0.0, 1.0, lo_open=True))  # prior mass of the old cloud
     reseed_odds: float = field(default=0.0, metadata=_rng(0.0, 1e6))  # nats of log-odds that settle a protected re-seed
     # a place a search found is challenged once (a protected re-seed) when the median quality score of
-    # _CHALLENGE_WINDOW updates in a row on probation is below this; 0: off
+    # ProbationChallenge.WINDOW updates in a row on probation is below this; 0: off
     probation_fit: float = field(default=0.0, metadata=_rng(0.0, 1.0))
     global_density: float = field(default=0.0, metadata=_rng(0.0, 1e6))  # uniform candidates per m2 of free space
     search_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # laser log-lik x this while searching

@@ -37,8 +37,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, StallCheck, draw_injected, kld_resample,
-                          make_recovery, measurement_count)
+from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, ProbationChallenge, StallCheck, draw_injected,
+                          kld_resample, make_recovery, measurement_count)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard
@@ -55,7 +55,6 @@ _MAX_DEGENERATE_RUN = 3  # consecutive all-zero updates before a global reinitia
 _MAX_PROTECTED = 25  # updates a protected re-seed may last; then the heavier side wins
 _PROTECT_STEP = 3.0  # nats: the most one scan may move its log-odds (with reseed_odds 4.6, two scans decide)
 _DECISIVE_FIT = 0.9  # ... unless the search's place fits it at least this well (quality score) and the track is bad
-_CHALLENGE_WINDOW = 10  # updates on probation whose median quality score filter.probation_fit judges
 
 
 @dataclass(frozen=True)
@@ -133,6 +132,10 @@ class ParticleFilter:
         # a place a search found whose estimate does not follow the odometry is re-seeded (filter.stall_*)
         self.stall = (StallCheck(fc.stall_ratio, fc.stall_window, fc.stall_travel, fc.stall_active, self.search)
                       if fc.stall_ratio > 0.0 else None)
+        # a place a search found that fits poorly on probation is challenged once (filter.probation_fit), only where
+        # a re-seed runs protected (reseed_odds > 0; and lost recovery with recovery_reseed, checked as it runs)
+        self.challenge = (ProbationChallenge(fc.probation_fit, self.search)
+                          if fc.probation_fit > 0.0 and fc.reseed_odds > 0.0 else None)
         self._odom = None  # this update's odometry pose (x, y, theta), None without motion (the stall test)
         self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
@@ -162,11 +165,6 @@ class ParticleFilter:
         self._track: np.ndarray | None = None
         self._protected_updates = 0
         self._odds = 0.0  # its log-odds, search against track (the evidence that counted)
-        # the quality scores of the place a search found, on probation (filter.probation_fit), and whether it has
-        # been challenged (None: not on probation or already challenged)
-        self._probation_scores: list[float] | None = None
-        self._judged_search = 0  # search.starts when the scores were last reset
-        self._challenge_due = False
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
         self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
@@ -221,6 +219,8 @@ class ParticleFilter:
             self.faults.reset()
         if self.stall is not None:
             self.stall.reset()
+        if self.challenge is not None:
+            self.challenge.reset()
 
     def kidnap(self, mean, std) -> None:
         """Particles replaced by N(mean, diag(std^2)) with the policies untouched (recovery averages, lost
@@ -694,32 +694,8 @@ class ParticleFilter:
         if self.stall is not None:
             self.stall.observe(self._dt, self.last_estimate.mean, self.last_estimate.cov, self._odom)
             info.stalled = self.stall.stalled
-        self._judge_probation(fit)
-
-    def _judge_probation(self, fit) -> None:
-        """``filter.probation_fit``: a place a search found that fits ``_CHALLENGE_WINDOW`` scans in a row on
-        probation at a median quality score below it is challenged once by a protected re-seed (``protect``): it
-        keeps its cloud, and a place found anew must out-score it by ``reseed_odds``. A wrong place on a big map
-        fits 0.65-0.75 for many seconds without ever staying lost for ``recovery_global_after`` updates
-        (large-03: held 98 m off for 40 s); a right one with people or clutter around fits as low, and keeps
-        itself in the protected search."""
-        fc = self.cfg.filter
-        # only where a re-seed can run protected (lost recovery with recovery_reseed, reseed_odds > 0)
-        if (fc.probation_fit <= 0.0 or fc.reseed_odds <= 0.0 or not getattr(self.recovery, "reseed", False)
-                or self._track is not None):
-            return
-        if self._judged_search != self.search.starts:  # a search since: the place it finds is judged afresh
-            self._judged_search = self.search.starts
-            self._probation_scores = []
-        scores = self._probation_scores
-        if scores is None or self.search.holding or not getattr(self.recovery, "on_probation", False):
-            return
-        if fit is not None and fit.beams and math.isfinite(fit.score):
-            scores.append(fit.score)
-            del scores[:-_CHALLENGE_WINDOW]
-        if len(scores) == _CHALLENGE_WINDOW and float(np.median(scores)) < fc.probation_fit:
-            self._challenge_due = True
-            self._probation_scores = None  # challenged once
+        if self.challenge is not None and self._track is None and getattr(self.recovery, "reseed", False):
+            self.challenge.observe(fit, self.recovery.on_probation)
 
     def resample(self, info: StepInfo) -> None:
         """Resample when ESS / N < resample_threshold (the scheme named in filter.resampling).
@@ -732,7 +708,8 @@ class ParticleFilter:
         if self._track is not None:
             self._resample_apart(info)
             return
-        if self.recovery is not None and (getattr(self.recovery, "reseed_due", False) or self._challenge_due):
+        challenged = self.challenge is not None and self.challenge.due
+        if self.recovery is not None and (getattr(self.recovery, "reseed_due", False) or challenged):
             self._reseed(info)
             return
         p = self.recovery.inject_probability if self.recovery is not None else 0.0
@@ -799,9 +776,10 @@ class ParticleFilter:
         cloud: the motion has already ruled that place out, and its scans fit as well as anywhere else's."""
         fc = self.cfg.filter
         keep = 0.0 if info.stalled else fc.recovery_reseed_keep
-        # a track, not a place a search just found; or a place found that is challenged (_judge_probation)
-        trusted = self._challenge_due or not getattr(self.recovery, "on_probation", True)
-        self._challenge_due = False
+        # a track, not a place a search just found; or a place found that is challenged (ProbationChallenge)
+        trusted = not getattr(self.recovery, "on_probation", True)
+        if self.challenge is not None and self.challenge.due:
+            trusted, self.challenge.due = True, False
         n = min(self.n, fc.particles) if keep > 0.0 else 0  # a set grown by an earlier re-seed is drawn back down
         idx = resample(fc.resampling, self.logw, self.rng, n=n)
         m = max(fc.particles - n, n)

@@ -710,7 +710,7 @@ def test_a_place_a_search_found_fitting_poorly_on_probation_is_challenged_once_b
         assert not info.lost and not info.reseeded, k
     info = pf.step(None, obs)  # the tenth
     assert info.reseeded and pf._track is not None and pf._track.sum() == 4000
-    assert pf._probation_scores is None  # once: the place is not challenged again on this probation
+    assert pf.challenge.scores is None  # once: the place is not challenged again on this probation
     # a place fitting at 0.75, or the rule off (probation_fit 0): no challenge in 40 updates
     for score, sets in ((0.75, ()), (0.65, ("filter.probation_fit=0",)), (0.65, ("filter.reseed_odds=0",)),
                         (0.65, ("filter.recovery_reseed=false",))):
