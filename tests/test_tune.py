@@ -239,14 +239,39 @@ def test_sigint_then_resume_reaches_the_same_best(serial, files):
     assert {p: p.stat().st_mtime_ns for p in done} == done  # the finished runs were not run again
 
 
+# The study runs in a child process: when Ray's own daemons die (the raylet, the GCS), Ray ends its driver with
+# _exit(1), which in this process would end the whole test session with no report (seen once in CI, never here).
+_RAY_CHILD = """
+import sys, ray
+from mcl.cli import main
+ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+try:
+    rc = main(sys.argv[1:])
+finally:
+    ray.shutdown()
+print("main returned", rc, flush=True)
+sys.exit(rc)
+"""
+
+
 def test_ray_gives_the_same_trials(serial, files):
-    ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'mcl[cluster]')")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        study = files / "ray"
-        assert main(_args(files, study, "--trials", str(TRIALS), "--ray", "auto")) == 0
-    finally:
-        ray.shutdown()
+    """The study on a local Ray cluster gives the serial study's trials. Our failures fail the test: a nonzero
+    return of mcl tune, a Python traceback, different trials. A child that Ray itself ended (no traceback and
+    main never returned) is tried once more; twice in a row is Ray's trouble on this machine, not mcl's: skipped,
+    with what the child printed."""
+    pytest.importorskip("ray", reason="Ray is not installed (pip install 'mcl[cluster]')")
+    for attempt in (1, 2):
+        study = files / f"ray{attempt}"
+        child = subprocess.run([sys.executable, "-c", _RAY_CHILD, *_args(files, study, "--trials", str(TRIALS),
+                                                                         "--ray", "auto")],
+                               capture_output=True, text=True, timeout=600)
+        returned = "main returned" in child.stdout
+        if returned or "Traceback (most recent call last)" in child.stderr:
+            break
+    tail = "\n".join((child.stdout + child.stderr).splitlines()[-15:])
+    if not returned and "Traceback (most recent call last)" not in child.stderr:
+        pytest.skip(f"Ray's local cluster died twice on this machine (exit {child.returncode}):\n{tail}")
+    assert child.returncode == 0 and returned, tail
     _same_trials(serial, study)
 
 
