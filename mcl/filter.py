@@ -13,8 +13,10 @@ The policies are small objects the loop calls, each in its own module:
 ``InputGuard`` (mcl.degenerate: odometry jumps, time running backwards, NaN
 ranges, empty scans), ``KLDSampling`` and the recovery policies
 ``LostRecovery`` / ``AugmentedMCL`` with the ``GlobalSearch`` state they
-read (mcl.adaptive), ``BeamSkipping`` (mcl.sensors) and ``ScanQuality``
-(mcl.quality). The filter owns the one
+read, and beside them ``ProtectedReseed`` (a re-seed of a trusted track
+settled by log-odds, ``protect``), ``ProbationChallenge``, ``StallCheck`` and
+``FaultWindow`` (mcl.adaptive), ``BeamSkipping`` and ``UnmappedObjects``
+(mcl.sensors) and ``ScanQuality`` (mcl.quality). The filter owns the one
 random generator, seeded from the config, so a seed gives the same
 trajectory whatever the numba thread count. It does no I/O.
 
@@ -37,8 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, ProbationChallenge, StallCheck, draw_injected,
-                          kld_resample, make_recovery, measurement_count)
+from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, ProbationChallenge, ProtectedReseed, StallCheck,
+                          draw_injected, kld_resample, make_recovery, measurement_count)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard
@@ -52,9 +54,6 @@ from mcl.sensors import BeamSkipping, UnmappedObjects, make_sensor_model
 __all__ = ["Control", "StepInfo", "ParticleFilter", "EVENT_KINDS"]
 
 _MAX_DEGENERATE_RUN = 3  # consecutive all-zero updates before a global reinitialisation
-_MAX_PROTECTED = 25  # updates a protected re-seed may last; then the heavier side wins
-_PROTECT_STEP = 3.0  # nats: the most one scan may move its log-odds (with reseed_odds 4.6, two scans decide)
-_DECISIVE_FIT = 0.9  # ... unless the search's place fits it at least this well (quality score) and the track is bad
 
 
 @dataclass(frozen=True)
@@ -161,10 +160,8 @@ class ParticleFilter:
         self._scan_observation = None  # this update's full observation, before beam skipping (for the quality)
         self._laser_pose = np.zeros(3)  # of the scan last prepared (beam skipping and the quality walk from there)
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
-        # (N,) bool: the kept track's particles while a protected re-seed runs (filter.reseed_odds), else None
-        self._track: np.ndarray | None = None
-        self._protected_updates = 0
-        self._odds = 0.0  # its log-odds, search against track (the evidence that counted)
+        # a protected re-seed while it runs (filter.reseed_odds; its track mask selects the kept track), else None
+        self.protected: ProtectedReseed | None = None
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
         self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
@@ -197,7 +194,7 @@ class ParticleFilter:
     def _set(self, particles: np.ndarray) -> None:
         self._injected = None
         self._fresh = None
-        self._track = None
+        self.protected = None
         self.particles = particles
         n = particles.shape[1]
         self.logw = np.full(n, -np.log(n))
@@ -576,54 +573,28 @@ class ParticleFilter:
             self._degenerate_run = 0
 
     def protect(self, info: StepInfo) -> None:
-        """Settle a protected re-seed (``filter.reseed_odds``) once one side leads by the odds.
-
-        A re-seed of a trusted track (one started from a known pose, or held past the probation of the search that
-        found it) keeps that track as its own component: the two are resampled apart, so each keeps its particles
-        and its share of the weight is the evidence for it since the re-seed: the prior ``recovery_reseed_keep``
-        times the likelihood of every scan that also fits the map better (the quality score) at the estimate of
-        the side it favours. One scan moves the log-odds by ``_PROTECT_STEP`` nats at most, unless it fits the
-        search's place at ``_DECISIVE_FIT`` or better and the track's below ``quality.lost_below``. The estimate
-        stays on the track until one side leads by ``reseed_odds`` nats (or the heavier after ``_MAX_PROTECTED``
-        updates); the loser is dropped, and a track that wins is not put on probation. Outdoors a correct track
-        fits poorly for seconds (freiburg-campus: match 0.2-0.7); on one scan a place 170 m away fitted better,
-        took the whole set at the next resample, and the estimate jumped there (RMSE 15 m).
-        """
-        track, fc = self._track, self.cfg.filter
-        if track is None or info.degenerate:
+        """Settle a protected re-seed (``filter.reseed_odds``, ``mcl.adaptive.ProtectedReseed``) once one side
+        leads by the odds: the loser is dropped, and a track that wins is not put on probation. Until then the
+        weights carry the odds that counted, and the estimate stays on the track."""
+        p = self.protected
+        if p is None or info.degenerate:
             return
-        if track.size != self.n:  # pragma: no cover - every change of the set goes through _set or _resample_apart
-            self._track = None
+        if p.track.size != self.n:  # pragma: no cover - every change of the set goes through _set or _resample_apart
+            self.protected = None
             return
-        # the two sides' log masses (log-sum-exp: a side can hold e^-50 of the weight and still come back)
-        log_m = [normalize_log_weights(self.logw[side])[1] for side in (track, ~track)]
-        raw = log_m[1] - log_m[0]
-        odds = raw
-        if not (math.isfinite(log_m[0]) and math.isfinite(log_m[1])):  # a side with no weight at all lost
-            odds = -math.inf if math.isfinite(log_m[0]) else math.inf
-        elif raw != self._odds and self._scan_observation is not None:
-            # this scan's evidence counts only if the scan also fits the map better (mcl.quality's score) at the
-            # side it favours: outdoors one scan that fits the true pose badly (a third of its beams through mapped
-            # walls) gave a place 176 m away e^50 the likelihood while fitting worse still there (-0.23 against
-            # 0.02, a third of its beams through walls: the likelihood field does not see readings through walls)
-            s_search, s_track = self._side_score(~track), self._side_score(track)
-            step = raw - self._odds if (raw - self._odds) * (s_search - s_track) >= 0.0 else 0.0
-            # and no one scan decides: on the campus a scan fitted the true pose at -0.04 and a place 205 m away at
-            # 0.60 (both signals agreed), and the scans after it fitted the track at 0.29-0.95 and far places below -1;
-            # unless the scan fits the search's place as a tracked scan does and the track's as a lost one: on a
-            # log with a scan every 3 s (fr101, kidnapped: 0.96 against 0.34) the second scan came 17 s later
-            if not (s_search >= _DECISIVE_FIT and s_track < self.cfg.quality.lost_below):
-                step = min(max(step, -_PROTECT_STEP), _PROTECT_STEP)
-            odds = self._odds + step
-        self._odds = odds
-        self._protected_updates += 1
-        if abs(odds) < fc.reseed_odds and self._protected_updates < _MAX_PROTECTED:
+        track = p.track
+        log_track, log_search = (normalize_log_weights(self.logw[side])[1] for side in (track, ~track))
+        scores = (None if self._scan_observation is None
+                  else lambda: (self._side_score(~track), self._side_score(track)))
+        odds = p.weigh(log_track, log_search, scores)
+        raw = log_search - log_track
+        if not p.settled:
             if odds != raw:  # the weights carry the odds that counted: shift the search side's mass
                 self.logw[~track] += odds - raw
                 self.weights, log_norm = normalize_log_weights(self.logw)
                 self.logw -= log_norm
             return
-        won = odds <= 0.0  # the track (a tie after _MAX_PROTECTED updates goes to the track)
+        won = p.track_won  # the track (a tie after MAX_UPDATES updates goes to the track)
         keep = track if won else ~track
         idx = np.flatnonzero(keep)
         logw = self.logw[idx]
@@ -658,9 +629,10 @@ class ParticleFilter:
         re-seed runs (``protect``), of the kept track's particles only."""
         fc = self.cfg.filter
         particles, weights = self.particles, self.weights
-        if self._track is not None:
-            particles = np.ascontiguousarray(particles[:, self._track])
-            weights = weights[self._track] / max(float(weights[self._track].sum()), 1e-300)
+        if self.protected is not None:
+            track = self.protected.track
+            particles = np.ascontiguousarray(particles[:, track])
+            weights = weights[track] / max(float(weights[track].sum()), 1e-300)
         if fc.estimate == "cluster":
             est = cluster_estimate(particles, weights, fc.cluster_size, fc.cluster_angle)
         else:
@@ -685,7 +657,7 @@ class ParticleFilter:
         info.fit = fit
         info.lost = self.quality.update(fit)
         # a protected re-seed's search settles by the odds (protect), not by the track's cluster
-        self.search.observe(info.lost, info.cluster_weight if self._track is None else 0.0)
+        self.search.observe(info.lost, info.cluster_weight if self.protected is None else 0.0)
         if self.faults is not None:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
             self.faults.observe(info.lost, c if c == c else 0.0)
@@ -694,7 +666,7 @@ class ParticleFilter:
         if self.stall is not None:
             self.stall.observe(self._dt, self.last_estimate.mean, self.last_estimate.cov, self._odom)
             info.stalled = self.stall.stalled
-        if self.challenge is not None and self._track is None and getattr(self.recovery, "reseed", False):
+        if self.challenge is not None and self.protected is None and getattr(self.recovery, "reseed", False):
             self.challenge.observe(fit, self.recovery.on_probation)
 
     def resample(self, info: StepInfo) -> None:
@@ -705,7 +677,7 @@ class ParticleFilter:
         new particles come from ``recovery_sampler`` instead of the weighted set.
         """
         fc = self.cfg.filter
-        if self._track is not None:
+        if self.protected is not None:
             self._resample_apart(info)
             return
         challenged = self.challenge is not None and self.challenge.due
@@ -742,12 +714,12 @@ class ParticleFilter:
         fc = self.cfg.filter
         parts, logw, track = [], [], []
         for side in (True, False):
-            sel = np.flatnonzero(self._track == side)
+            sel = np.flatnonzero(self.protected.track == side)
             if side or self.kld is None or sel.size <= self.kld.min_particles:
                 new = self.particles[:, sel[resample(fc.resampling, self.logw[sel], self.rng, n=sel.size)]]
             else:
                 # the search's poses by KLD sampling, at most as many as it has: its 100,000 fresh poses gather on
-                # a few places within a scan or two, and scoring them all for up to _MAX_PROTECTED updates took a
+                # a few places within a scan or two, and scoring them all for up to MAX_UPDATES updates took a
                 # campus run 13-16 s instead of 11-14 s (bins counted on the drawn ancestors, not moved)
                 new, _, _ = kld_resample(self.particles[:, sel], self.logw[sel], self.rng, self.kld.counter,
                                          scheme=fc.resampling, min_particles=self.kld.min_particles,
@@ -759,7 +731,7 @@ class ParticleFilter:
         self.particles = np.ascontiguousarray(np.concatenate(parts, axis=1))
         self.logw = np.concatenate(logw)
         self.weights = np.exp(self.logw)
-        self._track = np.concatenate(track)
+        self.protected.track = np.concatenate(track)
         self._injected = None
         self._fresh = None
         info.resampled = True
@@ -791,9 +763,7 @@ class ParticleFilter:
         self._injected = np.arange(n + m) >= n
         self._fresh = self._injected.copy()
         if keep > 0.0 and n > 0 and trusted and fc.reseed_odds > 0.0:
-            self._track = ~self._injected
-            self._protected_updates = 0
-            self._odds = math.log(1.0 - keep) - math.log(keep) if keep < 1.0 else -math.inf
+            self.protected = ProtectedReseed(~self._injected, keep, fc.reseed_odds, self.cfg.quality.lost_below)
         if self.kld is not None:
             self.kld.pending = None
         info.resampled = True

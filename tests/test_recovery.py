@@ -4,6 +4,7 @@ recovery injects nothing during a correct track, spreads locally, then re-seeds 
 from __future__ import annotations
 
 import importlib.util
+import math
 
 import numpy as np
 import pytest
@@ -624,18 +625,44 @@ def _reseeded(track, *sets):
 TRUE_POSE = [3.5, 4.5, 1.2]
 
 
+def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_three_nats_at_most():
+    """mcl.adaptive.ProtectedReseed.weigh on its own: the masses are log masses of (track, search)."""
+    from mcl.adaptive import ProtectedReseed
+
+    def fresh():
+        return ProtectedReseed(np.ones(4, dtype=bool), keep=0.5, reseed_odds=4.6, lost_below=0.6)
+
+    p = fresh()
+    assert p.odds == 0.0 and not p.settled
+    assert p.weigh(0.0, 10.0, lambda: (0.8, 0.7)) == 3.0 and not p.settled  # agreed, capped at STEP
+    assert p.weigh(0.0, 13.0, lambda: (0.8, 0.7)) == 6.0 and p.settled and not p.track_won
+    p = fresh()
+    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.7)) == 0.0  # the likelihood favours the search, the fit the track
+    assert p.weigh(0.0, -8.0, lambda: (0.5, 0.7)) == -3.0  # both favour the track: capped
+    p = fresh()
+    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.3)) == 10.0 and p.settled  # decisive: fits as tracked vs as lost
+    assert fresh().weigh(0.0, -math.inf, lambda: (0.0, 0.0)) == -math.inf  # the search has no weight left
+    assert fresh().weigh(-math.inf, 0.0, None) == math.inf  # nor the track
+    p = fresh()
+    for _ in range(ProtectedReseed.MAX_UPDATES - 1):
+        p.weigh(0.0, 0.0, None)  # no scan: no evidence
+    assert not p.settled
+    p.weigh(0.0, 0.0, None)
+    assert p.settled and p.track_won  # a tie after MAX_UPDATES goes to the track
+
+
 def test_a_protected_reseed_keeps_a_correct_track_and_drops_the_search_without_probation():
     # freiburg-campus, tracking with gentle odometry: a correct track fits poorly outdoors for seconds at a time;
     # re-seeded, one scan that a place 170 m away fitted better handed it the whole set at the next resample, and
     # the estimate jumped there (RMSE 15 m). The track now stays its own component until one side leads by
     # reseed_odds; here the scan is exact, the track right, and the search loses at once.
     pf, grid = _reseeded(TRUE_POSE)
-    assert pf._track is not None and pf._track.sum() == 4000
+    assert pf.protected is not None and pf.protected.track.sum() == 4000
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
-    info = pf.step(None, obs)  # no one scan decides (_PROTECT_STEP 3 nats < reseed_odds 4.6) ...
-    assert not info.confirmed and pf.n == 8000 and pf._odds == -3.0
+    info = pf.step(None, obs)  # no one scan decides (ProtectedReseed.STEP 3 nats < reseed_odds 4.6) ...
+    assert not info.confirmed and pf.n == 8000 and pf.protected.odds == -3.0
     info = pf.step(None, obs)  # ... two do
-    assert info.confirmed and not info.switched and pf.n == 4000 and pf._track is None
+    assert info.confirmed and not info.switched and pf.n == 4000 and pf.protected is None
     assert not pf.search.tempering and not pf.search.holding and pf.search.since_end is None
     assert not pf.recovery.on_probation and np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.1
 
@@ -645,9 +672,9 @@ def test_a_protected_reseed_of_a_wrong_track_switches_to_the_search():
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
     # one scan: the estimate stays on the track (the search's heaviest cluster, a blend after one scan, fits 0.75)
     info = pf.step(None, obs)
-    assert not info.switched and pf._odds == 3.0 and np.hypot(*(info.mean[:2] - [6.0, 3.0])) < 0.1
+    assert not info.switched and pf.protected.odds == 3.0 and np.hypot(*(info.mean[:2] - [6.0, 3.0])) < 0.1
     info = pf.step(None, obs)  # (still lost by the quality window, the place it found is re-seeded on probation)
-    assert info.switched and not info.confirmed and info.particles == 4000 and pf._track is None
+    assert info.switched and not info.confirmed and info.particles == 4000 and pf.protected is None
     assert np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.3
 
 
@@ -656,9 +683,9 @@ def test_while_neither_side_leads_the_estimate_stays_on_the_track_and_each_side_
     for k in range(24):  # no scan: no evidence either way, the odds stay at 0
         info = pf.step(None, None)
         assert not info.confirmed and not info.switched, k
-        assert pf.n == 8000 and pf._track.sum() == 4000 and info.resampled
+        assert pf.n == 8000 and pf.protected.track.sum() == 4000 and info.resampled
         assert np.hypot(*(info.mean[:2] - [6.0, 3.0])) < 0.1  # the track, though the search holds half the weight
-        assert np.exp(pf.logw[pf._track]).sum() == pytest.approx(0.5)
+        assert np.exp(pf.logw[pf.protected.track]).sum() == pytest.approx(0.5)
     info = pf.step(None, None)  # the 25th update: a tie goes to the track
     assert info.confirmed and pf.n == 4000
 
@@ -671,9 +698,9 @@ def test_with_kld_a_protected_search_shrinks_to_what_its_places_need_and_keeps_i
     pf, grid = _reseeded([6.0, 3.0, -0.5], "filter.kld=true", "filter.min_particles=500")
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
     info = pf.step(None, obs)
-    assert not info.switched and pf._odds == 3.0
-    assert pf._track.sum() == 4000 and (~pf._track).sum() == 500 and pf.n == 4500
-    assert np.exp(pf.logw[~pf._track]).sum() == pytest.approx(np.exp(3.0) / (1.0 + np.exp(3.0)))
+    assert not info.switched and pf.protected.odds == 3.0
+    assert pf.protected.track.sum() == 4000 and (~pf.protected.track).sum() == 500 and pf.n == 4500
+    assert np.exp(pf.logw[~pf.protected.track]).sum() == pytest.approx(np.exp(3.0) / (1.0 + np.exp(3.0)))
     assert np.hypot(*(info.mean[:2] - [6.0, 3.0])) < 0.1  # the estimate still on the track
     info = pf.step(None, obs)
     assert info.switched and np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.3
@@ -709,7 +736,7 @@ def test_a_place_a_search_found_fitting_poorly_on_probation_is_challenged_once_b
         info = pf.step(None, obs)
         assert not info.lost and not info.reseeded, k
     info = pf.step(None, obs)  # the tenth
-    assert info.reseeded and pf._track is not None and pf._track.sum() == 4000
+    assert info.reseeded and pf.protected is not None and pf.protected.track.sum() == 4000
     assert pf.challenge.scores is None  # once: the place is not challenged again on this probation
     # a place fitting at 0.75, or the rule off (probation_fit 0): no challenge in 40 updates
     for score, sets in ((0.75, ()), (0.65, ("filter.probation_fit=0",)), (0.65, ("filter.reseed_odds=0",)),
@@ -720,18 +747,18 @@ def test_a_place_a_search_found_fitting_poorly_on_probation_is_challenged_once_b
 
 def test_a_reseed_of_a_place_a_search_just_found_is_not_protected_nor_with_reseed_odds_0():
     pf, _ = _reseeded(TRUE_POSE, "filter.reseed_odds=0")
-    assert pf._track is None
+    assert pf.protected is None
     from mcl.filter import StepInfo
 
     pf, _ = _reseeded(TRUE_POSE)
-    pf._track = None
+    pf.protected = None
     pf.search.since_end = 3  # the search that found this place ended 3 updates ago: on probation
     pf.search.tempering = pf.search.holding = False
     assert pf.recovery.on_probation
     pf.recovery.observe_lost(True)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
-    assert info.reseeded and pf._track is None
+    assert info.reseeded and pf.protected is None
 
 
 def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_with_its_likelihood():
@@ -744,7 +771,7 @@ def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_w
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
     for k in range(24):
         info = pf.step(None, obs)
-        assert not info.switched and pf._odds == 0.0, k
+        assert not info.switched and pf.protected.odds == 0.0, k
         assert np.hypot(*(info.mean[:2] - [6.0, 3.0])) < 0.5, k
     assert pf.step(None, obs).confirmed
     # the same scans with the score agreeing (0.7 against 0.5): the odds move 3 nats a scan, the search wins on the
@@ -752,7 +779,7 @@ def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_w
     # one (below quality.lost_below 0.6), on the first (a sparse log's next scan can be 17 s away)
     pf, grid = _reseeded([6.0, 3.0, -0.5])
     pf._side_score = lambda side: 0.5 if side[0] else 0.7
-    assert not pf.step(None, obs).switched and pf._odds == 3.0 and pf.step(None, obs).switched
+    assert not pf.step(None, obs).switched and pf.protected.odds == 3.0 and pf.step(None, obs).switched
     pf, grid = _reseeded([6.0, 3.0, -0.5])
     pf._side_score = lambda side: 0.5 if side[0] else 0.9
     assert pf.step(None, obs).switched
