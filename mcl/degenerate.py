@@ -91,3 +91,30 @@ class InputGuard:
         c, s = math.cos(a[2]), math.sin(a[2])
         dx, dy = b[0] - a[0], b[1] - a[1]
         return control, np.array([c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(b[2] - a[2]))])
+
+
+class ZeroWeights:
+    """``degenerate_weights``: what the filter does after a correction that left every weight zero. Re-spread
+    around the last estimate (moved by the odometry step) with ``respread_std`` times 2^(k-1) on the k-th such
+    update in a row; after ``MAX_RUN`` in a row (``respread`` returns None) reinitialise globally. A scan no pose
+    explains is far more often a bad scan or a short glitch than a kidnapping (recovery handles that), and a
+    global reinitialisation throws away a good track."""
+
+    MAX_RUN = 3  # consecutive all-zero updates before a global reinitialisation
+
+    def __init__(self, respread_std):
+        self.std = np.asarray(respread_std, dtype=np.float64)
+        self.run = 0  # consecutive updates where every weight was zero
+
+    def respread(self) -> np.ndarray | None:
+        """Another all-zero update: the std (x, y, theta) to re-spread with, or None to reinitialise globally
+        (the run then starts again)."""
+        self.run += 1
+        if self.run > self.MAX_RUN:
+            self.run = 0
+            return None
+        return self.std * 2.0 ** (self.run - 1)
+
+    def ok(self) -> None:
+        """An update with weight: the run ends."""
+        self.run = 0

@@ -10,8 +10,8 @@
     resample   low variance when ESS / N is low; KLD sizes the new set; recovery injects
 
 The policies are small objects the loop calls, each in its own module:
-``InputGuard`` (mcl.degenerate: odometry jumps, time running backwards, NaN
-ranges, empty scans), ``KLDSampling`` and the recovery policies
+``InputGuard`` and ``ZeroWeights`` (mcl.degenerate: odometry jumps, time
+running backwards, NaN ranges, empty scans; every weight zero), ``KLDSampling`` and the recovery policies
 ``LostRecovery`` / ``AugmentedMCL`` with the ``GlobalSearch`` state they
 read, and beside them ``ProtectedReseed`` (a re-seed of a trusted track
 settled by log-odds, ``protect``), ``ProbationChallenge``, ``StallCheck`` and
@@ -43,7 +43,7 @@ from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, ProbationChall
                           draw_injected, kld_resample, make_recovery, measurement_count)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
-from mcl.degenerate import EVENT_KINDS, InputGuard
+from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.estimate import estimate, wrap_angle
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
 from mcl.motion import allowed_mask, make_motion_model
@@ -53,7 +53,6 @@ from mcl.sensors import BeamSkipping, UnmappedObjects, make_sensor_model
 
 __all__ = ["Control", "StepInfo", "ParticleFilter", "EVENT_KINDS"]
 
-_MAX_DEGENERATE_RUN = 3  # consecutive all-zero updates before a global reinitialisation
 
 
 @dataclass(frozen=True)
@@ -152,7 +151,7 @@ class ParticleFilter:
         self.logw = np.full(n, -np.log(n))
         self.weights = np.full(n, 1.0 / n)
         self.degenerate_events = 0
-        self._degenerate_run = 0  # consecutive updates where every weight was zero
+        self.zero_weights = ZeroWeights(fc.respread_std)  # every weight zero: re-spread, then start again
         self._delta = None  # this update's odometry step in the robot frame, for re-spreading
         self._dt = 0.0  # this update's log time since the previous one (lost recovery's clock)
         self.last_estimate: ClusterEstimate | None = None
@@ -570,7 +569,7 @@ class ParticleFilter:
         if info.degenerate:
             self.recover_degenerate(info)
         else:
-            self._degenerate_run = 0
+            self.zero_weights.ok()
 
     def protect(self, info: StepInfo) -> None:
         """Settle a protected re-seed (``filter.reseed_odds``, ``mcl.adaptive.ProtectedReseed``) once one side
@@ -796,17 +795,15 @@ class ParticleFilter:
 
     def recover_degenerate(self, info: StepInfo) -> None:
         """Every weight was zero: re-spread around the last estimate (moved by the odometry step), or reinitialise
-        globally after _MAX_DEGENERATE_RUN consecutive failures; the new particles get equal weights."""
+        globally after ``ZeroWeights.MAX_RUN`` consecutive failures; the new particles get equal weights."""
         self.guard.event("degenerate_weights", "every particle weight is zero (no pose explains the scan); the "
                          "particles are re-spread around the last estimate")
-        self._degenerate_run += 1
-        k = self._degenerate_run
-        if self.last_estimate is None or k > _MAX_DEGENERATE_RUN:
+        std = self.zero_weights.respread()
+        if self.last_estimate is None or std is None:
             self.init_global()
-            self._degenerate_run = 0
+            self.zero_weights.ok()
         else:
-            centre = self._moved_estimate()
-            self._set(self._draw_around(centre, np.asarray(self.cfg.filter.respread_std) * 2.0 ** (k - 1)))
+            self._set(self._draw_around(self._moved_estimate(), std))
         # Equal weights: the scan that explained nothing is not scored again (re-scoring a bad scan would
         # collapse the fresh cloud onto the few poses that happen to fit it); the next scan decides.
         info.ess = float(self.n)
