@@ -11,11 +11,12 @@
 
 The policies are small objects the loop calls, each in its own module:
 ``InputGuard`` and ``ZeroWeights`` (mcl.degenerate: odometry jumps, time
-running backwards, NaN ranges, empty scans; every weight zero), ``KLDSampling`` and the recovery policies
-``LostRecovery`` / ``AugmentedMCL`` with the ``GlobalSearch`` state they
-read, and beside them ``ProtectedReseed`` (a re-seed of a trusted track
-settled by log-odds, ``protect``), ``ProbationChallenge``, ``StallCheck`` and
-``FaultWindow`` (mcl.adaptive), ``BeamSkipping`` and ``UnmappedObjects``
+running backwards, NaN ranges, empty scans; every weight zero),
+``KLDSampling`` and the recovery policies ``LostRecovery`` /
+``AugmentedMCL`` with the ``GlobalSearch`` state they read, and beside them
+``ProtectedReseed`` (a re-seed of a trusted track settled by log-odds,
+``protect``), ``ProbationChallenge``, ``StallCheck`` and ``FaultWindow``
+(mcl.adaptive), ``BeamSkipping`` and ``UnmappedObjects``
 (mcl.sensors) and ``ScanQuality`` (mcl.quality). The filter owns the one
 random generator, seeded from the config, so a seed gives the same
 trajectory whatever the numba thread count. It does no I/O.
@@ -52,7 +53,6 @@ from mcl.resampling import effective_sample_size, normalize_log_weights, resampl
 from mcl.sensors import BeamSkipping, UnmappedObjects, make_sensor_model
 
 __all__ = ["Control", "StepInfo", "ParticleFilter", "EVENT_KINDS"]
-
 
 
 @dataclass(frozen=True)
