@@ -261,7 +261,7 @@ def _ray_study(files: Path, study: Path) -> tuple[int | None, str, str]:
                                                                      "--ray", "auto")],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        out, err = child.communicate(timeout=240)  # about 10 s here
+        out, err = child.communicate(timeout=120)  # about 10 s here
         return child.returncode, out, err
     except subprocess.TimeoutExpired:
         os.killpg(child.pid, signal.SIGKILL)
@@ -269,24 +269,24 @@ def _ray_study(files: Path, study: Path) -> tuple[int | None, str, str]:
         return None, out, err
 
 
+RAY_ATTEMPTS = 3  # a child that Ray itself ended is run again, at most this many times in all
+
+
 def test_ray_gives_the_same_trials(serial, files):
-    """The study on a local Ray cluster gives the serial study's trials. Our failures fail the test: a nonzero
-    return of mcl tune, a Python traceback, different trials, a study that hangs once Ray has started. A child
-    that Ray itself ended (no traceback and main never returned), or whose Ray never started within the timeout,
-    is tried once more; twice in a row is Ray's trouble on this machine, not mcl's: skipped, with what the child
-    printed."""
+    """The study on a local Ray cluster gives the serial study's trials. A child that Ray itself ended (no
+    traceback, main never returned) or whose Ray never started within the timeout is run again, up to
+    RAY_ATTEMPTS in all: once, CI saw Ray's daemons die and Ray end its driver with _exit(1). Anything else fails
+    at once: a nonzero return of mcl tune, a Python traceback, a study that hangs after Ray started, different
+    trials; and so does Ray failing on every attempt."""
     pytest.importorskip("ray", reason="Ray is not installed (pip install 'mcl[cluster]')")
-    for attempt in (1, 2):
+    for attempt in range(1, RAY_ATTEMPTS + 1):
         study = files / f"ray{attempt}"
         code, out, err = _ray_study(files, study)
         returned = "main returned" in out
-        ours = returned or "Traceback (most recent call last)" in err or (code is None and "Started a local Ray" in err)
-        if ours:
+        if returned or "Traceback (most recent call last)" in err or (code is None and "Started a local Ray" in err):
             break
     tail = "\n".join((out + err).splitlines()[-15:])
-    if not ours:
-        pytest.skip(f"Ray's local cluster died or never started, twice (exit {code}):\n{tail}")
-    assert code == 0 and returned, tail
+    assert code == 0 and returned, f"attempt {attempt} of {RAY_ATTEMPTS}, exit {code}:\n{tail}"
     _same_trials(serial, study)
 
 
