@@ -67,6 +67,8 @@ class FilterConfig:
     cluster_angle: float = field(default=0.5236, metadata=_rng(0.0, 6.2832, lo_open=True))  # rad, its theta cell
     # degenerate input (mcl.filter): an odometry step longer than this is a jump, not motion
     max_odom_step: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
+    # ... and longer than this many times the longest of the last 20 steps taken (0: the fixed bound alone)
+    max_odom_ratio: float = field(default=3.0, metadata=_rng(0.0))
     respread_std: tuple[float, float, float] = (0.5, 0.5, 0.5)  # std x, y (m), theta (rad) of a re-spread
     # KLD sampling (Fox 2003, Prob. Rob. Table 8.4; mcl.adaptive): with kld on, `particles` is the
     # maximum (and the count drawn at initialisation, as AMCL's max_particles) and each resample draws

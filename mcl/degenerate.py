@@ -9,10 +9,14 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
   and positive): the update only predicts;
 * ``time_backwards``: a control with dt < 0 (or not finite): dt is taken as 0;
   the odometry step itself is still applied (the odometry model does not use dt);
-* ``odometry_jumps``: an odometry step longer than ``filter.max_odom_step`` or
-  not finite: the step is a glitch, not motion; it is not applied and the
-  particles are re-spread by ``filter.respread_std`` where they were (poses off
-  the allowed map are drawn again), so the scan decides;
+* ``odometry_jumps``: an odometry step longer than ``filter.max_odom_step`` and
+  than ``filter.max_odom_ratio`` times the longest of the last ``JUMP_HISTORY``
+  steps taken, or not finite. A long step may be a glitch or real motion: logs
+  with a scan every metre of travel make steps of 2-4 m at their turns
+  (Radish's orebro), hence the relative bound. And the filter hedges: every other particle takes the step (the motion
+  model's noise grows with it), the others are re-spread by
+  ``filter.respread_std`` where they were (poses off the allowed map are drawn
+  again), and the scan decides. Non-finite odometry is only re-spread;
 * ``degenerate_weights``: every weight is zero after the correction (no pose
   explains the scan): the filter re-spreads the particles around the last
   estimate moved by the odometry step, twice wider each consecutive time, and
@@ -21,6 +25,7 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import math
 import warnings
@@ -36,8 +41,12 @@ EVENT_KINDS = ("degenerate_weights", "nan_ranges", "odometry_jumps", "time_backw
 class InputGuard:
     """Checks scans and controls before the filter uses them; counts and warns once per kind."""
 
-    def __init__(self, max_odom_step: float):
+    JUMP_HISTORY = 20  # odometry steps taken whose longest sets the relative jump bound
+
+    def __init__(self, max_odom_step: float, max_odom_ratio: float = 0.0):
         self.max_odom_step = float(max_odom_step)
+        self.max_odom_ratio = float(max_odom_ratio)
+        self._steps: collections.deque[float] = collections.deque(maxlen=self.JUMP_HISTORY)
         self.events = dict.fromkeys(EVENT_KINDS, 0)
         self._warned: set[str] = set()
         self._step: list[str] = []  # kinds seen in the current update
@@ -72,22 +81,33 @@ class InputGuard:
         self.event("time_backwards", f"time ran backwards (dt = {dt:.3f} s); dt taken as 0, the odometry step "
                    "still applied")
 
+    def jump_bound(self) -> float:
+        """m: the longest odometry step taken as motion now: max(max_odom_step, max_odom_ratio * the longest of
+        the last JUMP_HISTORY steps taken)."""
+        if self.max_odom_ratio <= 0.0 or not self._steps:
+            return self.max_odom_step
+        return max(self.max_odom_step, self.max_odom_ratio * max(self._steps))
+
     def check_control(self, control):
-        """(control to apply, odometry step in the robot frame (3,)): dt < 0 made 0; (None, None) for an
-        odometry jump or non-finite odometry."""
+        """(control to apply, odometry step in the robot frame (3,)): dt < 0 made 0; (control, None) for an
+        odometry jump (a glitch or real motion: the filter hedges), (None, None) for non-finite odometry."""
         a = np.asarray(control.odom_prev, dtype=np.float64)[:3]
         b = np.asarray(control.odom_now, dtype=np.float64)[:3]
         if not (np.isfinite(a).all() and np.isfinite(b).all()):
             self.event("odometry_jumps", "odometry is not finite; the step is not applied, the particles are re-spread")
             return None, None
-        step = math.hypot(b[0] - a[0], b[1] - a[1])
-        if step > self.max_odom_step:
-            self.event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> filter.max_odom_step = "
-                       f"{self.max_odom_step} m); the step is not applied, the particles are re-spread")
-            return None, None
         if not control.dt >= 0.0:
             self.time_backwards(control.dt)
             control = dataclasses.replace(control, dt=0.0)
+        step = math.hypot(b[0] - a[0], b[1] - a[1])
+        bound = self.jump_bound()
+        if step > bound:
+            self.event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> {bound:.2f} m: "
+                       f"filter.max_odom_step {self.max_odom_step} m, or max_odom_ratio {self.max_odom_ratio} times "
+                       "the longest recent step): a glitch or real motion; half the particles take the step, the "
+                       "others are re-spread where they were, and the scan decides")
+            return control, None
+        self._steps.append(step)
         c, s = math.cos(a[2]), math.sin(a[2])
         dx, dy = b[0] - a[0], b[1] - a[1]
         return control, np.array([c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(b[2] - a[2]))])

@@ -122,7 +122,7 @@ class ParticleFilter:
         self.allowed = allowed_mask(grid, cfg.motion.robot_radius) if cfg.motion.map_rejection else None
         self.sensor = make_sensor_model(grid, cfg.sensor)
         # the policies
-        self.guard = InputGuard(fc.max_odom_step)
+        self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio)
         self.kld = KLDSampling(fc, grid) if fc.kld else None
         self.search = GlobalSearch()  # a global start or re-seed until one hypothesis is left
         # odometry faults allowed only around a lost call on a track that had held (motion.fault_*)
@@ -363,11 +363,11 @@ class ParticleFilter:
         self._odom = None
         if control is not None:
             control, self._delta = self.guard.check_control(control)
-            if control is None:  # a jump: not motion (no odometry pose for the stall test either)
+            if self._delta is None:  # a jump: not motion to trust (no odometry pose for the stall test either)
                 self._delta = np.zeros(3)
                 if self.kld is not None and self.kld.pending is not None:
                     self._kld_draw(None, info)
-                self.particles = self._draw_around(self.particles, np.asarray(self.cfg.filter.respread_std))
+                self._hedge_jump(control, info)
                 return
         if self.kld is not None and self.kld.pending is not None:
             new, ok, tries, lw = self._kld_draw(control, info)
@@ -387,6 +387,27 @@ class ParticleFilter:
             bad = ~ok
             info.rejected = int(np.count_nonzero(bad))
             self.logw[bad] = -np.inf
+
+    def _hedge_jump(self, control: Control | None, info: StepInfo) -> None:
+        """An odometry jump: a glitch (the robot did not move so) or real motion (a log with a scan every few
+        metres). Every other particle takes the step ``control`` (None: non-finite odometry, none does), the
+        others are re-spread by ``respread_std`` where they were; the scan then weighs the two halves."""
+        std = np.asarray(self.cfg.filter.respread_std)
+        if control is None:
+            self.particles = self._draw_around(self.particles, std)
+            return
+        p, new = self.particles, np.empty_like(self.particles)
+        new[:, 0::2] = self._draw_around(p[:, 0::2], std, p[:, 0::2].shape[1])
+        moved, ok, tries, lw = self._move(np.ascontiguousarray(p[:, 1::2]), control)
+        new[:, 1::2] = moved
+        logw = self.logw[1::2]  # a view: the moving half's weights
+        if lw is not None:
+            logw += lw
+            info.faults = True
+        if ok is not None and not ok.all():
+            info.rejected = int(np.count_nonzero(~ok))
+            logw[~ok] = -np.inf
+        self.particles = new
 
     def _move(self, particles: np.ndarray, control: Control):
         """(moved (3, N), ok (N,) bool | None, mean tries, log-weights (N,) | None): the motion model applied to
