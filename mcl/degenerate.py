@@ -13,10 +13,11 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
   than ``filter.max_odom_ratio`` times the longest of the last ``JUMP_HISTORY``
   steps taken, or not finite. A long step may be a glitch or real motion: logs
   with a scan every metre of travel make steps of 2-4 m at their turns
-  (Radish's orebro), hence the relative bound. And the filter hedges: every other particle takes the step (the motion
-  model's noise grows with it), the others are re-spread by
-  ``filter.respread_std`` where they were (poses off the allowed map are drawn
-  again), and the scan decides. Non-finite odometry is only re-spread;
+  (Radish's orebro), hence the relative bound. And the filter hedges: every
+  other particle takes the step (the motion model's noise grows with it), the
+  others are re-spread by ``filter.respread_std`` where they were (poses off
+  the allowed map are drawn again), and the scan decides. Non-finite odometry
+  is only re-spread;
 * ``degenerate_weights``: every weight is zero after the correction (no pose
   explains the scan): the filter re-spreads the particles around the last
   estimate moved by the odometry step, twice wider each consecutive time, and
