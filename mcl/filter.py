@@ -380,13 +380,20 @@ class ParticleFilter:
         self._odom = control.odom_now
         self.particles = new
         info.tries = float(tries)
-        if lw is not None:  # the odometry-fault proposal's importance weights
-            self.logw += lw
+        self._weigh_motion(self.logw, ok, lw, info)
+
+    @staticmethod
+    def _weigh_motion(logw: np.ndarray, ok, lw, info: StepInfo) -> None:
+        """Fold a motion's outcome into the log-weights ``logw`` of the particles it moved (in place: the set's, or
+        a view of its moved part): the odometry-fault proposal's importance weights ``lw``, and weight zero where
+        the map rejected every try (``ok`` False)."""
+        if lw is not None:
+            logw += lw
             info.faults = True
         if ok is not None and not ok.all():
             bad = ~ok
             info.rejected = int(np.count_nonzero(bad))
-            self.logw[bad] = -np.inf
+            logw[bad] = -np.inf
 
     def _hedge_jump(self, control: Control | None, info: StepInfo) -> None:
         """An odometry jump: a glitch (the robot did not move so) or real motion (a log with a scan every few
@@ -396,17 +403,11 @@ class ParticleFilter:
         if control is None:
             self.particles = self._draw_around(self.particles, std)
             return
-        p, new = self.particles, np.empty_like(self.particles)
-        new[:, 0::2] = self._draw_around(p[:, 0::2], std, p[:, 0::2].shape[1])
-        moved, ok, tries, lw = self._move(np.ascontiguousarray(p[:, 1::2]), control)
-        new[:, 1::2] = moved
-        logw = self.logw[1::2]  # a view: the moving half's weights
-        if lw is not None:
-            logw += lw
-            info.faults = True
-        if ok is not None and not ok.all():
-            info.rejected = int(np.count_nonzero(~ok))
-            logw[~ok] = -np.inf
+        stay, go = self.particles[:, 0::2], np.ascontiguousarray(self.particles[:, 1::2])
+        new = np.empty_like(self.particles)
+        new[:, 0::2] = self._draw_around(stay, std, stay.shape[1])
+        new[:, 1::2], ok, _, lw = self._move(go, control)
+        self._weigh_motion(self.logw[1::2], ok, lw, info)  # a view: the moving half's weights
         self.particles = new
 
     def _move(self, particles: np.ndarray, control: Control):
