@@ -76,7 +76,7 @@ def odometry_deltas(odom_prev, odom_now) -> tuple[float, float, float]:
     return rot1, trans, rot2
 
 
-def _noise_angle(rot: float) -> float:
+def noise_angle(rot: float) -> float:
     """min(|rot|, |rot -+ pi|): the rotation a reversing robot really made, for the noise."""
     return min(abs(angle_diff(rot, 0.0)), abs(angle_diff(rot, math.pi)))
 
@@ -88,8 +88,8 @@ def noise_sigmas(rot1: float, trans: float, rot2: float, cfg) -> tuple[float, fl
     rotations enter as min(|rot|, |rot -+ pi|) (see the module docstring).
     """
     a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
-    r1 = _noise_angle(rot1)
-    r2 = _noise_angle(rot2)
+    r1 = noise_angle(rot1)
+    r2 = noise_angle(rot2)
     t = abs(float(trans))
     if cfg.noise_form == "variance":
         return (math.sqrt(a1 * r1 * r1 + a2 * t * t),
@@ -284,7 +284,7 @@ def odometry_deltas_array(x_prev, x_new, min_trans: float = ROT1_MIN_TRANS):
 
 def _noise_angle_np(rot):
     r = np.abs(_wrap_np(rot))
-    return np.minimum(r, np.pi - r)  # min(|rot|, |rot -+ pi|), as _noise_angle
+    return np.minimum(r, np.pi - r)  # min(|rot|, |rot -+ pi|), as noise_angle
 
 
 def noise_sigmas_array(rot1, trans, rot2, cfg):

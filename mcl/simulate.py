@@ -31,7 +31,10 @@ Robotics (Table 5.6), in its variance form: each tick's true motion
 (rot1, trans, rot2) is perturbed with variances ``a1*rot^2 + a2*trans^2``
 (rotations) and ``a3*trans^2 + a4*(rot1^2 + rot2^2)`` (translation), then a
 systematic drift is applied (a scale on translation and a yaw bias per
-metre), as real wheel odometry has.
+metre), as real wheel odometry has. As in the filter's model (and ROS AMCL's),
+each rot in a variance is min(|rot|, |rot -+ pi|): a step backwards reads
+rot1 ~ pi, and the book's formula as printed would give it pi-sized heading
+noise that no wheel odometry has.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from mcl.errors import ConfigError
+from mcl.motion import noise_angle
 
 __all__ = ["simulate", "make_world", "World", "add_arguments", "run_from_args"]
 
@@ -322,9 +326,12 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift):
         else:
             rot1 = _wrap(math.atan2(y1 - y0, x1 - x0) - t0)
         rot2 = _wrap(t1 - t0 - rot1)
-        r1 = rot1 - z[k, 0] * math.sqrt(a1 * rot1 ** 2 + a2 * trans ** 2)
-        tr = trans - z[k, 1] * math.sqrt(a3 * trans ** 2 + a4 * (rot1 ** 2 + rot2 ** 2))
-        r2 = rot2 - z[k, 2] * math.sqrt(a1 * rot2 ** 2 + a2 * trans ** 2)
+        # the noise scales with the rotation the robot really made: a backward step reads rot1 ~ pi, rot2 ~ -pi
+        # (the filter's motion model folds them the same way, mcl.motion.noise_angle)
+        n1, n2 = noise_angle(rot1), noise_angle(rot2)
+        r1 = rot1 - z[k, 0] * math.sqrt(a1 * n1 ** 2 + a2 * trans ** 2)
+        tr = trans - z[k, 1] * math.sqrt(a3 * trans ** 2 + a4 * (n1 ** 2 + n2 ** 2))
+        r2 = rot2 - z[k, 2] * math.sqrt(a1 * n2 ** 2 + a2 * trans ** 2)
         tr *= scale
         r1 += 0.5 * yaw_drift * trans
         r2 += 0.5 * yaw_drift * trans

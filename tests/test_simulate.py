@@ -184,6 +184,26 @@ def test_odometry_noise_matches_motion_model_variances():
     np.testing.assert_allclose(tv[1:], ot / 0.1, rtol=1e-9)
 
 
+def test_reversing_odometry_gets_the_noise_of_the_turn_it_made():
+    # A robot reversing along an arc reads rot1 ~ pi and rot2 ~ -pi each tick. Its rotation noise must be that of
+    # the turn it made (min(|rot|, |rot -+ pi|), as the filter's model and AMCL fold it), not pi-sized: the book's
+    # formula as printed gives a heading error of sqrt(2 * 0.05) * pi ~ 1 rad a tick. Oracle: the folded model's
+    # per-tick heading sd, sqrt(2 (a1 n^2 + a2 trans^2)) = 0.014 rad here; 5000 ticks put the sample sd within
+    # 3 % of it (the tolerance, 0.1, is far from both 1 rad and a wrong fold).
+    a = (0.05, 0.05, 0.05, 0.02)
+    truth = _arc_truth(5001, v=-0.4, w=0.15)
+    odom, _, _ = _odometry(truth, truth, np.random.default_rng(5), a, 1.0, 0.0)
+    r1, tr, r2 = _odom_deltas(truth)
+    assert np.all(np.abs(r1) > 3.0)  # every tick backwards
+    n1, n2 = np.pi - np.abs(r1), np.pi - np.abs(r2)
+    sd = np.sqrt(a[0] * (n1**2 + n2**2) + 2 * a[1] * tr**2)
+    heading_err = _wrap(np.diff(odom[:, 2]) - np.diff(truth[:, 2]))
+    assert (heading_err / sd).std() == pytest.approx(1.0, abs=0.1)
+    # and the path is driven backwards, as truth is: the odometry's displacement points behind its heading
+    _, ot, _ = _odom_deltas(odom)
+    np.testing.assert_allclose(ot, tr, atol=0.05)
+
+
 def test_odometry_systematic_drift_is_exact_without_noise():
     truth = _arc_truth(501, v=0.5, w=-0.2)
     odom, _, _ = _odometry(truth, truth, np.random.default_rng(0), (0.0, 0.0, 0.0, 0.0), 1.02, 0.03)
