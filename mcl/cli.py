@@ -51,7 +51,8 @@ def _add_run(sub) -> None:
     )
     p.add_argument("config", nargs="?", help="YAML config (default: configs/default.yaml, the bundled demo)")
     p.add_argument("--map", help="ROS map_server YAML of the occupancy grid")
-    p.add_argument("--log", help="CARMEN log (.clf, plain or gzip); replaces the config's log, and its truth "
+    p.add_argument("--log", help="CARMEN log (.clf, plain or gzip; a ROS bag given here is read as --bag); replaces the "
+                   "config's log, and its truth "
                    "unless --truth is given")
     p.add_argument("--bag", help="ROS bag instead of a log: .bag (ROS 1), .db3 / .mcap (ROS 2) or a rosbag2 folder; "
                    "its /map stands in for --map (see 'mcl bag info')")
@@ -90,6 +91,11 @@ def cmd_run(args) -> int:
 
     config_path = args.config
     overrides = []
+    if args.log and not args.bag:
+        from mcl.datasets.rosbag import is_bag
+
+        if is_bag(args.log):  # a bag given as the log: read as --bag
+            args.bag, args.log = args.log, None
     if config_path is None:
         # No config: the documented defaults of configs/default.yaml, with the user's data instead of the demo's.
         config_path = _project_default_config()

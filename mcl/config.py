@@ -473,6 +473,11 @@ def _cross_checks(cfg: Config) -> None:
         raise ConfigError(f"laser: expected one of {', '.join(LASER_KINDS)}, got {cfg.laser!r}")
     if cfg.log is not None and cfg.bag is not None:
         raise ConfigError("bag: give a CARMEN log (log) or a ROS bag (bag), not both")
+    if cfg.log is not None:
+        from mcl.datasets.rosbag import is_bag
+
+        if is_bag(cfg.log):
+            raise ConfigError(f"log: {cfg.log} is a ROS bag: give it as bag (--bag on the command line)")
     if not cfg.topics.cloud_z[0] <= cfg.topics.cloud_z[1]:
         raise ConfigError(f"topics.cloud_z: expected [min, max], got {list(cfg.topics.cloud_z)}")
     if cfg.topics.scan == "" or cfg.topics.odom == "":

@@ -252,10 +252,26 @@ def _coarse(world: World, stride: int) -> World:
                  world.room_id[::s, ::s], world.clearance)
 
 
-def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, leg_max=None):
+def _reversal_plan(rng, n_ticks, reversals):
+    """{tick: back-up distance (m), 0.5-3} for ``reversals`` manoeuvres spread over the run: one per equal share
+    of it, at a random tick in its share's middle half (``_drive``)."""
+    plan = {}
+    if not reversals:
+        return plan
+    share = (n_ticks - 1) / reversals
+    for i in range(reversals):
+        k = int(share * i + share * rng.uniform(0.25, 0.75)) + 1
+        plan[k] = float(rng.uniform(0.5, 3.0))
+    return plan
+
+
+def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, leg_max=None, reversals=None):
     """Truth poses (n_ticks, 3) at 10 Hz, the pre-teleport poses, start and kidnap poses.
 
     ``plan_stride`` > 1 plans on a coarse lattice (big maps); ``leg_max`` bounds each leg of the route.
+    ``reversals`` ({tick: metres}, ``_reversal_plan``): at each such tick the robot backs up that far along its
+    own track (the ticks it came by, replayed backwards: the heading it had there, moving tail first), then
+    drives forward over them again and goes on. A track it drove is free, so the manoeuvre needs no planning.
     """
     fine = world
     if plan_stride > 1:
@@ -279,7 +295,22 @@ def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, le
     start = robot.pose.copy()
     kidnap = None
     length = 0.0
+    replay = []  # poses of a reversal still to drive (backwards, then forwards again)
+    since = 0  # the first tick a reversal may retrace back to (after a kidnap: the new place only)
     for k in range(1, n_ticks):
+        if reversals and k in reversals and not replay:
+            back, j = 0.0, k - 1
+            while j > since and back < reversals[k]:
+                back += math.hypot(*(truth[j, :2] - truth[j - 1, :2]))
+                j -= 1
+            replay = [truth[i].copy() for i in range(k - 2, j - 1, -1)] + [truth[i].copy() for i in range(j + 1, k)]
+            if kidnap_tick is not None and k <= kidnap_tick < k + len(replay) + 10:
+                replay = []  # not across the kidnap (nor right before it)
+        if replay:
+            before = truth[k - 1, :2]
+            pre[k] = truth[k] = replay.pop(0)
+            length += math.hypot(*(truth[k, :2] - before))
+            continue
         for _ in range(per_tick):
             before = robot.pose[:2].copy()
             robot.step(_SIM_DT)
@@ -296,6 +327,7 @@ def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, le
             theta = float(rng.uniform(-math.pi, math.pi))
             robot = start_at(node, theta)
             truth[k] = robot.pose
+            since = k
             kidnap = {"t": k / _ODOM_RATE, "from": _pose_list(pre[k]), "to": _pose_list(truth[k])}
     return truth, pre, start, kidnap, length
 
@@ -337,8 +369,10 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift):
         r2 += 0.5 * yaw_drift * trans
         ox, oy, ot = odom[k - 1]
         odom[k] = (ox + tr * math.cos(ot + r1), oy + tr * math.sin(ot + r1), _wrap(ot + r1 + r2))
-        tv[k] = tr / dt
-        rv[k] = (r1 + r2) / dt
+        # the wheels' velocities: negative tv on a step backwards (rot1 ~ pi), and the heading change itself
+        # (rot1 + rot2 is it only up to 2 pi then)
+        tv[k] = (-tr if abs(rot1) > 0.5 * math.pi else tr) / dt
+        rv[k] = _wrap(r1 + r2) / dt
     return odom, tv, rv
 
 
@@ -475,7 +509,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              unmapped_furniture: int | None = None, landmarks: int = 0,
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
-             map_resolution: float | None = None) -> dict:
+             map_resolution: float | None = None, reversals: int = 0) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -505,6 +539,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     every ``depth_every``-th scan into ``depth/<t>.npz`` with ``depth/camera.yaml``; without it every output
     is byte-identical. ``map_resolution`` (m) writes the map at another cell size than the world's 0.05 m, as a
     mapping run at that resolution would have drawn it (``resample_occupancy``); the laser still sees the world.
+    ``reversals`` = R backs the robot up R times, spread over the run, 0.5-3 m along its own track each time, then
+    forward over it again (``_drive``): a robot that reverses out of a dead end or a docking station. Its odometry
+    reads rot1 ~ pi on those steps. R = 0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap.
     """
@@ -542,6 +579,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected an integer >= 1, got {depth_every!r}")
     _check(map_resolution is None or (math.isfinite(map_resolution) and 0.01 <= map_resolution <= 0.5),
            "map_resolution", f"expected 0.01..0.5 m, got {map_resolution}")
+    _check(isinstance(reversals, (int, np.integer)) and 0 <= reversals <= 1000, "reversals",
+           f"expected 0..1000, got {reversals!r}")
     n_ticks = int(round(duration * _ODOM_RATE)) + 1
     kidnap_tick = None
     if kidnap_at is not None:
@@ -551,8 +590,13 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     seeds = np.random.SeedSequence(int(seed)).spawn(4)
     rng_world, rng_drive, rng_odom, rng_laser = (np.random.default_rng(s) for s in seeds)
     world = generate(kind, rng_world)
+    plan = None
+    if reversals:
+        # An eighth child stream: the others are unchanged.
+        rng_rev = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(8)[7])
+        plan = _reversal_plan(rng_rev, n_ticks, int(reversals))
     truth, pre, start, kidnap, length = _drive(world, rng_drive, n_ticks, speed, turn_rate, kidnap_tick,
-                                               defaults["plan_stride"], defaults["leg_max"])
+                                               defaults["plan_stride"], defaults["leg_max"], plan)
     clear = _clear(truth[:, :2], world).min()
     if clear < robot_radius + world.resolution:
         raise RuntimeError(f"simulate: seed {seed}: the drive came {clear:.3f} m close to a wall (a bug)")
@@ -668,6 +712,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         "dynamic_obstacles": int(dynamic_obstacles),
         "unmapped_furniture": len(furniture),
     }
+    if reversals:
+        params["reversals"] = int(reversals)
     if lm_obs is not None:
         params["landmarks"] = {"count": int(lm_ids.size), "range_max": float(landmark_range),
                                "sigma_range": float(landmark_sigma[0]), "sigma_bearing": float(landmark_sigma[1]),
@@ -839,6 +885,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write the map with M metre cells (0.01-0.5) instead of the world's 0.05 m, as a "
                         "mapper at that resolution would (walls thicken on coarser maps); the laser still sees "
                         "the world")
+    parser.add_argument("--reversals", type=int, default=0, metavar="R",
+                        help="back the robot up R times over the run, 0.5-3 m along its own track each time "
+                        "(its odometry then reads steps backwards); default 0")
 
 
 def write_log_as_bag(outdir, fmt: str) -> Path:
@@ -862,7 +911,8 @@ def run_from_args(args: argparse.Namespace) -> int:
                  n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
                  dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                  landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
-                 depth_every=args.depth_every, map_resolution=args.map_resolution)
+                 depth_every=args.depth_every, map_resolution=args.map_resolution,
+                 reversals=args.reversals)
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
         write_log_as_bag(s["outdir"], fmt)

@@ -18,7 +18,7 @@ from mcl.config import load_config
 from mcl.datasets.bagwrite import BagOut, convert, write_scans
 from mcl.datasets.carmen import read_carmen
 from mcl.datasets.rosbag import bag_info, open_bag
-from mcl.errors import DataError
+from mcl.errors import ConfigError, DataError
 from mcl.maps import load_map
 from mcl.runner import run
 from mcl.simulate import simulate
@@ -310,6 +310,22 @@ def test_command_line_initial_pose_overrides_the_bags(world, scans, tmp_path, ca
     import json
 
     assert json.loads((out / "summary.json").read_text())["mode"] == "global"
+
+
+def test_a_bag_given_as_the_log_is_read_as_a_bag(world, scans, tmp_path, capsys):
+    # `mcl run --map M --log x.mcap` reads the bag (it said "x.mcap:1: not UTF-8 text"): the same trajectory as
+    # --bag. A config's `log:` naming a bag is one line that says to give it as bag.
+    bag = tmp_path / "b.mcap"
+    write_scans(bag, scans)
+    trajs = []
+    for flag in ("--bag", "--log"):
+        out = tmp_path / flag.strip("-")
+        assert main(["run", "--map", str(world / "map.yaml"), flag, str(bag), "--out", str(out), "--rerun", "off",
+                     "--particles", "300", "--no-progress"]) == 0
+        trajs.append((out / "trajectory.tum").read_bytes())
+    assert trajs[0] == trajs[1] and len(trajs[0]) > 1000
+    with pytest.raises(ConfigError, match=r"default.yaml: log: .*b\.mcap is a ROS bag: give it as bag"):
+        load_config(Path(__file__).resolve().parents[1] / "configs" / "default.yaml", [f"log={bag}"])
 
 
 # ----------------------------------------------------------------------------- convert, write-bag, info

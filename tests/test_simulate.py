@@ -192,16 +192,20 @@ def test_reversing_odometry_gets_the_noise_of_the_turn_it_made():
     # 3 % of it (the tolerance, 0.1, is far from both 1 rad and a wrong fold).
     a = (0.05, 0.05, 0.05, 0.02)
     truth = _arc_truth(5001, v=-0.4, w=0.15)
-    odom, _, _ = _odometry(truth, truth, np.random.default_rng(5), a, 1.0, 0.0)
+    odom, tv, rv = _odometry(truth, truth, np.random.default_rng(5), a, 1.0, 0.0)
     r1, tr, r2 = _odom_deltas(truth)
     assert np.all(np.abs(r1) > 3.0)  # every tick backwards
     n1, n2 = np.pi - np.abs(r1), np.pi - np.abs(r2)
     sd = np.sqrt(a[0] * (n1**2 + n2**2) + 2 * a[1] * tr**2)
     heading_err = _wrap(np.diff(odom[:, 2]) - np.diff(truth[:, 2]))
     assert (heading_err / sd).std() == pytest.approx(1.0, abs=0.1)
-    # and the path is driven backwards, as truth is: the odometry's displacement points behind its heading
-    _, ot, _ = _odom_deltas(odom)
+    # and the path is driven backwards, as truth is: the odometry's displacement points behind its heading,
+    # and the wheels' velocities say so (tv < 0; rv the heading change, not it plus 2 pi)
+    o1, ot, _ = _odom_deltas(odom)
     np.testing.assert_allclose(ot, tr, atol=0.05)
+    assert np.all(np.abs(o1) > np.pi / 2)
+    np.testing.assert_allclose(tv[1:], -ot / 0.1, rtol=1e-9)
+    np.testing.assert_allclose(rv[1:], _wrap(np.diff(odom[:, 2])) / 0.1, atol=1e-9)
 
 
 def test_odometry_systematic_drift_is_exact_without_noise():
@@ -237,6 +241,32 @@ def test_logged_odometry_error_per_scan_interval(sim):
     z = (dth_odom[straight] - dth_true[straight] - drift * d) / (math.sqrt(a2) * d)
     assert abs(z.mean()) < 0.35
     assert z.std() == pytest.approx(1.0, rel=0.3)
+
+
+def test_reversals_back_up_along_the_track_and_back(sim, tmp_path):
+    # reversals=3: three manoeuvres, each a run of ticks backwards (the displacement behind the heading) that
+    # retraces poses the robot held before, then the same poses forwards; reversals=0 is the default's bytes.
+    out, _ = sim
+    simulate(tmp_path / "r0", seed=4, duration=40.0, reversals=0)
+    for name in ("log.clf", "truth.tum", "map.pgm", "sim.yaml"):
+        assert (tmp_path / "r0" / name).read_bytes() == (out / name).read_bytes()
+    simulate(tmp_path / "r3", seed=4, duration=40.0, reversals=3)
+    _, p = read_tum(tmp_path / "r3" / "truth.tum")
+    d = np.diff(p[:2], axis=1)
+    moved = np.hypot(*d) > 1e-3
+    back = moved & (np.abs(_wrap(np.arctan2(d[1], d[0]) - p[2, :-1])) > np.pi / 2)
+    runs = np.flatnonzero(np.diff(back.astype(int)) == 1)  # starts of backward stretches
+    assert len(runs) + back[0] == 3
+    assert 0.5 * 3 <= np.hypot(*d[:, back]).sum() <= 3.0 * 3 + 0.1
+    for k in np.flatnonzero(back):  # every pose reached backwards is one the robot held earlier
+        assert np.min(np.abs(p[:, :k + 1] - p[:, k + 1:k + 2]).sum(axis=0)) < 1e-9
+    assert yaml.safe_load((tmp_path / "r3" / "sim.yaml").read_text())["reversals"] == 3
+    odom = read_carmen(tmp_path / "r3" / "log.clf").odometry  # the ODOM lines: t, x, y, theta, tv, rv
+    do = np.diff(odom[:, 1:3], axis=0)
+    o_back = np.abs(_wrap(np.arctan2(do[:, 1], do[:, 0]) - odom[:-1, 3])) > np.pi / 2
+    o_back &= np.hypot(*do.T) > 1e-3
+    assert o_back.sum() >= 2 * back.sum() - 3  # ODOM at 10 Hz, the reference at the scans' 5 Hz
+    np.testing.assert_array_equal(odom[1:, 4] < 0, o_back)  # tv < 0 exactly on the steps backwards
 
 
 def test_kidnapping_moves_truth_but_not_odometry(tmp_path):
