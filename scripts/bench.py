@@ -446,7 +446,7 @@ def bench_kernels(args) -> None:
                 rows = [("predict+map", None, predict)]
                 for b, e in beams.items():
                     ll = np.empty(n)
-                    rows.append((f"likelihood", b, lambda f=fields[b], e=e, ll=ll: f.log_likelihood(p, e, out=ll)))
+                    rows.append(("likelihood", b, lambda f=fields[b], e=e, ll=ll: f.log_likelihood(p, e, out=ll)))
                 w_skip = np.full(n, 1.0 / n)
                 centre = p.mean(axis=1)
                 for b, e in beams.items():  # beam skipping (default rule short): support + ray walks from the estimate

@@ -1,7 +1,6 @@
 """Line features (seed 003): split-and-merge, polar TLS fit, propagated P_alpha_r, frames."""
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np

@@ -1,6 +1,5 @@
 """Resampling schemes, log-weight normalisation and ESS."""
 
-import math
 
 import numpy as np
 import pytest

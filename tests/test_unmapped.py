@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mcl.config import PROJECT_ROOT, SensorConfig
+from mcl.config import PROJECT_ROOT
 from mcl.kernels.segments import small_segments
 from mcl.maps import OccupancyGrid
 from mcl.sensors import UnmappedObjects, beam_endpoints, beam_selection

@@ -48,7 +48,7 @@ class NoReturn:
 
     def describe(self) -> str:
         """e.g. 'no-return readings at 50.00 m and 51.14-51.15 m (13,213 of 155,841, 8.5 %)'."""
-        lo, hi = self.spikes[0], self.spikes[-1]
+        lo = self.spikes[0]
         if len(self.spikes) == 1:
             at = f"{lo:.2f} m"
         else:

@@ -8,7 +8,6 @@ map but the flag array allocated once.
 
 import math
 
-import numpy as np
 from numba import njit
 
 
