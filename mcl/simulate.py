@@ -340,8 +340,13 @@ def _pose_list(p):
 # Odometry and laser
 # --------------------------------------------------------------------------
 
-def _odometry(truth, pre, rng, alphas, scale, yaw_drift):
-    """Noisy odometry poses (n, 3) starting at (0, 0, 0), and measured tv, rv (n,)."""
+def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6):
+    """Noisy odometry poses (n, 3) starting at (0, 0, 0), and measured tv, rv (n,).
+
+    A step shorter than ``min_trans`` (m) is read as a turn on the spot (rot1 = 0): the simulator's robot turns on
+    the spot exactly (trans 0); a replayed SLAM path (scripts/radish_dataset.py) jitters by millimetres in any
+    direction, and the direction of such a step, taken for rot1, would give it a rotation's noise it never made
+    (it passes 0.01, the filter's and AMCL's rule)."""
     a1, a2, a3, a4 = alphas
     n = truth.shape[0]
     z = rng.standard_normal((n, 3))
@@ -353,7 +358,7 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift):
         x0, y0, t0 = truth[k - 1]
         x1, y1, t1 = pre[k]
         trans = math.hypot(x1 - x0, y1 - y0)
-        if trans < 1e-6:
+        if trans < min_trans:
             rot1 = 0.0
         else:
             rot1 = _wrap(math.atan2(y1 - y0, x1 - x0) - t0)

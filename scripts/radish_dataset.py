@@ -66,7 +66,7 @@ def simulated_odometry(truth: np.ndarray, rng: np.random.Generator, step: float 
         at.append(at[-1] + m)
     path = np.hstack(fine).T
     alphas = tuple(noise * a for a in (0.05, 0.05, 0.05, 0.02))
-    odom, _, _ = _odometry(path, path, rng, alphas, 1.0 + noise * 0.01, noise * 0.01)
+    odom, _, _ = _odometry(path, path, rng, alphas, 1.0 + noise * 0.01, noise * 0.01, min_trans=0.01)
     return _compose(truth[:, 0], odom[at].T)
 
 
