@@ -193,7 +193,7 @@ def _add_suite_options(p) -> None:
     g.add_argument("--out", help="output folder (default runs/suite-NAME); a rerun with the same folder resumes")
     g.add_argument("--cache", help="folder of the generated synthetic worlds (default OUT/worlds)")
     g.add_argument("--modes", metavar="M,...", help="only these modes: tracking,global,kidnapped")
-    g.add_argument("--only", metavar="NAME,...", help="only these datasets")
+    g.add_argument("--only", metavar="NAME,...", help="only these datasets (names, or patterns: 'corridor-*')")
     g.add_argument("--baseline", action=argparse.BooleanOptionalAction, default=True,
                    help="also run configs/baseline.yaml, the plain fixed-N filter (default on)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -37,6 +37,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import difflib
+import fnmatch
 import hashlib
 import inspect
 import io
@@ -359,11 +360,11 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: 
     datasets = suite.datasets
     if only:
         names = {d.name for d in datasets}
-        for n in only:
-            if n not in names:
+        for n in only:  # a name, or a shell pattern (corridor-*)
+            if not fnmatch.filter(names, n):
                 hint = difflib.get_close_matches(n, sorted(names), n=1)
                 raise ConfigError(f"--only: no dataset {n!r} in {suite.path}" + (f" (did you mean {hint[0]}?)" if hint else ""))
-        datasets = [d for d in datasets if d.name in only]
+        datasets = [d for d in datasets if any(fnmatch.fnmatchcase(d.name, n) for n in only)]
     jobs: list[Job] = []
     for d in datasets:
         for mode in (m for m in d.modes if modes is None or m in modes):

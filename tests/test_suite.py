@@ -17,6 +17,7 @@ from mcl.runner import run
 from mcl.simulate import simulate
 from mcl.suite import aggregate, load_suite, plan, score
 from mcl.evaluate import position_errors
+from mcl.errors import ConfigError
 from mcl.trajectory import read_tum
 
 CONFIGS = PROJECT_ROOT / "configs"
@@ -194,6 +195,11 @@ def test_plan_modes_only_and_configs(tmp_path):
     only = plan(suite, config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", modes=("global",),
                 only=["b"], baseline=False)
     assert [(j.dataset, j.mode, j.config) for j in only] == [("b", "global", "default")]
+    # a shell pattern picks every name it matches; one that matches none is an error, as a wrong name is
+    pat = plan(suite, config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", only=["[ab]"], baseline=False)
+    assert sorted({j.dataset for j in pat}) == ["a", "b"]
+    with pytest.raises(ConfigError, match=r"--only: no dataset 'c\*'"):
+        plan(suite, config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", only=["c*"], baseline=False)
 
 
 # ----------------------------------------------------------------------------- ROS bags in a suite
