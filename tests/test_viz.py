@@ -230,6 +230,31 @@ def test_time_timeline_from_log(run_every1):
     np.testing.assert_allclose(got, [10.0 + 0.5 * k for k in range(STEPS)])
 
 
+def test_buffered_rows_over_several_flushes_keep_every_step_and_time(tmp_path):
+    # The small per-step entities go out as columns every COLUMN_FLUSH_STEPS steps and at close: over 2.5 flushes,
+    # with the first steps' times not finite (no time yet), every step is there once, with its own time or none,
+    # and its values; the same as one rr.log per step wrote (the demo's recording was compared row by row).
+    path = tmp_path / "flushes.rrd"
+    n = int(2.5 * viz.COLUMN_FLUSH_STEPS)
+    with RerunLogger("save", path) as log:
+        for k in range(n):
+            log.log_step(k, math.nan if k < 3 else 10.0 + 0.5 * k, particles=np.zeros((3, 4)),
+                         weights=np.full(4, 0.25), estimate=np.array([0.1 * k, 0.0, 0.2]),
+                         cov=np.diag([0.04, 0.01, 0.001]), truth_pose=np.array([0.1 * k, 1.0, 0.0]),
+                         stats={"ess": float(k)})
+    r = rows(path, "/stats/ess", "step")
+    assert [t for t, _ in r] == list(range(n))
+    assert [c["Scalars:scalars"][0] for _, c in r] == [float(k) for k in range(n)]
+    timed = rows(path, "/stats/ess", "time")
+    np.testing.assert_allclose([t * 1e-9 for t, _ in timed], [10.0 + 0.5 * k for k in range(3, n)])
+    est = rows(path, "/world/estimate", "step")
+    assert [t for t, _ in est] == list(range(n))
+    np.testing.assert_allclose([c["Points2D:positions"][0][0] for _, c in est], [0.1 * k for k in range(n)], atol=1e-6)
+    assert all(len(c["LineStrips2D:strips"][0]) == 49 and c["Arrows2D:vectors"] for _, c in est)
+    trail = rows(path, "/world/truth/trail", "step")
+    assert [t for t, _ in trail] == list(range(1, n))  # a segment from the previous pose: none at step 0
+
+
 def test_estimate_trails_truth_and_blueprint(run_every1):
     path, _ = run_every1
     est = rows(path, "/world/estimate", "step")
