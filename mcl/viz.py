@@ -255,7 +255,15 @@ def _pool(a: np.ndarray, k: int, reduce, pad) -> np.ndarray:
         full = np.full((hp, wp), pad, dtype=a.dtype)
         full[:h, :w] = a
         a = full
-    return reduce(a.reshape(hp // k, k, wp // k, k), axis=(1, 3))
+    # the k x k strided views folded pairwise (the same values as reduce over the blocks' axes, which strides
+    # badly: 100 M cells, k = 2: 3 s -> 0.3 s)
+    pair = {np.any: np.logical_or, np.min: np.minimum, np.max: np.maximum}[reduce]
+    out = a[0::k, 0::k].copy()
+    for i in range(k):
+        for j in range(k):
+            if i or j:
+                pair(out, a[i::k, j::k], out=out)
+    return out
 
 
 def _log_grid_image(rec: Any, path: str, grid: Any, img: np.ndarray, mode: str, draw_order: float,
