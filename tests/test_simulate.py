@@ -269,6 +269,19 @@ def test_reversals_back_up_along_the_track_and_back(sim, tmp_path):
     np.testing.assert_array_equal(odom[1:, 4] < 0, o_back)  # tv < 0 exactly on the steps backwards
 
 
+def test_reversals_never_retrace_across_a_kidnap(tmp_path):
+    # With a kidnap and reversals, the reference still jumps once (at the kidnap, by more than 5 m), the odometry
+    # never, and the robot still backs up: no manoeuvre retraces the track from before the kidnap after it.
+    s = simulate(tmp_path, seed=2, duration=40.0, kidnap_at=20.0, reversals=6)
+    t, p = read_tum(tmp_path / "truth.tum")
+    jumps = np.hypot(np.diff(p[0]), np.diff(p[1]))
+    assert jumps.max() > 5.0 and np.sort(jumps)[-2] <= 0.2
+    assert t[int(np.argmax(jumps)) + 1] == pytest.approx(s["kidnap"]["t"])
+    o = read_carmen(tmp_path / "log.clf").odometry
+    assert np.hypot(np.diff(o[:, 1]), np.diff(o[:, 2])).max() < 0.1
+    assert (o[:, 4] < 0).sum() > 10  # steps backwards (tv < 0)
+
+
 def test_kidnapping_moves_truth_but_not_odometry(tmp_path):
     s = simulate(tmp_path, seed=2, duration=20.0, kidnap_at=10.0)
     assert s["kidnap"]["t"] == pytest.approx(10.0)
@@ -306,6 +319,8 @@ def test_short_range_and_robotlaser_geometry_via_cli_arguments(tmp_path, capsys)
     (dict(n_beams=1), "n_beams"),
     (dict(range_max=0.0), "range_max"),
     (dict(map_resolution=0.001), "map_resolution"),
+    (dict(reversals=-1), "reversals"),
+    (dict(reversals=2.5), "reversals"),
 ])
 def test_bad_options_raise_config_error(tmp_path, kw, key):
     with pytest.raises(ConfigError, match=key):
