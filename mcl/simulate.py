@@ -346,7 +346,7 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6):
     A step shorter than ``min_trans`` (m) is read as a turn on the spot (rot1 = 0): the simulator's robot turns on
     the spot exactly (trans 0); a replayed SLAM path (scripts/radish_dataset.py) jitters by millimetres in any
     direction, and the direction of such a step, taken for rot1, would give it a rotation's noise it never made
-    (it passes 0.01, the filter's and AMCL's rule)."""
+    (it passes ``mcl.motion.ROT1_MIN_TRANS``, 1 cm: the filter's and AMCL's rule)."""
     a1, a2, a3, a4 = alphas
     n = truth.shape[0]
     z = rng.standard_normal((n, 3))

@@ -40,6 +40,7 @@ from mcl.datasets.carmen import read_carmen  # noqa: E402
 from mcl.datasets.noreturn import detect_no_return  # noqa: E402
 from mcl.estimate import wrap_angle  # noqa: E402
 from mcl.maps import OccupancyGrid, save_map  # noqa: E402
+from mcl.motion import ROT1_MIN_TRANS  # noqa: E402
 from mcl.trajectory import atomic_write_text, write_tum  # noqa: E402
 
 
@@ -66,7 +67,7 @@ def simulated_odometry(truth: np.ndarray, rng: np.random.Generator, step: float 
         at.append(at[-1] + m)
     path = np.hstack(fine).T
     alphas = tuple(noise * a for a in (0.05, 0.05, 0.05, 0.02))
-    odom, _, _ = _odometry(path, path, rng, alphas, 1.0 + noise * 0.01, noise * 0.01, min_trans=0.01)
+    odom, _, _ = _odometry(path, path, rng, alphas, 1.0 + noise * 0.01, noise * 0.01, min_trans=ROT1_MIN_TRANS)
     return _compose(truth[:, 0], odom[at].T)
 
 
