@@ -87,6 +87,9 @@ class FilterConfig:
     recovery: bool | Literal["lost", "augmented", "auto"] = False
     recovery_fraction: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_local_std: tuple[float, float, float] = (0.5, 0.5, 0.3)  # lost: std x, y (m), theta (rad) around the estimate
+    # lost: lost updates before the spread around the estimate (and the tempered scan) while the lost scans look
+    # occluded; a scan that refutes the estimate (mcl.quality.ScanQuality.refutes) spreads at once. 0: always at once
+    recovery_wait: int = field(default=0, metadata=_rng(0, 10_000))
     recovery_global_after: int = field(default=10, metadata=_rng(0, 1_000_000))  # lost updates before uniform draws
     # ... or this many seconds of log time lost (after at least quality.lost_after lost updates), whichever comes
     # first: a log with a scan every 3 s (intel_lab) is otherwise lost for 30 s before the re-seed. 0: updates only
@@ -301,6 +304,9 @@ class QualityConfig:
     occluded_below: float = field(default=1.0, metadata=_rng(-2.0, 1.0))
     # an update is bad also when this share of its beams or more went through mapped walls (0: off)
     contradiction_above: float = field(default=0.0, metadata=_rng(0.0, 1.0))
+    # a lost scan that matches under this share (or goes through walls, contradiction_above) refutes the estimate:
+    # filter.recovery_wait does not wait for it (0: only through walls)
+    occlusion_match: float = field(default=0.0, metadata=_rng(0.0, 1.0))
     doubt_margin: float = field(default=0.25, metadata=_rng(0.0, 2.0))  # after a lost episode: bad also this far below
     # the score the track had before it (0: off)
     doubt_updates: int = field(default=50, metadata=_rng(1, 100_000))  # ... for this many updates after the episode

@@ -516,13 +516,13 @@ class ParticleFilter:
         fc = self.cfg.filter
         if self.search.tempering:
             return fc.search_exponent
-        if getattr(self.recovery, "lost_updates", 0):
+        if getattr(self.recovery, "spreading", False):
             return fc.lost_exponent
         return 1.0
 
     def _laser_searching(self) -> bool:
-        """A global search is under way or lost recovery spreads poses (the updates ``_laser_exponent`` tempers):
-        the likelihood field then scores with ``search_interior``'s field."""
+        """A global search is under way or lost recovery runs (it spreads poses, the updates ``_laser_exponent``
+        tempers, or waits to): the likelihood field then scores with ``search_interior``'s field."""
         return self.search.tempering or bool(getattr(self.recovery, "lost_updates", 0))
 
     def _oversample_fresh(self, observation, loglik: np.ndarray) -> np.ndarray:
@@ -683,7 +683,7 @@ class ParticleFilter:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
             self.faults.observe(info.lost, c if c == c else 0.0)
         if self.recovery is not None:
-            self.recovery.observe_lost(info.lost, info.cluster_weight, self._dt)
+            self.recovery.observe_lost(info.lost, info.cluster_weight, self._dt, self.quality.refutes(fit))
         if self.stall is not None:
             self.stall.observe(self._dt, self.last_estimate.mean, self.last_estimate.cov, self._odom)
             info.stalled = self.stall.stalled
