@@ -231,6 +231,9 @@ class RerunConfig:
     mode: Literal["save", "spawn", "serve", "off"] = "save"
     particles_max: int = field(default=1000, metadata=_rng(0, 10_000_000))  # particles logged per step
     particles_every: int = field(default=1, metadata=_rng(1, 1_000_000))  # log the cloud every k-th update
+    # MB: a log long enough to take the recording past this logs the cloud on fewer updates (mcl run raises
+    # particles_every and says so); the map layers come on top. 0: no budget
+    budget_mb: float = field(default=0.0, metadata=_rng(0.0))
     scan: bool = True  # log the scan endpoints seen from the estimate
     lines: bool = False  # extract line features from each scan (mcl.features, split-and-merge) and log them
 

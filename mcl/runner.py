@@ -499,13 +499,19 @@ def _run(
     viz = None
     rrd_path = out_dir / "recording.rrd"
     if cfg.rerun.mode != "off":
-        from mcl.viz import RerunLogger
+        from mcl.viz import RerunLogger, particles_every_within
 
+        beams = max((len(s.ranges) for s in scans[:1000]), default=0)  # the first scans tell the laser
+        every = particles_every_within(cfg.rerun.budget_mb, len(updates), beams, cfg.rerun.particles_max,
+                                       cfg.rerun.particles_every, cfg.rerun.scan)
+        if every > cfg.rerun.particles_every:
+            echo(f"mcl: recording: the particle cloud on one update in {every}, to keep {len(updates)} updates near "
+                 f"rerun.budget_mb ({cfg.rerun.budget_mb:g} MB)")
         viz = RerunLogger(
             cfg.rerun.mode,
             rrd_path,
             particles_max=cfg.rerun.particles_max,
-            particles_every=cfg.rerun.particles_every,
+            particles_every=every,
             log_scan=cfg.rerun.scan,
         )
         viz.log_map(grid)
@@ -726,6 +732,7 @@ def _run(
         "quality": _quality_summary(quality_rows),
         **({"planes": plane_sensor.summary()} if plane_sensor is not None else {}),
         "skipped_messages": dict(log.skipped),
+        "recording_particles_every": viz.particles_every if viz is not None else None,  # rerun.budget_mb may raise it
         "wall_time_s": {"load": load_time, "loop": loop_time, **stage_totals},
         "ms_per_update": {k: 1e3 * v / n_up for k, v in stage_totals.items()},
         "outputs": {

@@ -398,3 +398,57 @@ def test_skipped_beams_are_drawn_over_the_scan_and_cleared_when_none(tmp_path):
     assert r[0][1]["Points2D:positions"][2] == pytest.approx([3.0, 0.5])
     style = rows(path, "/world/scan/skipped", None)
     assert style and style[0][1]["Points2D:colors"] == [0xFAC828FF]
+
+
+def test_particles_every_within_a_budget():
+    from mcl.viz import particles_every_within
+
+    # an hour at 10 Hz, 181 beams, 1,000 particles: 119 MB of estimates and scans, 12.5 kB a cloud: one in 2 fits 500 MB
+    assert particles_every_within(500, 36_000, 181, 1000) == 2
+    assert particles_every_within(500, 3_600, 181, 1000) == 1  # six minutes: every cloud fits
+    assert particles_every_within(500, 72_000, 181, 1000) == 4  # 238 MB of the rest: 20,934 clouds fit
+    assert particles_every_within(0, 72_000, 181, 1000) == 1  # no budget
+    assert particles_every_within(500, 36_000, 181, 1000, particles_every=7) == 7  # never lowered
+    assert particles_every_within(500, 36_000, 181, 0) == 1  # no cloud logged
+    assert particles_every_within(1, 1_000, 181, 1000) == 1_000  # the rest alone is over: the first cloud only
+    # the bound holds exactly: the chosen stride fits, one less does not
+    for u in (1_000, 2_000, 3_001):  # 5.1-15.3 MB of estimates and scans
+        k = particles_every_within(20, u, 360, 2000)
+        per = viz.STEP_BYTES + viz.SCAN_POINT_BYTES * 360
+        assert per * u + viz.CLOUD_POINT_BYTES * 2000 * math.ceil(u / k) <= 20e6
+        assert per * u + viz.CLOUD_POINT_BYTES * 2000 * math.ceil(u / (k - 1)) > 20e6
+
+
+def test_a_run_past_its_recording_budget_logs_the_cloud_on_fewer_updates(tmp_path):
+    # A 20 s world (101 scans of 181 beams) with room for 26 clouds of 1,000 particles beyond the estimates and
+    # scans: the cloud on one update in 4, said on stderr and in summary.json. The clouds' bytes, measured against
+    # the same run with no cloud, are within the 12.5 bytes a point the stride is computed with (measured: 12.3).
+    from mcl.config import PROJECT_ROOT, load_config
+    from mcl.runner import run
+    from mcl.simulate import simulate
+
+    simulate(tmp_path / "w", kind="office", seed=3, duration=20.0)
+    per = viz.STEP_BYTES + viz.SCAN_POINT_BYTES * 181
+    budget = (per * 101 + viz.CLOUD_POINT_BYTES * 1000 * 26 + 500) / 1e6  # (+500 B: not at the edge of a float)
+    said: list[str] = []
+
+    def go(name, *sets):
+        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+            f"map={tmp_path / 'w' / 'map.yaml'}", f"log={tmp_path / 'w' / 'log.clf'}", "rerun.mode=save",
+            "rerun.particles_max=1000", *sets])
+        s = run(cfg, tmp_path / name, progress=False, echo=said.append)
+        return s, tmp_path / name / "recording.rrd"
+
+    s, rrd = go("budget", f"rerun.budget_mb={budget}")
+    assert s["recording_particles_every"] == 4
+    steps = [t for t, _ in rows(rrd, "/world/estimate", "step")]
+    assert len(steps) >= 100
+    assert [t for t, _ in rows(rrd, "/world/particles", "step")] == steps[::4]
+    assert any("one update in 4" in m and "rerun.budget_mb" in m for m in said), said
+    said.clear()
+    s0, rrd0 = go("none", "rerun.particles_max=0")
+    clouds = rrd.stat().st_size - rrd0.stat().st_size
+    logged = len(steps[::4]) * 1000
+    assert 0.8 * logged * viz.CLOUD_POINT_BYTES <= clouds <= logged * viz.CLOUD_POINT_BYTES, clouds
+    s1, _ = go("unbounded", "rerun.budget_mb=0")
+    assert s1["recording_particles_every"] == 1 and not any("budget" in m for m in said), said
