@@ -578,6 +578,30 @@ def aggregate(rows: list[dict]) -> list[dict]:
     return table
 
 
+def totals(rows: list[dict]) -> list[dict]:
+    """Over the whole suite, one row per mode x config: the runs kept (not lost) out of the runs, and the median
+    RMSE over them (the suite's verdict in one line, as the README's corpus table gives it)."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["mode"], r["config"]), []).append(r)
+    order = {m: i for i, m in enumerate(MODES)}
+    return [{"mode": mode, "config": cfg, "runs": len(rs), "kept": sum(not r["lost"] for r in rs),
+             "rmse_median": _median([r["rmse"] for r in rs])}
+            for (mode, cfg), rs in sorted(groups.items(), key=lambda kv: (order.get(kv[0][0], 99), kv[0][0]))]
+
+
+def format_totals(rows: list[dict]) -> str:
+    """``totals`` for the terminal: ``tracking  default  118/126 kept (94 %), RMSE median 0.071 m``."""
+    t = totals(rows)
+    if not t:
+        return ""
+    kept = [f"{r['kept']}/{r['runs']}" for r in t]
+    wm, wc, wk = (max(len(x) for x in col) for col in ([r["mode"] for r in t], [r["config"] for r in t], kept))
+    return "\n".join(
+        f"{r['mode']:<{wm}}  {r['config']:<{wc}}  {k:>{wk}} kept ({100 * r['kept'] / r['runs']:.0f} %), "
+        f"RMSE median {_f(r['rmse_median'], '.3f', '-')} m" for r, k in zip(t, kept))
+
+
 def _f(v, fmt: str, none: str = "never") -> str:
     return none if v is None else format(v, fmt)
 
@@ -623,11 +647,11 @@ def write_results(out: Path, suite: Suite, rows: list[dict], planned: int) -> li
               f"{WITHIN_S:g} s of the start / kidnap. conv: s until the error is below {SETTLE_M} m and stays "
               "below lost_m (kidnapped: from the kidnap).")
     doc = {"suite": suite.name, "suite_file": str(suite.path), "planned_runs": planned, "finished_runs": len(rows),
-           "settle_m": SETTLE_M, "within_s": WITHIN_S, "runs": rows, "table": table}
+           "settle_m": SETTLE_M, "within_s": WITHIN_S, "runs": rows, "table": table, "totals": totals(rows)}
     atomic_write_text(out / "results.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / "results.csv", _csv(rows, RUN_FIELDS))
     atomic_write_text(out / "table.csv", _csv(table, TABLE_FIELDS))
-    atomic_write_text(out / "table.txt", format_table(table) + "\n" + legend + "\n")
+    atomic_write_text(out / "table.txt", format_table(table) + "\n" + legend + "\n\n" + format_totals(rows) + "\n")
     return table
 
 
@@ -800,6 +824,8 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     if rows:
         plot_errors(out, rows)
     echo(format_table(table))
+    if rows:
+        echo(format_totals(rows))
     echo(f"lost: tracking max error > lost_m; global / kidnapped: not below {SETTLE_M} m within {WITHIN_S:g} s. "
          f"{len(rows)} of {len(job_list)} runs; results in {out} (results.json, results.csv, table.csv, plots/)")
     for e in errors:

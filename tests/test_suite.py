@@ -15,7 +15,7 @@ from mcl.cli import main
 from mcl.config import PROJECT_ROOT, load_config, to_dict
 from mcl.runner import run
 from mcl.simulate import simulate
-from mcl.suite import aggregate, load_suite, plan, score
+from mcl.suite import aggregate, format_totals, load_suite, plan, score, totals
 from mcl.evaluate import position_errors
 from mcl.errors import ConfigError
 from mcl.trajectory import read_tum
@@ -131,6 +131,24 @@ def test_table_median_and_worst():
     assert d["particles_median"] == 1000 and d["particles_worst"] == 1100
     b = table["baseline"]  # an even count: the median is the mean of the middle two
     assert b["rmse_median"] == pytest.approx(0.06) and b["rmse_worst"] == pytest.approx(0.07) and b["lost"] == 0
+
+
+def test_totals_count_the_kept_runs_per_mode_and_config_in_mode_order():
+    def row(ds, mode, config, lost, rmse):
+        return {"dataset": ds, "mode": mode, "config": config, "seed": 1, "rmse": rmse, "lost": lost}
+
+    rows = [row("a", "kidnapped", "default", True, 9.0), row("a", "tracking", "default", False, 0.1),
+            row("b", "tracking", "default", True, 2.0), row("b", "tracking", "default", False, 0.3),
+            row("a", "tracking", "baseline", True, 5.0), row("b", "kidnapped", "default", False, 0.2)]
+    t = totals(rows)
+    assert [(r["mode"], r["config"], r["kept"], r["runs"]) for r in t] == [
+        ("tracking", "default", 2, 3), ("tracking", "baseline", 0, 1), ("kidnapped", "default", 1, 2)]
+    assert t[0]["rmse_median"] == pytest.approx(0.3) and t[2]["rmse_median"] == pytest.approx(4.6)
+    assert format_totals(rows).splitlines() == [
+        "tracking   default   2/3 kept (67 %), RMSE median 0.300 m",
+        "tracking   baseline  0/1 kept (0 %), RMSE median 5.000 m",
+        "kidnapped  default   1/2 kept (50 %), RMSE median 4.600 m"]
+    assert format_totals([]) == ""
 
 
 # ----------------------------------------------------------------------------- bad suite files
@@ -319,6 +337,11 @@ def test_suite_end_to_end_rows_table_and_lost(evaluated):
     assert {r["particles"] for r in rows if r["config"] == "baseline"} == {5000.0}
     assert (out / "plots" / "good.png").stat().st_size > 1000
     assert (out / "table.txt").read_text().startswith("dataset")
+    # the suite's verdict per mode and config, after the table: the good world kept, the planted run lost
+    last = (out / "table.txt").read_text().splitlines()[-2:]
+    assert last[0].startswith("tracking  default   2/4 kept (50 %), RMSE median "), last
+    assert last[1].startswith("tracking  baseline  2/4 kept (50 %), RMSE median "), last
+    assert json.loads((out / "results.json").read_text())["totals"][0]["kept"] == 2
 
 
 def test_suite_rmse_matches_a_direct_run_and_eval(evaluated, tmp_path, capsys):
