@@ -37,6 +37,35 @@ __all__ = ["OccupancyGrid", "load_map", "save_map"]
 
 _MODES = ("trinary", "scale", "raw")
 
+# Memory a localization needs per map cell, at least: the distance field, the likelihood table and the map-rejection
+# mask, measured at 17-18 bytes a cell on 100 M and 400 M cell maps (tracking, --rerun off; a global start and a
+# recording take 23-26). A map whose cells need more than the machine has is refused before its image is decoded.
+BYTES_PER_CELL = 17
+
+
+def available_memory() -> int | None:
+    """Bytes this process can still take, RAM and swap (Linux /proc/meminfo: MemAvailable + SwapFree); None where
+    that is not known."""
+    try:
+        with open("/proc/meminfo") as f:
+            info = {k: v for k, v in (line.split(":", 1) for line in f if ":" in line)}
+        return 1024 * (int(info["MemAvailable"].split()[0]) + int(info.get("SwapFree", "0 kB").split()[0]))
+    except (OSError, KeyError, ValueError, IndexError):
+        return None
+
+
+def _check_memory(label: str, width: int, height: int) -> None:
+    """One line, before the image is decoded, when the map's tables cannot fit in this machine's memory."""
+    need, have = BYTES_PER_CELL * width * height, available_memory()
+    if have is not None and need > have:
+        def size(b: int) -> str:
+            return f"{b / 1e9:.1f} GB" if b >= 1e9 else f"{b / 1e6:.0f} MB"
+
+        raise DataError(f"{label}: {width} x {height} cells need about {size(need)} to localize in "
+                        f"({BYTES_PER_CELL} bytes a cell: distance field, likelihood table, rejection mask); "
+                        f"{size(have)} of memory is available: crop the map to where the robot drives, or "
+                        "coarsen its resolution")
+
 
 @dataclass(eq=False)
 class OccupancyGrid:
@@ -278,6 +307,7 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | No
     bomb_limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
     try:
         with Image.open(io.BytesIO(data)) as im:
+            _check_memory(label, *im.size)  # the header's size, before the pixels are decoded
             im.load()
             mode = im.mode
             if mode in ("1", "P", "PA", "CMYK", "YCbCr", "LAB", "HSV", "La", "RGBa", "RGBX"):

@@ -160,7 +160,8 @@ def _check_log(log, path) -> None:
     for s in log.scans:
         assert s.kind in LASER_KINDS
         assert 1 <= s.line <= len(file_lines)  # a real line of the file (0 or past the end is a reader bug)
-        assert file_lines[s.line - 1].split()[0].decode() == s.kind, (s.line, file_lines[s.line - 1][:40])  # its own line
+        # its own line, split as the reader splits it: UTF-8 text, any Unicode whitespace (U+0085 too)
+        assert file_lines[s.line - 1].decode("utf-8").split()[0] == s.kind, (s.line, file_lines[s.line - 1][:40])
         assert s.ranges.dtype == np.float64 and s.ranges.ndim == 1
         assert s.odom is not None and s.odom.shape == (3,) and np.isfinite(s.odom).all(), s
         assert np.isfinite(s.t)

@@ -435,3 +435,29 @@ def test_the_map_tables_are_built_without_numpys_huge_page_advice_and_the_advice
         assert multiarray._get_madvise_hugepage() is True
     finally:
         multiarray._set_madvise_hugepage(before)
+
+
+def test_a_map_too_big_for_the_memory_is_one_line_before_its_pixels_are_decoded(tmp_path, monkeypatch, capsys):
+    # BYTES_PER_CELL (17) per cell against the memory available: 1000 x 600 cells need 10.2 MB. With 8 MB
+    # available the map is refused, naming the file, the cells and what to do; with 12 MB it loads.
+    import mcl.maps as maps
+    from mcl.cli import main
+
+    y = write_map(tmp_path, np.full((600, 1000), 254, dtype=np.uint8), fmt="png")
+    monkeypatch.setattr(maps, "available_memory", lambda: 8_000_000)
+    from PIL import ImageFile
+
+    decoded = []
+    load = ImageFile.ImageFile.load
+    monkeypatch.setattr(ImageFile.ImageFile, "load", lambda im: decoded.append(1) or load(im))
+    with pytest.raises(DataError, match=r"m\.yaml: image: .*m\.png: 1000 x 600 cells need about 10 MB to localize "
+                                        r"in \(17 bytes a cell.*\); 8 MB of memory is available: crop the map"):
+        load_map(y)
+    assert not decoded  # refused from the header, before the pixels
+    assert main(["run", "--map", str(y), "--log", str(tmp_path / "none.clf"), "--rerun", "off"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "1000 x 600 cells need about 10 MB" in err[0], err
+    monkeypatch.setattr(maps, "available_memory", lambda: 12_000_000)
+    assert load_map(y).occupancy.shape == (600, 1000) and decoded
+    monkeypatch.setattr(maps, "available_memory", lambda: None)  # not known (not Linux): no check
+    assert load_map(y).occupancy.shape == (600, 1000)
