@@ -591,7 +591,7 @@ def totals(rows: list[dict]) -> list[dict]:
 
 
 def format_totals(rows: list[dict]) -> str:
-    """``totals`` for the terminal: ``tracking  default  118/126 kept (94 %), RMSE median 0.071 m``."""
+    """``totals`` for the terminal: ``tracking   default  118/126 kept (94 %), RMSE median 0.071 m``."""
     t = totals(rows)
     if not t:
         return ""
