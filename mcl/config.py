@@ -90,6 +90,9 @@ class FilterConfig:
     # lost: lost updates before the spread around the estimate (and the tempered scan) while the lost scans look
     # occluded; a scan that refutes the estimate (mcl.quality.ScanQuality.refutes) spreads at once. 0: always at once
     recovery_wait: int = field(default=0, metadata=_rng(0, 10_000))
+    # lost: the pose reported at the next update is the whole set's estimate or the older particles' alone,
+    # whichever fits the scan better (ParticleFilter._trial_estimate)
+    recovery_trial: bool = False
     recovery_global_after: int = field(default=10, metadata=_rng(0, 1_000_000))  # lost updates before uniform draws
     # ... or this many seconds of log time lost (after at least quality.lost_after lost updates), whichever comes
     # first: a log with a scan every 3 s (intel_lab) is otherwise lost for 30 s before the re-seed. 0: updates only
