@@ -670,6 +670,7 @@ class ParticleFilter:
         return shown.mean, shown.cov
 
     def _estimate_of(self, particles: np.ndarray, weights: np.ndarray) -> ClusterEstimate:
+        """The estimate (``filter.estimate``) of ``particles`` with normalised ``weights``."""
         fc = self.cfg.filter
         if fc.estimate == "cluster":
             return cluster_estimate(particles, weights, fc.cluster_size, fc.cluster_angle)
