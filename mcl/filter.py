@@ -490,12 +490,26 @@ class ParticleFilter:
         if candidates is None or not candidates.any():
             return observation, None
         pose = self._moved_estimate()
-        kept, skipped = self.unmapped.select(observation, candidates, pose)
+        kept, skipped = self.unmapped.select(observation, candidates, pose, self._unmapped_shifts())
         if skipped is None:
             return observation, None
         if self.quality.fit(pose, kept, self._laser_pose[:2]).score < self.cfg.sensor.unmapped_fit:
             return observation, None
         return kept, skipped
+
+    def _unmapped_shifts(self):
+        """``sensor.unmapped_spread``: offsets of the estimate along the cloud's major axis, out to that many of its
+        std each way (0.1 m steps at most), from which a skipped endpoint must be off the map too; None when 0."""
+        k = self.cfg.sensor.unmapped_spread
+        if k <= 0.0:
+            return None
+        vals, vecs = np.linalg.eigh(np.asarray(self.last_estimate.cov, dtype=np.float64)[:2, :2])
+        reach = k * math.sqrt(max(float(vals[1]), 0.0))
+        n = int(math.ceil(reach / 0.1))
+        if n == 0:
+            return None
+        t = np.linspace(-reach, reach, 2 * n + 1)
+        return t[:, None] * vecs[:, 1][None, :]
 
     def _laser_loglik(self, particles: np.ndarray, observation) -> np.ndarray:
         """(N,) log p(z | x, m) of the laser at ``particles``, tempered by ``_laser_exponent``; a NaN or +inf

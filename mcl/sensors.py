@@ -367,15 +367,28 @@ class UnmappedObjects:
                        float(self.cfg.unmapped_width), small)
         return small[beam_selection(r, a, max_range, self.cfg)]
 
-    def select(self, observation, candidates, pose):
+    def select(self, observation, candidates, pose, shifts=None):
         """(the observation to score, the skipped robot-frame endpoints (2, k) or None) for the robot-frame
-        endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``."""
+        endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``. With
+        ``shifts`` ((M, 2) world-frame offsets of ``pose``), an endpoint is skipped only if it is far from the map
+        seen from every shifted pose too."""
         if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
             return observation, None
         idx = np.flatnonzero(candidates)
+        pts = observation[:, idx]
         # NaN off the map: not far, kept
-        far = endpoint_distances(self.dist, self.origin, self.resolution, pose, observation[:, idx]) \
-            > self.cfg.unmapped_distance
+        far = endpoint_distances(self.dist, self.origin, self.resolution, pose, pts) > self.cfg.unmapped_distance
+        if shifts is not None and far.any():
+            # a run of neighbouring candidates is the map's if one shift puts all of it on mapped obstacles
+            run = np.concatenate(([0], np.cumsum(np.diff(idx) != 1)))
+            for dx, dy in shifts:
+                near = ~(endpoint_distances(self.dist, self.origin, self.resolution,
+                                            (pose[0] + dx, pose[1] + dy, pose[2]), pts) > self.cfg.unmapped_distance)
+                # runs whose every endpoint is near from this shift (bincount of the far ones per run is 0)
+                ok = np.bincount(run, weights=~near, minlength=run[-1] + 1) == 0
+                far &= ~ok[run]
+                if not far.any():
+                    break
         if not far.any() or 2 * np.count_nonzero(far) >= observation.shape[1]:
             return observation, None
         skip = np.zeros(observation.shape[1], dtype=bool)

@@ -192,3 +192,46 @@ def test_people_at_a_junction_no_longer_carry_the_track_off(people_corridor, tmp
     assert on["skipped_beams"] > 0
     off = track("false")
     assert off["eval"]["ate_max"] > 2.0, off["eval"]
+
+
+def _junction():
+    """A 31 m x 2 m corridor (walls at y = 0 and y = 2) with a side corridor x 15-17 m going up to y = 7."""
+    occ = np.zeros((160, 640), dtype=np.int8)  # origin (-0.5, -0.5), 0.05 m cells
+    occ[:10, :] = 100  # y < 0
+    occ[50:, :] = 100  # y >= 2 ...
+    occ[50:150, 310:350] = 0  # ... but for the side corridor
+    occ[150:, :] = 100
+    occ[:, :10] = occ[:, 630:] = 100
+    return OccupancyGrid.from_occupancy(occ, 0.05, (-0.5, -0.5))
+
+
+def test_a_lagging_clouds_view_through_an_opening_is_the_maps_and_a_person_is_still_skipped():
+    # corridor-02 and infinite_corridor: the cloud lags 0.5-1 m behind the robot along a corridor, and the side
+    # corridor's far wall, seen through the junction's opening, is a small segment that ends 0.6 m short of that
+    # wall as seen from the estimate: without the shifts it is skipped as an unmapped object, the very beams that
+    # would pull the cloud forward. Shifted along the corridor (sensor.unmapped_spread), one pose puts the whole
+    # segment on the wall: kept. A person in the corridor stays off the map from every shift: still skipped.
+    grid = _junction()
+    cfg = _cfg()
+    truth, lagging = (11.0, 1.0, 0.0), (10.4, 1.0, 0.0)
+    scan = _scan(truth, grid, people=[(13.0, 0.6, 0.2)])
+    obs = beam_endpoints(scan.ranges, scan.angles, None, cfg)
+    u = UnmappedObjects(grid, cfg)
+    cand = u.candidates(scan)
+
+    def skipped_world(shifts):
+        _, sk = u.select(obs, cand, lagging, shifts)
+        return np.array(lagging[:2])[:, None] + sk
+
+    on_person = lambda w: np.hypot(w[0] - 12.4, w[1] - 0.6) < 0.3  # noqa: E731 (seen 0.6 m back)
+    far_wall = lambda w: (w[1] > 2.0) & (np.abs(w[0] - 16.4) < 0.1)  # noqa: E731 (x = 17 seen 0.6 m back)
+    plain = skipped_world(None)
+    assert np.count_nonzero(far_wall(plain)) >= 3 and np.count_nonzero(on_person(plain)) >= 3
+    along = np.linspace(-0.6, 0.6, 13)[:, None] * np.array([[1.0, 0.0]])
+    shifted = skipped_world(along)
+    assert not far_wall(shifted).any()
+    assert np.count_nonzero(on_person(shifted)) == np.count_nonzero(on_person(plain))
+    assert shifted.shape[1] == np.count_nonzero(on_person(shifted))
+    # shifts across the corridor, or too short to reach the wall, leave the far wall skipped
+    assert np.count_nonzero(far_wall(skipped_world(along[:, ::-1]))) >= 3
+    assert np.count_nonzero(far_wall(skipped_world(along * 0.5))) >= 3
