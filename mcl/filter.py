@@ -498,18 +498,28 @@ class ParticleFilter:
         return kept, skipped
 
     def _unmapped_shifts(self):
-        """``sensor.unmapped_spread``: offsets of the estimate along the cloud's major axis, out to that many of its
-        std each way (0.1 m steps at most), from which a skipped endpoint must be off the map too; None when 0."""
+        """``sensor.unmapped_spread``: offsets of the estimate along the cloud's major axis, forward (the way this
+        update's odometry moves the robot) out to that many of its std (0.1 m steps, at most 16), from which a
+        skipped run of endpoints must be off the map too; None when 0 or not moving.
+
+        Forward only: a cloud behind the robot sees the walls ahead short of the map, and a shift forward puts
+        them back on it; a cloud ahead sees readings end inside walls, which are never skipped. People at a
+        junction's opening fit the walls beside it from a pose *behind* (corridor-05, infinite_corridor at 25 s):
+        a backward shift would keep their beams."""
         k = self.cfg.sensor.unmapped_spread
-        if k <= 0.0:
+        if k <= 0.0 or self._delta is None:
             return None
         vals, vecs = np.linalg.eigh(np.asarray(self.last_estimate.cov, dtype=np.float64)[:2, :2])
         reach = k * math.sqrt(max(float(vals[1]), 0.0))
-        n = int(math.ceil(reach / 0.1))
-        if n == 0:
+        n = min(int(math.ceil(reach / 0.1)), 16)  # suites' tracking clouds: std up to 0.68 m, 7 steps
+        th = float(self.last_estimate.mean[2])
+        dx, dy = float(self._delta[0]), float(self._delta[1])
+        step = np.array([math.cos(th) * dx - math.sin(th) * dy, math.sin(th) * dx + math.cos(th) * dy])
+        along = float(step @ vecs[:, 1])
+        if n == 0 or along == 0.0:
             return None
-        t = np.linspace(-reach, reach, 2 * n + 1)
-        return t[:, None] * vecs[:, 1][None, :]
+        t = np.linspace(reach / n, reach, n)
+        return t[:, None] * (math.copysign(1.0, along) * vecs[:, 1])[None, :]
 
     def _laser_loglik(self, particles: np.ndarray, observation) -> np.ndarray:
         """(N,) log p(z | x, m) of the laser at ``particles``, tempered by ``_laser_exponent``; a NaN or +inf

@@ -340,7 +340,12 @@ class UnmappedObjects:
       readings within ``unmapped_jump`` of each other, end to end narrower than ``unmapped_width``), and
     * seen from the estimate, its endpoint lies farther than ``unmapped_distance`` from every mapped obstacle
       (a mapped pillar or door post fits the map and is kept; an endpoint inside a wall says the pose is wrong
-      and is kept; so is an endpoint off the map).
+      and is kept; so is an endpoint off the map), and
+    * no one shift of the estimate along the cloud's major axis (``unmapped_spread`` std each way; the filter
+      passes the shifts) puts the whole run of neighbouring candidates on the map. A cloud lagging along a
+      corridor sees walls ahead short of the map: the side corridor's far wall through the junction's opening is
+      a small segment 0.5-1 m off the map from the estimate, and its beams correct the lag
+      (infinite_corridor, corridor-02). A person in the corridor stays off the map from every shift.
 
     Unlike beam skipping it asks nothing of the particles, and it leaves a corridor's far wall alone when the
     cloud lags behind the robot (a wide segment). If it would skip half the beams or more, the estimate is
@@ -370,8 +375,8 @@ class UnmappedObjects:
     def select(self, observation, candidates, pose, shifts=None):
         """(the observation to score, the skipped robot-frame endpoints (2, k) or None) for the robot-frame
         endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``. With
-        ``shifts`` ((M, 2) world-frame offsets of ``pose``), an endpoint is skipped only if it is far from the map
-        seen from every shifted pose too."""
+        ``shifts`` ((M, 2) world-frame offsets of ``pose``), a run of neighbouring candidates is kept whole when
+        one shifted pose puts every endpoint of it within ``unmapped_distance`` of the map."""
         if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
             return observation, None
         idx = np.flatnonzero(candidates)

@@ -235,3 +235,29 @@ def test_a_lagging_clouds_view_through_an_opening_is_the_maps_and_a_person_is_st
     # shifts across the corridor, or too short to reach the wall, leave the far wall skipped
     assert np.count_nonzero(far_wall(skipped_world(along[:, ::-1]))) >= 3
     assert np.count_nonzero(far_wall(skipped_world(along * 0.5))) >= 3
+
+
+DATA = PROJECT_ROOT.parent / "shared" / "data"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (DATA / "infinite_corridor").is_dir(), reason=f"real datasets not found at {DATA}")
+def test_infinite_corridor_seed_3_keeps_within_1_m_with_the_shifts(tmp_path):
+    # The real tracking bound (1 m) had one miss: infinite_corridor seed 3 lagged 1.18 m at 175 s, the
+    # beams that tell (small segments on walls ahead, 0.5-1 m short of them seen from the lagging cloud) skipped as
+    # unmapped objects. With the estimate shifted along the cloud's major axis (2 std) they are kept: 0.61 m.
+    # Seed 3 is fixed; the other seeds stay within 0.71 m either way (docs/measurements.md, "Eleventh session").
+    from mcl.config import load_config
+    from mcl.runner import run
+
+    def track(spread: str):
+        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+            f"map={DATA / 'infinite_corridor' / 'map.yaml'}", f"log={DATA / 'infinite_corridor' / 'log.clf'}",
+            f"truth={DATA / 'infinite_corridor' / 'truth.tum'}", "rerun.mode=off", "seed=3",
+            "filter.global_localization=false",
+            "filter.initial_pose=[1.00824, -0.016781, 0.005957]",
+            f"sensor.unmapped_spread={spread}"])
+        return run(cfg, tmp_path / spread, progress=False, echo=lambda m: None)
+
+    assert track("2.0")["eval"]["ate_max"] < 0.8
+    assert track("0")["eval"]["ate_max"] > 1.0
