@@ -222,7 +222,7 @@ class SensorConfig:
     unmapped_width: float = field(default=1.2, metadata=_rng(0.0, lo_open=True))  # m: segments narrower than this
     unmapped_jump: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m: a range step this big splits
     unmapped_distance: float = field(default=0.3, metadata=_rng(0.0))  # m: skipped only if this far from the map
-    unmapped_spread: float = field(default=0.0, metadata=_rng(0.0))  # ... plus this many of the cloud's x/y std
+    unmapped_spread: float = field(default=2.0, metadata=_rng(0.0))  # ... unless a forward shift (std) fits them
     unmapped_fit: float = field(default=0.9, metadata=_rng(-2.0, 1.0))  # the rest of the scan must fit this well
     unmapped_after: int = field(default=50, metadata=_rng(0, 1_000_000))  # updates since a lost call before any skip
     laser_pose: tuple[float, float, float] | None = None  # mounting pose in the robot frame; null -> from the log

@@ -341,11 +341,12 @@ class UnmappedObjects:
     * seen from the estimate, its endpoint lies farther than ``unmapped_distance`` from every mapped obstacle
       (a mapped pillar or door post fits the map and is kept; an endpoint inside a wall says the pose is wrong
       and is kept; so is an endpoint off the map), and
-    * no one shift of the estimate along the cloud's major axis (``unmapped_spread`` std each way; the filter
-      passes the shifts) puts the whole run of neighbouring candidates on the map. A cloud lagging along a
-      corridor sees walls ahead short of the map: the side corridor's far wall through the junction's opening is
-      a small segment 0.5-1 m off the map from the estimate, and its beams correct the lag
-      (infinite_corridor, corridor-02). A person in the corridor stays off the map from every shift.
+    * no one of the shifts the filter passes (``ParticleFilter._unmapped_shifts``: the estimate moved forward
+      along the cloud's major axis, out to ``unmapped_spread`` std) puts the whole run of neighbouring candidates
+      on the map. A cloud lagging along a corridor sees walls ahead short of the map: the side corridor's far
+      wall through the junction's opening is a small segment 0.5-1 m off the map from the estimate, and its
+      beams correct the lag (infinite_corridor, corridor-02). A person in the corridor stays off the map from
+      every shift.
 
     Unlike beam skipping it asks nothing of the particles, and it leaves a corridor's far wall alone when the
     cloud lags behind the robot (a wide segment). If it would skip half the beams or more, the estimate is
