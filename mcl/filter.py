@@ -490,7 +490,7 @@ class ParticleFilter:
         if candidates is None or not candidates.any():
             return observation, None
         pose = self._moved_estimate()
-        kept, skipped = self.unmapped.select(observation, candidates, pose, self._unmapped_shifts())
+        kept, skipped = self.unmapped.select(observation, candidates, pose, self._unmapped_shifts)
         if skipped is None:
             return observation, None
         if self.quality.fit(pose, kept, self._laser_pose[:2]).score < self.cfg.sensor.unmapped_fit:
@@ -509,17 +509,22 @@ class ParticleFilter:
         k = self.cfg.sensor.unmapped_spread
         if k <= 0.0 or self._delta is None:
             return None
-        vals, vecs = np.linalg.eigh(np.asarray(self.last_estimate.cov, dtype=np.float64)[:2, :2])
-        reach = k * math.sqrt(max(float(vals[1]), 0.0))
-        n = min(int(math.ceil(reach / 0.1)), 16)  # suites' tracking clouds: std up to 0.68 m, 7 steps
+        cov = self.last_estimate.cov
+        a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+        # the 2x2 covariance's larger eigenvalue and its unit eigenvector (closed form)
+        lam = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
+        ux, uy = (lam - c, b) if b != 0.0 else ((1.0, 0.0) if a >= c else (0.0, 1.0))
+        norm = math.hypot(ux, uy)
+        reach = k * math.sqrt(max(lam, 0.0))
+        n = min(int(math.ceil(reach / 0.1)), 16)  # suites' tracking clouds: std up to 0.68 m, 14 steps
         th = float(self.last_estimate.mean[2])
         dx, dy = float(self._delta[0]), float(self._delta[1])
-        step = np.array([math.cos(th) * dx - math.sin(th) * dy, math.sin(th) * dx + math.cos(th) * dy])
-        along = float(step @ vecs[:, 1])
-        if n == 0 or along == 0.0:
+        # the odometry step in the world frame, projected on the axis: which way is forward
+        along = (math.cos(th) * dx - math.sin(th) * dy) * ux + (math.sin(th) * dx + math.cos(th) * dy) * uy
+        if n == 0 or along == 0.0 or norm == 0.0:
             return None
-        t = np.linspace(reach / n, reach, n)
-        return t[:, None] * (math.copysign(1.0, along) * vecs[:, 1])[None, :]
+        u = math.copysign(1.0, along) / norm * np.array([ux, uy])
+        return np.linspace(reach / n, reach, n)[:, None] * u[None, :]
 
     def _laser_loglik(self, particles: np.ndarray, observation) -> np.ndarray:
         """(N,) log p(z | x, m) of the laser at ``particles``, tempered by ``_laser_exponent``; a NaN or +inf

@@ -376,25 +376,35 @@ class UnmappedObjects:
     def select(self, observation, candidates, pose, shifts=None):
         """(the observation to score, the skipped robot-frame endpoints (2, k) or None) for the robot-frame
         endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``. With
-        ``shifts`` ((M, 2) world-frame offsets of ``pose``), a run of neighbouring candidates is kept whole when
-        one shifted pose puts every endpoint of it within ``unmapped_distance`` of the map."""
+        ``shifts`` ((M, 2) world-frame offsets of ``pose``, or a function returning them or None, called only
+        when a candidate is far), a run of neighbouring candidates is kept whole when one shifted pose puts every
+        endpoint of it within ``unmapped_distance`` of the map."""
         if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
             return observation, None
         idx = np.flatnonzero(candidates)
         pts = observation[:, idx]
         # NaN off the map: not far, kept
         far = endpoint_distances(self.dist, self.origin, self.resolution, pose, pts) > self.cfg.unmapped_distance
+        if callable(shifts):
+            shifts = shifts() if far.any() else None  # computed only when a candidate is far from the map
         if shifts is not None and far.any():
-            # a run of neighbouring candidates is the map's if one shift puts all of it on mapped obstacles
+            # a run of neighbouring candidates is the map's if one shift puts all of it on mapped obstacles: the
+            # endpoints seen from every shifted pose at once, (M, k) lookups (off the map: not far)
+            c, s_ = math.cos(pose[2]), math.sin(pose[2])
+            wx = pose[0] + c * pts[0] - s_ * pts[1] - self.origin[0]
+            wy = pose[1] + s_ * pts[0] + c * pts[1] - self.origin[1]
+            fx = np.floor((wx[None, :] + shifts[:, :1]) / self.resolution)
+            fy = np.floor((wy[None, :] + shifts[:, 1:2]) / self.resolution)
+            h, w = self.dist.shape
+            inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
+            d = np.zeros(fx.shape, dtype=np.float32)
+            d[inside] = self.dist[fy[inside].astype(np.int64), fx[inside].astype(np.int64)]
+            off = (d > self.cfg.unmapped_distance).astype(np.float64)  # (M, k)
             run = np.concatenate(([0], np.cumsum(np.diff(idx) != 1)))
-            for dx, dy in shifts:
-                near = ~(endpoint_distances(self.dist, self.origin, self.resolution,
-                                            (pose[0] + dx, pose[1] + dy, pose[2]), pts) > self.cfg.unmapped_distance)
-                # runs whose every endpoint is near from this shift (bincount of the far ones per run is 0)
-                ok = np.bincount(run, weights=~near, minlength=run[-1] + 1) == 0
-                far &= ~ok[run]
-                if not far.any():
-                    break
+            members = np.zeros((run.size, run[-1] + 1))
+            members[np.arange(run.size), run] = 1.0
+            fits = ((off @ members) == 0.0).any(axis=0)  # (runs,): some shift puts the whole run on the map
+            far &= ~fits[run]
         if not far.any() or 2 * np.count_nonzero(far) >= observation.shape[1]:
             return observation, None
         skip = np.zeros(observation.shape[1], dtype=bool)
