@@ -63,17 +63,23 @@ from mcl.kernels.raycast import segments_blocked
 DOUBT_HISTORY = 50  # held updates whose median score is the track's score before a lost episode
 
 
-def endpoint_distances(dist, origin, resolution: float, pose, endpoints) -> np.ndarray:
+def endpoint_distances(dist, origin, resolution: float, pose, endpoints, shifts=None) -> np.ndarray:
     """(K,) float32: the distance field ``dist`` (m to the nearest mapped obstacle, row 0 at y = origin[1]) at the
-    robot-frame ``endpoints`` (2, K) seen from ``pose`` (x, y, theta); NaN off the map (no comparison holds)."""
+    robot-frame ``endpoints`` (2, K) seen from ``pose`` (x, y, theta); NaN off the map (no comparison holds).
+    With ``shifts`` ((M, 2) world-frame offsets of the pose), (M, K): the same seen from every shifted pose."""
     e = np.asarray(endpoints, dtype=np.float64)
     x, y, th = (float(v) for v in pose[:3])
     c, s = math.cos(th), math.sin(th)
-    fx = np.floor((x + c * e[0] - s * e[1] - origin[0]) / resolution)
-    fy = np.floor((y + s * e[0] + c * e[1] - origin[1]) / resolution)
+    wx = x + c * e[0] - s * e[1] - origin[0]
+    wy = y + s * e[0] + c * e[1] - origin[1]
+    if shifts is not None:
+        wx = wx[None, :] + shifts[:, :1]
+        wy = wy[None, :] + shifts[:, 1:2]
+    fx = np.floor(wx / resolution)
+    fy = np.floor(wy / resolution)
     h, w = dist.shape
     inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
-    out = np.full(e.shape[1], np.nan, dtype=np.float32)
+    out = np.full(fx.shape, np.nan, dtype=np.float32)
     out[inside] = dist[fy[inside].astype(np.int64), fx[inside].astype(np.int64)]
     return out
 

@@ -389,17 +389,9 @@ class UnmappedObjects:
             shifts = shifts() if far.any() else None  # computed only when a candidate is far from the map
         if shifts is not None and far.any():
             # a run of neighbouring candidates is the map's if one shift puts all of it on mapped obstacles: the
-            # endpoints seen from every shifted pose at once, (M, k) lookups (off the map: not far)
-            c, s_ = math.cos(pose[2]), math.sin(pose[2])
-            wx = pose[0] + c * pts[0] - s_ * pts[1] - self.origin[0]
-            wy = pose[1] + s_ * pts[0] + c * pts[1] - self.origin[1]
-            fx = np.floor((wx[None, :] + shifts[:, :1]) / self.resolution)
-            fy = np.floor((wy[None, :] + shifts[:, 1:2]) / self.resolution)
-            h, w = self.dist.shape
-            inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
-            d = np.zeros(fx.shape, dtype=np.float32)
-            d[inside] = self.dist[fy[inside].astype(np.int64), fx[inside].astype(np.int64)]
-            off = (d > self.cfg.unmapped_distance).astype(np.float64)  # (M, k)
+            # endpoints seen from every shifted pose at once, (M, k) lookups (NaN off the map: not far)
+            off = (endpoint_distances(self.dist, self.origin, self.resolution, pose, pts, shifts)
+                   > self.cfg.unmapped_distance).astype(np.float64)
             run = np.concatenate(([0], np.cumsum(np.diff(idx) != 1)))
             members = np.zeros((run.size, run[-1] + 1))
             members[np.arange(run.size), run] = 1.0
