@@ -490,40 +490,39 @@ class ParticleFilter:
         if candidates is None or not candidates.any():
             return observation, None
         pose = self._moved_estimate()
-        kept, skipped = self.unmapped.select(observation, candidates, pose, self._unmapped_shifts)
+        kept, skipped = self.unmapped.select(observation, candidates, pose, lambda: self._unmapped_shifts(pose))
         if skipped is None:
             return observation, None
         if self.quality.fit(pose, kept, self._laser_pose[:2]).score < self.cfg.sensor.unmapped_fit:
             return observation, None
         return kept, skipped
 
-    def _unmapped_shifts(self):
+    def _unmapped_shifts(self, moved):
         """``sensor.unmapped_spread``: offsets of the estimate along the cloud's major axis, forward (the way this
-        update's odometry moves the robot) out to that many of its std (0.1 m steps, at most 16), from which a
-        skipped run of endpoints must be off the map too; None when 0 or not moving.
+        update's odometry moves the robot: from the estimate to ``moved``, ``_moved_estimate``) out to that many
+        of its std (0.1 m steps, at most 16), from which a skipped run of endpoints must be off the map too; None
+        when 0 or not moving along the axis.
 
         Forward only: a cloud behind the robot sees the walls ahead short of the map, and a shift forward puts
         them back on it; a cloud ahead sees readings end inside walls, which are never skipped. People at a
         junction's opening fit the walls beside it from a pose *behind* (corridor-05, infinite_corridor at 25 s):
         a backward shift would keep their beams."""
         k = self.cfg.sensor.unmapped_spread
-        if k <= 0.0 or self._delta is None:
+        if k <= 0.0:
             return None
         cov = self.last_estimate.cov
         a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
         # the 2x2 covariance's larger eigenvalue and its unit eigenvector (closed form)
         lam = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
         ux, uy = (lam - c, b) if b != 0.0 else ((1.0, 0.0) if a >= c else (0.0, 1.0))
-        norm = math.hypot(ux, uy)
         reach = k * math.sqrt(max(lam, 0.0))
         n = min(int(math.ceil(reach / 0.1)), 16)  # suites' tracking clouds: std up to 0.68 m, 14 steps
-        th = float(self.last_estimate.mean[2])
-        dx, dy = float(self._delta[0]), float(self._delta[1])
+        mean = self.last_estimate.mean
         # the odometry step in the world frame, projected on the axis: which way is forward
-        along = (math.cos(th) * dx - math.sin(th) * dy) * ux + (math.sin(th) * dx + math.cos(th) * dy) * uy
-        if n == 0 or along == 0.0 or norm == 0.0:
+        along = (float(moved[0]) - float(mean[0])) * ux + (float(moved[1]) - float(mean[1])) * uy
+        if n == 0 or along == 0.0:
             return None
-        u = math.copysign(1.0, along) / norm * np.array([ux, uy])
+        u = math.copysign(1.0, along) / math.hypot(ux, uy) * np.array([ux, uy])
         return np.linspace(reach / n, reach, n)[:, None] * u[None, :]
 
     def _laser_loglik(self, particles: np.ndarray, observation) -> np.ndarray:

@@ -249,22 +249,22 @@ def test_the_shifts_go_forward_along_the_clouds_major_axis_out_to_unmapped_sprea
                                            "sensor.unmapped_spread=2.0"]), _corridor())
     pf.last_estimate = SimpleNamespace(mean=np.array([9.0, 1.0, 0.0]), cov=np.diag([0.09, 0.0009, 0.001]))
     pf._delta = np.array([0.2, 0.0, 0.0])
-    fwd = pf._unmapped_shifts()
+    fwd = pf._unmapped_shifts(pf._moved_estimate())
     assert fwd.shape == (6, 2)
     np.testing.assert_allclose(np.abs(fwd[:, 1]), 0.0, atol=1e-9)
     np.testing.assert_allclose(fwd[:, 0], np.linspace(0.1, 0.6, 6), atol=1e-9)
     pf._delta = np.array([-0.2, 0.0, 0.0])
-    np.testing.assert_allclose(pf._unmapped_shifts(), -fwd, atol=1e-9)
+    np.testing.assert_allclose(pf._unmapped_shifts(pf._moved_estimate()), -fwd, atol=1e-9)
     pf.last_estimate.mean[2] = math.pi  # facing -x, driving forward in its own frame: -x in the world
     pf._delta = np.array([0.2, 0.0, 0.0])
-    np.testing.assert_allclose(pf._unmapped_shifts(), -fwd, atol=1e-9)
+    np.testing.assert_allclose(pf._unmapped_shifts(pf._moved_estimate()), -fwd, atol=1e-9)
     pf.last_estimate.mean[2] = 0.0
     pf._delta = np.zeros(3)
-    assert pf._unmapped_shifts() is None
+    assert pf._unmapped_shifts(pf._moved_estimate()) is None
     off = ParticleFilter(load_config(None, ["filter.particles=100", "filter.kld=false",
                                             "sensor.unmapped_spread=0"]), _corridor())
     off.last_estimate, off._delta = pf.last_estimate, np.array([0.2, 0.0, 0.0])
-    assert off._unmapped_shifts() is None
+    assert off._unmapped_shifts(off._moved_estimate()) is None
 
 
 DATA = PROJECT_ROOT.parent / "shared" / "data"
