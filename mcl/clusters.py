@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mcl.estimate import estimate
+from mcl.estimate import estimate, moments
 from mcl.kernels.clusters import cell_keys, label_cells
 
 
@@ -87,10 +87,8 @@ def cluster_estimate(particles: np.ndarray, w: np.ndarray, cell_xy: float = 0.5,
         return ClusterEstimate(full_mean, full_cov, full_mean, full_cov, max(n_c, 1), 1.0)
     cw = np.bincount(labels, weights=w, minlength=n_c)
     best = int(np.argmax(cw))
-    sel = labels == best
     total = float(cw[best])
     if not total > 0.0:  # pragma: no cover - weights sum to 1, so some cluster has weight
         return ClusterEstimate(full_mean, full_cov, full_mean, full_cov, n_c, 0.0)
-    sub = np.ascontiguousarray(particles[:, sel])
-    mean, cov = estimate(sub, w[sel] / total)
+    mean, cov = moments(particles, w, labels, best, 1.0 / total)
     return ClusterEstimate(mean, cov, full_mean, full_cov, n_c, total)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from mcl.kernels.moments import pose_moments
+
 
 def wrap_angle(a):
     """Normalise angles to (-pi, pi]."""
@@ -34,6 +36,21 @@ def weighted_covariance(particles: np.ndarray, w: np.ndarray, mean: np.ndarray) 
 
 
 def estimate(particles: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(mean (3,), covariance (3, 3)) of the weighted particle set."""
-    mean = weighted_mean_pose(particles, w)
-    return mean, weighted_covariance(particles, w, mean)
+    """(mean (3,), covariance (3, 3)) of the weighted particle set (``weighted_mean_pose`` and
+    ``weighted_covariance`` in one numba pass, ``mcl.kernels.moments``)."""
+    return moments(particles, w)
+
+
+def moments(particles: np.ndarray, w: np.ndarray, labels: np.ndarray | None = None, which: int = -1,
+            scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(mean (3,), covariance (3, 3)) of the particles with weights ``scale * w``: all of them, or with ``labels``
+    those of cluster ``which`` only (its weights renormalised by ``scale``)."""
+    p = np.ascontiguousarray(particles, dtype=np.float64)
+    wt = np.ascontiguousarray(w, dtype=np.float64)
+    mean = np.empty(3)
+    cov = np.empty((3, 3))
+    pose_moments(p, wt, _NO_LABELS if labels is None else labels, int(which), float(scale), mean, cov)
+    return mean, cov
+
+
+_NO_LABELS = np.zeros(0, dtype=np.int64)

@@ -57,30 +57,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mcl.kernels.field import field_at
 from mcl.kernels.raycast import segments_blocked
 
 
 DOUBT_HISTORY = 50  # held updates whose median score is the track's score before a lost episode
 
 
-def endpoint_distances(dist, origin, resolution: float, pose, endpoints, shifts=None) -> np.ndarray:
+def endpoint_distances(dist, origin, resolution: float, pose, endpoints) -> np.ndarray:
     """(K,) float32: the distance field ``dist`` (m to the nearest mapped obstacle, row 0 at y = origin[1]) at the
     robot-frame ``endpoints`` (2, K) seen from ``pose`` (x, y, theta); NaN off the map (no comparison holds).
-    With ``shifts`` ((M, 2) world-frame offsets of the pose), (M, K): the same seen from every shifted pose."""
-    e = np.asarray(endpoints, dtype=np.float64)
-    x, y, th = (float(v) for v in pose[:3])
-    c, s = math.cos(th), math.sin(th)
-    wx = x + c * e[0] - s * e[1] - origin[0]
-    wy = y + s * e[0] + c * e[1] - origin[1]
-    if shifts is not None:
-        wx = wx[None, :] + shifts[:, :1]
-        wy = wy[None, :] + shifts[:, 1:2]
-    fx = np.floor(wx / resolution)
-    fy = np.floor(wy / resolution)
-    h, w = dist.shape
-    inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
-    out = np.full(fx.shape, np.nan, dtype=np.float32)
-    out[inside] = dist[fy[inside].astype(np.int64), fx[inside].astype(np.int64)]
+    One numba pass (``mcl.kernels.field.field_at``)."""
+    e = np.ascontiguousarray(endpoints, dtype=np.float64)
+    th = float(pose[2])
+    out = np.empty(e.shape[1], dtype=np.float32)
+    field_at(dist, float(origin[0]), float(origin[1]), float(resolution), float(pose[0]), float(pose[1]),
+             math.cos(th), math.sin(th), e, out)
     return out
 
 

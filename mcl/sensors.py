@@ -30,9 +30,9 @@ import numpy as np
 
 from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik, likelihood_field_loglik_serial
 from mcl.kernels.raycast import segments_blocked
+from mcl.kernels.field import far_runs
 from mcl.kernels.segments import small_segments
 from mcl.parallel import choose
-from mcl.quality import endpoint_distances
 
 
 def beam_selection(ranges, angles, max_range, cfg) -> np.ndarray:
@@ -382,26 +382,28 @@ class UnmappedObjects:
         if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
             return observation, None
         idx = np.flatnonzero(candidates)
-        pts = observation[:, idx]
-        # NaN off the map: not far, kept
-        far = endpoint_distances(self.dist, self.origin, self.resolution, pose, pts) > self.cfg.unmapped_distance
-        if callable(shifts):
-            shifts = shifts() if far.any() else None  # computed only when a candidate is far from the map
-        if shifts is not None and far.any():
-            # a run of neighbouring candidates is the map's if one shift puts all of it on mapped obstacles: the
-            # endpoints seen from every shifted pose at once, (M, k) lookups (NaN off the map: not far)
-            off = (endpoint_distances(self.dist, self.origin, self.resolution, pose, pts, shifts)
-                   > self.cfg.unmapped_distance).astype(np.float64)
-            run = np.concatenate(([0], np.cumsum(np.diff(idx) != 1)))
-            members = np.zeros((run.size, run[-1] + 1))
-            members[np.arange(run.size), run] = 1.0
-            fits = ((off @ members) == 0.0).any(axis=0)  # (runs,): some shift puts the whole run on the map
-            far &= ~fits[run]
-        if not far.any() or 2 * np.count_nonzero(far) >= observation.shape[1]:
+        e = np.ascontiguousarray(observation, dtype=np.float64)
+        far = np.empty(idx.size, dtype=np.bool_)
+        th = float(pose[2])
+        # far from the map seen from the pose (NaN off the map: not far); then, if some are, a run of neighbouring
+        # candidates is the map's when one shift puts all of it on mapped obstacles (mcl.kernels.field.far_runs)
+        args = (self.dist, self.origin[0], self.origin[1], self.resolution, float(pose[0]), float(pose[1]),
+                math.cos(th), math.sin(th), e, idx)
+        d = np.float32(self.cfg.unmapped_distance)  # compared in float32 with the float32 field, as numpy does
+        n_far = far_runs(*args, _NO_SHIFTS, _NO_SHIFTS, d, far)
+        if n_far and callable(shifts):
+            shifts = shifts()  # computed only when a candidate is far from the map
+        if n_far and shifts is not None:
+            sh = np.asarray(shifts, dtype=np.float64)
+            n_far = far_runs(*args, np.ascontiguousarray(sh[:, 0]), np.ascontiguousarray(sh[:, 1]), d, far)
+        if n_far == 0 or 2 * n_far >= observation.shape[1]:
             return observation, None
         skip = np.zeros(observation.shape[1], dtype=bool)
         skip[idx[far]] = True
         return np.ascontiguousarray(observation[:, ~skip]), observation[:, skip]
+
+
+_NO_SHIFTS = np.zeros(0)
 
 
 def make_sensor_model(grid, cfg):

@@ -158,3 +158,34 @@ def test_filter_estimate_uses_the_heaviest_cluster(tmp_path):
         np.testing.assert_allclose(info.full_mean[:2], [0.6 * 3 + 0.4 * 7, 0.6 * 3 + 0.4 * 6], atol=0.02)
         assert info.clusters == (2 if mode == "cluster" else 1)
         assert info.full_cov[0, 0] > 3.0
+
+
+def test_the_kernel_gives_the_books_mean_and_covariance_of_the_set_and_of_one_cluster():
+    # mcl.kernels.moments against weighted_mean_pose / weighted_covariance (numpy, the formulas as written): clouds
+    # anywhere on the circle, some straddling the +-pi seam, some spread over every heading; a cluster's
+    # moments are those of its particles with their weights renormalised. 1e-12: summation order only.
+    from mcl.estimate import moments, weighted_covariance, weighted_mean_pose
+
+    rng = np.random.default_rng(7)
+    for trial in range(200):
+        n = int(rng.integers(1, 4000))
+        centre = (rng.uniform(-50, 50), rng.uniform(-50, 50), rng.choice([math.pi, rng.uniform(-math.pi, math.pi)]))
+        p = _blob(rng, centre, (rng.uniform(0.01, 2.0), rng.uniform(0.01, 2.0),
+                                rng.choice([0.05, 0.5, 3.0])), n)
+        w = rng.random(n)
+        w /= w.sum()
+        mean, cov = estimate(p, w)
+        want = weighted_mean_pose(p, w)
+        np.testing.assert_allclose(mean, want, rtol=0, atol=1e-10, err_msg=f"trial {trial}")
+        np.testing.assert_allclose(cov, weighted_covariance(p, w, want), rtol=1e-9, atol=1e-12,
+                                   err_msg=f"trial {trial}")
+        labels = rng.integers(0, 3, n)
+        sel = labels == 1
+        if not sel.any():
+            continue
+        total = float(w[sel].sum())
+        mean1, cov1 = moments(p, w, labels, 1, 1.0 / total)
+        want1 = weighted_mean_pose(p[:, sel], w[sel] / total)
+        np.testing.assert_allclose(mean1, want1, rtol=0, atol=1e-10, err_msg=f"trial {trial}")
+        np.testing.assert_allclose(cov1, weighted_covariance(p[:, sel], w[sel] / total, want1), rtol=1e-9,
+                                   atol=1e-12, err_msg=f"trial {trial}")

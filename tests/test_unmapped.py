@@ -75,6 +75,62 @@ def test_small_segments_agrees_with_the_rule_written_out_on_random_scans():
         np.testing.assert_array_equal(out, _segments_reference(r, a, valid, 0.3, 1.2), err_msg=f"trial {trial}")
 
 
+def _select_reference(dist, origin, res, d_max, observation, candidates, pose, shifts):
+    """``UnmappedObjects.select``'s rule written out in numpy: the skip mask, or None when nothing is skipped."""
+    def field(px, py):
+        fx, fy = np.floor((px - origin[0]) / res), np.floor((py - origin[1]) / res)
+        inside = (fx >= 0) & (fx < dist.shape[1]) & (fy >= 0) & (fy < dist.shape[0])
+        out = np.full(px.shape, np.nan, dtype=np.float32)
+        out[inside] = dist[fy[inside].astype(int), fx[inside].astype(int)]
+        return out
+
+    idx = np.flatnonzero(candidates)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    e = observation[:, idx]
+    wx, wy = pose[0] + c * e[0] - s * e[1], pose[1] + s * e[0] + c * e[1]
+    far = field(wx, wy) > np.float32(d_max)
+    if shifts is not None and far.any():
+        runs = np.split(np.arange(idx.size), np.flatnonzero(np.diff(idx) != 1) + 1)
+        for run in runs:
+            if any(not (field(wx[run] + dx, wy[run] + dy) > np.float32(d_max)).any() for dx, dy in shifts):
+                far[run] = False
+    if not far.any() or 2 * np.count_nonzero(far) >= observation.shape[1]:
+        return None
+    skip = np.zeros(observation.shape[1], dtype=bool)
+    skip[idx[far]] = True
+    return skip
+
+
+def test_select_agrees_with_the_rule_written_out_on_random_scans_and_shifts():
+    # the kernel (mcl.kernels.field.far_runs) against the rule in numpy: fields holding many distances equal to
+    # unmapped_distance (0.3 = 6 cells of 0.05 m: compared in float32, as the float32 field is), runs of many
+    # lengths, shifts that clear some runs and not others, endpoints off the map
+    rng = np.random.default_rng(11)
+    dist = (np.sqrt(rng.integers(0, 120, (120, 160)).astype(float)) * 0.05).astype(np.float32)
+    dist[rng.random(dist.shape) < 0.2] = np.float32(0.3)
+    grid = SimpleNamespace(origin=(-1.0, -2.0), resolution=0.05)
+    unmapped = UnmappedObjects(grid, _cfg(), dist=dist)
+    skipped_some = cleared_some = 0
+    for trial in range(1500):
+        k = int(rng.integers(3, 90))
+        obs = np.vstack([rng.uniform(-3.0, 8.0, k), rng.uniform(-5.0, 5.0, k)])
+        cand = rng.random(k) < rng.uniform(0.05, 0.9)
+        pose = (rng.uniform(0.0, 7.0), rng.uniform(0.0, 4.0), rng.uniform(-3.2, 3.2))
+        shifts = None if trial % 3 == 0 else rng.normal(0.0, 0.5, (int(rng.integers(1, 17)), 2))
+        want = _select_reference(dist, grid.origin, 0.05, 0.3, obs, cand, pose, shifts)
+        kept, skipped = unmapped.select(obs, cand, pose, (lambda sh=shifts: sh) if trial % 2 else shifts)
+        if want is None:
+            assert skipped is None and kept is obs, trial
+        else:
+            np.testing.assert_array_equal(skipped, obs[:, want], err_msg=f"trial {trial}")
+            np.testing.assert_array_equal(kept, obs[:, ~want], err_msg=f"trial {trial}")
+            skipped_some += 1
+        unshifted = _select_reference(dist, grid.origin, 0.05, 0.3, obs, cand, pose, None)
+        if unshifted is not None and (want is None or np.count_nonzero(want) < np.count_nonzero(unshifted)):
+            cleared_some += 1  # a shift kept a run the pose alone would skip
+    assert skipped_some > 500 and cleared_some > 500  # both branches exercised (740 and 785 of 1500)
+
+
 def _corridor():
     """A 20 m x 2 m corridor (walls at y = 0 and y = 2) with a mapped pillar at x = 12; 0.05 m cells."""
     occ = np.zeros((60, 440), dtype=np.int8)
