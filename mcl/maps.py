@@ -151,8 +151,24 @@ class OccupancyGrid:
         return cache[key]
 
     def _surface_distance(self, extra_cells: float, tile: int = 128, margin: int = 16) -> np.ndarray:
-        occ = self.occupied
         d = np.array(self.distance, dtype=np.float32)
+        for y0, y1, x0, x1, mine, metres in self._surface_patches(extra_cells, tile, margin):
+            d[y0:y1, x0:x1][mine] = metres
+        return d
+
+    def surface_patches(self, tolerance: float = 0.0) -> list:
+        """Where ``surface_distance(tolerance)`` differs from ``distance``: (y0, y1, x0, x1, mine, metres) per tile,
+        ``mine`` the (y1 - y0, x1 - x0) bool mask of the tile's cells set to the float32 ``metres`` (cached per
+        tolerance). The likelihood field builds its ``interior: depth`` table from ``distance`` and these, without a
+        copy of the whole map (250 m map: 100 MB less to allocate and fill)."""
+        cache = self.__dict__.setdefault("_surface_patches_cache", {})
+        key = float(tolerance)
+        if key not in cache:
+            cache[key] = self._surface_patches(key / self.resolution)
+        return cache[key]
+
+    def _surface_patches(self, extra_cells: float, tile: int = 128, margin: int = 16) -> list:
+        occ = self.occupied
         # only cells whose four neighbours are occupied lie deeper than one cell; the depth transform runs on
         # the tiles holding such cells, each in a window ``margin`` cells wider (250 m map: 0.17 s, against 0.6 s
         # for scipy.ndimage's labelling and import and 1.2 s for a whole-map transform; the same values)
@@ -163,12 +179,13 @@ class OccupancyGrid:
         inner[:, :-1] &= occ[:, 1:]
         ys, xs = np.nonzero(inner)
         if ys.size == 0:
-            return d
+            return []
         h, w = occ.shape
         per_row = -(-w // tile)
         tiles = np.unique((ys // tile) * per_row + xs // tile)
         whole = None  # the whole map's transform, made once when windows do not do (see below)
         widened = 0
+        patches = []
         for t in tiles:
             ty, tx = divmod(int(t), per_row)
             y0, y1, x0, x1 = ty * tile, min(ty * tile + tile, h), tx * tile, min(tx * tile + tile, w)
@@ -186,9 +203,9 @@ class OccupancyGrid:
                 sq = whole[y0:y1, x0:x1]
             mine = occ[y0:y1, x0:x1] & np.isfinite(sq)  # inf: no non-occupied cell on the map, depth 0 as before
             depth = np.sqrt(sq[mine], dtype=np.float64)
-            block = d[y0:y1, x0:x1]
-            block[mine] = np.maximum(depth - 1.0 - extra_cells, 0.0) * self.resolution
-        return d
+            metres = (np.maximum(depth - 1.0 - extra_cells, 0.0) * self.resolution).astype(np.float32)
+            patches.append((y0, y1, x0, x1, mine, metres))
+        return patches
 
     # --- coordinates -----------------------------------------------------
     def world_to_cell(self, x, y) -> tuple[np.ndarray, np.ndarray]:
@@ -263,6 +280,14 @@ def _num(doc: dict, key: str, where: str) -> float:
 
 
 _MAX_WIDENED = 64  # window widenings in OccupancyGrid._surface_distance before the whole map's transform
+
+
+def byte_mask(mask) -> np.ndarray:
+    """``mask`` as a C-contiguous uint8 (H, W) array (0 / 1) for the kernels: a view of a contiguous bool array (no
+    copy: on a 250 m map 25 MB less to allocate and fill), else a converted copy."""
+    if isinstance(mask, np.ndarray) and mask.dtype == np.bool_ and mask.flags.c_contiguous:
+        return mask.view(np.uint8)
+    return np.ascontiguousarray(mask, dtype=np.uint8)
 
 
 def _edt_squared(mask: np.ndarray) -> np.ndarray:

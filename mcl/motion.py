@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcl.kernels import motion as _k
+from mcl.maps import byte_mask
 from mcl.noise import log_density, standard_noise
 
 ROT1_MIN_TRANS = 0.01  # m: below this translation rot1 is set to 0 (AMCL)
@@ -150,7 +151,7 @@ def allowed_mask(grid, robot_radius: float) -> np.ndarray:
     """
     free = np.asarray(grid.free, dtype=bool)
     dist = np.asarray(grid.distance)
-    return np.ascontiguousarray(free & (dist > float(robot_radius)), dtype=np.uint8)
+    return byte_mask(free & (dist > float(robot_radius)))
 
 
 class OdometryMotionModel:

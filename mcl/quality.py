@@ -59,6 +59,7 @@ import numpy as np
 
 from mcl.kernels.field import field_at
 from mcl.kernels.raycast import segments_blocked
+from mcl.maps import byte_mask
 
 
 DOUBT_HISTORY = 50  # held updates whose median score is the track's score before a lost episode
@@ -101,7 +102,7 @@ class ScanQuality:
     def __init__(self, grid, cfg):
         self.cfg = cfg
         self.dist = np.ascontiguousarray(grid.distance, dtype=np.float32)
-        self.blocked = np.ascontiguousarray(grid.occupied, dtype=np.uint8)
+        self.blocked = byte_mask(grid.occupied)
         self.origin = (float(grid.origin[0]), float(grid.origin[1]))
         self.resolution = float(grid.resolution)
         self.lost = False

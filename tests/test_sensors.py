@@ -272,3 +272,28 @@ def test_kernel_direct_call_writes_out():
     out = np.full(1, np.nan)
     likelihood_field_loglik(p, e, table, 0.0, 0.0, 1.0, -100.0, 0.5, out)
     assert out[0] == pytest.approx(0.5 * (0 + 1 + 8 - 100))
+
+
+def test_the_depth_table_from_the_surface_patches_is_the_one_from_the_whole_depth_field_to_the_bit():
+    # _make_table builds `interior: depth` from `distance` and rewrites only the tiles OccupancyGrid.surface_patches
+    # lists (no copy of the whole map); a grid without surface_patches takes surface_distance whole. Thick blocks
+    # over several 128-cell tiles, one wider than a tile, and a tolerance.
+    rng = np.random.default_rng(12)
+    occ = np.where(rng.random((300, 420)) < 0.05, 100, 0).astype(np.int8)
+    occ[10:60, 20:300] = 100
+    occ[150:170, 100:130] = 100
+    occ[200:290, 380:420] = 100
+    g = OccupancyGrid.from_occupancy(occ, 0.05, (-1.0, 2.0))
+
+    class Whole:  # the grid without surface_patches
+        def __getattr__(self, name):
+            if name == "surface_patches":
+                raise AttributeError(name)
+            return getattr(g, name)
+
+    for tol in (0.0, 0.05):
+        cfg = sensor_cfg(interior="depth", interior_tolerance=tol)
+        patched, whole = LikelihoodField(g, cfg).table, LikelihoodField(Whole(), cfg).table
+        assert len(g.surface_patches(tol)) >= 4
+        np.testing.assert_array_equal(patched, whole)
+        assert (patched != LikelihoodField(g, sensor_cfg(interior="zero")).table).any()
