@@ -149,12 +149,16 @@ class OccupancyGrid:
         cache = self.__dict__.setdefault("_surface_cache", {})
         key = float(tolerance)
         if key not in cache:
-            cache[key] = self._surface_distance(key / self.resolution)
+            cache[key] = self._patched(self.surface_patches(key))
         return cache[key]
 
     def _surface_distance(self, extra_cells: float, tile: int = 128, margin: int = 16) -> np.ndarray:
+        """``surface_distance`` with ``extra_cells`` of tolerance, made afresh with other tile sizes (tests)."""
+        return self._patched(self._surface_patches(extra_cells, tile, margin))
+
+    def _patched(self, patches: list) -> np.ndarray:
         d = np.array(self.distance, dtype=np.float32)
-        for y0, y1, x0, x1, mine, metres in self._surface_patches(extra_cells, tile, margin):
+        for y0, y1, x0, x1, mine, metres in patches:
             d[y0:y1, x0:x1][mine] = metres
         return d
 

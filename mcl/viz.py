@@ -120,6 +120,15 @@ _TIMESTAMP_THRESHOLD = 1e8  # seconds: larger t is taken as Unix time (1973 onwa
 # calls) are buffered and sent as columns every this many steps and at close: one rr.log costs 25-100 us of Python
 # per archetype, a column of 64 rows about as much as one. The particles and scans are logged as they come.
 COLUMN_FLUSH_STEPS = 64
+
+
+def _save_batcher() -> rr.ChunkBatcherConfig:
+    """The batcher of a saved recording: Rerun's default thresholds without its 200 ms tick (a week instead)."""
+    d = rr.ChunkBatcherConfig.DEFAULT()
+    return rr.ChunkBatcherConfig(flush_tick=7 * 24 * 3600.0, flush_num_bytes=d.flush_num_bytes,
+                                 flush_num_rows=d.flush_num_rows)
+
+
 _COLUMN_DTYPES = {"colors": np.uint8, "radii": np.float32, "draw_order": np.float32}
 
 
@@ -367,7 +376,6 @@ class RerunLogger:
         if mode == "off":
             return
 
-        rec = rr.RecordingStream(app_id, recording_id=recording_id or uuid.uuid4())
         if mode == "spawn" and not has_display():
             self.path = self.path or Path(f"{app_id}.rrd")
             print(
@@ -377,6 +385,10 @@ class RerunLogger:
             )
             mode = "save"
             self.mode = "save"
+        # a saved recording is cut into chunks by size alone (the default batcher also flushes every 200 ms, so the
+        # file's layout, and its size, followed the machine's load): the same run gives the same file
+        rec = rr.RecordingStream(app_id, recording_id=recording_id or uuid.uuid4(),
+                                 batcher_config=_save_batcher() if mode == "save" else None)
         if mode == "save":
             if self.path is None:
                 raise ValueError("rerun mode 'save' needs a path for the .rrd file")
