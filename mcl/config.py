@@ -93,6 +93,9 @@ class FilterConfig:
     # lost: the pose reported at the next update is the whole set's estimate or the older particles' alone,
     # whichever fits the scan better (ParticleFilter._trial_estimate)
     recovery_trial: bool = False
+    # lost: the spread around the estimate runs protected, as a re-seed does (reseed_odds > 0): the spread poses and
+    # the track resampled apart, the estimate kept on the track until the spread poses out-score it (ProtectedReseed)
+    recovery_protect: bool = False
     recovery_global_after: int = field(default=10, metadata=_rng(0, 1_000_000))  # lost updates before uniform draws
     # ... or this many seconds of log time lost (after at least quality.lost_after lost updates), whichever comes
     # first: a log with a scan every 3 s (intel_lab) is otherwise lost for 30 s before the re-seed. 0: updates only

@@ -644,20 +644,26 @@ class ParticleFilter:
                 self.logw -= log_norm
             return
         won = p.track_won  # the track (a tie after MAX_UPDATES updates goes to the track)
-        keep = track if won else ~track
-        idx = np.flatnonzero(keep)
-        logw = self.logw[idx]
-        self._set(np.ascontiguousarray(self.particles[:, idx]))
-        self.weights, log_norm = normalize_log_weights(logw)
-        self.logw = logw - log_norm
+        self._keep_side(track if won else ~track)
         info.ess = float(effective_sample_size(self.weights))
         info.particles = self.n
+        if p.local:  # a protected spread: the filter is still lost until a scan fits (its count goes on)
+            return
         if won:
             info.confirmed = True
             self.search.confirm()
             self.recovery.start_search()  # the lost count starts again
         else:
             info.switched = True
+
+    def _keep_side(self, keep: np.ndarray) -> None:
+        """End a protected re-seed or spread: the particles ``keep`` selects stay, with their weights
+        (normalised)."""
+        idx = np.flatnonzero(keep)
+        logw = self.logw[idx]
+        self._set(np.ascontiguousarray(self.particles[:, idx]))
+        self.weights, log_norm = normalize_log_weights(logw)
+        self.logw = logw - log_norm
 
     def _side_score(self, side: np.ndarray) -> float:
         """The quality score (mcl.quality: match - 2 contradiction) of this update's scan at the estimate of the
@@ -760,15 +766,23 @@ class ParticleFilter:
         new particles come from ``recovery_sampler`` instead of the weighted set.
         """
         fc = self.cfg.filter
-        if self.protected is not None:
-            self._resample_apart(info)
-            return
         challenged = self.challenge is not None and self.challenge.due
-        if self.recovery is not None and (getattr(self.recovery, "reseed_due", False) or challenged):
+        reseed_due = self.recovery is not None and (getattr(self.recovery, "reseed_due", False) or challenged)
+        if self.protected is not None:
+            if not (self.protected.local and reseed_due):
+                self._resample_apart(info)
+                return
+            # the global re-seed is due while a protected spread runs: the side that leads is the track it keeps
+            p = self.protected
+            self._keep_side(p.track if p.track_won else ~p.track)
+        if reseed_due:
             self._reseed(info)
             return
         p = self.recovery.inject_probability if self.recovery is not None else 0.0
         info.inject_p = p
+        if p > 0.0 and self._protects_spread():
+            self._spread_protected(info)
+            return
         # Recovery resamples whenever it injects: a lost filter whose particles all explain the scan
         # equally badly has a high ESS and would otherwise never inject.
         if info.ess >= fc.resample_threshold * self.n and p == 0.0:
@@ -854,6 +868,40 @@ class ParticleFilter:
         info.reseeded = True
         self.search.start()
         self.recovery.start_search()
+
+    def _protects_spread(self) -> bool:
+        """``filter.recovery_protect``: lost recovery spreads poses around the estimate only (no global share), no
+        global search is under way, and protected re-seeds are on (``reseed_odds``, ``recovery_reseed_keep``)."""
+        fc = self.cfg.filter
+        rec = self.recovery
+        return (fc.recovery_protect and fc.reseed_odds > 0.0 and 0.0 < fc.recovery_reseed_keep < 1.0
+                and self.last_estimate is not None and not self.search.tempering
+                and getattr(rec, "local_std", None) is not None and getattr(rec, "global_share", 1.0) == 0.0)
+
+    def _spread_protected(self, info: StepInfo) -> None:
+        """Lost recovery's spread around the estimate, protected (``filter.recovery_protect``): the track
+        (resampled, ``recovery_reseed_keep`` of the mass) and as many poses drawn around the estimate with the
+        policy's ``local_std`` (the rest of the mass), resampled apart and settled by log-odds as a protected
+        re-seed (``ProtectedReseed``; the estimate stays on the track meanwhile). Mixed into the set, a spread pose
+        that fits one scan takes the estimate at once: two seconds of scans that fit no pose near the track (a
+        laser tilted onto the ground, a crowd) handed the track to spread poses where they matched walls, in every
+        generated world tried; kept apart, they must out-score the track over scans that fit the map
+        there."""
+        fc = self.cfg.filter
+        keep = fc.recovery_reseed_keep
+        n = self.n
+        idx = resample(fc.resampling, self.logw, self.rng, n=n)
+        fresh = self._draw_around(self.last_estimate.mean, self.recovery.local_std, n)
+        self._set(np.ascontiguousarray(np.concatenate([self.particles[:, idx], fresh], axis=1)))
+        self.logw = np.concatenate([np.full(n, math.log(keep / n)), np.full(n, math.log((1.0 - keep) / n))])
+        self.weights = np.exp(self.logw)
+        self._injected = np.arange(2 * n) >= n
+        self.protected = ProtectedReseed(~self._injected, keep, fc.reseed_odds, self.cfg.quality.lost_below,
+                                         local=True)
+        if self.kld is not None:
+            self.kld.pending = None
+        info.resampled = True
+        info.injected = n
 
     def _injection_sampler(self):
         """sampler(n) -> (3, n): the poses recovery injects now. The policy's ``global_share`` of them (a binomial
