@@ -265,6 +265,28 @@ def _reversal_plan(rng, n_ticks, reversals):
     return plan
 
 
+GROUND_HIT_S = 2.0  # s: how long each of simulate(ground_hits=G)'s episodes lasts
+
+
+def _ground_hits(rng, t, angles, episodes: int, duration: float, exact) -> list[tuple[float, float]]:
+    """Tilt the laser onto the ground ``episodes`` times, one in each equal share of the run at a random place in
+    it, for ``GROUND_HIT_S``: in each scan of an episode (rows of ``exact``, the ranges cast at times ``t``) a flat
+    floor seen by a laser pitched and rolled a little is a straight line, here at a distance of 1.5-5 m with its
+    normal within 0.6 rad of straight ahead, new every scan (the robot rocks); a beam within 70 degrees of that
+    normal reads the line where it is nearer than what the beam saw. In place; returns the (start, end) windows."""
+    share = duration / episodes
+    windows = []
+    for i in range(episodes):
+        a = (i + rng.uniform(0.2, 0.8)) * share - GROUND_HIT_S / 2
+        windows.append((a, a + GROUND_HIT_S))
+        for k in np.flatnonzero((t >= a) & (t < a + GROUND_HIT_S)):
+            dist, normal = rng.uniform(1.5, 5.0), rng.uniform(-0.6, 0.6)
+            c = np.cos(angles - normal)
+            on = c > 0.35
+            exact[k, on] = np.minimum(exact[k, on], dist / c[on])
+    return windows
+
+
 def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, leg_max=None, reversals=None):
     """Truth poses (n_ticks, 3) at 10 Hz, the pre-teleport poses, start and kidnap poses.
 
@@ -514,7 +536,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              unmapped_furniture: int | None = None, landmarks: int = 0,
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
-             map_resolution: float | None = None, reversals: int = 0) -> dict:
+             map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -547,6 +569,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     ``reversals`` = R backs the robot up R times, spread over the run, 0.5-3 m along its own track each time, then
     forward over it again (``_drive``): a robot that reverses out of a dead end or a docking station. Its odometry
     reads rot1 ~ pi on those steps. R = 0 leaves every output byte-identical.
+    ``ground_hits`` = G tilts the laser onto the ground G times, spread over the run, for ``GROUND_HIT_S`` (2 s)
+    each (``_ground_hits``): a robot pitching on a ramp or braking hard, whose scan then reads a line of returns
+    1.5-5 m ahead that moves every scan and is on no map. G = 0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap.
     """
@@ -586,6 +611,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            "map_resolution", f"expected 0.01..0.5 m, got {map_resolution}")
     _check(isinstance(reversals, (int, np.integer)) and 0 <= reversals <= 1000, "reversals",
            f"expected 0..1000, got {reversals!r}")
+    _check(isinstance(ground_hits, (int, np.integer)) and 0 <= ground_hits <= duration / (2 * GROUND_HIT_S),
+           "ground_hits", f"expected 0..{int(duration / (2 * GROUND_HIT_S))} for {duration:g} s, got {ground_hits!r}")
     n_ticks = int(round(duration * _ODOM_RATE)) + 1
     kidnap_tick = None
     if kidnap_at is not None:
@@ -626,6 +653,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         rng_obst = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(5)[4])
         _cast_with_unmapped(world, truth[scan_ticks], t[scan_ticks], angles, range_max, int(dynamic_obstacles),
                             rng_obst, exact, furniture)
+    hit_windows = []
+    if ground_hits:
+        # A ninth child stream: the others are unchanged.
+        rng_ground = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(9)[8])
+        hit_windows = _ground_hits(rng_ground, t[scan_ticks], angles, int(ground_hits), float(duration), exact)
     noise = rng_laser.standard_normal(exact.shape)
     u = rng_laser.random(exact.shape)
     frac = rng_laser.uniform(0.05, 1.0, exact.shape)
@@ -719,6 +751,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     }
     if reversals:
         params["reversals"] = int(reversals)
+    if hit_windows:
+        params["ground_hits"] = [[round(a, 3), round(b, 3)] for a, b in hit_windows]
     if lm_obs is not None:
         params["landmarks"] = {"count": int(lm_ids.size), "range_max": float(landmark_range),
                                "sigma_range": float(landmark_sigma[0]), "sigma_bearing": float(landmark_sigma[1]),
@@ -893,6 +927,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reversals", type=int, default=0, metavar="R",
                         help="back the robot up R times over the run, 0.5-3 m along its own track each time "
                         "(its odometry then reads steps backwards); default 0")
+    parser.add_argument("--ground-hits", type=int, default=0, metavar="G",
+                        help="tilt the laser onto the ground G times over the run, 2 s each: a line of returns "
+                        "1.5-5 m ahead, moving every scan, on no map (a robot rocking on a ramp); default 0")
 
 
 def write_log_as_bag(outdir, fmt: str) -> Path:
@@ -917,7 +954,7 @@ def run_from_args(args: argparse.Namespace) -> int:
                  dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                  landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
                  depth_every=args.depth_every, map_resolution=args.map_resolution,
-                 reversals=args.reversals)
+                 reversals=args.reversals, ground_hits=args.ground_hits)
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
         write_log_as_bag(s["outdir"], fmt)

@@ -269,6 +269,40 @@ def test_reversals_back_up_along_the_track_and_back(sim, tmp_path):
     np.testing.assert_array_equal(odom[1:, 4] < 0, o_back)  # tv < 0 exactly on the steps backwards
 
 
+def test_ground_hits_put_a_line_of_returns_ahead_in_each_window_and_nothing_else_changes(sim, tmp_path):
+    # ground_hits=2: two 2 s windows, one in each half of the run (sim.yaml lists them); inside them every scan has a
+    # run of beams cut short onto one straight line 1.5-5 m ahead, a new line each scan; outside them the ranges are
+    # those of the same seed without ground hits, and ground_hits=0 is the default's bytes
+    out, _ = sim
+    simulate(tmp_path / "g0", seed=4, duration=40.0, ground_hits=0)
+    for name in ("log.clf", "truth.tum", "map.pgm", "sim.yaml"):
+        assert (tmp_path / "g0" / name).read_bytes() == (out / name).read_bytes()
+    simulate(tmp_path / "g2", seed=4, duration=40.0, ground_hits=2, range_sigma=0.0, p_short=0.0, p_max=0.0)
+    simulate(tmp_path / "c", seed=4, duration=40.0, range_sigma=0.0, p_short=0.0, p_max=0.0)
+    windows = yaml.safe_load((tmp_path / "g2" / "sim.yaml").read_text())["ground_hits"]
+    assert len(windows) == 2 and all(b - a == pytest.approx(2.0) for a, b in windows)
+    assert 0.0 <= windows[0][0] and windows[0][1] <= 20.0 + 1.0 and 20.0 - 1.0 <= windows[1][0] <= 40.0
+    hit, clean = read_carmen(tmp_path / "g2" / "log.clf").scans, read_carmen(tmp_path / "c" / "log.clf").scans
+    lines, inside_scans = [], 0
+    for a, b in zip(hit, clean):
+        if not any(w0 <= a.t < w1 for w0, w1 in windows):
+            np.testing.assert_array_equal(a.ranges, b.ranges)
+            continue
+        inside_scans += 1
+        assert (a.ranges <= b.ranges + 1e-6).all()  # the line only ever cuts a beam short
+        short = a.ranges < b.ranges - 1e-6
+        if short.sum() < 5:  # walls nearer than the line on (almost) every beam
+            continue
+        xy = np.vstack([a.ranges[short] * np.cos(a.angles[short]), a.ranges[short] * np.sin(a.angles[short])])
+        val, vec = np.linalg.eigh(np.cov(xy))
+        assert val[0] < 1e-5  # one straight line (residuals at the file's 1 mm rounding)
+        d = abs(float(vec[:, 0] @ xy.mean(axis=1)))  # its distance from the laser
+        assert 1.5 - 0.01 <= d <= 5.0 + 0.01
+        lines.append(round(d, 2))
+    assert inside_scans == 20 and len(lines) >= 10
+    assert len(set(lines)) > len(lines) // 2  # 5 scans a second, a new line each scan
+
+
 def test_reversals_never_retrace_across_a_kidnap(tmp_path):
     # With a kidnap and reversals, the reference still jumps once (at the kidnap, by more than 5 m), the odometry
     # never, and the robot still backs up: no manoeuvre retraces the track from before the kidnap after it.
