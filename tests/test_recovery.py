@@ -964,27 +964,29 @@ def test_two_seconds_of_ground_hits_do_not_hand_a_correct_track_to_spread_poses(
     # hall no pose fits those scans, so the filter is called lost and lost recovery spreads poses around the
     # estimate. Mixed into the set, spread poses where the line met a wall took the track (20.6 m off);
     # protected (filter.recovery_protect), they must out-score the track on scans that fit the map where they are,
-    # which these do not: 0.23 m (the baseline, with no recovery: 0.26 m).
+    # which these do not: 0.23 m (the baseline, with no recovery: 0.26 m). Off by default (configs/default.yaml:
+    # people in a depth camera's narrow view decide a protected spread in two scans, the test below).
     from mcl.simulate import simulate
 
     data = tmp_path_factory.mktemp("ground")
     sim = simulate(data, kind="hall", seed=0, duration=45.0, ground_hits=1)
-    s = _track(data, sim, tmp_path / "default")
+    s = _track(data, sim, tmp_path / "protected", "filter.recovery_protect=true")
     assert s["quality"]["lost_updates"] > 0, s["quality"]  # the scans do make it lost: the protection is what held
     assert s["eval"]["ate_max"] < 0.5, s["eval"]
-    before = _track(data, sim, tmp_path / "before", "filter.recovery_protect=false")
-    assert before["eval"]["ate_max"] > 2.0, before["eval"]
+    mixed = _track(data, sim, tmp_path / "mixed")  # the default
+    assert mixed["eval"]["ate_max"] > 2.0, mixed["eval"]
 
 
 def _spread_protected(track, scan_at):
     """A filter tracking ``track`` in the room with a wall (an estimate made), lost on a refuting scan cast at
-    ``scan_at`` and resampled: lost recovery's spread runs protected (filter.recovery_protect, the default)."""
+    ``scan_at`` and resampled, with lost recovery's spread protected (filter.recovery_protect)."""
     from mcl.config import load_config
     from mcl.filter import ParticleFilter, StepInfo
 
     grid = _room_with_a_wall()
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-        "rerun.mode=off", "filter.particles=4000", "filter.kld=false", "filter.recovery=lost"])
+        "rerun.mode=off", "filter.particles=4000", "filter.kld=false", "filter.recovery=lost",
+        "filter.recovery_protect=true"])
     pf = ParticleFilter(cfg, grid, rng=np.random.default_rng(5))
     pf.init_gaussian(track, [0.05, 0.05, 0.02])
     pf.estimate(StepInfo(particles=pf.n))
