@@ -852,12 +852,7 @@ class ParticleFilter:
         n = min(self.n, fc.particles) if keep > 0.0 else 0  # a set grown by an earlier re-seed is drawn back down
         idx = resample(fc.resampling, self.logw, self.rng, n=n)
         m = max(fc.particles - n, n)
-        fresh = self.recovery_sampler(m, self.rng, self._observation)
-        self._set(np.ascontiguousarray(np.concatenate([self.particles[:, idx], fresh], axis=1)))
-        self.logw = np.concatenate([np.full(n, math.log(keep / n) if n else 0.0),
-                                    np.full(m, math.log(1.0 - keep) - math.log(m) if keep < 1.0 else -np.inf)])
-        self.weights = np.exp(self.logw)
-        self._injected = np.arange(n + m) >= n
+        self._kept_and_fresh(self.particles[:, idx], self.recovery_sampler(m, self.rng, self._observation), keep)
         self._fresh = self._injected.copy()
         if keep > 0.0 and n > 0 and trusted and fc.reseed_odds > 0.0:
             self.protected = ProtectedReseed(~self._injected, keep, fc.reseed_odds, self.cfg.quality.lost_below)
@@ -868,6 +863,16 @@ class ParticleFilter:
         info.reseeded = True
         self.search.start()
         self.recovery.start_search()
+
+    def _kept_and_fresh(self, kept: np.ndarray, fresh: np.ndarray, keep: float) -> None:
+        """The set becomes ``kept`` (resampled particles, ``keep`` of the mass) then ``fresh`` (the rest), each
+        side's mass spread evenly over it; ``_injected`` marks the fresh ones (a re-seed, a protected spread)."""
+        n, m = kept.shape[1], fresh.shape[1]
+        self._set(np.ascontiguousarray(np.concatenate([kept, fresh], axis=1)))
+        self.logw = np.concatenate([np.full(n, math.log(keep / n) if n else 0.0),
+                                    np.full(m, math.log(1.0 - keep) - math.log(m) if keep < 1.0 else -np.inf)])
+        self.weights = np.exp(self.logw)
+        self._injected = np.arange(n + m) >= n
 
     def _protects_spread(self) -> bool:
         """``filter.recovery_protect``: lost recovery spreads poses around the estimate only (no global share), no
@@ -891,11 +896,8 @@ class ParticleFilter:
         keep = fc.recovery_reseed_keep
         n = self.n
         idx = resample(fc.resampling, self.logw, self.rng, n=n)
-        fresh = self._draw_around(self.last_estimate.mean, self.recovery.local_std, n)
-        self._set(np.ascontiguousarray(np.concatenate([self.particles[:, idx], fresh], axis=1)))
-        self.logw = np.concatenate([np.full(n, math.log(keep / n)), np.full(n, math.log((1.0 - keep) / n))])
-        self.weights = np.exp(self.logw)
-        self._injected = np.arange(2 * n) >= n
+        self._kept_and_fresh(self.particles[:, idx], self._draw_around(self.last_estimate.mean,
+                                                                       self.recovery.local_std, n), keep)
         self.protected = ProtectedReseed(~self._injected, keep, fc.reseed_odds, self.cfg.quality.lost_below,
                                          local=True)
         if self.kld is not None:

@@ -285,7 +285,7 @@ def _num(doc: dict, key: str, where: str) -> float:
     return finite_number(doc[key], f"{where}: {key}", DataError)
 
 
-_MAX_WIDENED = 64  # window widenings in OccupancyGrid._surface_distance before the whole map's transform
+_MAX_WIDENED = 64  # window widenings in OccupancyGrid._surface_patches before the whole map's transform
 
 
 def byte_mask(mask) -> np.ndarray:

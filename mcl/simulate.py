@@ -277,7 +277,8 @@ def _ground_hits(rng, t, angles, episodes: int, duration: float, exact) -> list[
     share = duration / episodes
     windows = []
     for i in range(episodes):
-        a = (i + rng.uniform(0.2, 0.8)) * share - GROUND_HIT_S / 2
+        # centred at a random place in the share, kept inside the run (only at the most episodes the check allows)
+        a = min(max((i + rng.uniform(0.2, 0.8)) * share - GROUND_HIT_S / 2, 0.0), duration - GROUND_HIT_S)
         windows.append((a, a + GROUND_HIT_S))
         for k in np.flatnonzero((t >= a) & (t < a + GROUND_HIT_S)):
             dist, normal = rng.uniform(1.5, 5.0), rng.uniform(-0.6, 0.6)

@@ -303,6 +303,17 @@ def test_ground_hits_put_a_line_of_returns_ahead_in_each_window_and_nothing_else
     assert len(set(lines)) > len(lines) // 2  # 5 scans a second, a new line each scan
 
 
+def test_ground_hit_windows_stay_inside_the_run_at_the_most_episodes_allowed(tmp_path):
+    # 20 s allow 5 episodes (one per 4 s share); each 2 s window lies within [0, 20] s (seed 1's first would start
+    # at -0.15 s unclamped), and 6 are refused in one line
+    simulate(tmp_path / "g", seed=1, duration=20.0, ground_hits=5)
+    windows = yaml.safe_load((tmp_path / "g" / "sim.yaml").read_text())["ground_hits"]
+    assert len(windows) == 5 and all(0.0 <= a and b <= 20.0 for a, b in windows)
+    with pytest.raises(Exception, match="ground_hits: expected 0..5 for 20 s, got 6"):
+        simulate(tmp_path / "h", seed=1, duration=20.0, ground_hits=6)
+    assert not (tmp_path / "h").exists()
+
+
 def test_reversals_never_retrace_across_a_kidnap(tmp_path):
     # With a kidnap and reversals, the reference still jumps once (at the kidnap, by more than 5 m), the odometry
     # never, and the robot still backs up: no manoeuvre retraces the track from before the kidnap after it.
