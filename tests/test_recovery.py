@@ -973,17 +973,16 @@ def test_two_seconds_of_ground_hits_do_not_hand_a_correct_track_to_spread_poses(
     # every scan; the campus log of suites/heldout-real-gentle.yaml has such a stretch at 203-205 s). In an open
     # hall no pose fits those scans, so the filter is called lost and lost recovery spreads poses around the
     # estimate. Mixed into the set, spread poses where the line met a wall took the track (20.6 m off);
-    # protected (filter.recovery_protect), they must out-score the track on scans that fit the map where they are,
-    # which these do not: 0.23 m (the baseline, with no recovery: 0.26 m). Off by default (configs/default.yaml:
-    # people in a depth camera's narrow view decide a protected spread in two scans, the test below).
+    # protected (filter.recovery_protect, the default), they must out-score the track on scans that fit the map where
+    # they are, which these do not: 0.23 m (the baseline, with no recovery: 0.26 m).
     from mcl.simulate import simulate
 
     data = tmp_path_factory.mktemp("ground")
     sim = simulate(data, kind="hall", seed=0, duration=45.0, ground_hits=1)
-    s = _track(data, sim, tmp_path / "protected", "filter.recovery_protect=true")
+    s = _track(data, sim, tmp_path / "protected")  # the default
     assert s["quality"]["lost_updates"] > 0, s["quality"]  # the scans do make it lost: the protection is what held
     assert s["eval"]["ate_max"] < 0.5, s["eval"]
-    mixed = _track(data, sim, tmp_path / "mixed")  # the default
+    mixed = _track(data, sim, tmp_path / "mixed", "filter.recovery_protect=false")
     assert mixed["eval"]["ate_max"] > 2.0, mixed["eval"]
 
 
