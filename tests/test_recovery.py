@@ -986,19 +986,28 @@ def test_two_seconds_of_ground_hits_do_not_hand_a_correct_track_to_spread_poses(
     assert mixed["eval"]["ate_max"] > 2.0, mixed["eval"]
 
 
-def _spread_protected(track, scan_at):
-    """A filter tracking ``track`` in the room with a wall (an estimate made), lost on a refuting scan cast at
-    ``scan_at`` and resampled, with lost recovery's spread protected (filter.recovery_protect)."""
+def _tracking_protected(track):
+    """A filter tracking ``track`` in the room with a wall (an estimate made), with lost recovery's spread
+    protected (filter.recovery_protect)."""
     from mcl.config import load_config
     from mcl.filter import ParticleFilter, StepInfo
 
-    grid = _room_with_a_wall()
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
         "rerun.mode=off", "filter.particles=4000", "filter.kld=false", "filter.recovery=lost",
         "filter.recovery_protect=true"])
-    pf = ParticleFilter(cfg, grid, rng=np.random.default_rng(5))
+    pf = ParticleFilter(cfg, _room_with_a_wall(), rng=np.random.default_rng(5))
     pf.init_gaussian(track, [0.05, 0.05, 0.02])
     pf.estimate(StepInfo(particles=pf.n))
+    return pf
+
+
+def _spread_protected(track, scan_at):
+    """``_tracking_protected``, lost on a refuting scan cast at ``scan_at`` and resampled: lost recovery's spread
+    starts."""
+    from mcl.filter import StepInfo
+
+    pf = _tracking_protected(track)
+    grid = pf.grid
     pf.recovery.observe_lost(True, refuted=True)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
@@ -1037,6 +1046,25 @@ def test_a_protected_spread_that_found_the_slipped_robot_takes_the_estimate_with
         if k == 0:
             assert pf.protected.odds == 3.0  # one scan: capped, undecided
     assert errors[0] > 0.6 and max(errors[1:]) < 0.15, errors  # the track's estimate for one scan, then the robot's
+    # the lost belief held through the update the spread won in, but its scan fits the new track: no new spread
+    # started there (one would have sat on the same pose, no scan counting for either side, for 25 updates)
+    assert pf.protected is None and pf.n == 4000
+
+
+def test_no_spread_starts_on_a_scan_that_fits_the_track_while_the_lost_belief_holds():
+    # After a spread won, the lost belief holds for a few updates while the new track fits. A spread started then
+    # sat on the track's own pose, where no scan counts for either side (ProtectedReseed.weigh: a scan that fits
+    # the track as tracked is no evidence for a spread), and doubled the set for nothing
+    truth = np.array(TRUE_POSE)
+    for scan_at, spreads in ((truth, False), (truth + [0.8, 0.0, 0.0], True)):
+        pf = _tracking_protected(truth)
+        pf.quality.reset(lost=True)  # lost, and lost recovery past its wait
+        for _ in range(pf.cfg.filter.recovery_wait + 1):
+            pf.recovery.observe_lost(True)
+        info = pf.step(None, pf.prepare(_cast_scan(pf.grid, scan_at), np.zeros(3)))
+        assert pf.quality.lost and pf.recovery.spreading, scan_at  # the belief holds either way
+        assert (pf.protected is not None) == spreads and pf.n == (8000 if spreads else 4000), scan_at
+        assert (info.injected > 0) == spreads, scan_at
 
 
 def test_a_global_reseed_due_during_a_protected_spread_keeps_the_leading_side_as_its_track():
