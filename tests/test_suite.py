@@ -113,10 +113,11 @@ def test_suite_lost_m_is_every_datasets_default(tmp_path):
     assert synthetic["lost_m"] == 0.5  # issue 8's bar for the generated worlds' tracking runs
 
 
-@pytest.mark.parametrize("name, worlds", [("synthetic", 43), ("heldout", 42), ("heldout2", 26), ("smoke", None)])
+@pytest.mark.parametrize("name, worlds", [("synthetic", 43), ("heldout", 42), ("heldout2", 26), ("heldout3", 12),
+                                         ("ground-hits", 15), ("smoke", None)])
 def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(name, worlds):
     # load_suite checks every key and every simulate keyword (a typo stops `mcl eval` before any run); a world seed
-    # used twice in a suite would count one world twice, and across the three corpora it would leak a world the
+    # used twice in a suite would count one world twice, and across the corpora it would leak a world the
     # defaults were chosen on into a held-out suite
     suite = load_suite(PROJECT_ROOT / "suites" / f"{name}.yaml")
     names = [d.name for d in suite.datasets]
@@ -127,7 +128,8 @@ def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(nam
     seeds = {(s.get("kind", "office"), s["seed"]) for s in sims}
     assert len(seeds) == len(sims)
     if name.startswith("heldout"):
-        for other in {"heldout": ["synthetic"], "heldout2": ["synthetic", "heldout"]}[name]:
+        for other in {"heldout": ["synthetic"], "heldout2": ["synthetic", "heldout"],
+                      "heldout3": ["synthetic", "heldout", "heldout2", "ground-hits"]}[name]:
             taken = {(d.simulate.get("kind", "office"), d.simulate["seed"])
                      for d in load_suite(PROJECT_ROOT / "suites" / f"{other}.yaml").datasets}
             assert not taken & seeds, other
