@@ -1,0 +1,53 @@
+"""scripts/degrade_laser.py: a suite's logs with a narrower, noisier laser, read back through mcl's own reader."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import yaml
+
+from mcl.config import PROJECT_ROOT
+from mcl.datasets.carmen import read_carmen
+from mcl.simulate import simulate
+
+sys.path.insert(0, str(PROJECT_ROOT / "scripts"))
+from degrade_laser import main  # noqa: E402
+
+
+def test_the_degraded_log_keeps_the_central_field_of_view_and_the_no_returns_and_nothing_else(tmp_path):
+    world = tmp_path / "world"
+    simulate(world, seed=5, duration=8, n_beams=181)  # a FLASER log of 181 beams over 180 degrees
+    lines = (world / "log.clf").read_text().splitlines()
+    k = next(i for i, s in enumerate(lines) if s.startswith("FLASER"))
+    p = lines[k].split()
+    p[2 + 90] = "50.00"  # the middle beam: a no-return reading, as aces logs them
+    lines[k] = " ".join(p)
+    (world / "log.clf").write_text("\n".join(lines) + "\n")
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
+        "name": "w", "root": "world", "modes": ["tracking"],
+        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+    out = tmp_path / "out"
+    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "90", "--sigma", "0.05",
+                 "--drop", "0.2"]) == 0
+
+    suite = yaml.safe_load((out / "suite.yaml").read_text())
+    assert suite["root"] == str(out.resolve()) and suite["datasets"][0]["log"] == "w/log.clf"
+    assert (out / "w" / "map.yaml").is_symlink() and (out / "w" / "truth.tum").is_symlink()
+    before, after = read_carmen(world / "log.clf"), read_carmen(out / "w" / "log.clf")
+    assert len(after.scans) == len(before.scans) > 30
+    r0 = np.array([s.ranges for s in before.scans])
+    r1 = np.array([s.ranges for s in after.scans])
+    angle = np.degrees(before.scans[0].angle_min + before.scans[0].angle_increment * np.arange(r0.shape[1]))
+    inside = np.abs(angle) <= 45.0 + 1e-6
+    assert np.all(r1[:, ~inside] == 0.0)  # outside the 90 degrees: no reading at all
+    assert r1[0, 90] == 50.0  # the no-return reading is left as it is
+    kept = r1[:, inside] > 0.0
+    # 20 % dropped of 91 x scans readings: the share within 0.17-0.23 (more than 5 std of a binomial share)
+    assert 0.77 < kept.mean() < 0.83
+    diff = (r1[:, inside] - r0[:, inside])[kept & (r0[:, inside] < 49.9)]
+    # N(0, 0.05) noise rounded to 1 cm: the std of thousands of differences within 10 %, the mean within 0.005 m
+    assert 0.045 < diff.std() < 0.055 and abs(diff.mean()) < 0.005
+    # the rest of the log is the original's: the odometry and each scan's time and pose
+    assert np.array_equal(after.odometry, before.odometry)
+    assert all(a.t == b.t and np.array_equal(a.odom, b.odom) for a, b in zip(after.scans, before.scans))
