@@ -126,13 +126,15 @@ def cmd_run(args) -> int:
                        ("frames.base", args.base_frame)):
         if value is not None:
             overrides.append(f"{key}={json.dumps(value)}")
+    # an option's value that the config rejects names the option (load_config's (option, key=value) pairs)
     if args.particles is not None:
-        overrides.append(f"filter.particles={args.particles}")
+        overrides.append((f"--particles {args.particles}", f"filter.particles={args.particles}"))
     if args.seed is not None:
-        overrides.append(f"seed={args.seed}")
+        overrides.append((f"--seed {args.seed}", f"seed={args.seed}"))
     if args.initial_pose is not None:
         x, y, th = args.initial_pose
-        overrides += [f"filter.initial_pose=[{x!r}, {y!r}, {th!r}]", "filter.global_localization=false"]
+        overrides += [(f"--initial-pose {x!r} {y!r} {th!r}", f"filter.initial_pose=[{x!r}, {y!r}, {th!r}]"),
+                      "filter.global_localization=false"]
     if args.global_:
         overrides.append("filter.global_localization=true")
     if args.rerun is not None:

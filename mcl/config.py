@@ -591,8 +591,12 @@ def _resolve_path(value: str | None, base: Path | None) -> str | None:
 # ----------------------------------------------------------------------------- public API
 
 
-def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
-    """Load and validate a config file (None: the defaults) with ``key=value`` overrides."""
+def load_config(path: str | Path | None = None, overrides: list | tuple = ()) -> Config:
+    """Load and validate a config file (None: the defaults) with ``key=value`` overrides.
+
+    An override is the ``--set`` text, or an (option, ``key=value``) pair for a command-line option that sets a
+    key (``("--particles 0", "filter.particles=0")``): an error in its value then names the option the user typed.
+    """
     data: dict = {}
     base = None
     if path is not None:
@@ -610,14 +614,15 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
                 _build(Config, copy.deepcopy(data), "")
             except ConfigError as e:
                 raise ConfigError(f"{path}: {e}") from None
-    set_by: dict[str, str] = {}  # dotted key -> the --set text that gave it its value
-    for text in overrides:
+    set_by: dict[str, str] = {}  # dotted key -> what gave it its value: "--set text", or the option
+    for item in overrides:
+        where, text = item if isinstance(item, tuple) else (f"--set {_printable(item)}", item)
         keys, value = parse_override(text)
         try:
             _apply(data, keys, value)
         except ConfigError as e:
-            raise ConfigError(f"--set {_printable(text)}: {e}") from None
-        set_by[".".join(keys)] = text
+            raise ConfigError(f"{where}: {e}") from None
+        set_by[".".join(keys)] = where
     for k in PATH_KEYS:
         if isinstance(data.get(k), str):
             try:
@@ -641,9 +646,9 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
     except ConfigError as e:
         # a bad value names where it came from: the --set that gave it, else the file
         key = str(e).split(":", 1)[0]
-        text = next((t for k, t in set_by.items() if key == k or key.startswith(k + ".")), None)
-        if text is not None:
-            raise ConfigError(f"--set {_printable(text)}: {e}") from None
+        where = next((w for k, w in set_by.items() if key == k or key.startswith(k + ".")), None)
+        if where is not None:
+            raise ConfigError(f"{where}: {e}") from None
         raise ConfigError(f"{path}: {e}" if path is not None else str(e)) from None
     try:
         _cross_checks(cfg)

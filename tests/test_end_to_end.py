@@ -140,6 +140,18 @@ def test_bad_config_is_one_line_and_exit_2(tmp_path, capsys):
     assert "bad.yaml" in err and "filter.particels: unknown key (did you mean particles?)" in err
 
 
+def test_a_bad_option_value_names_the_option_typed_not_the_key_it_sets(tmp_path, capsys):
+    base = ["run", "--map", str(DEMO / "map.yaml"), "--log", str(DEMO / "log.clf"), "--rerun", "off",
+            "--out", str(tmp_path / "o")]
+    for extra, said in ((["--particles", "0"], "--particles 0: filter.particles: 0 is out of range (must be >= 1)"),
+                        (["--seed", "-3"], "--seed -3: seed: -3 is out of range (must be >= 0)"),
+                        (["--set", "filter.particles=0"], "--set filter.particles=0: filter.particles: 0 is out")):
+        assert main(base + extra) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and said in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_missing_map_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["run", "--map", str(tmp_path / "nope.yaml"), "--log", str(tmp_path / "x.clf"), "--rerun", "off",
                  "--out", str(tmp_path / "o")]) == 2
