@@ -360,10 +360,14 @@ def test_suite_end_to_end_rows_table_and_lost(evaluated):
     assert (out / "plots" / "good.png").stat().st_size > 1000
     assert (out / "table.txt").read_text().startswith("dataset")
     # the suite's verdict per mode and config, after the table: the good world kept, the planted run lost
-    last = (out / "table.txt").read_text().splitlines()[-2:]
+    last = (out / "table.txt").read_text().splitlines()[-3:]
     assert last[0].startswith("tracking  default   2/4 kept (50 %), RMSE median "), last
     assert last[1].startswith("tracking  baseline  2/4 kept (50 %), RMSE median "), last
-    assert json.loads((out / "results.json").read_text())["totals"][0]["kept"] == 2
+    # and the runs paired with the baseline's: both configs keep the same two
+    assert last[2] == ("tracking  default, 4 runs paired with the baseline's: kept by default alone 0, by the "
+                       "baseline alone 0"), last
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["totals"][0]["kept"] == 2 and doc["against_baseline"][0]["paired"] == 4
 
 
 def test_suite_rmse_matches_a_direct_run_and_eval(evaluated, tmp_path, capsys):
@@ -501,3 +505,27 @@ def test_ctrl_c_while_a_run_writes_its_summary_stops_the_evaluation(evaluated, t
     monkeypatch.setattr(mcl.trajectory, "atomic_write_text", real)
     assert main(args) == 0
     assert "1 of 2 runs already finished" in capsys.readouterr().out
+
+
+def test_the_runs_the_baseline_alone_keeps_are_named_per_mode():
+    from mcl.suite import against_baseline, format_against_baseline
+
+    def row(ds, mode, cfg, seed, lost, mx, conv):
+        return {"dataset": ds, "mode": mode, "config": cfg, "seed": seed, "lost": lost, "max": mx, "conv_s": conv}
+
+    rows = [row("a", "tracking", "default", 1, True, 0.85, None), row("a", "tracking", "baseline", 1, False, 0.43, 0.0),
+            row("a", "tracking", "default", 2, False, 0.30, 0.0), row("a", "tracking", "baseline", 2, True, 1.20, None),
+            row("b", "tracking", "default", 1, False, 0.20, 0.0), row("b", "tracking", "baseline", 1, False, 0.25, 0.0),
+            row("b", "global", "default", 1, True, 40.0, None), row("b", "global", "baseline", 1, False, 0.30, 12.5),
+            row("c", "tracking", "default", 1, True, 3.00, None)]  # no baseline run: not paired
+    t, g = against_baseline(rows)
+    assert (t["mode"], t["paired"], t["config_alone"]) == ("tracking", 3, 1)
+    assert [(a["dataset"], a["seed"]) for a in t["baseline_alone"]] == [("a", 1)]
+    assert (g["mode"], g["paired"], g["config_alone"], len(g["baseline_alone"])) == ("global", 1, 0, 1)
+    text = format_against_baseline(rows).splitlines()
+    assert text == [
+        "tracking  default, 3 runs paired with the baseline's: kept by default alone 1, by the baseline alone 1: "
+        "a seed 1 (max 0.85 m; baseline 0.43 m)",
+        "global  default, 1 run paired with the baseline's: kept by default alone 0, by the baseline alone 1: "
+        "b seed 1 (within 0.5 m never; baseline at 12.5 s)"]
+    assert format_against_baseline([r for r in rows if r["config"] == "default"]) == ""  # no baseline: no line
