@@ -297,3 +297,32 @@ def test_the_depth_table_from_the_surface_patches_is_the_one_from_the_whole_dept
         assert len(g.surface_patches(tol)) >= 4
         np.testing.assert_array_equal(patched, whole)
         assert (patched != LikelihoodField(g, sensor_cfg(interior="zero")).table).any()
+
+
+@pytest.mark.parametrize("model", ["likelihood_field", "beam"])
+def test_a_scan_published_clockwise_scores_as_the_same_scan_counter_clockwise(model):
+    """Some ROS drivers publish LaserScan with a negative angle_increment (beam 0 on the left, turning clockwise).
+    The same readings in the other order must score the same at every pose, and fit the map the same."""
+    import dataclasses
+
+    from mcl.config import PROJECT_ROOT, load_config
+    from mcl.filter import ParticleFilter
+    from mcl.runner import _open_source
+
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [f"sensor.model={model}"])
+    _, grid, scans, _, truth, _ = _open_source(cfg, echo=lambda m: None)
+    pf = ParticleFilter(cfg, grid)
+    s = scans[100]
+    n = s.ranges.size
+    cw = dataclasses.replace(s, ranges=s.ranges[::-1].copy(), angle_min=s.angle_min + (n - 1) * s.angle_increment,
+                             angle_increment=-s.angle_increment)
+    i = int(np.argmin(np.abs(truth.t - s.t)))
+    poses = np.ascontiguousarray(truth.poses[:, i:i + 1] + np.random.default_rng(0).normal(0.0, 0.2, (3, 200)))
+    at = np.zeros(3)
+    ccw_obs, cw_obs = pf.prepare(s, at), pf.prepare(cw, at)
+    a, b = pf.sensor.log_likelihood(poses, ccw_obs), pf.sensor.log_likelihood(poses, cw_obs)
+    assert np.ptp(a) > 10.0  # the poses are told apart (measured: tens of nats)
+    np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-9)
+    fa = pf.quality.fit(truth.poses[:, i], pf.sensor.endpoints(ccw_obs), at[:2])
+    fb = pf.quality.fit(truth.poses[:, i], pf.sensor.endpoints(cw_obs), at[:2])
+    assert (fa.beams, fa.match, fa.contradiction) == (fb.beams, fb.match, fb.contradiction) and fa.beams > 40
