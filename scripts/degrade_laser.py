@@ -1,16 +1,22 @@
 #!/usr/bin/env python
-"""The real logs of a suite with another laser: a narrower field of view, range noise, dropouts.
+"""The real logs of a suite with another laser (a narrower field of view, range noise, dropouts) or other wheels.
 
-A held-out check of the default config on real buildings with a laser it was not chosen on. Every ``FLASER``
-line of each dataset's CARMEN log is rewritten:
+A held-out check of the default config on real buildings with a laser or odometry it was not chosen on. Every
+``FLASER`` line of each dataset's CARMEN log is rewritten:
 
 * readings outside the central ``--fov`` degrees (the line's beams spread evenly over 180 degrees, as FLASER
   lays them) become 0, which no reader takes as a range (``sensor.range_min`` 0: a reading must be > 0);
 * the rest get N(0, ``--sigma``) added (clipped at 0.01 m), except the log's no-return readings (``--no-return``
-  m and more: 50.00 and 51.0-51.25 m in ``../shared/data``), which stay as they are;
+  m and more: 50.00 and 51.0-51.25 m in ``../shared/data``) and readings of 0 or less, which stay as they are;
 * ``--drop`` of them become 0 too.
 
-The odometry, the maps and the references are those of the originals (linked, not copied). Writes
+With ``--odom-scale S`` and ``--turn-scale R`` the odometry misreports the motion as wheels of the wrong size or a
+skid-steer base do: every step between consecutive odometry poses (in the robot frame of the first) has its
+translation multiplied by S and its rotation by R, and the poses are integrated again from the first. The ODOM
+lines and the FLASER lines' robot poses are each redone so; a FLASER line's laser pose keeps its mounting on the
+robot. The defaults, 1 and 1, leave the odometry as it is, byte for byte.
+
+The maps and the references are those of the originals (linked, not copied). Writes
 ``OUT/<name>/log.clf`` with links to the rest, and ``OUT/suite.yaml``: the suite with its root at ``OUT``.
 Deterministic for a given ``--seed``. Then:
 
@@ -21,6 +27,7 @@ Deterministic for a given ``--seed``. Then:
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -34,16 +41,61 @@ ROOT = Path(__file__).resolve().parents[1]
 def degrade_line(line: str, rng: np.random.Generator, fov: float, sigma: float, drop: float,
                  no_return: float) -> str:
     """One FLASER line with the laser changed (see the module docstring); any other line as it is."""
-    if not line.startswith("FLASER "):
+    if not line.startswith("FLASER ") or (fov >= 180.0 and sigma == 0.0 and drop == 0.0):
         return line
     p = line.split()
     n = int(p[1])
     r = np.array([float(x) for x in p[2:2 + n]])
     keep = np.abs(np.linspace(-90.0, 90.0, n)) <= fov / 2.0
-    out = np.where(r >= no_return, r, np.maximum(r + rng.normal(0.0, sigma, n), 0.01))
+    out = np.where((r >= no_return) | (r <= 0.0), r, np.maximum(r + rng.normal(0.0, sigma, n), 0.01))
     out = np.where(keep & (rng.random(n) >= drop), out, 0.0)
     p[2:2 + n] = [f"{x:.2f}" for x in out]
     return " ".join(p) + "\n"
+
+
+class Rescaled:
+    """One odometry stream integrated again with its steps scaled (translation by ``scale``, rotation by
+    ``turn``): ``pose(x, y, theta)`` takes the stream's next original pose and gives the new one."""
+
+    def __init__(self, scale: float, turn: float):
+        self.scale, self.turn = scale, turn
+        self.last = None  # (original pose, new pose)
+
+    def pose(self, x: float, y: float, th: float) -> tuple[float, float, float]:
+        if self.last is None:
+            self.last = ((x, y, th), (x, y, th))
+            return x, y, th
+        (x0, y0, t0), (nx, ny, nt) = self.last
+        c, s = math.cos(t0), math.sin(t0)
+        dx, dy = c * (x - x0) + s * (y - y0), -s * (x - x0) + c * (y - y0)  # the step in the robot frame
+        dth = math.atan2(math.sin(th - t0), math.cos(th - t0))
+        dx, dy, dth = dx * self.scale, dy * self.scale, dth * self.turn
+        c, s = math.cos(nt), math.sin(nt)
+        new = (nx + c * dx - s * dy, ny + s * dx + c * dy, math.atan2(math.sin(nt + dth), math.cos(nt + dth)))
+        self.last = ((x, y, th), new)
+        return new
+
+
+def rescale_line(line: str, odom: Rescaled, flaser: Rescaled) -> str:
+    """An ODOM line's pose, or a FLASER line's robot pose (and its laser pose, kept on the robot), from the
+    rescaled streams; any other line as it is."""
+    if odom.scale == 1.0 and odom.turn == 1.0:
+        return line
+    p = line.split()
+    if p and p[0] == "ODOM":
+        p[1:4] = [f"{v:.6f}" for v in odom.pose(*map(float, p[1:4]))]
+        return " ".join(p) + "\n"
+    if p and p[0] == "FLASER":
+        k = 2 + int(p[1])
+        lx, ly, lt, rx, ry, rt = map(float, p[k:k + 6])
+        c, s = math.cos(rt), math.sin(rt)  # the laser's mounting in the robot frame
+        ox, oy, ot = c * (lx - rx) + s * (ly - ry), -s * (lx - rx) + c * (ly - ry), lt - rt
+        nx, ny, nt = flaser.pose(rx, ry, rt)
+        c, s = math.cos(nt), math.sin(nt)
+        laser = (nx + c * ox - s * oy, ny + s * ox + c * oy, math.atan2(math.sin(nt + ot), math.cos(nt + ot)))
+        p[k:k + 6] = [f"{v:.6f}" for v in (*laser, nx, ny, nt)]
+        return " ".join(p) + "\n"
+    return line
 
 
 def main(argv=None) -> int:
@@ -54,6 +106,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sigma", type=float, default=0.03, help="range noise std, m (default 0.03)")
     ap.add_argument("--drop", type=float, default=0.1, help="share of readings dropped (default 0.1)")
     ap.add_argument("--no-return", type=float, default=49.9, help="readings from this on are left alone (m)")
+    ap.add_argument("--odom-scale", type=float, default=1.0, help="odometry translation factor (default 1)")
+    ap.add_argument("--turn-scale", type=float, default=1.0, help="odometry rotation factor (default 1)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
     suite = yaml.safe_load(a.suite.read_text())
@@ -71,13 +125,15 @@ def main(argv=None) -> int:
                         os.symlink(g, folder / g.name)
                 d[key] = f"{d['name']}/{f.name}"
         tmp = folder / (log.name + ".part")
+        odom, flaser = Rescaled(a.odom_scale, a.turn_scale), Rescaled(a.odom_scale, a.turn_scale)
         with open(log, errors="replace") as fi, open(tmp, "w") as fo:
             for line in fi:
-                fo.write(degrade_line(line, rng, a.fov, a.sigma, a.drop, a.no_return))
+                fo.write(rescale_line(degrade_line(line, rng, a.fov, a.sigma, a.drop, a.no_return), odom, flaser))
         tmp.replace(folder / log.name)
         d["log"] = f"{d['name']}/{log.name}"
     suite["root"] = str(a.out.resolve())
-    suite["name"] = f"{suite.get('name', 'suite')}-fov{a.fov:g}"
+    suite["name"] = f"{suite.get('name', 'suite')}-fov{a.fov:g}" + (
+        f"-odom{a.odom_scale:g}x{a.turn_scale:g}" if (a.odom_scale, a.turn_scale) != (1.0, 1.0) else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")
     return 0

@@ -51,3 +51,43 @@ def test_the_degraded_log_keeps_the_central_field_of_view_and_the_no_returns_and
     # the rest of the log is the original's: the odometry and each scan's time and pose
     assert np.array_equal(after.odometry, before.odometry)
     assert all(a.t == b.t and np.array_equal(a.odom, b.odom) for a, b in zip(after.scans, before.scans))
+
+
+def test_the_rescaled_odometry_reports_the_steps_scaled_and_keeps_the_laser_on_the_robot(tmp_path):
+    world = tmp_path / "world"
+    simulate(world, seed=5, duration=8)
+    lines = []
+    for line in (world / "log.clf").read_text().splitlines():
+        if line.startswith("FLASER"):  # the laser mounted 0.2 m ahead, 0.05 m left, turned 0.1 rad
+            p = line.split()
+            k = 2 + int(p[1])
+            rx, ry, rt = map(float, p[k + 3:k + 6])
+            c, s = np.cos(rt), np.sin(rt)
+            p[k:k + 3] = [f"{v:.6f}" for v in (rx + 0.2 * c - 0.05 * s, ry + 0.2 * s + 0.05 * c, rt + 0.1)]
+            line = " ".join(p)
+        lines.append(line)
+    (world / "log.clf").write_text("\n".join(lines) + "\n")
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
+        "name": "w", "root": "world", "modes": ["tracking"],
+        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+    out = tmp_path / "out"
+    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
+                 "--odom-scale", "1.05", "--turn-scale", "1.1"]) == 0
+    before, after = read_carmen(world / "log.clf"), read_carmen(out / "w" / "log.clf")
+
+    def steps(log):
+        o = np.array([s.odom for s in log.scans])
+        d = np.diff(o, axis=0)
+        c, s = np.cos(o[:-1, 2]), np.sin(o[:-1, 2])
+        return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1],
+                                (d[:, 2] + np.pi) % (2 * np.pi) - np.pi])
+
+    a, b = steps(before), steps(after)
+    assert np.abs(a[:, 2]).sum() > 1.0 and np.hypot(a[:, 0], a[:, 1]).sum() > 3.0  # the robot drives and turns
+    # every step in the robot frame: translation x 1.05, rotation x 1.1 (to the 1e-6 the log's decimals carry)
+    np.testing.assert_allclose(b[:, :2], 1.05 * a[:, :2], atol=2e-5)
+    np.testing.assert_allclose(b[:, 2], 1.1 * a[:, 2], atol=2e-5)
+    assert np.allclose(after.scans[0].odom, before.scans[0].odom)  # integrated from the same first pose
+    for x, y in zip(before.scans, after.scans):  # the laser keeps its mounting, the ranges are untouched
+        assert np.allclose(x.laser_offset, [0.2, 0.05, 0.1], atol=1e-5)
+        assert np.allclose(y.laser_offset, [0.2, 0.05, 0.1], atol=1e-5) and np.array_equal(x.ranges, y.ranges)
