@@ -16,6 +16,11 @@ translation multiplied by S and its rotation by R, and the poses are integrated 
 lines and the FLASER lines' robot poses are each redone so; a FLASER line's laser pose keeps its mounting on the
 robot. The defaults, 1 and 1, leave the odometry as it is, byte for byte.
 
+With ``--latency T`` each scan is paired with the odometry T seconds after it was taken, as a driver that stamps
+its scans T late does: a FLASER line's robot pose becomes the odometry interpolated at its time + T (the ODOM
+lines when the log has them, else the FLASER lines' own poses; ``mcl.datasets.carmen.interpolate_odometry``), its
+laser pose kept on the robot. The rescaled odometry, when asked for too, is the one interpolated.
+
 The maps and the references are those of the originals (linked, not copied). Writes
 ``OUT/<name>/log.clf`` with links to the rest, and ``OUT/suite.yaml``: the suite with its root at ``OUT``.
 Deterministic for a given ``--seed``. Then:
@@ -98,6 +103,38 @@ def rescale_line(line: str, odom: Rescaled, flaser: Rescaled) -> str:
     return line
 
 
+def odometry_stream(lines) -> np.ndarray:
+    """(M, 6) rows t, x, y, theta, 0, 0 of a log's odometry: its ODOM lines, else its FLASER lines' robot poses."""
+    odom, flaser = [], []
+    for line in lines:
+        p = line.split()
+        if p and p[0] == "ODOM":
+            odom.append((float(p[7]), *map(float, p[1:4]), 0.0, 0.0))
+        elif p and p[0] == "FLASER":
+            k = 2 + int(p[1])
+            flaser.append((float(p[k + 6]), *map(float, p[k + 3:k + 6]), 0.0, 0.0))
+    return np.array(odom or flaser, dtype=np.float64).reshape(-1, 6)
+
+
+def delay_line(line: str, stream: np.ndarray, latency: float) -> str:
+    """A FLASER line with its robot pose taken from ``stream`` at its time + ``latency`` (its laser pose kept on the
+    robot); any other line as it is."""
+    from mcl.datasets.carmen import interpolate_odometry
+
+    if latency == 0.0 or not line.startswith("FLASER ") or stream.shape[0] == 0:
+        return line
+    p = line.split()
+    k = 2 + int(p[1])
+    lx, ly, lt, rx, ry, rt = map(float, p[k:k + 6])
+    c, s = math.cos(rt), math.sin(rt)
+    ox, oy, ot = c * (lx - rx) + s * (ly - ry), -s * (lx - rx) + c * (ly - ry), lt - rt
+    nx, ny, nt = interpolate_odometry(stream, float(p[k + 6]) + latency)[:, 0]
+    c, s = math.cos(nt), math.sin(nt)
+    laser = (nx + c * ox - s * oy, ny + s * ox + c * oy, math.atan2(math.sin(nt + ot), math.cos(nt + ot)))
+    p[k:k + 6] = [f"{v:.6f}" for v in (*laser, nx, ny, nt)]
+    return " ".join(p) + "\n"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path, help="output folder")
@@ -108,6 +145,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-return", type=float, default=49.9, help="readings from this on are left alone (m)")
     ap.add_argument("--odom-scale", type=float, default=1.0, help="odometry translation factor (default 1)")
     ap.add_argument("--turn-scale", type=float, default=1.0, help="odometry rotation factor (default 1)")
+    ap.add_argument("--latency", type=float, default=0.0,
+                    help="pair each scan with the odometry this many s after it (default 0)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
     suite = yaml.safe_load(a.suite.read_text())
@@ -129,11 +168,16 @@ def main(argv=None) -> int:
         with open(log, errors="replace") as fi, open(tmp, "w") as fo:
             for line in fi:
                 fo.write(rescale_line(degrade_line(line, rng, a.fov, a.sigma, a.drop, a.no_return), odom, flaser))
+        if a.latency:
+            lines = tmp.read_text().splitlines(keepends=True)
+            stream = odometry_stream(lines)
+            tmp.write_text("".join(delay_line(line, stream, a.latency) for line in lines))
         tmp.replace(folder / log.name)
         d["log"] = f"{d['name']}/{log.name}"
     suite["root"] = str(a.out.resolve())
     suite["name"] = f"{suite.get('name', 'suite')}-fov{a.fov:g}" + (
-        f"-odom{a.odom_scale:g}x{a.turn_scale:g}" if (a.odom_scale, a.turn_scale) != (1.0, 1.0) else "")
+        f"-odom{a.odom_scale:g}x{a.turn_scale:g}" if (a.odom_scale, a.turn_scale) != (1.0, 1.0) else "") + (
+        f"-latency{a.latency:g}" if a.latency else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")
     return 0

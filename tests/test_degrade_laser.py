@@ -91,3 +91,25 @@ def test_the_rescaled_odometry_reports_the_steps_scaled_and_keeps_the_laser_on_t
     for x, y in zip(before.scans, after.scans):  # the laser keeps its mounting, the ranges are untouched
         assert np.allclose(x.laser_offset, [0.2, 0.05, 0.1], atol=1e-5)
         assert np.allclose(y.laser_offset, [0.2, 0.05, 0.1], atol=1e-5) and np.array_equal(x.ranges, y.ranges)
+
+
+def test_a_latency_pairs_each_scan_with_the_odometry_that_much_later(tmp_path):
+    from mcl.datasets.carmen import interpolate_odometry
+
+    world = tmp_path / "world"
+    simulate(world, seed=5, duration=8)
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
+        "name": "w", "root": "world", "modes": ["tracking"],
+        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+    out = tmp_path / "out"
+    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
+                 "--latency", "0.25"]) == 0
+    assert yaml.safe_load((out / "suite.yaml").read_text())["name"] == "w-fov180-latency0.25"
+    before, after = read_carmen(world / "log.clf"), read_carmen(out / "w" / "log.clf")
+    t = np.array([s.t for s in before.scans])
+    late = interpolate_odometry(before.odometry, t + 0.25).T
+    got = np.array([s.odom for s in after.scans])
+    np.testing.assert_allclose(got, late, atol=2e-6)  # the pose 0.25 s later, to the log's 6 decimals
+    moved = np.hypot(*(got[:, :2] - np.array([s.odom for s in before.scans])[:, :2]).T)
+    assert np.median(moved) > 0.05  # the robot drives: a quarter second later is somewhere else
+    assert np.array_equal(after.odometry, before.odometry)  # the ODOM lines are left as they are
