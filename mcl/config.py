@@ -147,7 +147,7 @@ class MotionConfig:
     # (1 - fault_prob) p(x'|u,x) + fault_prob p_k(x'|u,x), p_k the same model with every sigma times fault_scale.
     # fault_share of the particles are drawn from p_k and importance-weighted back to the mixture. 0: never.
     fault_prob: float = field(default=0.0, metadata=_rng(0.0, 1.0, hi_open=True))
-    fault_scale: float = field(default=5.0, metadata=_rng(1.0))
+    fault_scale: float = field(default=10.0, metadata=_rng(1.0))
     fault_share: float = field(default=0.05, metadata=_rng(0.0, 1.0, lo_open=True, hi_open=True))
     fault_window: int = field(default=50, metadata=_rng(0, 1_000_000))  # updates after a lost call
     fault_contradiction: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # a lost call opens it from this

@@ -20,14 +20,18 @@ CORRIDOR = PROJECT_ROOT.parent / "shared" / "data" / "infinite_corridor"
 
 @pytest.mark.slow
 @pytest.mark.skipif(not (CORRIDOR / "log.clf").is_file(), reason=f"infinite_corridor not found at {CORRIDOR}")
+@pytest.mark.xfail(strict=True, reason="open defect (sixteenth session): the odometry-fault window runs the track "
+                   "down the corridor when the scans are stamped late; strict, so a fix makes this fail until the "
+                   "mark goes")
 def test_a_late_scan_stamp_at_the_junction_does_not_send_the_track_down_the_corridor(tmp_path):
     # At 25.8 s the robot turns at a T-junction where a person stands; with the scans 0.1 s late the scans misfit
     # the turn and the filter calls itself lost. The odometry-fault mixture then opens (motion.fault_*): with its
-    # sigmas 10 times the model's, fault poses far along the corridor fitted the misfit scans better each update,
-    # and the estimate ran down the corridor at 5 m/s: 16.3 and 15.6 m off with seeds 1 and 2 (seeds 1-10 over the
-    # whole log: 9 lost, worst 66 m). With 5 times: 0.33 and 0.30 m (seeds 1-5 in these 45 s: at most 1.41 m);
-    # the baseline 0.53-0.62 m over the whole log. Bound: 3 m, twice the worst of those five seeds, far under the
-    # runaway's 16 m.
+    # sigmas 10 times the model's (the default), fault poses far along the corridor fitted the misfit scans better
+    # each update, and the estimate ran down the corridor at 5 m/s: 16.3 and 15.6 m off with seeds 1 and 2 (seeds
+    # 1-10 over the whole log: 9 lost, worst 66 m). With 5 times: 0.33 and 0.30 m (seeds 1-5 in these 45 s: at
+    # most 1.41 m), but 5 costs recoveries elsewhere (docs/measurements.md, "Odometry faults"), so the default
+    # stays at 10 and this test is a strict xfail until a fix that costs nothing. The baseline: 0.53-0.62 m over the
+    # whole log. Bound: 3 m, twice the worst of the five seeds with 5, far under the runaway's 16 m.
     lines = []
     for line in (CORRIDOR / "log.clf").read_text().splitlines(keepends=True):
         p = line.split()
