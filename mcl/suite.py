@@ -615,11 +615,11 @@ def against_baseline(rows: list[dict]) -> list[dict]:
     order = {m: i for i, m in enumerate(MODES)}
     out = []
     for (mode, cfg), pairs in sorted(groups.items(), key=lambda kv: (order.get(kv[0][0], 99), kv[0])):
-        alone = [(r, b) for r, b in pairs if r["lost"] and not b["lost"]]
+        alone = [{"dataset": r["dataset"], "seed": r["seed"], "max": r["max"], "conv_s": r["conv_s"],
+                  "baseline_max": b["max"], "baseline_conv_s": b["conv_s"]}
+                 for r, b in pairs if r["lost"] and not b["lost"]]
         out.append({"mode": mode, "config": cfg, "paired": len(pairs),
-                    "config_alone": sum(1 for r, b in pairs if b["lost"] and not r["lost"]),
-                    "baseline_alone": [{"dataset": r["dataset"], "seed": r["seed"], "max": r["max"], "conv_s": r["conv_s"],
-                                        "baseline_max": b["max"], "baseline_conv_s": b["conv_s"]} for r, b in alone]})
+                    "config_alone": sum(1 for r, b in pairs if b["lost"] and not r["lost"]), "baseline_alone": alone})
     return out
 
 
@@ -639,10 +639,9 @@ def format_against_baseline(rows: list[dict]) -> str:
         else:
             runs = [f"{a['dataset']} seed {a['seed']} (within {SETTLE_M} m {when(a['conv_s'])}; baseline "
                     f"{when(a['baseline_conv_s'])})" for a in g["baseline_alone"]]
-        lines.append(f"{g['mode']}  {g['config']}, {g['paired']} run{'s' * (g['paired'] != 1)} paired with the "
-                     f"baseline's: kept by "
-                     f"{g['config']} alone {g['config_alone']}, by the baseline alone {len(runs)}"
-                     + (": " + ", ".join(runs) if runs else ""))
+        paired = f"{g['paired']} run{'s' * (g['paired'] != 1)} paired with the baseline's"
+        lines.append(f"{g['mode']}  {g['config']}, {paired}: kept by {g['config']} alone {g['config_alone']}, "
+                     f"by the baseline alone {len(runs)}" + (": " + ", ".join(runs) if runs else ""))
     return "\n".join(lines)
 
 
