@@ -32,7 +32,6 @@ Deterministic for a given ``--seed``. Then:
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 from pathlib import Path
@@ -41,6 +40,10 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mcl.datasets.carmen import interpolate_odometry  # noqa: E402
+from mcl.runner import compose, inverse  # noqa: E402
 
 
 def degrade_line(line: str, rng: np.random.Generator, fov: float, sigma: float, drop: float,
@@ -70,15 +73,20 @@ class Rescaled:
         if self.last is None:
             self.last = ((x, y, th), (x, y, th))
             return x, y, th
-        (x0, y0, t0), (nx, ny, nt) = self.last
-        c, s = math.cos(t0), math.sin(t0)
-        dx, dy = c * (x - x0) + s * (y - y0), -s * (x - x0) + c * (y - y0)  # the step in the robot frame
-        dth = math.atan2(math.sin(th - t0), math.cos(th - t0))
-        dx, dy, dth = dx * self.scale, dy * self.scale, dth * self.turn
-        c, s = math.cos(nt), math.sin(nt)
-        new = (nx + c * dx - s * dy, ny + s * dx + c * dy, math.atan2(math.sin(nt + dth), math.cos(nt + dth)))
+        old, new = self.last
+        step = compose(inverse(np.array(old)), np.array([x, y, th]))  # the step in the robot frame
+        new = tuple(float(v) for v in compose(np.array(new), step * [self.scale, self.scale, self.turn]))
         self.last = ((x, y, th), new)
         return new
+
+
+def _with_robot_pose(p: list, k: int, robot) -> str:
+    """A FLASER line (split, ``k`` the index of its laser pose) with its robot pose replaced and its laser pose
+    moved along, so the laser keeps its mounting on the robot."""
+    mount = compose(inverse(np.array([float(v) for v in p[k + 3:k + 6]])), np.array([float(v) for v in p[k:k + 3]]))
+    robot = np.asarray(robot, dtype=np.float64)
+    p[k:k + 6] = [f"{v:.6f}" for v in (*compose(robot, mount), *robot)]
+    return " ".join(p) + "\n"
 
 
 def rescale_line(line: str, odom: Rescaled, flaser: Rescaled) -> str:
@@ -92,14 +100,7 @@ def rescale_line(line: str, odom: Rescaled, flaser: Rescaled) -> str:
         return " ".join(p) + "\n"
     if p and p[0] == "FLASER":
         k = 2 + int(p[1])
-        lx, ly, lt, rx, ry, rt = map(float, p[k:k + 6])
-        c, s = math.cos(rt), math.sin(rt)  # the laser's mounting in the robot frame
-        ox, oy, ot = c * (lx - rx) + s * (ly - ry), -s * (lx - rx) + c * (ly - ry), lt - rt
-        nx, ny, nt = flaser.pose(rx, ry, rt)
-        c, s = math.cos(nt), math.sin(nt)
-        laser = (nx + c * ox - s * oy, ny + s * ox + c * oy, math.atan2(math.sin(nt + ot), math.cos(nt + ot)))
-        p[k:k + 6] = [f"{v:.6f}" for v in (*laser, nx, ny, nt)]
-        return " ".join(p) + "\n"
+        return _with_robot_pose(p, k, flaser.pose(*map(float, p[k + 3:k + 6])))
     return line
 
 
@@ -119,20 +120,11 @@ def odometry_stream(lines) -> np.ndarray:
 def delay_line(line: str, stream: np.ndarray, latency: float) -> str:
     """A FLASER line with its robot pose taken from ``stream`` at its time + ``latency`` (its laser pose kept on the
     robot); any other line as it is."""
-    from mcl.datasets.carmen import interpolate_odometry
-
     if latency == 0.0 or not line.startswith("FLASER ") or stream.shape[0] == 0:
         return line
     p = line.split()
     k = 2 + int(p[1])
-    lx, ly, lt, rx, ry, rt = map(float, p[k:k + 6])
-    c, s = math.cos(rt), math.sin(rt)
-    ox, oy, ot = c * (lx - rx) + s * (ly - ry), -s * (lx - rx) + c * (ly - ry), lt - rt
-    nx, ny, nt = interpolate_odometry(stream, float(p[k + 6]) + latency)[:, 0]
-    c, s = math.cos(nt), math.sin(nt)
-    laser = (nx + c * ox - s * oy, ny + s * ox + c * oy, math.atan2(math.sin(nt + ot), math.cos(nt + ot)))
-    p[k:k + 6] = [f"{v:.6f}" for v in (*laser, nx, ny, nt)]
-    return " ".join(p) + "\n"
+    return _with_robot_pose(p, k, interpolate_odometry(stream, float(p[k + 6]) + latency)[:, 0])
 
 
 def main(argv=None) -> int:
