@@ -18,6 +18,7 @@ the recording and says ``"interrupted": true`` in the summary.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import signal
@@ -501,7 +502,8 @@ def _run(
     if cfg.rerun.mode != "off":
         from mcl.viz import RerunLogger, particles_every_within
 
-        beams = max((len(s.ranges) for s in scans[:1000]), default=0)  # the first scans tell the laser
+        # the first scans tell the laser (a bag's scans are a stream: no slicing, and each pass reads the bag)
+        beams = max((len(s.ranges) for s in itertools.islice(scans, 1000)), default=0)
         every = particles_every_within(cfg.rerun.budget_mb, len(updates), beams, cfg.rerun.particles_max,
                                        cfg.rerun.particles_every, cfg.rerun.scan)
         if every > cfg.rerun.particles_every:

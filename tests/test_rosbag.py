@@ -80,6 +80,22 @@ def test_each_storage_kind_reads_the_logs_records_and_gives_a_byte_identical_tra
     assert (o_bag / "trajectory.tum").read_bytes() == (o_clf / "trajectory.tum").read_bytes()
 
 
+def test_a_bag_run_writes_its_recording_with_a_scan_per_update(world, scans, tmp_path):
+    # A bag's scans are a stream (BagScans): the recording's setup once sliced them and every bag run with a
+    # recording (the default rerun.mode) stopped on a TypeError. Read back: one /world/scan row per update.
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    bag = tmp_path / "log.mcap"
+    write_scans(bag, scans)
+    s, out = _run(tmp_path, "rec", map=world / "map.yaml", bag=bag, **{"rerun.mode": "save"})
+    steps = []
+    for c in RrdReader(out / "recording.rrd").stream().to_chunks():
+        if c.entity_path == "/world/scan" and not c.is_static and "step" in c.timeline_names:
+            steps += c.to_record_batch().column("step").cast(pa.int64()).to_pylist()
+    assert sorted(steps) == list(range(s["updates"])) and s["updates"] > 30
+
+
 def test_odometry_from_tf_is_interpolated_at_each_scan_stamp(scans, tmp_path):
     # /tf carries odom -> base_link at every other scan only: the scans between get the linear interpolation of
     # their two neighbours (x, y exactly the midpoint within float rounding; the motion between is small).
