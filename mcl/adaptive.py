@@ -718,7 +718,8 @@ class FaultWindow:
         self.window = int(mc.fault_window)
         self.contradiction = float(mc.fault_contradiction)
         self.search = search
-        self.fault = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale))
+        self.fault = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale),
+                                   float(mc.fault_turn_max), float(mc.fault_shift_max))
         self.reset()
 
     def reset(self) -> None:

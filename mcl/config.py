@@ -151,6 +151,8 @@ class MotionConfig:
     fault_share: float = field(default=0.05, metadata=_rng(0.0, 1.0, lo_open=True, hi_open=True))
     fault_window: int = field(default=50, metadata=_rng(0, 1_000_000))  # updates after a lost call
     fault_contradiction: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # a lost call opens it from this
+    fault_turn_max: float = field(default=0.0, metadata=_rng(0.0, 6.2832))  # rad: cap on p_k's heading std (0: none)
+    fault_shift_max: float = field(default=0.3, metadata=_rng(0.0))  # m: cap on p_k's translation std (0: none)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -209,6 +211,7 @@ class SensorConfig:
     max_beams: int = field(default=60, metadata=_rng(1, 100_000))
     range_min: float = field(default=0.0, metadata=_rng(0.0))
     range_max: float = field(default=80.0, metadata=_rng(0.0, lo_open=True))  # readings >= this: no return
+    time_offset: float = field(default=0.0, metadata=_rng(-10.0, 10.0))  # s added to each scan's stamp (ROS drivers' time_offset)
     exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # temper the beam product
     # beam skipping (after AMCL likelihood_field_prob): once converged, ignore the short beams most particles cannot
     # explain (AMCL's own settings: beam_skip_distance 0.5, beam_skip_threshold 0.3, beam_skip_rule amcl)

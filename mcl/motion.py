@@ -104,34 +104,57 @@ def noise_sigmas(rot1: float, trans: float, rot2: float, cfg) -> tuple[float, fl
 @dataclass(frozen=True)
 class FaultProposal:
     """The odometry-fault mixture of one update: model weight ``prob`` of p_k (sigmas times ``scale``), proposal
-    weight ``share`` (see the module docstring; built from the motion config by ``mcl.adaptive.FaultWindow``)."""
+    weight ``share`` (see the module docstring; built from the motion config by ``mcl.adaptive.FaultWindow``).
+    ``turn_max`` (rad) and ``shift_max`` (m) cap p_k's heading and translation stds (never below the model's own;
+    0: no cap). Without them a fast robot's p_k is metres wide: 5 m/s, 1 m a scan, gives a translation std of
+    2.2 m, and a turn's heading std can reach pi (infinite_corridor with late scans: the estimate turned around
+    and ran 16 m down the corridor)."""
 
     prob: float
     share: float
     scale: float
+    turn_max: float = 0.0
+    shift_max: float = 0.0
+
+    def scales(self, sigmas, turns=(0, 2), shifts=(1,), dt: float = 1.0) -> list:
+        """The fault component's multiplier of each noise dimension (3 values, or arrays shaped like
+        ``sigmas``' items): ``scale``, but at most ``turn_max`` / (sigma dt) for the heading dimensions ``turns``
+        and ``shift_max`` / (sigma dt) for the translation ones ``shifts`` (dt converts a rate's sigma to an angle
+        or a distance; a cap of 0 is none), and at least 1."""
+        k = [np.float64(self.scale)] * 3
+        for dims, cap in ((turns, self.turn_max), (shifts, self.shift_max)):
+            if cap > 0.0:
+                for d in dims:
+                    step = np.asarray(sigmas[d], dtype=np.float64) * dt
+                    with np.errstate(divide="ignore"):
+                        k[d] = np.where(step > 0.0, np.clip(cap / step, 1.0, self.scale), self.scale)
+        return k
 
 
-def fault_scales(n: int, fault: FaultProposal | None, rng: np.random.Generator) -> np.ndarray | None:
-    """(n,) noise multipliers, ``fault.scale`` for the particles drawn from p_k (each with probability
-    ``fault.share``) and 1 for the others; None without a fault proposal."""
+def fault_scales(n: int, fault: FaultProposal | None, k, rng: np.random.Generator) -> np.ndarray | None:
+    """(3, n) noise multipliers: the fault component's ``k`` (3,) (``FaultProposal.scales``) for the particles
+    drawn from p_k (each with probability ``fault.share``) and 1 for the others; None without a fault proposal."""
     if fault is None or n == 0:
         return None
-    return np.where(rng.random(n) < fault.share, float(fault.scale), 1.0)
+    drawn = rng.random(n) < fault.share
+    return np.where(drawn[None, :], np.asarray(k, dtype=np.float64)[:, None], 1.0)
 
 
-def fault_log_weights(noise: np.ndarray, sigmas, kind: str, fault: FaultProposal) -> np.ndarray:
+def fault_log_weights(noise: np.ndarray, sigmas, kind: str, fault: FaultProposal, k) -> np.ndarray:
     """(N,) log p_f / q of each particle's motion noise ``noise`` (3, N), in units of the ordinary sigmas (the
-    standard noise times the particle's scale): p_f = (1 - prob) f(u) + prob f_k(u), q = (1 - share) f(u) +
+    standard noise times the particle's multiplier): p_f = (1 - prob) f(u) + prob f_k(u), q = (1 - share) f(u) +
     share f_k(u), with f the product of the noise densities over the dimensions whose sigma is not zero and
-    f_k(u) = f(u / scale) / scale^d. A particle far out in the wide component weighs prob / share."""
+    f_k(u) = prod_d f(u_d / k_d) / k_d, ``k`` the fault component's multipliers. A particle far out in the wide
+    component weighs prob / share."""
     dims = [d for d in range(3) if sigmas[d] > 0.0]
-    k = float(fault.scale)
-    if not dims or k == 1.0:
+    k = np.asarray(k, dtype=np.float64)
+    if not dims or np.all(k[dims] == 1.0):
         return np.zeros(noise.shape[1])
     u = noise[dims]
+    kd = k[dims][:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         log_f = log_density(kind, u, 1.0).sum(axis=0)
-        log_fk = (log_density(kind, u / k, 1.0) - math.log(k)).sum(axis=0)
+        log_fk = (log_density(kind, u / kd, 1.0) - np.log(kd)).sum(axis=0)
     return _mixture_log(log_f, log_fk, fault.prob) - _mixture_log(log_f, log_fk, fault.share)
 
 
@@ -204,7 +227,8 @@ class OdometryMotionModel:
         noise, idx_all = self._buffers(n)
         kind = getattr(self.cfg, "noise", "normal")
         standard_noise(kind, rng, out=noise)  # normal: rng.standard_normal
-        scales = fault_scales(n, fault, rng)
+        k = fault.scales((s1, st, s2)) if fault is not None else None
+        scales = fault_scales(n, fault, k, rng)
         if scales is not None:
             noise *= scales
 
@@ -217,7 +241,7 @@ class OdometryMotionModel:
         result = _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, self.max_tries, allowed, grid, out,
                                   scales)
         if fault is not None and log_weight is not None:
-            log_weight[:] = fault_log_weights(noise, (s1, st, s2), kind, fault)
+            log_weight[:] = fault_log_weights(noise, (s1, st, s2), kind, fault, k)
         return result
 
 
@@ -368,15 +392,16 @@ def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "odome
     return out
 
 
-def _noise_log_density(kind: str, residuals, sigmas, fault: FaultProposal | None) -> np.ndarray:
-    """sum_d log f(residual_d; sigma_d), or of the fault mixture (1 - prob) f(.; sigma) + prob f(.; scale sigma)."""
-    def log_f(k: float):
+def _noise_log_density(kind: str, residuals, sigmas, fault: FaultProposal | None, **caps) -> np.ndarray:
+    """sum_d log f(residual_d; sigma_d), or of the fault mixture (1 - prob) f(.; sigma) + prob f(.; k sigma), k the
+    fault component's multipliers (``FaultProposal.scales`` with ``caps``: its dimensions and dt)."""
+    def log_f(ks):
         return sum(log_density(kind, r, np.maximum(np.asarray(sg, dtype=np.float64) * k, SIGMA_MIN))
-                   for r, sg in zip(residuals, sigmas))
+                   for r, sg, k in zip(residuals, sigmas, ks))
 
     if fault is None or fault.prob <= 0.0:
-        return log_f(1.0)
-    return _mixture_log(log_f(1.0), log_f(float(fault.scale)), fault.prob)
+        return log_f((1.0, 1.0, 1.0))
+    return _mixture_log(log_f((1.0, 1.0, 1.0)), log_f(fault.scales(sigmas, **caps)), fault.prob)
 
 
 def motion_model_odometry(x_new, u, x_prev, cfg, **kw) -> np.ndarray:
@@ -465,7 +490,8 @@ def log_motion_model_velocity(x_new, u, x_prev, cfg, *, jacobian: bool = True,
     v, w, dt = _velocity_control(u)
     v_hat, w_hat, g_hat = velocity_inverse(x_prev, x_new, dt)
     kind = getattr(cfg, "noise", "normal")
-    out = _noise_log_density(kind, (v - v_hat, w - w_hat, g_hat), velocity_sigmas(v, w, cfg), fault)
+    out = _noise_log_density(kind, (v - v_hat, w - w_hat, g_hat), velocity_sigmas(v, w, cfg), fault,
+                              turns=(1, 2), shifts=(0,), dt=dt)
     if jacobian:
         jac = np.abs(v_hat) * dt ** 4 * 0.5 * _sinc(0.5 * w_hat * dt) ** 2
         with np.errstate(divide="ignore"):
@@ -522,7 +548,7 @@ def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, al
     move(noise, out) moves every particle; move_map(noise, idx, mask, ox, oy,
     inv_res, out, ok) moves the particles idx and checks the map, returning
     how many landed. Same semantics as ``OdometryMotionModel.sample``. With
-    ``scales`` (a fault proposal's per-particle multipliers) a redraw keeps
+    ``scales`` (a fault proposal's (3, n) multipliers) a redraw keeps
     its particle's multiplier, and ``noise`` ends holding the noise each
     particle last moved with (for its importance weight).
     """
@@ -546,7 +572,7 @@ def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, al
         draws += idx.size
         fresh = standard_noise(kind, rng, (3, idx.size))
         if scales is not None:
-            fresh *= scales[idx]
+            fresh *= scales[:, idx]
             noise[:, idx] = fresh
         n_ok += move_map(fresh, idx, mask, ox, oy, inv_res, out, ok)
     return out, ok, draws / n if n else 0.0
@@ -588,7 +614,9 @@ class VelocityMotionModel:
             self._noise = np.empty((3, n))
             self._all = np.arange(n, dtype=np.int64)
         noise = standard_noise(self.noise_kind, rng, out=self._noise)
-        scales = fault_scales(n, fault, rng)
+        # the heading noise: w and the final rotation gamma over dt; the translation: v over dt
+        k = fault.scales((sv, sw, sg), turns=(1, 2), shifts=(0,), dt=dt) if fault is not None else None
+        scales = fault_scales(n, fault, k, rng)
         if scales is not None:
             noise *= scales
 
@@ -601,7 +629,7 @@ class VelocityMotionModel:
         result = _sample_with_map(move, move_map, n, noise, self._all, rng, self.noise_kind, self.max_tries,
                                   allowed, grid, out, scales)
         if fault is not None and log_weight is not None:
-            log_weight[:] = fault_log_weights(noise, (sv, sw, sg), self.noise_kind, fault)
+            log_weight[:] = fault_log_weights(noise, (sv, sw, sg), self.noise_kind, fault, k)
         return result
 
 

@@ -233,6 +233,47 @@ class _Unpaired:
         return ((s, None) for s in self.scans)
 
 
+class _Retimed:
+    """The scans of a sized iterable with their stamps moved by ``offset`` seconds (``sensor.time_offset``) and
+    each paired with the robot's odometry pose at the new stamp, interpolated in ``odometry`` (rows t, x, y, theta,
+    tv, rv; ``mcl.datasets.rosbag.odometry_at``). A scan's own pose (a FLASER line's) is dropped; its velocities and
+    laser mounting are kept. Lazy, so a bag's scans still stream."""
+
+    def __init__(self, scans, odometry: np.ndarray, offset: float) -> None:
+        self.scans, self.offset = scans, float(offset)
+        self.odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+    def __iter__(self):
+        return (self._moved(s) for s in self.scans)
+
+    def _moved(self, s):
+        import dataclasses
+
+        from mcl.datasets.rosbag import odometry_at
+
+        t = s.t + self.offset
+        return dataclasses.replace(s, t=t, odom=odometry_at(self.odometry, t)[0])
+
+
+def _retime(scans, log, offset: float, echo):
+    """``scans`` with ``sensor.time_offset`` applied (``_Retimed``), or as they are when it is 0. The odometry is
+    the log's own stream (a CARMEN log's ODOM lines, a bag's odometry topic or transforms); a CARMEN log without
+    ODOM lines interpolates its scans' own poses."""
+    if offset == 0.0 or not len(scans):
+        return scans
+    odometry = np.asarray(log.odometry, dtype=np.float64).reshape(-1, 6)
+    what = "odometry"
+    if odometry.shape[0] == 0:
+        odometry = np.array([(s.t, *s.odom, s.tv, s.rv) for s in scans], dtype=np.float64).reshape(-1, 6)
+        what = "its scans' own odometry poses"
+    echo(f"{log.path}: sensor.time_offset {offset:+g} s: each scan paired with the {what} at its stamp "
+         f"{'+' if offset > 0 else '-'} {abs(offset):g} s")
+    return _Retimed(scans, odometry, offset)
+
+
 def _open_source(cfg: Config, echo):
     """The run's data: (log, grid, scans, landmark records, truth, initial pose from the bag or None).
 
@@ -275,6 +316,7 @@ def _open_source(cfg: Config, echo):
         echo(f"mcl: warning: {w}")
     for note in log.notes:
         echo(note)
+    scans = _retime(scans, log, cfg.sensor.time_offset, echo)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
     elif cfg.bag is not None and log.truth is not None:

@@ -243,14 +243,24 @@ def test_map_based_density():
 # ----------------------------------------------------------------------- odometry faults (FaultProposal)
 
 
+@pytest.mark.parametrize("capped", [False, True])
 @pytest.mark.parametrize("model", ["odometry", "velocity"])
-def test_fault_weights_are_the_ratio_of_the_mixture_densities(model):
+def test_fault_weights_are_the_ratio_of_the_mixture_densities(model, capped):
     # The importance weight of a particle is p_f / q: the fault mixture with weight prob over the same mixture
     # with weight share (the proposal), both from the closed form at the pose the particle reached. Exact to
-    # rounding: the sampler's noise and the density's residuals are the same numbers computed two ways.
-    from mcl.motion import FaultProposal
+    # rounding: the sampler's noise and the density's residuals are the same numbers computed two ways. Capped:
+    # turn_max and shift_max at 3 times the model's stds here, so p_k is 3 times as wide as the model, not 10
+    # (the sampler and the closed form must cap alike, or the weights miss by up to log(10 / 3)^3 = 3.6 nats).
+    from mcl.motion import FaultProposal, noise_sigmas, odometry_deltas, velocity_sigmas
 
-    fault = FaultProposal(prob=1e-3, share=0.05, scale=10.0)
+    if not capped:
+        fault = FaultProposal(prob=1e-3, share=0.05, scale=10.0)
+    elif model == "odometry":
+        s1, st, _ = noise_sigmas(*odometry_deltas(*ODOM), cfg(alphas=(0.05, 0.02, 0.05, 0.02, 0, 0)))
+        fault = FaultProposal(prob=1e-3, share=0.05, scale=10.0, turn_max=3 * s1, shift_max=3 * st)
+    else:
+        sv, sw, _ = velocity_sigmas(VEL[0], VEL[1], cfg("velocity", alphas=(0.01, 0.005, 0.01, 0.005, 0.002, 0.001)))
+        fault = FaultProposal(prob=1e-3, share=0.05, scale=10.0, turn_max=3 * sw * VEL[2], shift_max=3 * sv * VEL[2])
     n = 20_000
     x = np.tile(X0[:, None], (1, n))
     lw = np.empty(n)
@@ -266,11 +276,22 @@ def test_fault_weights_are_the_ratio_of_the_mixture_densities(model):
 
         def dens(f):
             return log_motion_model_velocity(s, VEL, X0, c, fault=f)
-    expected = dens(fault) - dens(FaultProposal(prob=fault.share, share=fault.share, scale=fault.scale))
-    # Exact but for a few wide draws whose translation noise reversed a short step: the closed form then reads
-    # the same pose as (rot1 + pi, -trans, rot2 - pi) (``odometry_residuals``), another split of the same motion
+    expected = dens(fault) - dens(FaultProposal(fault.share, fault.share, fault.scale, fault.turn_max, fault.shift_max))
+    # Exact but for a few wide draws whose translation noise all but cancelled the step: under 1 cm the closed
+    # form reads rot1 as 0 (``ROT1_MIN_TRANS``, as AMCL), another split of the same motion
     close = np.abs(lw - expected) < 1e-6
     assert close.mean() > 0.999, close.mean()
+    if model == "odometry":
+        from mcl.motion import ROT1_MIN_TRANS
+
+        rot1, trans, _ = odometry_deltas(*ODOM)
+        step = np.hypot(s[0] - X0[0], s[1] - X0[1])
+        assert (close | (step < ROT1_MIN_TRANS)).all()
+        if capped:  # the widest translation: about 3.3 x 3 sigmas (15 catches 10 sigmas uncapped, 33)
+            spread = np.abs(step - trans).max() / st
+            assert 6.0 < spread < 15.0, spread
+    if capped:
+        return  # the tail checks below are the 10x component's
     assert np.abs(lw - expected).max() < 0.1
     # the wide draws (about share of them) carry prob / share, the ordinary ones about (1 - prob) / (1 - share)
     far = lw < math.log(0.1)
