@@ -23,7 +23,7 @@ A dataset marked ``held_out: true`` is evaluated like the others here; ``mcl tun
 it and scores its best and its base config on it at the end.
 
 Every run goes through :func:`mcl.runner.run` in a worker process (``concurrent.futures``, one numba
-thread each, no recording) with seeds 1..K, for the config under test and, unless ``--no-baseline``, for
+thread each, no recording) with seeds 1..K (or A..B), for the config under test and, unless ``--no-baseline``, for
 ``configs/baseline.yaml`` (a plain fixed-N filter). Outputs in ``--out``: one folder per run
 (``runs/DATASET/MODE/CONFIG/seedK``, with the runner's outputs, ``errors.csv`` and ``row.json``),
 ``results.json`` and ``results.csv`` (one row per run), ``table.csv`` and ``table.txt`` (the median and
@@ -344,11 +344,26 @@ def _truth_start(truth: str) -> tuple[float, float, float]:
     return float(p[0, i]), float(p[1, i]), float(p[2, i])
 
 
-def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: Path, cache: Path,
+def seed_range(text: str) -> range:
+    """``--seeds``: "K" is seeds 1..K, "A-B" seeds A..B (to add seeds to a finished evaluation, or to split one
+    over machines). MclError naming the option otherwise."""
+    first, sep, last = str(text).strip().partition("-")
+    try:
+        a, b = (int(first), int(last)) if sep else (1, int(first))
+    except ValueError:
+        raise MclError(f"--seeds {text}: expected K (seeds 1..K) or A-B (seeds A..B)") from None
+    if a < 0 or b < max(a, 1):
+        raise MclError(f"--seeds {text}: expected K >= 1, or 0 <= A <= B with B >= 1")
+    return range(a, b + 1)
+
+
+def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int | range, out: Path, cache: Path,
          modes: tuple[str, ...] | None = None, only: list[str] | None = None, baseline: bool = True) -> list[Job]:
     """Every run of the suite, each with its validated Config (ConfigError naming the suite, the dataset
-    and the key when a dataset's ``set`` or a --set is wrong)."""
+    and the key when a dataset's ``set`` or a --set is wrong). ``seeds``: K (seeds 1..K) or a range."""
     from mcl.config import load_config, shipped
+
+    seeds = seeds if isinstance(seeds, range) else range(1, int(seeds) + 1)
 
     default_cfg = Path(config) if config else shipped("configs/default.yaml")
     if not default_cfg.is_file():
@@ -393,7 +408,7 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int, out: 
                     p = pose if pose is not None else (0.0, 0.0, 0.0)
                     overrides += [f"filter.initial_pose=[{p[0]!r}, {p[1]!r}, {p[2]!r}]", "filter.global_localization=false"]
                 overrides.append("rerun.mode=off")
-                for seed in range(1, seeds + 1):
+                for seed in seeds:
                     try:
                         cfg = load_config(cpath, overrides + [f"seed={seed}"])
                     except ConfigError as e:
@@ -887,14 +902,13 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
 
 def run_from_args(args) -> int:
     """``mcl eval --suite`` from the parsed command line (mcl.cli)."""
-    if args.seeds < 1:
-        raise MclError(f"--seeds: expected >= 1, got {args.seeds}")
+    seeds = seed_range(args.seeds)
     if args.jobs < 1:
         raise MclError(f"--jobs: expected >= 1, got {args.jobs}")
     modes = None
     if args.modes:
         modes = _modes([m.strip() for m in args.modes.split(",") if m.strip()], "--modes")
     only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
-    return evaluate_suite(args.suite, config=args.config, sets=args.set, seeds=args.seeds, jobs=args.jobs,
+    return evaluate_suite(args.suite, config=args.config, sets=args.set, seeds=seeds, jobs=args.jobs,
                           out=args.out, cache=args.cache, modes=modes, only=only, baseline=args.baseline,
                           progress=False if args.no_progress else None)

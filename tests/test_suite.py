@@ -204,6 +204,25 @@ def test_bad_suite_files_exit_2_naming_file_and_key(tmp_path, capsys):
         assert not (tmp_path / f"out{i}" / "results.json").exists()
 
 
+def test_seeds_k_or_a_range(tmp_path):
+    # --seeds K is 1..K; A-B adds seeds A..B to a finished --out (each run's folder is seedK, so the two plans
+    # share nothing and a resumed evaluation runs only the new ones). A bad value names the option.
+    from mcl.errors import MclError
+    from mcl.suite import seed_range
+
+    assert seed_range("3") == range(1, 4) and seed_range("4-6") == range(4, 7) and seed_range(" 2-2 ") == range(2, 3)
+    for bad in ("0", "x", "6-4", "3-", "-2", "1-2-3"):
+        with pytest.raises(MclError, match=r"^--seeds "):
+            seed_range(bad)
+    demo = PROJECT_ROOT / "data" / "demo"
+    suite = load_suite(_write(tmp_path / "s.yaml", {"name": "s", "root": str(demo), "modes": ["tracking"], "datasets": [
+        {"name": "a", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+    jobs = plan(suite, config=None, sets=[], seeds=seed_range("4-6"), out=tmp_path, cache=tmp_path / "w",
+                baseline=False)
+    assert [j.seed for j in jobs] == [j.cfg.seed for j in jobs] == [4, 5, 6]
+    assert [Path(j.run_dir).name for j in jobs] == ["seed4", "seed5", "seed6"]
+
+
 def test_plan_modes_only_and_configs(tmp_path):
     demo = PROJECT_ROOT / "data" / "demo"
     path = _write(tmp_path / "s.yaml", {"name": "s", "root": str(demo), "modes": ["tracking", "global"], "datasets": [
