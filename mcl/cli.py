@@ -191,7 +191,8 @@ def _add_suite_options(p) -> None:
     g.add_argument("--config", help="config under test (default: configs/default.yaml)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key of the config under test (repeatable)")
     g.add_argument("--seeds", default="1", metavar="K",
-                   help="seeds 1..K per run (default 1), or A-B: seeds A..B (to add seeds to a finished --out)")
+                   help="seeds 1..K per run (default 1), or A-B: seeds A..B alone (fresh seeds; --seeds B on the same --out "
+                        "then tables them all)")
     g.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="J", help="parallel runs (default: the cores)")
     g.add_argument("--out", help="output folder (default runs/suite-NAME); a rerun with the same folder resumes")
     g.add_argument("--cache", help="folder of the generated synthetic worlds (default OUT/worlds)")
