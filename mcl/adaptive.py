@@ -710,6 +710,11 @@ class FaultWindow:
     they cause opens nothing), while the filter stays lost and for ``fault_window`` updates after. A lost call
     during or just after a global search means a wrong hypothesis, not a slipping one; the search's re-seeds
     handle it, and a search closes the window.
+
+    For the window's first ``fault_widen_after`` lost updates the fault component is capped (``fault_shift_max``,
+    ``fault_turn_max``): a short episode is a slip or a glitch, and a fast robot's full-width component (2.2 m at
+    1 m a scan) let scans stamped late at a junction turn the cloud around (infinite_corridor). After that it has
+    its full width, which is a search as well: a kidnapped fast robot's wide fault poses find it within seconds.
     """
 
     def __init__(self, mc, search: GlobalSearch):
@@ -718,14 +723,17 @@ class FaultWindow:
         self.window = int(mc.fault_window)
         self.contradiction = float(mc.fault_contradiction)
         self.search = search
-        self.fault = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale),
-                                   float(mc.fault_turn_max), float(mc.fault_shift_max))
+        self.wide = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale))
+        self.capped = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale),
+                                    float(mc.fault_turn_max), float(mc.fault_shift_max))
+        self.widen_after = int(mc.fault_widen_after)
         self.reset()
 
     def reset(self) -> None:
         """Closed; a track from a known pose starts here (it has held since the start)."""
         self.held = self.window  # consecutive updates of good tracking before this one
         self.since_lost = None  # updates since the window's last lost update (None: closed)
+        self.lost_run = 0  # lost updates of the window so far
 
     def observe(self, lost: bool, contradiction: float = 1.0) -> None:
         """This update's lost belief (after the filter's ``search`` has seen it) and the fraction of its beams that
@@ -734,6 +742,7 @@ class FaultWindow:
             self.held, self.since_lost = 0, None
         elif lost:
             if self.since_lost is not None or (self.held >= self.window and contradiction >= self.contradiction):
+                self.lost_run = self.lost_run + 1 if self.since_lost is not None else 1
                 self.since_lost = 0
             self.held = 0
         else:
@@ -745,8 +754,12 @@ class FaultWindow:
 
     @property
     def proposal(self):
-        """The ``FaultProposal`` for the next motion update, or None (the plain motion model)."""
-        return self.fault if self.since_lost is not None else None
+        """The ``FaultProposal`` for the next motion update, or None (the plain motion model): with the caps
+        (``fault_shift_max``, ``fault_turn_max``) for the window's first ``fault_widen_after`` lost updates, at full
+        width after."""
+        if self.since_lost is None:
+            return None
+        return self.capped if self.lost_run <= self.widen_after else self.wide
 
 
 class LostRecovery:

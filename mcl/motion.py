@@ -108,7 +108,7 @@ class FaultProposal:
     ``turn_max`` (rad) and ``shift_max`` (m) cap p_k's heading and translation stds (never below the model's own;
     0: no cap). Without them a fast robot's p_k is metres wide: 5 m/s, 1 m a scan, gives a translation std of
     2.2 m, and a turn's heading std can reach pi (infinite_corridor with late scans: the estimate turned around
-    and ran 16 m down the corridor)."""
+    and ran 16 m down the corridor). ``mcl.adaptive.FaultWindow`` caps a window's first lost updates only."""
 
     prob: float
     share: float

@@ -199,7 +199,8 @@ def test_odometry_faults_are_allowed_from_a_lost_call_on_a_held_track_for_the_wi
 
     s = GlobalSearch()
     f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=3,
-                                    fault_contradiction=0.1), s)
+                                    fault_contradiction=0.1, fault_turn_max=0.0, fault_shift_max=0.0,
+                                    fault_widen_after=0), s)
 
     def upd(lost, cluster_weight=1.0, contradiction=0.2):
         s.observe(lost, cluster_weight)
@@ -234,6 +235,33 @@ def test_odometry_faults_are_allowed_from_a_lost_call_on_a_held_track_for_the_wi
     assert f.proposal is not None
     f.reset()
     assert f.proposal is None
+
+
+def test_the_fault_caps_hold_for_a_windows_first_lost_updates_then_it_widens():
+    # motion.fault_widen_after = 2: the window's first two lost updates move with the capped fault component (a
+    # slip is short: scans stamped late at a junction, infinite_corridor), the third on at full width (a kidnap: the
+    # wide fault poses are a search), until the window closes; a new window starts capped again.
+    from types import SimpleNamespace
+
+    from mcl.adaptive import FaultWindow, GlobalSearch
+
+    s = GlobalSearch()
+    f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=2,
+                                    fault_contradiction=0.1, fault_turn_max=0.1, fault_shift_max=0.3,
+                                    fault_widen_after=2), s)
+
+    def upd(lost):
+        s.observe(lost, 1.0)
+        f.observe(lost, 0.2)
+
+    caps = []
+    for lost in (True, True, False, True, True, False, False, False, True, True, True):
+        upd(lost)
+        caps.append(None if f.proposal is None else (f.proposal.turn_max, f.proposal.shift_max))
+    capped, wide = (0.1, 0.3), (0.0, 0.0)
+    # closed 3 good updates after its last lost one; the next lost call (the track had held 3 >= 2) opens a new
+    # window, capped again for its first two lost updates
+    assert caps == [capped, capped, capped, wide, wide, wide, wide, None, capped, capped, wide]
 
 
 def test_lost_recovery_reseeds_once_the_local_spread_failed():
