@@ -724,8 +724,7 @@ class FaultWindow:
         self.contradiction = float(mc.fault_contradiction)
         self.search = search
         self.wide = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale))
-        self.capped = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale),
-                                    float(mc.fault_turn_max), float(mc.fault_shift_max))
+        self.turn_rate, self.shift_rate = float(mc.fault_turn_max), float(mc.fault_shift_max)  # per second
         self.widen_after = int(mc.fault_widen_after)
         self.reset()
 
@@ -752,14 +751,19 @@ class FaultWindow:
                 if self.since_lost > self.window:
                     self.since_lost = None
 
-    @property
-    def proposal(self):
-        """The ``FaultProposal`` for the next motion update, or None (the plain motion model): with the caps
-        (``fault_shift_max``, ``fault_turn_max``) for the window's first ``fault_widen_after`` lost updates, at full
-        width after."""
+    def proposal(self, dt: float):
+        """The ``FaultProposal`` for the next motion update, which spans ``dt`` s of the log, or None (the plain
+        motion model): for the window's first ``fault_widen_after`` lost updates with its stds capped at
+        ``fault_shift_max`` and ``fault_turn_max`` times ``dt`` (a slip accrues with time: a sparse log's update
+        may hold a larger one), at full width after."""
         if self.since_lost is None:
             return None
-        return self.capped if self.lost_run <= self.widen_after else self.wide
+        if self.lost_run > self.widen_after or dt <= 0.0:
+            return self.wide
+        from mcl.motion import FaultProposal
+
+        w = self.wide
+        return FaultProposal(w.prob, w.share, w.scale, self.turn_rate * dt, self.shift_rate * dt)
 
 
 class LostRecovery:

@@ -151,9 +151,9 @@ class MotionConfig:
     fault_share: float = field(default=0.05, metadata=_rng(0.0, 1.0, lo_open=True, hi_open=True))
     fault_window: int = field(default=50, metadata=_rng(0, 1_000_000))  # updates after a lost call
     fault_contradiction: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # a lost call opens it from this
-    fault_turn_max: float = field(default=0.0, metadata=_rng(0.0, 6.2832))  # rad: cap on p_k's heading std (0: none)
-    fault_shift_max: float = field(default=0.3, metadata=_rng(0.0))  # m: cap on p_k's translation std (0: none)
-    fault_widen_after: int = field(default=10, metadata=_rng(0, 1_000_000))  # a window's first lost updates with the caps
+    fault_turn_max: float = field(default=0.0, metadata=_rng(0.0))  # rad/s: cap on p_k's heading std per s (0: none)
+    fault_shift_max: float = field(default=1.5, metadata=_rng(0.0))  # m/s: cap on p_k's translation std per s (0: none)
+    fault_widen_after: int = field(default=5, metadata=_rng(0, 1_000_000))  # a window's first lost updates with the caps
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

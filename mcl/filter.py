@@ -414,7 +414,7 @@ class ParticleFilter:
         """(moved (3, N), ok (N,) bool | None, mean tries, log-weights (N,) | None): the motion model applied to
         ``particles``, with the odometry-fault proposal while ``faults`` allows it (then the particles' importance
         log-weights, else None); a non-finite sample keeps its ancestor's pose and is not ok (weight zero)."""
-        fault = self.faults.proposal if self.faults is not None else None
+        fault = self.faults.proposal(float(control.dt)) if self.faults is not None else None
         lw = np.empty(particles.shape[1]) if fault is not None else None
         new, ok, tries = self.motion.sample_control(particles, control, self.rng, allowed=self.allowed,
                                                     grid=self.grid, fault=fault, log_weight=lw)

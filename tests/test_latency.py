@@ -30,8 +30,8 @@ def test_a_late_scan_stamp_at_the_junction_does_not_send_the_track_down_the_corr
     # drives 1 m a scan, so the fault component's translation std, 10 times the model's, was 2.2 m: the cloud turned
     # around and the estimate ran down the corridor at 5 m/s, 16.3 and 15.6 m off with seeds 1 and 2 (seeds 1-10
     # over the whole log: 9 lost, worst 66 m). motion.fault_shift_max (0.3 m) caps that std for a window's first
-    # fault_widen_after (10) lost updates: 0.31 and 0.30 m (seeds 1-4 in these 45 s: at most 0.97 m; seeds 1-10
-    # over the whole log: none lost, worst 0.86 m). Bound: 1 m, the bound for a real log, which the
+    # fault_widen_after (5) lost updates: 0.32 and 0.31 m (seeds 1-4 in these 45 s: at most 0.97 m; seeds 1-10
+    # over the whole log: none lost, worst 0.85 m). Bound: 1 m, the bound for a real log, which the
     # uncapped default misses 16-fold.
     lines = []
     for line in (CORRIDOR / "log.clf").read_text().splitlines(keepends=True):

@@ -207,61 +207,71 @@ def test_odometry_faults_are_allowed_from_a_lost_call_on_a_held_track_for_the_wi
         f.observe(lost, contradiction)
 
     upd(False)
-    assert f.proposal is None  # a track that fits: the plain motion model
+    assert f.proposal(0.2) is None  # a track that fits: the plain motion model
     upd(True, contradiction=0.05)  # lost, but no beam through a wall to speak of (people, furniture): nothing
-    assert f.proposal is None
+    assert f.proposal(0.2) is None
     for _ in range(3):
         upd(False)
     upd(True)  # a lost call whose scan goes through mapped walls, on a track that held: faults allowed ...
-    assert f.proposal is not None and f.proposal.prob == 1e-3 and f.proposal.share == 0.05
+    assert f.proposal(0.2) is not None and f.proposal(0.2).prob == 1e-3 and f.proposal(0.2).share == 0.05
     upd(True)
     for _ in range(3):  # ... while lost and 3 updates after
         upd(False)
-        assert f.proposal is not None
+        assert f.proposal(0.2) is not None
     upd(False)
-    assert f.proposal is None
+    assert f.proposal(0.2) is None
     upd(True)  # lost again after 4 good updates: opens again
-    assert f.proposal is not None
+    assert f.proposal(0.2) is not None
     s.start()  # a global search: a lost call means a wrong hypothesis, not a slipping one; it closes the window
     upd(True, 0.5)
-    assert f.proposal is None
+    assert f.proposal(0.2) is None
     upd(False, 0.95)  # settled and fits
     upd(False)
     upd(True)  # lost after 2 good updates: not a held track yet
-    assert f.proposal is None
+    assert f.proposal(0.2) is None
     for _ in range(3):
         upd(False)
     upd(True)  # after 3: it had held for the window
-    assert f.proposal is not None
+    assert f.proposal(0.2) is not None
     f.reset()
-    assert f.proposal is None
+    assert f.proposal(0.2) is None
 
 
 def test_the_fault_caps_hold_for_a_windows_first_lost_updates_then_it_widens():
     # motion.fault_widen_after = 2: the window's first two lost updates move with the capped fault component (a
     # slip is short: scans stamped late at a junction, infinite_corridor), the third on at full width (a kidnap: the
-    # wide fault poses are a search), until the window closes; a new window starts capped again.
+    # wide fault poses are a search), until the window closes; a new window starts capped again. The caps are
+    # rates: fault_shift_max 1.5 m/s is 0.3 m over a 0.2 s update and 3.9 m over a sparse log's 2.6 s.
     from types import SimpleNamespace
 
     from mcl.adaptive import FaultWindow, GlobalSearch
 
     s = GlobalSearch()
     f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=2,
-                                    fault_contradiction=0.1, fault_turn_max=0.1, fault_shift_max=0.3,
+                                    fault_contradiction=0.1, fault_turn_max=0.5, fault_shift_max=1.5,
                                     fault_widen_after=2), s)
 
     def upd(lost):
         s.observe(lost, 1.0)
         f.observe(lost, 0.2)
 
-    caps = []
+    def caps(dt=0.2):
+        p = f.proposal(dt)
+        return None if p is None else (round(p.turn_max, 9), round(p.shift_max, 9))
+
+    seen = []
     for lost in (True, True, False, True, True, False, False, False, True, True, True):
         upd(lost)
-        caps.append(None if f.proposal is None else (f.proposal.turn_max, f.proposal.shift_max))
+        seen.append(caps())
     capped, wide = (0.1, 0.3), (0.0, 0.0)
     # closed 3 good updates after its last lost one; the next lost call (the track had held 3 >= 2) opens a new
     # window, capped again for its first two lost updates
-    assert caps == [capped, capped, capped, wide, wide, wide, wide, None, capped, capped, wide]
+    assert seen == [capped, capped, capped, wide, wide, wide, wide, None, capped, capped, wide]
+    f.reset()
+    for _ in range(2):
+        upd(False)
+    upd(True)
+    assert caps(2.6) == (1.3, 3.9) and caps(0.0) == wide  # no log time: no cap
 
 
 def test_lost_recovery_reseeds_once_the_local_spread_failed():
