@@ -70,29 +70,35 @@ def _stamped_late(lines: list[str], lag: float) -> str:
     return "".join(out)
 
 
-def test_time_offset_pairs_each_scan_with_the_odometry_of_its_true_time(tmp_path):
-    # A generated office drive with its scans stamped 0.3 s late. With sensor.time_offset -0.3 each scan is paired
-    # with the ODOM lines interpolated at its stamp - 0.3 s, which is the original pairing: the same trajectory at the
-    # same times (tolerance 1e-5 m and s: the stamps go through "%.6f" and back, and the ODOM lines are
-    # interpolated, not read; measured: equal). Left late, the same log tracks worse: the robot turns up to
-    # 0.6 rad/s, 10 degrees in 0.3 s.
-    world = tmp_path / "w"
+@pytest.fixture(scope="module")
+def late_drive(tmp_path_factory):
+    """A generated office drive (seed 3, 30 s) and its log with the scans stamped 0.3 s late."""
+    world = tmp_path_factory.mktemp("late")
     simulate(world, seed=3, duration=30.0)
-    lines = (world / "log.clf").read_text().splitlines(keepends=True)
-    late = tmp_path / "late.clf"
-    late.write_text(_stamped_late(lines, 0.3))
+    late = world / "late.clf"
+    late.write_text(_stamped_late((world / "log.clf").read_text().splitlines(keepends=True), 0.3))
+    return world, late
+
+
+def _run(world, out, said, *sets):
+    """The default config from the drive's start pose, rerun off: (summary, trajectory (t, poses))."""
+    start = [float(v) for v in read_tum(world / "truth.tum")[1][:, 0]]
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={world / 'map.yaml'}", f"truth={world / 'truth.tum'}", "rerun.mode=off",
+        f"filter.initial_pose={start}", *sets])
+    return run(cfg, out, progress=False, echo=said.append), read_tum(out / "trajectory.tum")
+
+
+def test_time_offset_pairs_each_scan_with_the_odometry_of_its_true_time(late_drive, tmp_path):
+    # With sensor.time_offset -0.3 each scan of the late log is paired with the ODOM lines interpolated at its stamp
+    # - 0.3 s, which is the original pairing: the same trajectory at the same times (tolerance 1e-5 m and s: the
+    # stamps go through "%.6f" and back, and the ODOM lines are interpolated, not read; measured: equal). Left late,
+    # the same log tracks worse: the robot turns up to 0.6 rad/s, 10 degrees in 0.3 s.
+    world, late = late_drive
     said = []
-
-    def go(name, log, *sets):
-        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-            f"map={world / 'map.yaml'}", f"log={log}", f"truth={world / 'truth.tum'}", "rerun.mode=off",
-            "filter.initial_pose=" + str([float(v) for v in read_tum(world / "truth.tum")[1][:, 0]]), *sets])
-        s = run(cfg, tmp_path / name, progress=False, echo=said.append)
-        return s, read_tum(tmp_path / name / "trajectory.tum")
-
-    s0, (t0, p0) = go("original", world / "log.clf")
-    s1, (t1, p1) = go("corrected", late, "sensor.time_offset=-0.3")
-    s2, (t2, p2) = go("late", late)
+    s0, (t0, p0) = _run(world, tmp_path / "original", said, f"log={world / 'log.clf'}")
+    s1, (t1, p1) = _run(world, tmp_path / "corrected", said, f"log={late}", "sensor.time_offset=-0.3")
+    s2, _ = _run(world, tmp_path / "late", said, f"log={late}")
     assert any("sensor.time_offset -0.3 s: each scan paired with the odometry at its stamp - 0.3 s" in m
                for m in said), said
     assert s1["updates"] == s0["updates"] > 100
@@ -103,31 +109,22 @@ def test_time_offset_pairs_each_scan_with_the_odometry_of_its_true_time(tmp_path
     assert s2["eval"]["heading_rmse"] > 5 * s0["eval"]["heading_rmse"], (s0["eval"], s2["eval"])
 
 
-def test_time_offset_on_a_bag_streams_its_scans_paired_at_the_corrected_time(tmp_path):
+def test_time_offset_on_a_bag_streams_its_scans_paired_at_the_corrected_time(late_drive, tmp_path):
     # The same late drive as a ROS 2 bag (/scan and /odom at each late stamp): the bag's scans stream through the
     # offset lazily. Its /odom holds one pose per scan, so the corrected pairing interpolates between scans (0.3 s is
-    # 1.5 scan periods): not the original pairing exactly, but its heading RMSE within 1.5 times the original's,
-    # where the bag left late is 11 times.
+    # 1.5 scan periods): not the original pairing exactly, but its heading RMSE within 1.5 times the original's
+    # (measured 1.07), where the bag left late is 11 times.
     from mcl.datasets.bagwrite import write_scans
     from mcl.datasets.carmen import read_carmen
 
-    world = tmp_path / "w"
-    simulate(world, seed=3, duration=30.0)
-    late = tmp_path / "late.clf"
-    late.write_text(_stamped_late((world / "log.clf").read_text().splitlines(keepends=True), 0.3))
+    world, late = late_drive
     bag = tmp_path / "late.mcap"
     write_scans(bag, read_carmen(late).laser_stream())
-    start = "filter.initial_pose=" + str([float(v) for v in read_tum(world / "truth.tum")[1][:, 0]])
     said = []
-
-    def go(name, *sets):
-        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-            f"map={world / 'map.yaml'}", "log=null", f"truth={world / 'truth.tum'}", "rerun.mode=off", start, *sets])
-        return run(cfg, tmp_path / name, progress=False, echo=said.append)["eval"]
-
-    original = go("original", f"log={world / 'log.clf'}")
-    corrected = go("corrected", f"bag={bag}", "sensor.time_offset=-0.3")
-    left = go("late", f"bag={bag}")
+    original = _run(world, tmp_path / "original", said, f"log={world / 'log.clf'}")[0]["eval"]
+    corrected = _run(world, tmp_path / "corrected", said, "log=null", f"bag={bag}",
+                     "sensor.time_offset=-0.3")[0]["eval"]
+    left = _run(world, tmp_path / "late", said, "log=null", f"bag={bag}")[0]["eval"]
     assert any("sensor.time_offset -0.3 s" in m for m in said), said
     assert corrected["heading_rmse"] < 1.5 * original["heading_rmse"], (original, corrected)
     assert left["heading_rmse"] > 5 * original["heading_rmse"], (original, left)
