@@ -18,6 +18,7 @@ the recording and says ``"interrupted": true`` in the summary.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -240,7 +241,9 @@ class _Retimed:
     laser mounting are kept. Lazy, so a bag's scans still stream."""
 
     def __init__(self, scans, odometry: np.ndarray, offset: float) -> None:
-        self.scans, self.offset = scans, float(offset)
+        from mcl.datasets.rosbag import odometry_at
+
+        self.scans, self.offset, self.at = scans, float(offset), odometry_at
         self.odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
 
     def __len__(self) -> int:
@@ -250,12 +253,8 @@ class _Retimed:
         return (self._moved(s) for s in self.scans)
 
     def _moved(self, s):
-        import dataclasses
-
-        from mcl.datasets.rosbag import odometry_at
-
         t = s.t + self.offset
-        return dataclasses.replace(s, t=t, odom=odometry_at(self.odometry, t)[0])
+        return dataclasses.replace(s, t=t, odom=self.at(self.odometry, t)[0])
 
 
 def _retime(scans, log, offset: float, echo):
