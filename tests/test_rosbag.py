@@ -455,6 +455,70 @@ def test_messages_out_of_order(scans, tmp_path, capsys):
     _fails(capsys, tmp_path, bag, match="/scan: messages out of order: message 11")
 
 
+def _recompress(src: Path, folder: Path, storage: str, mode: str) -> None:
+    """Rewrite the ROS 2 bag ``src`` as the rosbag2 folder ``folder``, compressed as ``ros2 bag record
+    --compression-mode MODE --compression-format zstd`` does (mode storage: MCAP's own zstd chunks)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    w = Writer(folder, version=9, storage_plugin=plugin)
+    w.set_compression(CompressionMode[mode.upper()], CompressionFormat.ZSTD)
+    with AnyReader([src]) as r:
+        w.open()
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=r.typestore) for c in r.connections}
+        for c, t, raw in r.messages():
+            w.write(conns[c.id], t, raw)
+        w.close()
+
+
+@pytest.mark.parametrize("storage, mode", [("db3", "message"), ("db3", "file"), ("mcap", "message"),
+                                           ("mcap", "storage")])
+def test_a_compressed_rosbag2_recording_reads_through_its_folder(scans, tmp_path, capsys, storage, mode):
+    # Only the folder's metadata.yaml says a message-compressed .db3 or .mcap holds zstd frames, not messages,
+    # and a file-compressed recording's one file is a .db3.zstd: given the folder or the file in it, mcl reads the
+    # folder. Records compared with the uncompressed bag's, one by one.
+    plain = tmp_path / f"plain.{storage}"
+    write_scans(plain, scans)
+    folder = tmp_path / "rec"
+    _recompress(plain, folder, storage, mode)
+    (inner,) = [p for p in folder.iterdir() if p.name != "metadata.yaml"]
+    assert inner.name.endswith(".zstd") == (mode == "file")
+    for given in (folder, inner):
+        got = list(open_bag(given).scans)
+        assert len(got) == len(scans) > 30
+        for a, b in zip(scans, got):
+            _same_records(a, b)
+    if mode == "message":  # the file alone, without its metadata.yaml: one line that says why
+        lone = tmp_path / f"lone.{storage}"
+        lone.write_bytes(inner.read_bytes())
+        _fails(capsys, tmp_path, lone, match="recorded with message compression reads only through its folder")
+
+
+@pytest.mark.parametrize("fmt", ["BZ2", "LZ4"])
+def test_a_ros1_bag_with_compressed_chunks_reads_the_same_records(scans, tmp_path, fmt):
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag1 import Writer
+
+    plain, packed = tmp_path / "plain.bag", tmp_path / "packed.bag"
+    write_scans(plain, scans)
+    w = Writer(packed)
+    w.set_compression(getattr(Writer.CompressionFormat, fmt))
+    with AnyReader([plain]) as r:
+        w.open()
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+                 for c in r.connections}
+        for c, t, raw in r.messages():
+            w.write(conns[c.id], t, raw)
+        w.close()
+    assert packed.read_bytes() != plain.read_bytes()
+    got = list(open_bag(packed).scans)
+    assert len(got) == len(scans) > 30
+    for a, b in zip(scans, got):
+        _same_records(a, b)
+
+
 @pytest.mark.parametrize("kind", list(KINDS))
 def test_truncated_bag(scans, tmp_path, capsys, kind):
     bag = tmp_path / f"full.{KINDS[kind]}"

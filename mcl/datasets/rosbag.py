@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from mcl.datasets.carmen import Scan
 from mcl.errors import DataError
@@ -64,15 +65,39 @@ TRUTH_TYPES = (POSE, PWCS, ODOM)
 REORDER_TOLERANCE = 1.0
 
 
-def is_bag(path) -> bool:
-    """A ROS bag by its name: .bag, .db3, .mcap, or a folder with a rosbag2 metadata.yaml."""
+def rosbag2_folder(path) -> Path | None:
+    """The rosbag2 folder a storage file belongs to: its parent, when the parent's ``metadata.yaml`` lists the
+    file (None otherwise). Only the folder says how the messages were compressed (``ros2 bag record
+    --compression-mode message`` leaves each message compressed in a plain-looking .db3 or .mcap; ``file`` leaves
+    a ``.db3.zstd``), and which split files make up the recording, so such a file is read through its folder."""
     p = Path(path)
-    return p.suffix in BAG_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").exists())
+    meta = p.parent / "metadata.yaml"
+    if not p.is_file() or not meta.is_file():
+        return None
+    try:
+        info = yaml.safe_load(meta.read_text(errors="replace"))["rosbag2_bagfile_information"]
+        files = {Path(str(f)).name for f in info.get("relative_file_paths") or ()}
+    except Exception:  # not a rosbag2 metadata file: the file is read alone
+        return None
+    return p.parent if p.name in files else None
+
+
+def _storage(path) -> Path:
+    """The path to open: a storage file's rosbag2 folder (``rosbag2_folder``), else the path itself."""
+    return rosbag2_folder(path) or Path(path)
+
+
+def is_bag(path) -> bool:
+    """A ROS bag by its name: .bag, .db3, .mcap, a folder with a rosbag2 metadata.yaml, or a file that folder
+    lists (a split file, a compressed ``.db3.zstd``)."""
+    p = Path(path)
+    return (p.suffix in BAG_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").exists())
+            or rosbag2_folder(p) is not None)
 
 
 def bag_kind(path) -> str:
     """bag1, db3 or mcap (a rosbag2 folder: from its storage files)."""
-    p = Path(path)
+    p = _storage(path)
     if p.suffix in BAG_SUFFIXES:
         return BAG_SUFFIXES[p.suffix]
     if p.is_dir():
@@ -129,7 +154,7 @@ def _open_reader(path: Path):
     if not is_bag(path):
         raise DataError(f"{path}: not a ROS bag (.bag, .db3, .mcap or a rosbag2 folder)")
     try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader = AnyReader([_storage(path)], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
     except Exception as e:  # the library's readers raise many kinds for a damaged file
         raise DataError(f"{path}: cannot read the bag (truncated or corrupt?): {_why(e)}") from None
@@ -153,7 +178,12 @@ def _messages(reader, path, connections):
             return
         except Exception as e:
             where = f" on {conn.topic}" if conn is not None else ""
-            raise DataError(f"{path}: cannot read a message{where} (truncated or corrupt?): {_why(e)}") from None
+            hint = ""
+            if Path(path).suffix in (".db3", ".mcap") and rosbag2_folder(path) is None:
+                hint = ("; a rosbag2 file recorded with message compression reads only through its folder, with the "
+                        "metadata.yaml that says so")
+            raise DataError(f"{path}: cannot read a message{where} (truncated or corrupt?): "
+                            f"{_why(e).rstrip('.')}{hint}") from None
         yield conn, msg
 
 
