@@ -634,7 +634,7 @@ class ParticleFilter:
         track = p.track
         log_track, log_search = (normalize_log_weights(self.logw[side])[1] for side in (track, ~track))
         scores = (None if self._scan_observation is None
-                  else lambda: (self._side_score(~track), self._side_score(track)))
+                  else lambda: self._side_fits(~track, track))
         odds = p.weigh(log_track, log_search, scores)
         raw = log_search - log_track
         if not p.settled:
@@ -665,17 +665,25 @@ class ParticleFilter:
         self.weights, log_norm = normalize_log_weights(logw)
         self.logw = logw - log_norm
 
-    def _side_score(self, side: np.ndarray) -> float:
-        """The quality score (mcl.quality: match - 2 contradiction) of this update's scan at the estimate of the
-        particles ``side`` selects (their heaviest cluster); -inf without weight, nan without beams."""
+    def _side_fits(self, search: np.ndarray, track: np.ndarray) -> tuple[float, float, float, float]:
+        """This update's scan at the estimates of the sides ``search`` and ``track``: (score, score, contradiction,
+        contradiction), search first (``_side_fit``)."""
+        (s_search, c_search), (s_track, c_track) = self._side_fit(search), self._side_fit(track)
+        return s_search, s_track, c_search, c_track
+
+    def _side_fit(self, side: np.ndarray) -> tuple[float, float]:
+        """The quality score (mcl.quality: match - 2 contradiction) and the share of beams through mapped walls of
+        this update's scan at the estimate of the particles ``side`` selects (their heaviest cluster); (-inf, 1)
+        without weight, nan without beams."""
         w = self.weights[side]
         total = float(w.sum())
         if not total > 0.0:
-            return -math.inf
+            return -math.inf, 1.0
         fc = self.cfg.filter
         est = cluster_estimate(np.ascontiguousarray(self.particles[:, side]), w / total, fc.cluster_size,
                                fc.cluster_angle)
-        return self._scan_score(est.mean)
+        f = self.quality.fit(est.mean, self.sensor.endpoints(self._scan_observation), self._laser_pose[:2])
+        return f.score, f.contradiction
 
     def _scan_score(self, pose) -> float:
         """The quality score (mcl.quality: match - 2 contradiction) of this update's scan at ``pose``."""

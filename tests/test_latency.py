@@ -128,3 +128,30 @@ def test_time_offset_on_a_bag_streams_its_scans_paired_at_the_corrected_time(lat
     assert any("sensor.time_offset -0.3 s" in m for m in said), said
     assert corrected["heading_rmse"] < 1.5 * original["heading_rmse"], (original, corrected)
     assert left["heading_rmse"] > 5 * original["heading_rmse"], (original, left)
+
+
+@pytest.mark.slow
+def test_people_crowding_a_late_laser_in_a_hall_do_not_hand_the_track_to_a_place_seen_through_walls(tmp_path):
+    # A hall with 20 people walking, 20 % dropouts, and the scans 0.1 s late (suites/heldout3.yaml's
+    # hall-people-dropouts-h10 through scripts/degrade_laser.py --latency 0.1). Around 42 s people crowd the robot:
+    # the correct track fits at match 0.2-0.5 with no beam through a wall, is called lost, and lost recovery
+    # re-seeds. The search found a place 10.7 m away that fitted those scans at 0.53-0.62 with 3-7 % of the beams
+    # through mapped walls, out-scored the track over three scans and took the estimate (seed 2: 30 m off; the
+    # baseline, with no recovery, 0.19 m). A scan the track explains as occlusion and the search's place only through
+    # walls is no evidence for the search (mcl.adaptive.ProtectedReseed): 0.18 m (seeds 1 and 3: 0.19 and 0.21 m,
+    # the same with or without the rule). Bound: the suite's 0.5 m.
+    world = tmp_path / "hall"
+    simulate(world, kind="hall", seed=471, duration=120.0, range_max=25.0, dynamic_obstacles=20, p_max=0.2)
+    lines = (world / "log.clf").read_text().splitlines(keepends=True)
+    stream = odometry_stream(lines)
+    log = world / "late.clf"
+    log.write_text("".join(delay_line(line, stream, 0.1) for line in lines))
+    start = [float(v) for v in read_tum(world / "truth.tum")[1][:, 0]]
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={world / 'map.yaml'}", f"log={log}", f"truth={world / 'truth.tum'}", "rerun.mode=off",
+        f"filter.initial_pose={start}", "filter.global_localization=false", "seed=2"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
+    assert s["eval"]["scored"] == 601 and s["reseeds"] > 0, s  # people made it lost, and it re-seeded
+    assert s["eval"]["ate_max"] <= 0.5, s["eval"]

@@ -872,6 +872,27 @@ def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_thr
     assert p.settled and p.track_won  # a tie after MAX_UPDATES goes to the track
 
 
+def test_protected_reseed_counts_no_scan_that_goes_through_walls_only_at_the_searchs_place():
+    """A scan the track explains as occlusion (no beam through a mapped wall) and the search's place only with beams
+    through walls is no evidence for the search: people end readings short of walls and never make them go through
+    one. Scores and shares through walls as in hall-people-dropouts-h10 with scans 0.1 s late, where such scans
+    handed a place 10.7 m away the estimate (search first: score, score, through walls, through walls)."""
+    from mcl.adaptive import ProtectedReseed
+
+    def fresh(local=False):
+        return ProtectedReseed(np.ones(4, dtype=bool), keep=0.5, reseed_odds=4.6, lost_below=0.6, local=local)
+
+    p = fresh()
+    for _ in range(5):
+        assert p.weigh(0.0, 10.0, lambda: (0.62, 0.48, 0.034, 0.0)) == 0.0
+    assert not p.settled
+    assert fresh().weigh(0.0, 10.0, lambda: (0.62, 0.48, 0.0, 0.0)) == 3.0  # neither through walls: it counts
+    assert fresh().weigh(0.0, 10.0, lambda: (0.62, 0.48, 0.05, 0.02)) == 3.0  # the track through walls too
+    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.02, 0.0)) == 0.0  # even a decisive-looking scan
+    assert fresh().weigh(0.0, -10.0, lambda: (0.3, 0.5, 0.2, 0.0)) == -3.0  # evidence for the track counts
+    assert fresh(local=True).weigh(0.0, 10.0, lambda: (0.7, 0.3, 0.05, 0.0)) == 3.0  # a spread: its own rules
+
+
 def test_a_protected_reseed_keeps_a_correct_track_and_drops_the_search_without_probation():
     # freiburg-campus, tracking with gentle odometry: a correct track fits poorly outdoors for seconds at a time;
     # re-seeded, one scan that a place 170 m away fitted better handed it the whole set at the next resample, and
@@ -988,7 +1009,7 @@ def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_w
     # the scan favours the search (the track is 3 m off), but the quality score is made to favour the track: the
     # odds do not move, the estimate stays on the track, and after 25 updates the tie goes to the track.
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_score = lambda side: 0.9 if side[0] else 0.1  # the track's particles come first
+    pf._side_fit = lambda side: (0.9 if side[0] else 0.1, 0.0)  # the track's particles come first
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
     for k in range(24):
         info = pf.step(None, obs)
@@ -999,10 +1020,10 @@ def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_w
     # second; and with the scan fitting the search's place as a tracked scan does (0.9) and the track's as a lost
     # one (below quality.lost_below 0.6), on the first (a sparse log's next scan can be 17 s away)
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_score = lambda side: 0.5 if side[0] else 0.7
+    pf._side_fit = lambda side: (0.5 if side[0] else 0.7, 0.0)
     assert not pf.step(None, obs).switched and pf.protected.odds == 3.0 and pf.step(None, obs).switched
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_score = lambda side: 0.5 if side[0] else 0.9
+    pf._side_fit = lambda side: (0.5 if side[0] else 0.9, 0.0)
     assert pf.step(None, obs).switched
 
 
@@ -1062,7 +1083,7 @@ def test_lost_recovery_spreads_as_a_protected_side_and_the_estimate_stays_on_the
     assert pf.n == 8000 and pf._injected.sum() == 4000 and not pf.search.tempering
     fresh = pf.particles[:, pf._injected]
     assert 0.3 < np.std(fresh[0]) < 0.7 and np.hypot(*(fresh[:2].mean(axis=1) - track[:2])) < 0.05  # std 0.5 m
-    pf._side_score = lambda side: 0.3  # the scans fit neither side as a tracked scan does: no evidence
+    pf._side_fit = lambda side: (0.3, 0.0)  # the scans fit neither side as a tracked scan does: no evidence
     for k in range(5):
         info = pf.step(None, obs)
         assert pf.protected is not None and pf.protected.odds == 0.0, k
