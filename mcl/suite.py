@@ -477,12 +477,17 @@ def score(mode: str, t, e, *, lost_m: float, kidnap_t: float | None = None) -> d
 # ----------------------------------------------------------------------------- a run (in a worker)
 
 
+_IN_WORKER = False  # this process is a pool worker (_worker_init), whose parent hears Ctrl-C itself
+
+
 def _worker_init() -> None:
     """A worker: one numba thread (the runs are the parallelism), Ctrl-C left to the runs."""
     import signal
 
     import numba
 
+    global _IN_WORKER
+    _IN_WORKER = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # between runs; a run catches it (runner._Interrupts)
     numba.set_num_threads(1)
 
@@ -528,7 +533,11 @@ def run_job(job: Job) -> dict:
     if summary.get("late_signal"):
         # Ctrl-C while the run closed its outputs: the row is kept (a resume reads it back), and the signal goes
         # on to this process's own handler: KeyboardInterrupt here with --jobs 1, ignored in a pool worker (the
-        # parent process got the same Ctrl-C)
+        # parent process got the same Ctrl-C). A process started with SIGINT ignored (a background job of a
+        # script) has no handler to hand it to, but the run heard it (its own handler takes SIGINT whatever the
+        # process ignores), so it stops here too: CI once saw exit 0 instead of 130 that way
+        if signal.getsignal(signal.SIGINT) is signal.SIG_IGN and not _IN_WORKER:
+            raise KeyboardInterrupt
         signal.raise_signal(signal.SIGINT)
     return row
 
