@@ -682,12 +682,16 @@ class ParticleFilter:
         fc = self.cfg.filter
         est = cluster_estimate(np.ascontiguousarray(self.particles[:, side]), w / total, fc.cluster_size,
                                fc.cluster_angle)
-        f = self.quality.fit(est.mean, self.sensor.endpoints(self._scan_observation), self._laser_pose[:2])
+        f = self._scan_fit(est.mean)
         return f.score, f.contradiction
+
+    def _scan_fit(self, pose):
+        """This update's scan laid on the map at ``pose`` (mcl.quality.Fit)."""
+        return self.quality.fit(pose, self.sensor.endpoints(self._scan_observation), self._laser_pose[:2])
 
     def _scan_score(self, pose) -> float:
         """The quality score (mcl.quality: match - 2 contradiction) of this update's scan at ``pose``."""
-        return self.quality.fit(pose, self.sensor.endpoints(self._scan_observation), self._laser_pose[:2]).score
+        return self._scan_fit(pose).score
 
     def estimate(self, info: StepInfo | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The pose estimate and its covariance: of the heaviest cluster (``filter.estimate = cluster``) or of the
