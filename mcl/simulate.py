@@ -54,9 +54,21 @@ from mcl.worlds import (  # noqa: F401  (RESOLUTION, make_world, World: importab
     KIND_DEFAULTS, KINDS, RESOLUTION, World, _components, generate, make_world,
 )
 
-_ODOM_RATE = 10.0  # Hz, truth and ODOM
+_ODOM_RATE = 10.0  # Hz, truth and ODOM (at the default 5 Hz scan rate)
 _SCAN_EVERY = 2  # odometry ticks per scan (5 Hz)
 _SIM_DT = 0.01  # integration step, s
+
+
+def _rates(scan_rate: float) -> tuple[float, int, float]:
+    """(odometry rate Hz, odometry ticks per scan, integration step s) for a laser at ``scan_rate`` Hz: the odometry
+    at 10 Hz or more and a whole multiple of the scan rate, the step about 10 ms and a whole fraction of a tick. At
+    5 Hz these are the module's constants, so the default worlds stay what they were."""
+    if scan_rate == _ODOM_RATE / _SCAN_EVERY:
+        return _ODOM_RATE, _SCAN_EVERY, _SIM_DT
+    every = max(1, math.ceil(10.0 / scan_rate - 1e-9))
+    odom = scan_rate * every
+    per_tick = max(1, int(round(1.0 / (odom * _SIM_DT))))
+    return odom, every, 1.0 / (odom * per_tick)
 
 
 # --------------------------------------------------------------------------
@@ -288,7 +300,8 @@ def _ground_hits(rng, t, angles, episodes: int, duration: float, exact) -> list[
     return windows
 
 
-def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, leg_max=None, reversals=None):
+def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, leg_max=None, reversals=None,
+           odom_rate=_ODOM_RATE, sim_dt=_SIM_DT):
     """Truth poses (n_ticks, 3) at 10 Hz, the pre-teleport poses, start and kidnap poses.
 
     ``plan_stride`` > 1 plans on a coarse lattice (big maps); ``leg_max`` bounds each leg of the route.
@@ -300,8 +313,8 @@ def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, le
     if plan_stride > 1:
         world = _coarse(world, plan_stride)
     planner = _Planner(world)
-    per_tick = int(round(1.0 / (_ODOM_RATE * _SIM_DT)))
-    route_len = speed * n_ticks / _ODOM_RATE * 1.3 + 5.0
+    per_tick = int(round(1.0 / (odom_rate * sim_dt)))
+    route_len = speed * n_ticks / odom_rate * 1.3 + 5.0
 
     def start_at(node, theta=None):
         path = _plan_route(planner, world, node, route_len, rng, fine, leg_max)
@@ -336,7 +349,7 @@ def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, le
             continue
         for _ in range(per_tick):
             before = robot.pose[:2].copy()
-            robot.step(_SIM_DT)
+            robot.step(sim_dt)
             length += math.hypot(*(robot.pose[:2] - before))
         if robot.remaining < 5:  # route used up (slow driving): extend from here
             robot = _Robot(np.vstack([robot.path[robot.idx:],
@@ -351,7 +364,7 @@ def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, le
             robot = start_at(node, theta)
             truth[k] = robot.pose
             since = k
-            kidnap = {"t": k / _ODOM_RATE, "from": _pose_list(pre[k]), "to": _pose_list(truth[k])}
+            kidnap = {"t": k / odom_rate, "from": _pose_list(pre[k]), "to": _pose_list(truth[k])}
     return truth, pre, start, kidnap, length
 
 
@@ -363,7 +376,7 @@ def _pose_list(p):
 # Odometry and laser
 # --------------------------------------------------------------------------
 
-def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6):
+def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6, odom_rate=_ODOM_RATE):
     """Noisy odometry poses (n, 3) starting at (0, 0, 0), and measured tv, rv (n,).
 
     A step shorter than ``min_trans`` (m) is read as a turn on the spot (rot1 = 0): the simulator's robot turns on
@@ -376,7 +389,7 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6):
     odom = np.zeros((n, 3))
     tv = np.zeros(n)
     rv = np.zeros(n)
-    dt = 1.0 / _ODOM_RATE
+    dt = 1.0 / odom_rate
     for k in range(1, n):
         x0, y0, t0 = truth[k - 1]
         x1, y1, t1 = pre[k]
@@ -537,7 +550,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              unmapped_furniture: int | None = None, landmarks: int = 0,
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
-             map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0) -> dict:
+             map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
+             scan_rate: float = 5.0) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -570,6 +584,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     ``reversals`` = R backs the robot up R times, spread over the run, 0.5-3 m along its own track each time, then
     forward over it again (``_drive``): a robot that reverses out of a dead end or a docking station. Its odometry
     reads rot1 ~ pi on those steps. R = 0 leaves every output byte-identical.
+    ``scan_rate`` (Hz, default 5) is the laser's; the odometry (and the truth) runs at 10 Hz or at the scan rate
+    when that is higher, and the robot's motion is integrated in steps of about 10 ms that divide a tick (at 40 Hz,
+    12.5 ms). At 5 Hz the world, path and every number are as before the option.
     ``ground_hits`` = G tilts the laser onto the ground G times, spread over the run, for ``GROUND_HIT_S`` (2 s)
     each (``_ground_hits``): a robot pitching on a ramp or braking hard, whose scan then reads a line of returns
     1.5-5 m ahead that moves every scan and is on no map. G = 0 leaves every output byte-identical.
@@ -610,14 +627,17 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected an integer >= 1, got {depth_every!r}")
     _check(map_resolution is None or (math.isfinite(map_resolution) and 0.01 <= map_resolution <= 0.5),
            "map_resolution", f"expected 0.01..0.5 m, got {map_resolution}")
+    _check(isinstance(scan_rate, (int, float, np.number)) and math.isfinite(scan_rate) and 0.5 <= scan_rate <= 100.0,
+           "scan_rate", f"expected 0.5..100 Hz, got {scan_rate!r}")
     _check(isinstance(reversals, (int, np.integer)) and 0 <= reversals <= 1000, "reversals",
            f"expected 0..1000, got {reversals!r}")
     _check(isinstance(ground_hits, (int, np.integer)) and 0 <= ground_hits <= duration / (2 * GROUND_HIT_S),
            "ground_hits", f"expected 0..{int(duration / (2 * GROUND_HIT_S))} for {duration:g} s, got {ground_hits!r}")
-    n_ticks = int(round(duration * _ODOM_RATE)) + 1
+    odom_rate, scan_every, sim_dt = _rates(float(scan_rate))
+    n_ticks = int(round(duration * odom_rate)) + 1
     kidnap_tick = None
     if kidnap_at is not None:
-        kidnap_tick = int(round(kidnap_at * _ODOM_RATE))
+        kidnap_tick = int(round(kidnap_at * odom_rate))
         _check(0 < kidnap_tick < n_ticks - 1, "kidnap_at", f"must lie inside (0, {duration}) s, got {kidnap_at}")
 
     seeds = np.random.SeedSequence(int(seed)).spawn(4)
@@ -629,16 +649,16 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         rng_rev = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(8)[7])
         plan = _reversal_plan(rng_rev, n_ticks, int(reversals))
     truth, pre, start, kidnap, length = _drive(world, rng_drive, n_ticks, speed, turn_rate, kidnap_tick,
-                                               defaults["plan_stride"], defaults["leg_max"], plan)
+                                               defaults["plan_stride"], defaults["leg_max"], plan, odom_rate, sim_dt)
     clear = _clear(truth[:, :2], world).min()
     if clear < robot_radius + world.resolution:
         raise RuntimeError(f"simulate: seed {seed}: the drive came {clear:.3f} m close to a wall (a bug)")
     odom, tv, rv = _odometry(truth, pre, rng_odom, tuple(map(float, odom_alphas)),
-                             odom_scale, odom_yaw_drift)
+                             odom_scale, odom_yaw_drift, odom_rate=odom_rate)
 
     # --- laser
-    t = np.round(np.arange(n_ticks) / _ODOM_RATE, 6)
-    scan_ticks = np.arange(0, n_ticks, _SCAN_EVERY)
+    t = np.round(np.arange(n_ticks) / odom_rate, 6)
+    scan_ticks = np.arange(0, n_ticks, scan_every)
     angles = beam_angles(int(n_beams), fov)
     blocked = world.blocked
     exact = np.empty((scan_ticks.size, angles.size))
@@ -738,10 +758,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         "laser": {"message": "FLASER" if flaser else "ROBOTLASER1", "n_beams": int(n_beams), "fov": float(fov),
                   "angle_min": float(angles[0]), "range_max": float(range_max),
                   "range_sigma": float(range_sigma), "p_short": float(p_short), "p_max": float(p_max),
-                  "rate_hz": _ODOM_RATE / _SCAN_EVERY},
+                  "rate_hz": odom_rate / scan_every},
         "odometry": {"model": "odometry (Probabilistic Robotics Table 5.6, variance form)",
                      "alphas": [float(a) for a in odom_alphas], "scale": float(odom_scale),
-                     "yaw_drift_per_m": float(odom_yaw_drift), "rate_hz": _ODOM_RATE},
+                     "yaw_drift_per_m": float(odom_yaw_drift), "rate_hz": odom_rate},
         "robot": {"radius": float(robot_radius), "speed": float(speed), "turn_rate": float(turn_rate)},
         "map": {"resolution": map_res, "origin": [world.origin[0], world.origin[1]],
                 "width": int(occupancy.shape[1]), "height": int(occupancy.shape[0])},
@@ -928,6 +948,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reversals", type=int, default=0, metavar="R",
                         help="back the robot up R times over the run, 0.5-3 m along its own track each time "
                         "(its odometry then reads steps backwards); default 0")
+    parser.add_argument("--scan-rate", type=float, default=5.0, metavar="HZ",
+                        help="laser scans per second, 0.5-100; default 5. The odometry (ODOM lines, /odom) runs "
+                        "at 10 Hz or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz)")
     parser.add_argument("--ground-hits", type=int, default=0, metavar="G",
                         help="tilt the laser onto the ground G times over the run, 2 s each: a line of returns "
                         "1.5-5 m ahead, moving every scan, on no map (a robot rocking on a ramp); default 0")
@@ -955,7 +978,7 @@ def run_from_args(args: argparse.Namespace) -> int:
                  dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                  landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
                  depth_every=args.depth_every, map_resolution=args.map_resolution,
-                 reversals=args.reversals, ground_hits=args.ground_hits)
+                 reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate)
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
         write_log_as_bag(s["outdir"], fmt)

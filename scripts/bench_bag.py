@@ -31,9 +31,9 @@ def make(out: Path, duration: float) -> None:
     import mcl.simulate as sim
     from mcl.datasets.bagwrite import convert
 
-    sim._ODOM_RATE, sim._SCAN_EVERY = 40.0, 1  # 40 Hz odometry and laser
     t0 = time.perf_counter()
-    sim.simulate(out, seed=1, duration=duration, n_beams=1081, fov=math.radians(270.0), range_max=30.0)
+    sim.simulate(out, seed=1, duration=duration, n_beams=1081, fov=math.radians(270.0), range_max=30.0,
+                 scan_rate=40.0)  # 40 Hz laser and odometry
     print(f"simulated {duration:.0f} s in {time.perf_counter() - t0:.0f} s", flush=True)
     for ext in ("mcap", "bag", "db3"):
         t0 = time.perf_counter()
