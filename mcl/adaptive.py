@@ -66,6 +66,7 @@ poses from landmarks).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 from statistics import NormalDist
@@ -650,11 +651,12 @@ class ProtectedReseed:
         self.odds = math.log(1.0 - keep) - math.log(keep) if keep < 1.0 else -math.inf
         self.updates = 0
 
-    def weigh(self, log_track: float, log_search: float, scores: Callable[[], tuple[float, ...]] | None) -> float:
+    def weigh(self, log_track: float, log_search: float,
+              scores: Callable[[], tuple[float, float, float, float]] | None) -> float:
         """This update's log masses of the two sides (log-sum-exp: a side can hold e^-50 of the weight and still
         come back) -> the odds that counted. ``scores()`` gives this scan's quality score at the search's and at
-        the track's estimate, and optionally then the share of its beams through mapped walls at each, asked only
-        when the masses moved; None when the update had no scan."""
+        the track's estimate, then the share of its beams through mapped walls at each, asked only when the masses
+        moved; None when the update had no scan."""
         raw = log_search - log_track
         odds = raw
         if not (math.isfinite(log_track) and math.isfinite(log_search)):  # a side with no weight at all lost
@@ -664,7 +666,7 @@ class ProtectedReseed:
             # outdoors one scan that fits the true pose badly (a third of its beams through mapped walls) gave a
             # place 176 m away e^50 the likelihood while fitting worse still there (-0.23 against 0.02: the
             # likelihood field does not see readings through walls)
-            s_search, s_track, *through = scores()
+            s_search, s_track, c_search, c_track = scores()
             step = raw - self.odds if (raw - self.odds) * (s_search - s_track) >= 0.0 else 0.0
             # nor, for a global search, a scan the track explains as occlusion (no beam through a mapped wall) and
             # the search's place only with beams through walls, unless it fits there as a tracked scan does
@@ -673,8 +675,7 @@ class ProtectedReseed:
             # estimate (hall-people-dropouts-h10). People end readings short of a wall; nothing makes them go
             # through one. A right place that fits at 0.89-0.96 can still have one stray beam through a corner: held
             # back by it, the demo's recovery from its kidnapping took a second longer
-            if (step > 0.0 and not self.local and len(through) == 2 and through[1] == 0.0 and through[0] > 0.0
-                    and s_search < self.DECISIVE_FIT):
+            if step > 0.0 and not self.local and c_track == 0.0 and c_search > 0.0 and s_search < self.DECISIVE_FIT:
                 step = 0.0
             # and, for a spread around the estimate (local), only if the scan fits the side it favours as a tracked
             # scan does: two seconds of a tilted laser's ground hits fit no pose near the track, and spread poses
@@ -774,10 +775,7 @@ class FaultWindow:
             return None
         if self.lost_run > self.widen_after or dt <= 0.0:
             return self.wide
-        from mcl.motion import FaultProposal
-
-        w = self.wide
-        return FaultProposal(w.prob, w.share, w.scale, self.turn_rate * dt, self.shift_rate * dt)
+        return dataclasses.replace(self.wide, turn_max=self.turn_rate * dt, shift_max=self.shift_rate * dt)
 
 
 class LostRecovery:

@@ -62,9 +62,7 @@ _SIM_DT = 0.01  # integration step, s
 def _rates(scan_rate: float) -> tuple[float, int, float]:
     """(odometry rate Hz, odometry ticks per scan, integration step s) for a laser at ``scan_rate`` Hz: the odometry
     at 10 Hz or more and a whole multiple of the scan rate, the step about 10 ms and a whole fraction of a tick. At
-    5 Hz these are the module's constants, so the default worlds stay what they were."""
-    if scan_rate == _ODOM_RATE / _SCAN_EVERY:
-        return _ODOM_RATE, _SCAN_EVERY, _SIM_DT
+    5 Hz these are the module's constants (10 Hz, 2, 10 ms), so the default worlds stay what they were."""
     every = max(1, math.ceil(10.0 / scan_rate - 1e-9))
     odom = scan_rate * every
     per_tick = max(1, int(round(1.0 / (odom * _SIM_DT))))

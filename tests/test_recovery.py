@@ -830,7 +830,8 @@ TRUE_POSE = [3.5, 4.5, 1.2]
 
 
 def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_three_nats_at_most():
-    """mcl.adaptive.ProtectedReseed.weigh on its own: the masses are log masses of (track, search)."""
+    """mcl.adaptive.ProtectedReseed.weigh on its own: the masses are log masses of (track, search); the scores
+    (search's, track's, then the shares through walls: none here) as the filter gives them."""
     from mcl.adaptive import ProtectedReseed
 
     def fresh():
@@ -838,18 +839,20 @@ def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_thr
 
     p = fresh()
     assert p.odds == 0.0 and not p.settled
-    assert p.weigh(0.0, 10.0, lambda: (0.8, 0.7)) == 3.0 and not p.settled  # agreed, capped at STEP
-    assert p.weigh(0.0, 13.0, lambda: (0.8, 0.7)) == 6.0 and p.settled and not p.track_won
+    assert p.weigh(0.0, 10.0, lambda: (0.8, 0.7, 0.0, 0.0)) == 3.0 and not p.settled  # agreed, capped at STEP
+    assert p.weigh(0.0, 13.0, lambda: (0.8, 0.7, 0.0, 0.0)) == 6.0 and p.settled and not p.track_won
     p = fresh()
-    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.7)) == 0.0  # the likelihood favours the search, the fit the track
-    assert p.weigh(0.0, -8.0, lambda: (0.5, 0.7)) == -3.0  # both favour the track: capped
+    # the likelihood favours the search, the fit the track
+    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.7, 0.0, 0.0)) == 0.0
+    assert p.weigh(0.0, -8.0, lambda: (0.5, 0.7, 0.0, 0.0)) == -3.0  # both favour the track: capped
     # a spread around the estimate (local): the fit agrees, but the scan fits neither side as a tracked scan does
     # (below lost_below 0.6), so it is no evidence (ground hits of a tilted laser fit no pose near the track); a
     # global search counts it (after a kidnap the search's place fits poorly for many scans while it converges)
     p = ProtectedReseed(np.ones(4, dtype=bool), keep=0.5, reseed_odds=4.6, lost_below=0.6, local=True)
-    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.3)) == 0.0 and p.weigh(0.0, -10.0, lambda: (0.3, 0.5)) == 0.0
-    assert p.weigh(0.0, 10.0, lambda: (0.7, 0.3)) == 3.0
-    assert fresh().weigh(0.0, 10.0, lambda: (0.5, 0.3)) == 3.0
+    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.3, 0.0, 0.0)) == 0.0
+    assert p.weigh(0.0, -10.0, lambda: (0.3, 0.5, 0.0, 0.0)) == 0.0
+    assert p.weigh(0.0, 10.0, lambda: (0.7, 0.3, 0.0, 0.0)) == 3.0
+    assert fresh().weigh(0.0, 10.0, lambda: (0.5, 0.3, 0.0, 0.0)) == 3.0
     # a spread's best pose of thousands fitted people filling a narrow view better (0.95) than the correct track
     # did (0.75): a scan counts for a spread only while the track fits it as a lost scan does, and none decides;
     # for the track, a scan that fits it as tracked still counts
@@ -857,12 +860,14 @@ def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_thr
         return ProtectedReseed(np.ones(4, dtype=bool), keep=0.5, reseed_odds=4.6, lost_below=0.6, local=True)
 
     p = spread()
-    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.75)) == 0.0 and p.weigh(0.0, 10.0, lambda: (0.95, 0.3)) == 3.0
-    assert not p.settled and spread().weigh(0.0, -10.0, lambda: (0.5, 0.75)) == -3.0
-    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.75)) == 3.0  # a global search counts it
+    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.75, 0.0, 0.0)) == 0.0
+    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.0, 0.0)) == 3.0
+    assert not p.settled and spread().weigh(0.0, -10.0, lambda: (0.5, 0.75, 0.0, 0.0)) == -3.0
+    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.75, 0.0, 0.0)) == 3.0  # a global search counts it
     p = fresh()
-    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.3)) == 10.0 and p.settled  # decisive: fits as tracked vs as lost
-    assert fresh().weigh(0.0, -math.inf, lambda: (0.0, 0.0)) == -math.inf  # the search has no weight left
+    # decisive: fits as tracked vs as lost
+    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.0, 0.0)) == 10.0 and p.settled
+    assert fresh().weigh(0.0, -math.inf, lambda: (0.0, 0.0, 0.0, 0.0)) == -math.inf  # the search has no weight left
     assert fresh().weigh(-math.inf, 0.0, None) == math.inf  # nor the track
     p = fresh()
     for _ in range(ProtectedReseed.MAX_UPDATES - 1):
@@ -875,8 +880,9 @@ def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_thr
 def test_protected_reseed_counts_no_scan_that_goes_through_walls_only_at_the_searchs_place():
     """A scan the track explains as occlusion (no beam through a mapped wall) and the search's place only with beams
     through walls is no evidence for the search, unless it fits there as a tracked scan does: people end readings
-    short of walls and never make them go through one. Scores and shares through walls as in hall-people-dropouts-h10 with scans 0.1 s late, where such scans
-    handed a place 10.7 m away the estimate (search first: score, score, through walls, through walls)."""
+    short of walls and never make them go through one. Scores and shares through walls as in
+    hall-people-dropouts-h10 with scans 0.1 s late, where such scans handed a place 10.7 m away the estimate
+    (search first: score, score, through walls, through walls)."""
     from mcl.adaptive import ProtectedReseed
 
     def fresh(local=False):
