@@ -198,6 +198,10 @@ def _add_suite_options(p) -> None:
     g.add_argument("--cache", help="folder of the generated synthetic worlds (default OUT/worlds)")
     g.add_argument("--modes", metavar="M,...", help="only these modes: tracking,global,kidnapped")
     g.add_argument("--only", metavar="NAME,...", help="only these datasets (names, or patterns: 'corridor-*')")
+    g.add_argument("--world", action="append", default=[], metavar="KEY=VALUE",
+                   help="set a keyword of mcl simulate in every generated world of the suite (repeatable), e.g. "
+                        "scan_rate=40 or range_max=8: the suite's worlds with your robot's laser (new worlds, cached "
+                        "apart; real datasets unchanged)")
     g.add_argument("--baseline", action=argparse.BooleanOptionalAction, default=True,
                    help="also run configs/baseline.yaml, the plain fixed-N filter (default on)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -93,6 +93,7 @@ class Suite:
     name: str
     path: Path
     datasets: list[Dataset]
+    world: dict = field(default_factory=dict)  # --world: simulate keywords set in every generated world
 
 
 def _unknown(where: str, key, allowed) -> ConfigError:
@@ -120,6 +121,43 @@ def _lost_m(value, where: str) -> float:
     if not v > 0:
         raise ConfigError(f"{where}: must be positive, got {v}")
     return v
+
+
+def world_overrides(items) -> dict:
+    """``mcl eval --world KEY=VALUE`` (repeatable): keywords of :func:`mcl.simulate.simulate` to set in every
+    generated world of a suite, the value read as YAML (``scan_rate=40``, ``range_max=8``, ``fov=4.71``). ConfigError
+    naming the option for a malformed item or an unknown keyword."""
+    import yaml
+
+    from mcl.simulate import simulate
+
+    sim_keys = [k for k in inspect.signature(simulate).parameters if k != "outdir"]
+    out = {}
+    for item in items or ():
+        key, sep, text = str(item).partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ConfigError(f"--world: expected KEY=VALUE (a keyword of mcl simulate), got {item!r}")
+        if key not in sim_keys:
+            raise _unknown("--world: ", key, sim_keys)
+        try:
+            out[key] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            raise ConfigError(f"--world: {key}: cannot read the value {text!r}") from None
+    return out
+
+
+def with_world(suite: Suite, world: dict) -> Suite:
+    """The suite with ``world`` (``world_overrides``) set in every generated world's simulate keywords; the
+    worlds are new ones (their cache folder is named by a hash of the keywords), the real datasets unchanged.
+    ConfigError when the suite generates no world."""
+    if not world:
+        return suite
+    if not any(d.simulate is not None for d in suite.datasets):
+        raise ConfigError(f"--world: {suite.path} generates no world (no dataset has simulate:)")
+    datasets = [dataclasses.replace(d, simulate={**d.simulate, **world}) if d.simulate is not None else d
+                for d in suite.datasets]
+    return dataclasses.replace(suite, datasets=datasets, world={**suite.world, **world})
 
 
 def load_suite(path: str | os.PathLike) -> Suite:
@@ -716,6 +754,8 @@ def write_results(out: Path, suite: Suite, rows: list[dict], planned: int) -> li
     doc = {"suite": suite.name, "suite_file": str(suite.path), "planned_runs": planned, "finished_runs": len(rows),
            "settle_m": SETTLE_M, "within_s": WITHIN_S, "runs": rows, "table": table, "totals": totals(rows),
            "against_baseline": against_baseline(rows)}
+    if suite.world:
+        doc["world"] = suite.world
     atomic_write_text(out / "results.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / "results.csv", _csv(rows, RUN_FIELDS))
     atomic_write_text(out / "table.csv", _csv(table, TABLE_FIELDS))
@@ -782,7 +822,7 @@ def _finished(job: Job) -> dict | None:
 
 
 def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=None, cache=None, modes=None,
-                   only=None, baseline=True, progress=None, echo=print) -> int:
+                   only=None, baseline=True, world=None, progress=None, echo=print) -> int:
     """``mcl eval --suite``: plan, generate the worlds, run what is not finished, write and print the table.
     Returns the exit status (0, 130 interrupted, 2 when a run failed)."""
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -791,13 +831,15 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
 
     from tqdm import tqdm
 
-    suite = load_suite(suite_path)
+    suite = with_world(load_suite(suite_path), world or {})
     out = Path(out) if out else Path.cwd() / "runs" / f"suite-{suite.name}"
     cache = Path(cache) if cache else out / "worlds"
     job_list = plan(suite, config=config, sets=list(sets), seeds=seeds, out=out, cache=cache, modes=modes,
                     only=only, baseline=baseline)
     if not job_list:
         raise ConfigError(f"{suite.path}: no run left (modes {', '.join(modes or ())} not in any selected dataset)")
+    if suite.world:
+        echo(f"every generated world with {', '.join(f'{k}={v}' for k, v in suite.world.items())} (--world)")
     out.mkdir(parents=True, exist_ok=True)
     ctx = multiprocessing.get_context("spawn")  # fresh workers: no numba threads inherited from a fork
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init) if jobs > 1 else None
@@ -816,7 +858,8 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                 else:
                     list(pool.map(make_world, todo_worlds.keys(), todo_worlds.values()))
             except (MclError, RuntimeError) as e:
-                raise MclError(f"{suite.path}: simulate: {e}") from None
+                given = f" (with --world {', '.join(f'{k}={v}' for k, v in suite.world.items())})" if suite.world else ""
+                raise MclError(f"{suite.path}: simulate{given}: {e}") from None
         _finish_plan(job_list)
         todo = []
         for j in job_list:
@@ -918,6 +961,7 @@ def run_from_args(args) -> int:
     if args.modes:
         modes = _modes([m.strip() for m in args.modes.split(",") if m.strip()], "--modes")
     only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
+    world = world_overrides(getattr(args, "world", None))
     return evaluate_suite(args.suite, config=args.config, sets=args.set, seeds=seeds, jobs=args.jobs,
-                          out=args.out, cache=args.cache, modes=modes, only=only, baseline=args.baseline,
+                          out=args.out, cache=args.cache, modes=modes, only=only, baseline=args.baseline, world=world,
                           progress=False if args.no_progress else None)

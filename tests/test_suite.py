@@ -15,7 +15,7 @@ from mcl.cli import main
 from mcl.config import PROJECT_ROOT, load_config, to_dict
 from mcl.runner import run
 from mcl.simulate import simulate
-from mcl.suite import aggregate, format_totals, load_suite, plan, score, totals
+from mcl.suite import aggregate, format_totals, load_suite, plan, score, totals, with_world, world_overrides
 from mcl.evaluate import position_errors
 from mcl.errors import ConfigError
 from mcl.trajectory import read_tum
@@ -259,6 +259,43 @@ def test_plan_modes_only_and_configs(tmp_path):
     assert sorted({j.dataset for j in pat}) == ["a", "b"]
     with pytest.raises(ConfigError, match=r"--only: no dataset 'c\*'"):
         plan(suite, config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", only=["c*"], baseline=False)
+
+
+def test_world_sets_simulate_keywords_in_every_generated_world(tmp_path, capsys):
+    # --world KEY=VALUE: every generated world of the suite made with that keyword (a robot's own laser rate or
+    # range), as new worlds cached apart; the real datasets as they were; a bad item is one line naming the option.
+    demo = PROJECT_ROOT / "data" / "demo"
+    path = _write(tmp_path / "s.yaml", {"name": "s", "modes": ["tracking"], "datasets": [
+        {"name": "real", "map": str(demo / "map.yaml"), "log": str(demo / "log.clf"), "truth": str(demo / "truth.tum")},
+        {"name": "gen", "simulate": {"seed": 3, "duration": 8}}]})
+    suite = load_suite(path)
+    fast = with_world(suite, world_overrides(["scan_rate=20", "range_max=8"]))
+    assert fast.datasets[0] == suite.datasets[0]
+    assert fast.datasets[1].simulate == {"seed": 3, "duration": 8, "scan_rate": 20, "range_max": 8}
+    assert suite.datasets[1].simulate == {"seed": 3, "duration": 8}  # the loaded suite is not changed
+    kw = dict(config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", only=["gen"], baseline=False)
+    assert plan(fast, **kw)[0].world[0] != plan(suite, **kw)[0].world[0]  # not the 5 Hz world's cache folder
+    out = tmp_path / "out"
+    code = main(["eval", "--suite", str(path), "--only", "gen", "--world", "scan_rate=20", "--out", str(out),
+                 "--jobs", "1", "--no-baseline", "--no-progress", "--set", "filter.particles=1000"])
+    assert code == 0, capsys.readouterr().err
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["world"] == {"scan_rate": 20}
+    assert doc["runs"][0]["scans"] == 8 * 20 + 1  # 20 Hz for 8 s (5 Hz: 41)
+    real_only = _write(tmp_path / "r.yaml", {"name": "r", "datasets": [{"name": "real", "map": str(demo / "map.yaml"),
+                                             "log": str(demo / "log.clf"), "truth": str(demo / "truth.tum")}]})
+    for suite_file, item, expected in [
+        (path, "scan_rat=20", "--world: scan_rat: unknown key (did you mean scan_rate?)"),
+        (path, "scan_rate", "--world: expected KEY=VALUE"),
+        (path, "scan_rate=400", "(with --world scan_rate=400): simulate: scan_rate: expected 0.5..100 Hz, got 400"),
+        (real_only, "scan_rate=20", f"--world: {real_only} generates no world"),
+    ]:
+        bad = tmp_path / "bad"
+        code = main(["eval", "--suite", str(suite_file), "--world", item, "--out", str(bad), "--jobs", "1",
+                     "--no-baseline", "--no-progress"])
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1 and expected in err, (item, err)
+        assert not (bad / "results.json").exists()
 
 
 # ----------------------------------------------------------------------------- ROS bags in a suite
