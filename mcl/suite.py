@@ -123,6 +123,29 @@ def _lost_m(value, where: str) -> float:
     return v
 
 
+_SIM_TYPES = {"float": ("a number", lambda v: isinstance(v, (int, float)) and not isinstance(v, bool)),
+              "int": ("a whole number", lambda v: isinstance(v, int) and not isinstance(v, bool)),
+              "bool": ("true or false", lambda v: isinstance(v, bool)),
+              "str": ("a string", lambda v: isinstance(v, str))}
+
+
+def _sim_value(where: str, key: str, value):
+    """A simulate keyword's value checked against the type :func:`mcl.simulate.simulate` declares for it (a
+    keyword declared ``float | None`` may be null; one without a declared type is left to simulate); ConfigError
+    naming ``where`` and the key otherwise, before any world is made."""
+    from mcl.simulate import simulate
+
+    kind = str(inspect.signature(simulate).parameters[key].annotation)
+    optional = kind.endswith(" | None")
+    kind = kind.removesuffix(" | None")
+    if kind not in _SIM_TYPES or (optional and value is None):
+        return value
+    what, ok = _SIM_TYPES[kind]
+    if not ok(value):
+        raise ConfigError(f"{where}{key}: expected {what}{' or null' if optional else ''}, got {value!r}")
+    return value
+
+
 def world_overrides(items) -> dict:
     """``mcl eval --world KEY=VALUE`` (repeatable): keywords of :func:`mcl.simulate.simulate` to set in every
     generated world of a suite, the value read as YAML (``scan_rate=40``, ``range_max=8``, ``fov=4.71``). ConfigError
@@ -141,10 +164,15 @@ def world_overrides(items) -> dict:
         if key not in sim_keys:
             raise _unknown("--world: ", key, sim_keys)
         try:
-            out[key] = yaml.safe_load(text)
+            value = yaml.safe_load(text)
         except yaml.YAMLError:
             raise ConfigError(f"--world: {key}: cannot read the value {text!r}") from None
+        out[key] = _sim_value("--world: ", key, value)
     return out
+
+
+def _world_text(world: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in world.items())
 
 
 def with_world(suite: Suite, world: dict) -> Suite:
@@ -221,6 +249,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
             for k in kw:
                 if k not in sim_keys:
                     raise _unknown(f"{label}: simulate.", k, sim_keys)
+                _sim_value(f"{label}: simulate.", k, kw[k])
             for k in ("map", "log", "bag", "truth", "truth_topic", "config"):
                 if k in e:
                     raise ConfigError(f"{label}: {k}: not with simulate (the world gives map, log and truth)")
@@ -839,7 +868,7 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     if not job_list:
         raise ConfigError(f"{suite.path}: no run left (modes {', '.join(modes or ())} not in any selected dataset)")
     if suite.world:
-        echo(f"every generated world with {', '.join(f'{k}={v}' for k, v in suite.world.items())} (--world)")
+        echo(f"every generated world with {_world_text(suite.world)} (--world)")
     out.mkdir(parents=True, exist_ok=True)
     ctx = multiprocessing.get_context("spawn")  # fresh workers: no numba threads inherited from a fork
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init) if jobs > 1 else None
@@ -858,7 +887,7 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                 else:
                     list(pool.map(make_world, todo_worlds.keys(), todo_worlds.values()))
             except (MclError, RuntimeError) as e:
-                given = f" (with --world {', '.join(f'{k}={v}' for k, v in suite.world.items())})" if suite.world else ""
+                given = f" (with --world {_world_text(suite.world)})" if suite.world else ""
                 raise MclError(f"{suite.path}: simulate{given}: {e}") from None
         _finish_plan(job_list)
         todo = []

@@ -192,6 +192,10 @@ def test_bad_suite_files_exit_2_naming_file_and_key(tmp_path, capsys):
         ({"datasets": [{**good, "modes": ["tracking", "globl"]}]}, "modes: unknown mode 'globl' (did you mean global?)"),
         ({"datasets": [{"name": "s", "simulate": {"seed": 1, "durations": 5}}]},
          "datasets[0] (s): simulate.durations: unknown key (did you mean duration?)"),
+        ({"datasets": [{"name": "s", "simulate": {"seed": 1, "range_max": "far"}}]},
+         "datasets[0] (s): simulate.range_max: expected a number, got 'far'"),
+        ({"datasets": [{"name": "s", "simulate": {"seed": 1.5}}]},
+         "datasets[0] (s): simulate.seed: expected a whole number, got 1.5"),
         ({"datasets": [{**good, "set": {"filter.particle": 10}}]}, "filter.particle: unknown key"),
         ({"lost_m": -1, "datasets": [good]}, "lost_m: must be positive, got -1"),
     ]
@@ -287,6 +291,8 @@ def test_world_sets_simulate_keywords_in_every_generated_world(tmp_path, capsys)
     for suite_file, item, expected in [
         (path, "scan_rat=20", "--world: scan_rat: unknown key (did you mean scan_rate?)"),
         (path, "scan_rate", "--world: expected KEY=VALUE"),
+        (path, "range_max=[1, 2]", "--world: range_max: expected a number, got [1, 2]"),
+        (path, "n_beams=10.5", "--world: n_beams: expected a whole number, got 10.5"),
         (path, "scan_rate=400", "(with --world scan_rate=400): simulate: scan_rate: expected 0.5..100 Hz, got 400"),
         (real_only, "scan_rate=20", f"--world: {real_only} generates no world"),
     ]:
