@@ -54,8 +54,7 @@ from mcl.worlds import (  # noqa: F401  (RESOLUTION, make_world, World: importab
     KIND_DEFAULTS, KINDS, RESOLUTION, World, _components, generate, make_world,
 )
 
-_ODOM_RATE = 10.0  # Hz, truth and ODOM (at the default 5 Hz scan rate)
-_SCAN_EVERY = 2  # odometry ticks per scan (5 Hz)
+_ODOM_RATE = 10.0  # Hz, truth and ODOM: the lowest rate, and the rate at the default 5 Hz scan rate
 _SIM_DT = 0.01  # integration step, s
 
 
@@ -63,7 +62,7 @@ def _rates(scan_rate: float) -> tuple[float, int, float]:
     """(odometry rate Hz, odometry ticks per scan, integration step s) for a laser at ``scan_rate`` Hz: the odometry
     at 10 Hz or more and a whole multiple of the scan rate, the step about 10 ms and a whole fraction of a tick. At
     5 Hz these are the module's constants (10 Hz, 2, 10 ms), so the default worlds stay what they were."""
-    every = max(1, math.ceil(10.0 / scan_rate - 1e-9))
+    every = max(1, math.ceil(_ODOM_RATE / scan_rate - 1e-9))
     odom = scan_rate * every
     per_tick = max(1, int(round(1.0 / (odom * _SIM_DT))))
     return odom, every, 1.0 / (odom * per_tick)
@@ -300,7 +299,8 @@ def _ground_hits(rng, t, angles, episodes: int, duration: float, exact) -> list[
 
 def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, leg_max=None, reversals=None,
            odom_rate=_ODOM_RATE, sim_dt=_SIM_DT):
-    """Truth poses (n_ticks, 3) at 10 Hz, the pre-teleport poses, start and kidnap poses.
+    """Truth poses (n_ticks, 3) at ``odom_rate`` Hz (robot steps of ``sim_dt`` s, ``_rates``), the pre-teleport
+    poses, start and kidnap poses.
 
     ``plan_stride`` > 1 plans on a coarse lattice (big maps); ``leg_max`` bounds each leg of the route.
     ``reversals`` ({tick: metres}, ``_reversal_plan``): at each such tick the robot backs up that far along its

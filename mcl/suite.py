@@ -129,13 +129,18 @@ _SIM_TYPES = {"float": ("a number", lambda v: isinstance(v, (int, float)) and no
               "str": ("a string", lambda v: isinstance(v, str))}
 
 
+def _sim_params() -> dict:
+    """The keywords of :func:`mcl.simulate.simulate` a suite may give (its parameters but ``outdir``)."""
+    from mcl.simulate import simulate
+
+    return {k: p for k, p in inspect.signature(simulate).parameters.items() if k != "outdir"}
+
+
 def _sim_value(where: str, key: str, value):
     """A simulate keyword's value checked against the type :func:`mcl.simulate.simulate` declares for it (a
     keyword declared ``float | None`` may be null; one without a declared type is left to simulate); ConfigError
     naming ``where`` and the key otherwise, before any world is made."""
-    from mcl.simulate import simulate
-
-    kind = str(inspect.signature(simulate).parameters[key].annotation)
+    kind = str(_sim_params()[key].annotation)
     optional = kind.endswith(" | None")
     kind = kind.removesuffix(" | None")
     if kind not in _SIM_TYPES or (optional and value is None):
@@ -152,9 +157,7 @@ def world_overrides(items) -> dict:
     naming the option for a malformed item or an unknown keyword."""
     import yaml
 
-    from mcl.simulate import simulate
-
-    sim_keys = [k for k in inspect.signature(simulate).parameters if k != "outdir"]
+    sim_keys = list(_sim_params())
     out = {}
     for item in items or ():
         key, sep, text = str(item).partition("=")
@@ -192,7 +195,6 @@ def load_suite(path: str | os.PathLike) -> Suite:
     """Read and check a suite file: every key known, every file present, every simulate keyword one of
     :func:`mcl.simulate.simulate`'s. Errors name the file and the key (ConfigError)."""
     from mcl.config import load_config
-    from mcl.simulate import simulate
     from mcl.yamlfile import finite_number, read_yaml
 
     path = Path(path)
@@ -209,7 +211,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
     entries = doc.get("datasets")
     if not isinstance(entries, list) or not entries:
         raise ConfigError(f"{path}: datasets: expected a non-empty list")
-    sim_keys = [k for k in inspect.signature(simulate).parameters if k != "outdir"]
+    sim_keys = list(_sim_params())
     out, names = [], set()
     for i, e in enumerate(entries):
         if not isinstance(e, dict):
@@ -315,11 +317,9 @@ def _world_dir(cache: Path, d: Dataset, kidnapped: bool) -> Path:
 
 
 def _sim_kwargs(d: Dataset, kidnapped: bool) -> dict:
-    from mcl.simulate import simulate
-
     kw = dict(d.simulate)
     if kidnapped and kw.get("kidnap_at") is None:
-        duration = kw.get("duration", inspect.signature(simulate).parameters["duration"].default)
+        duration = kw.get("duration", _sim_params()["duration"].default)
         kw["kidnap_at"] = float(duration) / 2
     return kw
 
