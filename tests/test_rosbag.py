@@ -121,6 +121,38 @@ def test_odometry_from_tf_is_interpolated_at_each_scan_stamp(scans, tmp_path):
         assert np.array_equal(got[k].odom, scans[k].odom)  # a stamp with its own transform: that pose exactly
 
 
+def _old_style_bag(path, scans, tf_type: str) -> None:
+    """A ROS 1 bag as recorded before tf2: every transform on /tf (no /tf_static), the laser's mounting among them
+    at every scan, frames with a leading '/', typed ``tf_type``."""
+    from rosbags.typesys import get_types_from_msg
+
+    with BagOut(path) as b:
+        if tf_type not in b.ts.types:
+            b.ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", tf_type))
+        for s in scans:
+            b.write("/tf", tf_type, s.t, b.msg(tf_type, transforms=[
+                b.transform(s.t, "/odom", "/base_link", s.odom), b.transform(s.t, "/base_link", "/laser", (0.1, 0, 0))]))
+            _laser(b, "/scan", s, frame="/laser")
+
+
+def test_a_ros1_bag_with_tf_tfmessage_reads_as_one_with_tf2(scans, tmp_path, capsys):
+    # Bags recorded before ROS Hydro (2013) carry /tf as tf/tfMessage, which has the same fields as
+    # tf2_msgs/TFMessage; the reader refused them ("/tf is tf/msg/tfMessage, expected tf2_msgs/TFMessage").
+    old, new = tmp_path / "old.bag", tmp_path / "new.bag"
+    _old_style_bag(old, scans, "tf/msg/tfMessage")
+    _old_style_bag(new, scans, "tf2_msgs/msg/TFMessage")
+    a, b = open_bag(old), open_bag(new)
+    assert a.odom_source == b.odom_source == "/tf odom -> base_link"
+    got_a, got_b = list(a.scans), list(b.scans)
+    assert len(got_a) == len(got_b) == len(scans) > 30
+    for x, y, s in zip(got_a, got_b, scans):
+        _same_records(x, y)
+        assert np.array_equal(x.odom, s.odom) and np.allclose(x.laser_offset, (0.1, 0.0, 0.0), rtol=0, atol=1e-12)
+    assert main(["bag", "info", str(old)]) == 0
+    out = capsys.readouterr().out
+    assert "frames in /tf: base_link -> laser, odom -> base_link" in out and "odometry:     /tf odom -> base_link" in out
+
+
 def test_odometry_topic_and_tf_give_the_same_records(scans, tmp_path):
     write_scans(tmp_path / "a.db3", scans, odom="topic")
     write_scans(tmp_path / "b.db3", scans, odom="tf")

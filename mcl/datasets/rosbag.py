@@ -14,6 +14,8 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
 * **odometry**: ``nav_msgs/Odometry`` on a topic, or the ``frames.odom -> frames.base`` transform of ``/tf``;
   interpolated at each scan's header stamp (linear in x, y, shortest angle in theta; an exact stamp gives the
   message's own pose). Velocities from the Odometry twist (0 from /tf: the runner derives them).
+* **transforms**: ``tf2_msgs/TFMessage`` on ``/tf`` and ``/tf_static``, or ROS 1's older ``tf/tfMessage`` (the same
+  fields; bags recorded before tf2 put the static links on ``/tf`` too); a frame's leading '/' is dropped.
 * **laser mounting**: ``frames.base -> scan frame`` from ``/tf_static`` (or the first ``/tf`` that has it),
   through any chain of frames; None when absent (the runner then uses ``sensor.laser_pose`` or the centre).
   A laser mounted upside down (the frame's z axis pointing down: rolled or pitched by pi, as AMCL allows)
@@ -59,6 +61,8 @@ GRID = "nav_msgs/msg/OccupancyGrid"
 PWCS = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE = "geometry_msgs/msg/PoseStamped"
 TF = "tf2_msgs/msg/TFMessage"
+# ROS 1 before Hydro (2013) published transforms as tf/tfMessage: the same fields (TransformStamped[] transforms)
+TF_TYPES = (TF, "tf/msg/tfMessage")
 TRUTH_TYPES = (POSE, PWCS, ODOM)
 # Header stamps on one topic may step back this much (s) without being "out of order": recorders jitter, and
 # CARMEN logs converted to bags keep their own small backward steps (intel_lab: 4, all < 1 s).
@@ -511,8 +515,9 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         _check_type(path, topics, truth_topic, TRUTH_TYPES, "truth")
     tf_topics = [n for n in ("/tf", "/tf_static") if n in topics]
     for n in tf_topics:
-        if topics[n].msgtype != TF:
-            raise DataError(f"{path}: {n} is {topics[n].msgtype}, expected tf2_msgs/TFMessage")
+        if topics[n].msgtype not in TF_TYPES:
+            raise DataError(f"{path}: {n} is {topics[n].msgtype}, expected tf2_msgs/TFMessage (or ROS 1's "
+                            "tf/tfMessage)")
     odom_frame, base_frame = _frame(fr.odom), _frame(fr.base)
     if odom_topic is None and "/tf" not in topics:
         odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
@@ -649,7 +654,7 @@ def bag_info(path, topics=None, frames=None) -> dict:
                            "count": i.msgcount} for n, i in sorted(tps.items())},
         }
         frames_seen: dict[str, set] = {"/tf": set(), "/tf_static": set()}
-        conns = [c for c in reader.connections if c.topic in frames_seen and c.msgtype == TF]
+        conns = [c for c in reader.connections if c.topic in frames_seen and c.msgtype in TF_TYPES]
         for conn, msg in _messages(reader, path, conns):
             for ts in msg.transforms:
                 frames_seen[conn.topic].add(f"{_frame(ts.header.frame_id)} -> {_frame(ts.child_frame_id)}")
