@@ -317,8 +317,12 @@ def _world_dir(cache: Path, d: Dataset, kidnapped: bool) -> Path:
 
 
 def _sim_kwargs(d: Dataset, kidnapped: bool) -> dict:
+    """The keywords of :func:`mcl.simulate.simulate` for ``d``'s world in a mode: ``kidnap_at`` (the suite's, or
+    half the duration) only in the kidnapped mode; the tracking and global worlds are driven without a kidnap."""
     kw = dict(d.simulate)
-    if kidnapped and kw.get("kidnap_at") is None:
+    if not kidnapped:
+        kw.pop("kidnap_at", None)
+    elif kw.get("kidnap_at") is None:
         duration = kw.get("duration", _sim_params()["duration"].default)
         kw["kidnap_at"] = float(duration) / 2
     return kw

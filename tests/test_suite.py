@@ -304,6 +304,22 @@ def test_world_sets_simulate_keywords_in_every_generated_world(tmp_path, capsys)
         assert not (bad / "results.json").exists()
 
 
+def test_kidnap_at_sets_the_kidnapped_worlds_time_and_no_other_mode_is_kidnapped(tmp_path):
+    # A suite's (or --world's) kidnap_at is when the kidnapped mode's robot is carried off; it once went into the
+    # tracking and global worlds too, which were then driven with a kidnap in them and scored as if there were none.
+    path = _write(tmp_path / "s.yaml", {"name": "s", "modes": ["tracking", "global", "kidnapped"], "datasets": [
+        {"name": "gen", "simulate": {"seed": 3, "duration": 8, "kidnap_at": 3}},
+        {"name": "half", "simulate": {"seed": 4, "duration": 8}}]})
+    kw = dict(config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", baseline=False)
+    for suite in (load_suite(path), with_world(load_suite(path), world_overrides(["kidnap_at=3"]))):
+        worlds = {(j.dataset, j.mode): j.world[1] for j in plan(suite, **kw)}
+        for mode in ("tracking", "global"):
+            assert "kidnap_at" not in worlds["gen", mode] and "kidnap_at" not in worlds["half", mode]
+        assert worlds["gen", "kidnapped"]["kidnap_at"] == 3
+        assert worlds["half", "kidnapped"]["kidnap_at"] == (3 if suite.world else 4.0)  # else half the duration
+        assert worlds["gen", "tracking"] == worlds["gen", "global"] == {"seed": 3, "duration": 8}
+
+
 # ----------------------------------------------------------------------------- ROS bags in a suite
 
 
