@@ -212,7 +212,7 @@ class SensorConfig:
     max_beams: int = field(default=60, metadata=_rng(1, 100_000))
     range_min: float = field(default=0.0, metadata=_rng(0.0))
     range_max: float = field(default=80.0, metadata=_rng(0.0, lo_open=True))  # readings >= this: no return
-    time_offset: float = field(default=0.0, metadata=_rng(-10.0, 10.0))  # s added to each scan's stamp
+    time_offset: float = field(default=0.0, metadata=_rng(-1e10, 1e10))  # s added to each scan's stamp
     exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # temper the beam product
     # beam skipping (after AMCL likelihood_field_prob): once converged, ignore the short beams most particles cannot
     # explain (AMCL's own settings: beam_skip_distance 0.5, beam_skip_threshold 0.3, beam_skip_rule amcl)

@@ -294,6 +294,7 @@ def _open_source(cfg: Config, echo):
         if cfg.landmarks.use:
             raise ConfigError("landmarks.use: a ROS bag carries no LANDMARK records")
         log = open_bag(cfg.bag, cfg.topics, cfg.frames)
+        log.warnings.extend(log.stamps_checked(cfg.sensor.time_offset))
         if cfg.map is not None:
             grid = load_map(cfg.map)
         elif log.grid is not None:

@@ -452,6 +452,53 @@ def _fails(capsys, tmp_path, bag, *extra, match):
     return err
 
 
+def _shifted_odometry_bag(path, scans, shift: float, upto: int | None = None) -> None:
+    """/scan at the scans' stamps, /odom stamped ``shift`` s later (another clock), for the first ``upto`` scans."""
+    with BagOut(path) as b:
+        for k, s in enumerate(scans):
+            if upto is None or k < upto:
+                pw = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*s.odom), covariance=np.zeros(36))
+                tw = b.msg("geometry_msgs/msg/TwistWithCovariance", twist=b.msg(
+                    "geometry_msgs/msg/Twist", linear=b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0),
+                    angular=b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)), covariance=np.zeros(36))
+                b.write("/odom", "nav_msgs/msg/Odometry", s.t + shift, b.msg(
+                    "nav_msgs/msg/Odometry", header=b.header(s.t + shift, "odom"), child_frame_id="base_link",
+                    pose=pw, twist=tw))
+            _laser(b, "/scan", s)
+
+
+def test_scans_and_odometry_on_two_clocks_stop_with_one_line_and_a_time_offset_pairs_them(world, scans, tmp_path,
+                                                                                          capsys):
+    # Odometry stamped 1000 s after the scans (a driver on its own clock): every scan was paired with the first
+    # odometry pose, the robot stood still, and the run went on without a word.
+    bag = tmp_path / "clocks.mcap"
+    _shifted_odometry_bag(bag, scans, 1000.0)
+    err = _fails(capsys, tmp_path, bag, match="no scan is stamped within the odometry's time span")
+    assert "odometry (/odom (nav_msgs/Odometry)) 1000.000..1008.000 s" in err and "sensor.time_offset=1000.000 would pair" in err
+    # sensor.time_offset +1000 pairs each scan with its own odometry message again: the same poses as the bag
+    # on one clock (the trajectory's stamps are the scans' own)
+    same = tmp_path / "same.mcap"
+    write_scans(same, scans)
+    s_off, o_off = _run(tmp_path, "off", map=world / "map.yaml", bag=bag, **{"sensor.time_offset": 1000.0})
+    s_one, o_one = _run(tmp_path, "one", map=world / "map.yaml", bag=same)
+    a, b = read_tum(o_off / "trajectory.tum"), read_tum(o_one / "trajectory.tum")
+    assert s_off["updates"] == s_one["updates"] > 30 and np.allclose(a[1], b[1], rtol=0, atol=1e-9)
+
+
+def test_scans_past_the_odometrys_end_are_named_in_a_warning(world, scans, tmp_path, capsys):
+    bag = tmp_path / "short.mcap"
+    _shifted_odometry_bag(bag, scans, 0.0, upto=20)  # odometry for 0..3.8 s, scans until 8 s: 4.4..8 s past the slack (0.5 s)
+    out = tmp_path / "out"
+    code = main(["run", "--bag", str(bag), "--map", str(world / "map.yaml"), "--out", str(out), "--rerun", "off",
+                 "--no-progress", "--particles", "500"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    text = captured.out + captured.err
+    assert ("19 of 41 scans are stamped after the odometry's time span (0.000..3.800 s), by up to 4.20 s: their "
+            "odometry is held at the last pose") in text
+    assert "before the odometry" not in text
+
+
 def test_missing_topic_lists_the_scan_like_topics(scans, tmp_path, capsys):
     bag = tmp_path / "b.mcap"
     write_scans(bag, scans)

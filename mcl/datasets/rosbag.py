@@ -67,6 +67,9 @@ TRUTH_TYPES = (POSE, PWCS, ODOM)
 # Header stamps on one topic may step back this much (s) without being "out of order": recorders jitter, and
 # CARMEN logs converted to bags keep their own small backward steps (intel_lab: 4, all < 1 s).
 REORDER_TOLERANCE = 1.0
+# A scan stamped up to this long (s) outside the odometry's time span is paired with the end pose silently (a
+# recording's first and last odometry message come a period or so after or before the laser's).
+ODOM_SPAN_SLACK = 0.5
 
 
 def rosbag2_folder(path) -> Path | None:
@@ -224,6 +227,32 @@ class BagSource:
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     skipped: dict[str, int] = field(default_factory=dict)
+    scan_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))  # every scan's header stamp (s)
+
+    def stamps_checked(self, offset: float = 0.0) -> list[str]:
+        """The scans' stamps (plus ``sensor.time_offset``) against the odometry's time span: DataError when none
+        lies within it (no scan can be paired: two clocks, e.g. a driver stamping with its own), else a warning for
+        each end where scans lie more than ``ODOM_SPAN_SLACK`` outside (their odometry is held at that end: the
+        robot looks still there). Returns the warnings."""
+        t = self.scan_stamps + float(offset)
+        if t.size == 0:
+            return []
+        o0, o1 = float(self.odometry[0, 0]), float(self.odometry[-1, 0])
+        early, late = t < o0 - ODOM_SPAN_SLACK, t > o1 + ODOM_SPAN_SLACK
+        shifted = f" (with sensor.time_offset {offset:+g} s)" if offset else ""
+        if (early | late).all():
+            raise DataError(f"{self.path}: no scan is stamped within the odometry's time span{shifted}: scans "
+                            f"{t.min():.3f}..{t.max():.3f} s, odometry ({self.odom_source}) {o0:.3f}..{o1:.3f} s "
+                            f"(two clocks? sensor.time_offset={o0 - self.scan_stamps.min():.3f} would pair the "
+                            "first scan with the first odometry)")
+        out = []
+        for mask, where, gap in ((early, "before", o0 - t.min()), (late, "after", t.max() - o1)):
+            k = int(np.count_nonzero(mask))
+            if k:
+                out.append(f"{self.path}: {k} of {t.size} scans are stamped {where} the odometry's time span "
+                           f"({o0:.3f}..{o1:.3f} s{shifted}), by up to {gap:.2f} s: their odometry is held at the "
+                           f"{'first' if where == 'before' else 'last'} pose, as if the robot stood still")
+        return out
     landmarks: list = field(default_factory=list)
 
 
@@ -532,6 +561,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     tf_frames: set[str] = set()
     scan_frames: dict[str, str] = {}
     counts: dict[str, int] = {t: 0 for t in scan_topics}
+    scan_t: list[float] = []
     grid = initial = None
     truth_rows: list[tuple] = []
     other_rows: dict[str, list] = {}  # /tf odom -> child rows for children other than base_frame
@@ -542,7 +572,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         seen[topic] = seen.get(topic, 0) + 1
         if topic in counts:
             counts[topic] += 1
-            order.see(topic, stamp_seconds(msg.header.stamp))
+            scan_t.append(stamp_seconds(msg.header.stamp))
+            order.see(topic, scan_t[-1])
             scan_frames.setdefault(topic, _frame(msg.header.frame_id))
         elif topic in ("/tf", "/tf_static"):
             for ts in msg.transforms:
@@ -633,7 +664,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                      has_twist=odom_topic is not None, mirrored=mirrored)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
-                     warnings, notes, skipped)
+                     warnings, notes, skipped, np.array(scan_t, dtype=np.float64))
 
 
 # ----------------------------------------------------------------------------- mcl bag info
