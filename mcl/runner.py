@@ -323,6 +323,14 @@ def _open_source(cfg: Config, echo):
         truth = Truth(*log.truth)
     else:
         truth = None
+    if truth is not None and truth.t.size and len(scans):
+        stamps = getattr(log, "scan_stamps", None)
+        stamps = np.asarray([s.t for s in scans] if stamps is None or not stamps.size else stamps)
+        a, b = float(stamps.min()), float(stamps.max())
+        if truth.t.max() < a or truth.t.min() > b:
+            echo(f"mcl: warning: {cfg.truth or f'{cfg.bag}: {cfg.topics.truth}'}: no reference pose is stamped within "
+                 f"the scans' time span (reference {truth.t.min():.3f}..{truth.t.max():.3f} s, scans {a:.3f}..{b:.3f}"
+                 " s): the run will not be scored")
     return log, grid, scans, marks, truth, initial
 
 
@@ -808,6 +816,8 @@ def _run(
     )
     if "eval" in summary and "ate_rmse" in summary["eval"]:
         text += " " + format_eval(summary["eval"]) + "."
+    elif "eval" in summary and "error" in summary["eval"]:
+        text += f" Not scored: {summary['eval']['error']}."
     text += f" Outputs in {out_dir}."
     if summary["outputs"]["recording"]:
         text += f" Open the recording with: rerun {summary['outputs']['recording']}"

@@ -303,6 +303,22 @@ def test_a_log_given_on_the_command_line_drops_the_config_files_truth(tmp_path):
     assert json.loads((tmp_path / "b" / "summary.json").read_text())["eval"]["ate_rmse"] < 0.3
 
 
+def test_a_truth_on_another_clock_is_a_warning_before_the_run_and_not_scored_after(tmp_path, capsys):
+    # A reference stamped 1000 s after the log: the run said nothing and summary.json held an error no one reads.
+    truth = tmp_path / "late.tum"
+    rows = [line.split() for line in (DEMO / "truth.tum").read_text().splitlines() if not line.startswith("#")]
+    truth.write_text("".join(" ".join([f"{float(r[0]) + 1000:.6f}", *r[1:]]) + "\n" for r in rows))
+    out = tmp_path / "o"
+    assert main(["run", "--truth", str(truth), "--out", str(out), "--rerun", "off", "--no-progress",
+                 "--particles", "800"]) == 0
+    said = capsys.readouterr()
+    text = said.out + said.err
+    assert (f"mcl: warning: {truth}: no reference pose is stamped within the scans' time span (reference "
+            "1000.000..1070.000 s, scans 0.000..70.000 s): the run will not be scored") in text
+    assert "Not scored: evaluation: no reference timestamp lies inside" in text and "ATE RMSE" not in text
+    assert "error" in json.loads((out / "summary.json").read_text())["eval"]
+
+
 @pytest.mark.parametrize("model", ["odometry", "velocity"])
 def test_a_robot_that_backs_up_is_tracked(tmp_path, model):
     # `mcl simulate --reversals 6`: the robot backs up 0.5-3 m six times in 40 s (its odometry reads rot1 ~ pi on
