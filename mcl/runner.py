@@ -324,8 +324,9 @@ def _open_source(cfg: Config, echo):
     else:
         truth = None
     if truth is not None and truth.t.size and len(scans):
-        stamps = getattr(log, "scan_stamps", None)
-        stamps = np.asarray([s.t for s in scans] if stamps is None or not stamps.size else stamps)
+        stamps = getattr(log, "scan_stamps", None)  # a bag's, read in its first pass (its scans stream)
+        stamps = (np.asarray([s.t for s in scans]) if stamps is None or not stamps.size
+                  else stamps + cfg.sensor.time_offset)
         a, b = float(stamps.min()), float(stamps.max())
         if truth.t.max() < a or truth.t.min() > b:
             echo(f"mcl: warning: {cfg.truth or f'{cfg.bag}: {cfg.topics.truth}'}: no reference pose is stamped within "

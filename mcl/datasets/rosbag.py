@@ -227,6 +227,7 @@ class BagSource:
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     skipped: dict[str, int] = field(default_factory=dict)
+    landmarks: list = field(default_factory=list)
     scan_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))  # every scan's header stamp (s)
 
     def stamps_checked(self, offset: float = 0.0) -> list[str]:
@@ -253,7 +254,6 @@ class BagSource:
                            f"({o0:.3f}..{o1:.3f} s{shifted}), by up to {gap:.2f} s: their odometry is held at the "
                            f"{'first' if where == 'before' else 'last'} pose, as if the robot stood still")
         return out
-    landmarks: list = field(default_factory=list)
 
 
 class BagScans:
@@ -664,7 +664,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                      has_twist=odom_topic is not None, mirrored=mirrored)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
-                     warnings, notes, skipped, np.array(scan_t, dtype=np.float64))
+                     warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64))
 
 
 # ----------------------------------------------------------------------------- mcl bag info
