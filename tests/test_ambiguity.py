@@ -18,9 +18,9 @@ from ambiguity import LL_SAME, best_loglik, classify, classify_tracking  # noqa:
 DEMO = PROJECT_ROOT / "data" / "demo"
 
 
-def _run_dir(tmp_path, name, shift_left, mode="tracking"):
+def _run_dir(tmp_path, name, shift_left, mode="tracking", then=None):
     """An eval run folder on the demo whose trajectory is the reference moved ``shift_left`` m to the robot's
-    left, for every pose after 20 s."""
+    left, for every pose after 20 s (``then``: that many metres instead after 30 s, a jump)."""
     d = tmp_path / name
     d.mkdir()
     text = (PROJECT_ROOT / "configs" / "default.yaml").read_text()
@@ -33,6 +33,10 @@ def _run_dir(tmp_path, name, shift_left, mode="tracking"):
     late = t > t[0] + 20.0
     p[0, late] -= shift_left * np.sin(p[2, late])
     p[1, late] += shift_left * np.cos(p[2, late])
+    if then is not None:
+        later = t > t[0] + 30.0
+        p[0, later] -= (then - shift_left) * np.sin(p[2, later])
+        p[1, later] += (then - shift_left) * np.cos(p[2, later])
     write_tum(d / "trajectory.tum", t, p)
     row = {"dataset": "demo", "mode": mode, "config": "default", "seed": 1, "lost": True, "lost_m": 0.5,
            "kidnap_t": float(t[0] + 10.0)}
@@ -64,6 +68,18 @@ def test_a_kidnapped_run_at_a_pose_beside_the_reference_is_a_miss_by_score_and_b
     # the likelihood agrees by far: 1.5 m of wall offset costs 270 nats a scan (median; 26,600 over 100 scans); a sign
     # error or the estimate compared with itself gives <= 0
     assert c["gain"] > 10_000.0 and c["gain_median"] > 100.0
+    # the estimate never jumps against the reference: every scan is since its last jump
+    assert c["gain_held"] == c["gain"] and c["held_s"] > 19.0
+
+
+def test_the_evidence_since_the_estimates_last_jump_is_summed_apart(tmp_path):
+    # 1.5 m to the robot's left from 20 s, then 3.5 m from 30 s (a re-seed's jump): the scans after 30 s are summed
+    # apart from the window's (kidnap at 10 s: the window runs to 40 s); both favour the reference
+    d, row = _run_dir(tmp_path, "jump", 1.5, mode="kidnapped", then=3.5)
+    c = classify(d, row, {})
+    assert c is not None and c["kind"] == "miss"
+    assert 9.0 < c["held_s"] < 10.0  # 30.x .. 40 s: not the 20 s since the estimate first left the reference
+    assert 0.0 < c["gain_held"] < c["gain"] - 1_000.0
 
 
 def test_the_likelihood_is_taken_at_the_best_pose_near_each_one(tmp_path):
