@@ -402,8 +402,7 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
         if not ok:
             raise DataError(f"{where}: origin: expected finite numbers [x, y, yaw], got {short_repr(origin)}")
         vals.append(float(v))
-    if len(vals) == 3 and vals[2] != 0.0:
-        raise DataError(f"{where}: origin: non-zero yaw not supported (got {vals[2]})")
+    yaw = vals[2] if len(vals) == 3 else 0.0
 
     occ_th = _num(doc, "occupied_thresh", where)
     free_th = _num(doc, "free_thresh", where)
@@ -432,7 +431,47 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     occupancy = _classify(value, alpha, mode, bool(negate), occ_th, free_th)
     # Image row 0 is the top; the grid's row 0 is the bottom.
     occupancy = np.ascontiguousarray(occupancy[::-1])
-    return OccupancyGrid(occupancy, resolution, (vals[0], vals[1]), where, occ_th, free_th)
+    occupancy, corner = axis_aligned(occupancy, resolution, (vals[0], vals[1]), yaw, label=where)
+    return OccupancyGrid(occupancy, resolution, corner, where, occ_th, free_th)
+
+
+def axis_aligned(occupancy: np.ndarray, resolution: float, origin, yaw: float, label: str | None = None):
+    """(occupancy, origin) of a map whose lower-left cell sits at ``origin`` turned by ``yaw`` (map_server's
+    ``origin: [x, y, yaw]``: the image rotated counter-clockwise about its lower-left corner), on an axis-aligned
+    grid of the same resolution that holds it: each new cell takes the value of the map cell under its centre
+    (nearest cell), unknown (-1) outside the map. A yaw of a quarter turn (0, pi/2, pi, 3 pi/2, to 1e-9 rad) is an
+    exact turn of the array. The filter's kernels index an axis-aligned grid; resampling once at load keeps them
+    so. With ``label``, a turned grid too large for this machine's memory is one line naming it (as the image
+    itself is before it is decoded)."""
+    x0, y0 = float(origin[0]), float(origin[1])
+    k = yaw / (0.5 * math.pi)
+    if abs(k - round(k)) * 0.5 * math.pi < 1e-9:  # a quarter turn: exact
+        q = int(round(k)) % 4
+        h, w = occupancy.shape
+        size = {0: (0.0, 0.0), 1: (-h, 0.0), 2: (-w, -h), 3: (0.0, -w)}[q]  # the new lower-left corner, in cells
+        return (np.ascontiguousarray(np.rot90(occupancy, -q)),  # rows run up (y), columns right (x)
+                (x0 + size[0] * resolution, y0 + size[1] * resolution))
+    h, w = occupancy.shape
+    c, s_ = math.cos(yaw), math.sin(yaw)
+    cx = np.array([0.0, w, 0.0, w]) * resolution
+    cy = np.array([0.0, 0.0, h, h]) * resolution
+    wx, wy = x0 + c * cx - s_ * cy, y0 + s_ * cx + c * cy  # the image's corners in the world
+    left, bottom = float(wx.min()), float(wy.min())
+    nw = int(math.ceil((float(wx.max()) - left) / resolution - 1e-9))
+    nh = int(math.ceil((float(wy.max()) - bottom) / resolution - 1e-9))
+    if label is not None:
+        _check_memory(f"{label} (turned by its origin's yaw {yaw:g} rad)", nw, nh)
+    out = np.full((nh, nw), -1, dtype=np.int8)
+    px = left + (np.arange(nw) + 0.5) * resolution - x0
+    for r0 in range(0, nh, 512):  # bounded memory on huge maps: a band of rows at a time
+        py = (bottom + (np.arange(r0, min(r0 + 512, nh)) + 0.5) * resolution - y0)[:, None]
+        # the new cell centres in the image's own frame (the inverse rotation), in cells
+        u = np.floor((c * px[None, :] + s_ * py) / resolution).astype(np.int64)
+        v = np.floor((-s_ * px[None, :] + c * py) / resolution).astype(np.int64)
+        inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        band = out[r0:r0 + py.shape[0]]
+        band[inside] = occupancy[v[inside], u[inside]]
+    return out, (left, bottom)
 
 
 def _classify(value: np.ndarray, alpha: np.ndarray | None, mode: str, negate: bool,

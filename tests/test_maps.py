@@ -295,10 +295,42 @@ def test_missing_key(tmp_path):
         load_map(y)
 
 
-def test_non_zero_yaw(tmp_path):
-    y = write_map(tmp_path, PIX, origin="[0, 0, 0.5]")
-    with pytest.raises(DataError, match=r"m\.yaml: origin: non-zero yaw not supported"):
-        load_map(y)
+def _world_of_cells(h, w, res, origin, yaw):
+    """World centres (x, y) of every cell (i, j) of an (h, w) map whose lower-left cell sits at ``origin`` turned by
+    ``yaw`` (map_server's origin: [x, y, yaw])."""
+    i, j = np.mgrid[0:h, 0:w]
+    lx, ly = (j + 0.5) * res, (i + 0.5) * res
+    c, s = math.cos(yaw), math.sin(yaw)
+    return origin[0] + c * lx - s * ly, origin[1] + s * lx + c * ly
+
+
+@pytest.mark.parametrize("yaw", [math.pi / 2, math.pi, -math.pi / 2, 0.3, -2.0, 2.5])
+def test_a_rotated_origin_puts_each_cell_where_map_server_says(tmp_path, yaw):
+    # map_server's origin [x, y, yaw] turns the image about its lower-left corner; the map was refused before.
+    # Blocks of 4 x 4 pixels, each its own value: the centre of every block lands on that block's value (a quarter
+    # turn is exact: every cell); the nearest-cell resampling may move a block's edge by one cell, never its centre.
+    rng = np.random.default_rng(3)
+    blocks = rng.choice(np.array([0, 254, 205], dtype=np.uint8), size=(5, 7))
+    pixels = np.kron(blocks, np.ones((4, 4), dtype=np.uint8))
+    g = load_map(write_map(tmp_path, pixels, origin=f"[1.0, 2.0, {yaw!r}]", resolution=0.1))
+    flat = load_map(write_map(tmp_path, pixels, name="flat", resolution=0.1))
+    expect = flat.occupancy  # the same image unturned, row 0 at the bottom
+    h, w = expect.shape
+    x, y = _world_of_cells(h, w, 0.1, (1.0, 2.0), yaw)
+    ix, iy = g.world_to_cell(x, y)
+    assert g.contains(ix, iy).all()
+    got = g.occupancy[iy, ix]
+    quarter = abs(yaw / (math.pi / 2) - round(yaw / (math.pi / 2))) < 1e-12
+    centre = np.zeros((h, w), dtype=bool)
+    centre[1::4, 1::4] = centre[2::4, 2::4] = True  # two cells about each block's centre
+    if quarter:
+        np.testing.assert_array_equal(got, expect)
+        assert g.occupancy.size == expect.size
+    else:
+        np.testing.assert_array_equal(got[centre], expect[centre])
+        assert np.mean(got == expect) > 0.9
+        # outside the turned image every cell is unknown
+        assert np.count_nonzero(g.occupancy != -1) <= expect.size * 1.05
 
 
 @pytest.mark.parametrize("occ,free,key", [(1.5, 0.196, "occupied_thresh"), (0.65, -0.1, "free_thresh"),

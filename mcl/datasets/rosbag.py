@@ -480,19 +480,22 @@ def _pose_msg(msg) -> tuple[float, float, float]:
 
 
 def _grid_from_msg(path, topic, msg):
-    from mcl.maps import OccupancyGrid
+    from mcl.maps import OccupancyGrid, axis_aligned
 
     info = msg.info
     w, h = int(info.width), int(info.height)
     data = np.asarray(msg.data, dtype=np.int8)
     if w <= 0 or h <= 0 or data.size != w * h:
         raise DataError(f"{path}: {topic}: OccupancyGrid of {w} x {h} cells holds {data.size} values")
-    if abs(yaw_of(info.origin.orientation)) > 1e-9:
-        raise DataError(f"{path}: {topic}: a rotated map origin is not supported")
+    res = f32(info.resolution)
     try:
-        return OccupancyGrid.from_occupancy(data.reshape(h, w), f32(info.resolution),
-                                            (float(info.origin.position.x), float(info.origin.position.y)),
-                                            path=f"{path}:{topic}")
+        if not res > 0.0:
+            raise ValueError(f"resolution must be positive, got {res}")
+        # a rotated origin (the grid turned about its first cell): resampled onto an axis-aligned grid
+        occ, corner = axis_aligned(data.reshape(h, w), res, (float(info.origin.position.x),
+                                                             float(info.origin.position.y)),
+                                   yaw_of(info.origin.orientation))
+        return OccupancyGrid.from_occupancy(occ, res, corner, path=f"{path}:{topic}")
     except ValueError as e:
         raise DataError(f"{path}: {topic}: {e}") from None
 
