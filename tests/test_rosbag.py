@@ -335,6 +335,34 @@ def test_map_initial_pose_and_truth_from_the_bag(world, scans, tmp_path):
     assert summary["eval"]["ate_rmse"] < 0.15  # 8 s of tracking from the true pose; measured 0.05
 
 
+def test_a_bag_map_with_a_rotated_origin_is_turned_onto_the_axes(world, scans, tmp_path):
+    # /map's origin turned by a quarter turn about its first cell: the grid read is the array turned (exactly), its
+    # corner where the turn puts it; it was refused ("a rotated map origin is not supported")
+    grid = load_map(world / "map.yaml")
+    h, w = grid.occupancy.shape
+    bag = tmp_path / "turned.mcap"
+    with BagOut(bag) as b:
+        s = scans[0]
+        info = b.msg("nav_msgs/msg/MapMetaData", map_load_time=b.header(s.t, "map").stamp,
+                     resolution=float(grid.resolution), width=w, height=h, origin=b.pose(1.0, 2.0, math.pi / 2))
+        b.write("/map", "nav_msgs/msg/OccupancyGrid", s.t, b.msg(
+            "nav_msgs/msg/OccupancyGrid", header=b.header(s.t, "map"), info=info,
+            data=np.ascontiguousarray(grid.occupancy, dtype=np.int8).ravel()))
+        for s in scans:
+            b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg(
+                "nav_msgs/msg/Odometry", header=b.header(s.t, "odom"), child_frame_id="base_link",
+                pose=b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*s.odom), covariance=np.zeros(36)),
+                twist=b.msg("geometry_msgs/msg/TwistWithCovariance", twist=b.msg(
+                    "geometry_msgs/msg/Twist", linear=b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0),
+                    angular=b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)), covariance=np.zeros(36))))
+            _laser(b, "/scan", s)
+    got = open_bag(bag).grid
+    # a quarter turn counter-clockwise: cell (row i, column j) goes to (j, h - 1 - i); the corner to (1 - h res, 2)
+    np.testing.assert_array_equal(got.occupancy, np.rot90(grid.occupancy, -1))
+    assert got.occupancy[3, h - 1 - 5] == grid.occupancy[5, 3]
+    assert got.origin == pytest.approx((1.0 - h * grid.resolution, 2.0), abs=1e-9)
+
+
 def test_initial_pose_covariance_shapes_the_particles(world):
     # N(mean, cov) with a full covariance: the sample covariance of 20,000 particles is within 5 % of cov
     # (the standard error of a variance estimate at N=20,000 is sqrt(2/N) = 1 %).
