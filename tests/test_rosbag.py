@@ -461,9 +461,12 @@ def test_bag_info_names_what_mcl_would_use(scans, tmp_path, capsys):
     assert info["frames"] == {"/tf": ["odom -> base_link"], "/tf_static": ["base_link -> laser"]}
     assert info["mcl_uses"]["odometry"] == "/tf odom -> base_link"
     assert info["mcl_uses"]["laser_pose"]["/scan"] == [0.1, 0.0, 0.0]
+    assert info["mcl_uses"]["scan_span_s"] == [scans[0].t, scans[-1].t] == info["mcl_uses"]["odometry_span_s"]
+    assert info["mcl_uses"]["warnings"] == []
     assert main(["bag", "info", str(bag)]) == 0
     text = capsys.readouterr().out
     assert "mcl would use:" in text and "/tf odom -> base_link" in text
+    assert f"stamps:       scans {scans[0].t:.3f}..{scans[-1].t:.3f} s, odometry {scans[0].t:.3f}..{scans[-1].t:.3f} s" in text
 
 
 # ----------------------------------------------------------------------------- bad input: one line, exit 2
@@ -503,6 +506,8 @@ def test_scans_and_odometry_on_two_clocks_stop_with_one_line_and_a_time_offset_p
     _shifted_odometry_bag(bag, scans, 1000.0)
     err = _fails(capsys, tmp_path, bag, match="no scan is stamped within the odometry's time span")
     assert "odometry (/odom (nav_msgs/Odometry)) 1000.000..1008.000 s" in err and "sensor.time_offset=1000.000 would pair" in err
+    assert main(["bag", "info", str(bag)]) == 0  # what mcl would use: nothing, and why
+    assert "nothing: " + err.removeprefix("mcl: error: ") in capsys.readouterr().out
     # sensor.time_offset +1000 pairs each scan with its own odometry message again: the same poses as the bag
     # on one clock (the trajectory's stamps are the scans' own)
     same = tmp_path / "same.mcap"
@@ -525,6 +530,10 @@ def test_scans_past_the_odometrys_end_are_named_in_a_warning(world, scans, tmp_p
     assert ("19 of 41 scans are stamped after the odometry's time span (0.000..3.800 s), by up to 4.20 s: their "
             "odometry is held at the last pose") in text
     assert "before the odometry" not in text
+    # mcl bag info names it too (on a bag with no /tf or /tf_static at all, which it once read whole as transforms:
+    # an AttributeError traceback)
+    assert main(["bag", "info", str(bag)]) == 0
+    assert "  warning: " + f"{bag}: 19 of 41 scans are stamped after" in capsys.readouterr().out
 
 
 def test_missing_topic_lists_the_scan_like_topics(scans, tmp_path, capsys):

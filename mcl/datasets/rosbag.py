@@ -174,7 +174,10 @@ def _why(e: Exception) -> str:
 
 
 def _messages(reader, path, connections):
-    """(connection, deserialized message) in time order; DataError naming the topic on damage."""
+    """(connection, deserialized message) in time order; DataError naming the topic on damage. No connections:
+    nothing (the library reads every message for an empty list)."""
+    if not connections:
+        return
     it = reader.messages(connections=connections)
     conn = None
     while True:
@@ -697,10 +700,14 @@ def bag_info(path, topics=None, frames=None) -> dict:
         reader.close()
     try:
         src = open_bag(path, topics, frames)
+        stamp_warnings = src.stamps_checked()  # scans and odometry on two clocks: the error below
         info["mcl_uses"] = {
             "scan_topics": src.scans.topics,
             "scans": len(src.scans),
             "odometry": src.odom_source,
+            "scan_span_s": [round(float(src.scan_stamps.min()), 6), round(float(src.scan_stamps.max()), 6)],
+            "odometry_span_s": [round(float(src.odometry[0, 0]), 6), round(float(src.odometry[-1, 0]), 6)],
+            "warnings": src.warnings + stamp_warnings,
             "laser_pose": {t: (None if o is None else [round(float(v), 6) for v in o])
                            for t, o in src.laser_offsets.items()},
             "map": "from the bag" if src.grid is not None else "needs --map",
@@ -728,8 +735,11 @@ def format_info(info: dict) -> str:
     else:
         lines.append(f"  scans:        {', '.join(u['scan_topics'])} ({u['scans']} messages)")
         lines.append(f"  odometry:     {u['odometry']}")
+        (a, b), (c, d) = u["scan_span_s"], u["odometry_span_s"]
+        lines.append(f"  stamps:       scans {a:.3f}..{b:.3f} s, odometry {c:.3f}..{d:.3f} s")
         for t, p in u["laser_pose"].items():
             lines.append(f"  laser pose:   {t}: {p if p is not None else 'not in /tf_static or /tf (sensor.laser_pose)'}")
         lines.append(f"  map:          {u['map']}")
         lines.append(f"  initial pose: {u['initial_pose'] if u['initial_pose'] is not None else 'none in the bag'}")
+        lines += [f"  warning: {w}" for w in u["warnings"]]
     return "\n".join(lines)
