@@ -57,7 +57,8 @@ def _add_run(sub) -> None:
     p.add_argument("--bag", help="ROS bag instead of a log: .bag (ROS 1), .db3 / .mcap (ROS 2) or a rosbag2 folder; "
                    "its /map stands in for --map (see 'mcl bag info')")
     p.add_argument("--scan-topic", metavar="TOPIC", help="bag: LaserScan/PointCloud2 topic, or 'all' to fuse them (topics.scan)")
-    p.add_argument("--odom-topic", metavar="TOPIC", help="bag: nav_msgs/Odometry topic, or 'tf' for odom -> base on /tf (topics.odom)")
+    p.add_argument("--odom-topic", metavar="TOPIC", help="bag: nav_msgs/Odometry topic (or a PoseStamped / PoseWithCovarianceStamped "
+                   "topic in the odometry frame), or 'tf' for odom -> base on /tf (topics.odom)")
     p.add_argument("--odom-frame", metavar="FRAME", help="bag: odometry frame (frames.odom, default odom)")
     p.add_argument("--base-frame", metavar="FRAME", help="bag: robot frame (frames.base, default base_link)")
     p.add_argument("--write-bag", action="store_true",

@@ -153,6 +153,27 @@ def test_a_ros1_bag_with_tf_tfmessage_reads_as_one_with_tf2(scans, tmp_path, cap
     assert "frames in /tf: base_link -> laser, odom -> base_link" in out and "odometry:     /tf odom -> base_link" in out
 
 
+def test_odometry_from_a_pose_topic_named_as_the_odometry(world, scans, tmp_path, capsys):
+    # A robot_pose_ekf's odom_combined (PoseWithCovarianceStamped), no nav_msgs/Odometry and no /tf: an error that
+    # names the pose topic, then the same records as odometry on /tf (the pose, no velocities) once it is named
+    bag, ref = tmp_path / "ekf.mcap", tmp_path / "tf.mcap"
+    topic = "/robot_pose_ekf/odom_combined"
+    with BagOut(bag) as b:
+        for s in scans:
+            pw = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*s.odom), covariance=np.zeros(36))
+            b.write(topic, "geometry_msgs/msg/PoseWithCovarianceStamped", s.t, b.msg(
+                "geometry_msgs/msg/PoseWithCovarianceStamped", header=b.header(s.t, "odom_combined"), pose=pw))
+            _laser(b, "/scan", s)
+    write_scans(ref, scans, odom="tf")
+    _fails(capsys, tmp_path, bag, match=f"a pose topic in the odometry frame can be named with --odom-topic: {topic}")
+    src = open_bag(bag, load_config(None, [f"topics.odom={topic}"]).topics)
+    assert src.odom_source == f"{topic} (geometry_msgs/PoseWithCovarianceStamped)"
+    for x, y in zip(src.scans, open_bag(ref).scans):
+        assert np.array_equal(x.odom, y.odom) and (x.tv, x.rv) == (y.tv, y.rv) == (0.0, 0.0)
+    assert main(["run", "--bag", str(bag), "--odom-topic", topic, "--map", str(world / "map.yaml"), "--out",
+                 str(tmp_path / "o"), "--rerun", "off", "--no-progress", "--particles", "500"]) == 0
+
+
 def test_odometry_topic_and_tf_give_the_same_records(scans, tmp_path):
     write_scans(tmp_path / "a.db3", scans, odom="topic")
     write_scans(tmp_path / "b.db3", scans, odom="tf")

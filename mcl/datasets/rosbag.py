@@ -11,7 +11,8 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
   the cloud's frame) lies in ``topics.cloud_z`` binned by bearing into ``topics.cloud_beams`` beams, the
   nearest point per beam (as pointcloud_to_laserscan / Beluga). One topic, or every scan topic fused
   (``topics.scan: all``), each with its own mounting pose.
-* **odometry**: ``nav_msgs/Odometry`` on a topic, or the ``frames.odom -> frames.base`` transform of ``/tf``;
+* **odometry**: ``nav_msgs/Odometry`` on a topic, or the ``frames.odom -> frames.base`` transform of ``/tf``, or a
+  ``PoseStamped`` / ``PoseWithCovarianceStamped`` topic in the odometry frame named as ``topics.odom``;
   interpolated at each scan's header stamp (linear in x, y, shortest angle in theta; an exact stamp gives the
   message's own pose). Velocities from the Odometry twist (0 from /tf: the runner derives them).
 * **transforms**: ``tf2_msgs/TFMessage`` on ``/tf`` and ``/tf_static``, or ROS 1's older ``tf/tfMessage`` (the same
@@ -64,6 +65,9 @@ TF = "tf2_msgs/msg/TFMessage"
 # ROS 1 before Hydro (2013) published transforms as tf/tfMessage: the same fields (TransformStamped[] transforms)
 TF_TYPES = (TF, "tf/msg/tfMessage")
 TRUTH_TYPES = (POSE, PWCS, ODOM)
+# odometry: nav_msgs/Odometry, or, named as topics.odom, a pose topic in the odometry frame (a robot_pose_ekf's
+# odom_combined is a PoseWithCovarianceStamped): the pose alone, no velocities
+ODOM_TYPES = (ODOM, POSE, PWCS)
 # Header stamps on one topic may step back this much (s) without being "out of order": recorders jitter, and
 # CARMEN logs converted to bags keep their own small backward steps (intel_lab: 4, all < 1 s).
 REORDER_TOLERANCE = 1.0
@@ -427,7 +431,7 @@ def _choose_scan_topics(path, topics: dict, want: str) -> list[str]:
 
 
 def _choose_odom(path, topics: dict, want: str) -> str | None:
-    """The Odometry topic to use, or None for /tf."""
+    """The odometry topic to use (an Odometry, or a pose topic named), or None for /tf."""
     odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
     if want == "tf":
         return None
@@ -437,8 +441,9 @@ def _choose_odom(path, topics: dict, want: str) -> str | None:
         return odoms[0] if len(odoms) == 1 else None
     if want not in topics:
         raise DataError(f"{path}: no topic {want} (Odometry topics: {_listing(odoms)}; or topics.odom: tf)")
-    if topics[want].msgtype != ODOM:
-        raise DataError(f"{path}: {want} is {topics[want].msgtype}, not nav_msgs/Odometry")
+    if topics[want].msgtype not in ODOM_TYPES:
+        raise DataError(f"{path}: {want} is {topics[want].msgtype}, not nav_msgs/Odometry (or a PoseStamped or "
+                        "PoseWithCovarianceStamped in the odometry frame)")
     return want
 
 
@@ -556,8 +561,11 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     odom_frame, base_frame = _frame(fr.odom), _frame(fr.base)
     if odom_topic is None and "/tf" not in topics:
         odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
+        poses = sorted(n for n, i in topics.items() if i.msgtype in (POSE, PWCS))
+        hint = (f"; a pose topic in the odometry frame can be named with --odom-topic: {_listing(poses)}"
+                if poses else "")
         raise DataError(f"{path}: no odometry: no nav_msgs/Odometry topic{'' if not odoms else ' chosen'} "
-                        f"(Odometry topics: {_listing(odoms)}) and no /tf for {odom_frame} -> {base_frame}")
+                        f"(Odometry topics: {_listing(odoms)}) and no /tf for {odom_frame} -> {base_frame}{hint}")
 
     wanted = set(scan_topics) | set(tf_topics) | {t for t in (odom_topic, map_topic, init_topic, truth_topic) if t}
     conns = [c for c in reader.connections if c.topic in wanted]
@@ -600,9 +608,13 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         elif topic == odom_topic:
             t = stamp_seconds(msg.header.stamp)
             order.see(topic, t)
-            if odom_child is None:
-                odom_child = _frame(msg.child_frame_id)
-            odom_rows.append((t, *_pose_msg(msg), float(msg.twist.twist.linear.x), float(msg.twist.twist.angular.z)))
+            if hasattr(msg, "twist"):
+                if odom_child is None:
+                    odom_child = _frame(msg.child_frame_id)
+                odom_rows.append((t, *_pose_msg(msg), float(msg.twist.twist.linear.x),
+                                  float(msg.twist.twist.angular.z)))
+            else:  # a pose topic (ODOM_TYPES): no child frame, no velocities
+                odom_rows.append((t, *_pose_msg(msg), 0.0, 0.0))
         if topic == map_topic and grid is None:
             grid = _grid_from_msg(path, topic, msg)
         if topic == init_topic and initial is None:
@@ -665,9 +677,10 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             raise DataError(f"{path}: {truth_topic}: no messages")
         a = np.array(truth_rows, dtype=np.float64)
         truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
-    src_name = f"{odom_topic} (nav_msgs/Odometry)" if odom_topic else f"/tf {odom_frame} -> {odom_child or base_frame}"
+    odom_type = topics[odom_topic].msgtype.replace("/msg/", "/") if odom_topic else None
+    src_name = f"{odom_topic} ({odom_type})" if odom_topic else f"/tf {odom_frame} -> {odom_child or base_frame}"
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
-                     has_twist=odom_topic is not None, mirrored=mirrored)
+                     has_twist=odom_type == ODOM.replace("/msg/", "/"), mirrored=mirrored)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64))
