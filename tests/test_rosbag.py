@@ -263,6 +263,43 @@ def test_nav2_frames_base_footprint_without_base_link_are_found_with_a_note(scan
             assert np.allclose(compose(g.odom, g.laser_offset), a.odom, atol=1e-9)
 
 
+def _namespaced_bag(path, scans, robots, mount=(0.2, 0.0, 0.0)):
+    """Odometry on /tf as R/odom -> R/base_link for each robot R of ``robots`` (multi-robot namespaces), the laser
+    R/laser on /tf_static, the scans from the first robot's laser."""
+    from mcl.datasets.bagwrite import _compose, _inverse
+
+    with BagOut(path) as b:
+        b.write("/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+            b.transform(scans[0].t, f"{r}/base_link", f"{r}/laser", mount) for r in robots]))
+        for s in scans:
+            base = _compose(tuple(s.odom), _inverse(mount))
+            b.write("/tf", "tf2_msgs/msg/TFMessage", s.t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+                b.transform(s.t, f"{r}/odom", f"{r}/base_link", base) for r in robots]))
+            _laser(b, "/scan", s, frame=f"{robots[0]}/laser")
+
+
+def test_namespaced_frames_of_one_robot_are_found_with_a_note(scans, tmp_path, capsys):
+    # A multi-robot namespace (robot1/odom -> robot1/base_link, robot1/laser): with the default frames the bag was
+    # refused ("the transform odom -> base_link never appears"); one robot's namespaced pair is used, saying so, and
+    # the records are the log's. Two robots: which one is not guessed, the one line lists the transforms.
+    from mcl.runner import compose
+
+    bag = tmp_path / "ns.mcap"
+    _namespaced_bag(bag, scans, ["robot1"])
+    src = open_bag(bag)
+    assert src.odom_source == "/tf robot1/odom -> robot1/base_link"
+    assert any("the odometry is robot1/odom -> robot1/base_link" in n for n in src.notes), src.notes
+    assert np.allclose(src.laser_offsets["/scan"], (0.2, 0.0, 0.0), atol=1e-12)
+    for a, g in zip(scans, src.scans):
+        assert np.allclose(compose(g.odom, g.laser_offset), a.odom, atol=1e-9)
+    two = tmp_path / "two.mcap"
+    _namespaced_bag(two, scans, ["robot1", "robot2"])
+    _fails(capsys, tmp_path, two, match="the transform odom -> base_link never appears (it has: robot1/odom -> "
+                                        "robot1/base_link, robot2/odom -> robot2/base_link)")
+    src = open_bag(two, frames=load_config(None, ["frames.odom=robot2/odom", "frames.base=robot2/base_link"]).frames)
+    assert src.odom_source == "/tf robot2/odom -> robot2/base_link"
+
+
 def test_a_laser_without_transform_falls_back_with_a_note(scans, tmp_path):
     bag = tmp_path / "nostatic.bag"
     with BagOut(bag) as b:

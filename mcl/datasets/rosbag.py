@@ -131,6 +131,11 @@ def _frame(name: str) -> str:
     return name.lstrip("/")  # ROS 1 frames may start with '/'
 
 
+def _basename(frame: str) -> str:
+    """A frame's name without its namespace: robot1/base_link -> base_link."""
+    return frame.rsplit("/", 1)[-1]
+
+
 def _compose(a, b):
     """a ∘ b of planar transforms (x, y, theta[, m]), m = -1 for one that mirrors the plane (y -> -y before the
     rotation: a frame upside down), +1 or absent otherwise; the result has m when either has."""
@@ -559,6 +564,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             raise DataError(f"{path}: {n} is {topics[n].msgtype}, expected tf2_msgs/TFMessage (or ROS 1's "
                             "tf/tfMessage)")
     odom_frame, base_frame = _frame(fr.odom), _frame(fr.base)
+    default_odom = odom_frame == _frame(_Frames().odom)  # a namespaced one (robot1/odom) may stand in for it
     if odom_topic is None and "/tf" not in topics:
         odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
         poses = sorted(n for n, i in topics.items() if i.msgtype in (POSE, PWCS))
@@ -598,10 +604,12 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                     t = stamp_seconds(ts.header.stamp)
                     order.see(topic, t, f" {odom_frame} -> {base_frame}")
                     odom_rows.append((t, *_tf_pose(ts.transform), 0.0, 0.0))
-                elif topic == "/tf" and odom_topic is None and parent == odom_frame and not odom_rows:
-                    # odom -> another frame (nav2's base_footprint): kept in case frames.base never appears
-                    other_rows.setdefault(child, []).append((stamp_seconds(ts.header.stamp),
-                                                             *_tf_pose(ts.transform), 0.0, 0.0))
+                elif topic == "/tf" and odom_topic is None and not odom_rows and (
+                        parent == odom_frame or (default_odom and _basename(parent) == odom_frame)):
+                    # odom -> another frame (nav2's base_footprint), or a namespaced odom (robot1/odom): kept in case
+                    # frames.odom -> frames.base never appears
+                    other_rows.setdefault((parent, child), []).append((stamp_seconds(ts.header.stamp),
+                                                                       *_tf_pose(ts.transform), 0.0, 0.0))
                 elif topic == "/tf_static" or child not in static:
                     if parent != odom_frame or child != base_frame:
                         static[child] = (parent, _tf_mount(ts.transform))
@@ -631,14 +639,20 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     empty = [t for t in scan_topics if counts[t] == 0]
     if empty:
         raise DataError(f"{path}: {empty[0]}: no messages")
-    if not odom_rows and odom_topic is None and len(other_rows) == 1 and base_frame == _frame(_Frames().base):
-        # the default frames.base never appears under odom, but one other frame does (nav2: base_footprint): that
-        # one (a frame the user named is not second-guessed)
-        odom_child, odom_rows = next(iter(other_rows.items()))
+    pick = None
+    if not odom_rows and odom_topic is None and other_rows and base_frame == _frame(_Frames().base):
+        # frames.base (the default) never appears under the odometry frame. One namespaced pair (robot1/odom ->
+        # robot1/base_link), else the only transform from an odometry frame (nav2: odom -> base_footprint): that
+        # one. A frame the user named is not second-guessed, nor is a choice among several robots made.
+        named = [k for k in other_rows if _basename(k[1]) == base_frame]
+        pick = named[0] if len(named) == 1 else (next(iter(other_rows)) if len(other_rows) == 1 else None)
+    if pick is not None:
+        (odom_parent, odom_child), odom_rows = pick, other_rows[pick]
         for row in odom_rows:
-            order.see("/tf", row[0], f" {odom_frame} -> {odom_child}")
-        notes.append(f"{path}: /tf: no {odom_frame} -> {base_frame}; the odometry is {odom_frame} -> {odom_child}, "
-                     "the only transform from the odometry frame (frames.base chooses)")
+            order.see("/tf", row[0], f" {odom_parent} -> {odom_child}")
+        notes.append(f"{path}: /tf: no {odom_frame} -> {base_frame}; the odometry is {odom_parent} -> {odom_child}, "
+                     "the only such transform (frames.odom and frames.base choose)")
+        odom_frame = odom_parent
     if not odom_rows:
         if odom_topic is not None:
             raise DataError(f"{path}: {odom_topic}: no messages")
