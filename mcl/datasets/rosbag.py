@@ -131,6 +131,19 @@ def _frame(name: str) -> str:
     return name.lstrip("/")  # ROS 1 frames may start with '/'
 
 
+def _tf_names(topics: dict) -> tuple[str, str]:
+    """The bag's (dynamic, static) transform topics: /tf and /tf_static, else one namespace's (a multi-robot
+    recording remaps them: /robot1/tf, /robot1/tf_static); /tf and /tf_static when there are several or none."""
+    if "/tf" in topics or "/tf_static" in topics:
+        return "/tf", "/tf_static"
+    spaces = {n[: -len(suffix)] for n, i in topics.items() for suffix in ("/tf", "/tf_static")
+              if n.endswith(suffix) and i.msgtype in TF_TYPES}
+    if len(spaces) == 1:
+        ns = spaces.pop()
+        return f"{ns}/tf", f"{ns}/tf_static"
+    return "/tf", "/tf_static"
+
+
 def _basename(frame: str) -> str:
     """A frame's name without its namespace: robot1/base_link -> base_link."""
     return frame.rsplit("/", 1)[-1]
@@ -558,14 +571,15 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             poses = sorted(n for n, i in topics.items() if i.msgtype in TRUTH_TYPES)
             raise DataError(f"{path}: no truth topic {truth_topic} (pose and odometry topics: {_listing(poses)})")
         _check_type(path, topics, truth_topic, TRUTH_TYPES, "truth")
-    tf_topics = [n for n in ("/tf", "/tf_static") if n in topics]
+    tf_dyn, tf_static = _tf_names(topics)
+    tf_topics = [n for n in (tf_dyn, tf_static) if n in topics]
     for n in tf_topics:
         if topics[n].msgtype not in TF_TYPES:
             raise DataError(f"{path}: {n} is {topics[n].msgtype}, expected tf2_msgs/TFMessage (or ROS 1's "
                             "tf/tfMessage)")
     odom_frame, base_frame = _frame(fr.odom), _frame(fr.base)
     default_odom = odom_frame == _frame(_Frames().odom)  # a namespaced one (robot1/odom) may stand in for it
-    if odom_topic is None and "/tf" not in topics:
+    if odom_topic is None and tf_dyn not in topics:
         odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
         poses = sorted(n for n, i in topics.items() if i.msgtype in (POSE, PWCS))
         hint = (f"; a pose topic in the odometry frame can be named with --odom-topic: {_listing(poses)}"
@@ -595,22 +609,22 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             scan_t.append(stamp_seconds(msg.header.stamp))
             order.see(topic, scan_t[-1])
             scan_frames.setdefault(topic, _frame(msg.header.frame_id))
-        elif topic in ("/tf", "/tf_static"):
+        elif topic in (tf_dyn, tf_static):
             for ts in msg.transforms:
                 parent, child = _frame(ts.header.frame_id), _frame(ts.child_frame_id)
-                if topic == "/tf":
+                if topic == tf_dyn:
                     tf_frames.add(f"{parent} -> {child}")
-                if topic == "/tf" and odom_topic is None and parent == odom_frame and child == base_frame:
+                if topic == tf_dyn and odom_topic is None and parent == odom_frame and child == base_frame:
                     t = stamp_seconds(ts.header.stamp)
                     order.see(topic, t, f" {odom_frame} -> {base_frame}")
                     odom_rows.append((t, *_tf_pose(ts.transform), 0.0, 0.0))
-                elif topic == "/tf" and odom_topic is None and not odom_rows and (
+                elif topic == tf_dyn and odom_topic is None and not odom_rows and (
                         parent == odom_frame or (default_odom and _basename(parent) == odom_frame)):
                     # odom -> another frame (nav2's base_footprint), or a namespaced odom (robot1/odom): kept in case
                     # frames.odom -> frames.base never appears
                     other_rows.setdefault((parent, child), []).append((stamp_seconds(ts.header.stamp),
                                                                        *_tf_pose(ts.transform), 0.0, 0.0))
-                elif topic == "/tf_static" or child not in static:
+                elif topic == tf_static or child not in static:
                     if parent != odom_frame or child != base_frame:
                         static[child] = (parent, _tf_mount(ts.transform))
         elif topic == odom_topic:
@@ -649,7 +663,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     if pick is not None:
         (odom_parent, odom_child), odom_rows = pick, other_rows[pick]
         for row in odom_rows:
-            order.see("/tf", row[0], f" {odom_parent} -> {odom_child}")
+            order.see(tf_dyn, row[0], f" {odom_parent} -> {odom_child}")
         notes.append(f"{path}: /tf: no {odom_frame} -> {base_frame}; the odometry is {odom_parent} -> {odom_child}, "
                      "the only such transform (frames.odom and frames.base choose)")
         odom_frame = odom_parent
@@ -692,7 +706,9 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         a = np.array(truth_rows, dtype=np.float64)
         truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
     odom_type = topics[odom_topic].msgtype.replace("/msg/", "/") if odom_topic else None
-    src_name = f"{odom_topic} ({odom_type})" if odom_topic else f"/tf {odom_frame} -> {odom_child or base_frame}"
+    src_name = f"{odom_topic} ({odom_type})" if odom_topic else f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}"
+    if tf_dyn != "/tf":
+        notes.append(f"{path}: the transforms are on {tf_dyn} and {tf_static} (no /tf, one namespace's)")
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
                      has_twist=odom_type == ODOM.replace("/msg/", "/"), mirrored=mirrored)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
@@ -718,10 +734,11 @@ def bag_info(path, topics=None, frames=None) -> dict:
                            "count": i.msgcount} for n, i in sorted(tps.items())},
         }
         frames_seen: dict[str, set] = {"/tf": set(), "/tf_static": set()}
-        conns = [c for c in reader.connections if c.topic in frames_seen and c.msgtype in TF_TYPES]
+        label = dict(zip(_tf_names(tps), frames_seen))  # a namespace's /robot1/tf is listed as /tf
+        conns = [c for c in reader.connections if c.topic in label and c.msgtype in TF_TYPES]
         for conn, msg in _messages(reader, path, conns):
             for ts in msg.transforms:
-                frames_seen[conn.topic].add(f"{_frame(ts.header.frame_id)} -> {_frame(ts.child_frame_id)}")
+                frames_seen[label[conn.topic]].add(f"{_frame(ts.header.frame_id)} -> {_frame(ts.child_frame_id)}")
         info["frames"] = {k: sorted(v) for k, v in frames_seen.items()}
     finally:
         reader.close()
