@@ -598,7 +598,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     scan_t: list[float] = []
     grid = initial = None
     truth_rows: list[tuple] = []
-    other_rows: dict[str, list] = {}  # /tf odom -> child rows for children other than base_frame
+    other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
     odom_child = None  # the Odometry topic's child_frame_id
     seen: dict[str, int] = {}
     for conn, msg in _messages(reader, path, conns):
@@ -664,8 +664,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         (odom_parent, odom_child), odom_rows = pick, other_rows[pick]
         for row in odom_rows:
             order.see(tf_dyn, row[0], f" {odom_parent} -> {odom_child}")
-        notes.append(f"{path}: /tf: no {odom_frame} -> {base_frame}; the odometry is {odom_parent} -> {odom_child}, "
-                     "the only such transform (frames.odom and frames.base choose)")
+        notes.append(f"{path}: {tf_dyn}: no {odom_frame} -> {base_frame}; the odometry is {odom_parent} -> "
+                     f"{odom_child}, the only such transform (frames.odom and frames.base choose)")
         odom_frame = odom_parent
     if not odom_rows:
         if odom_topic is not None:
@@ -705,12 +705,13 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             raise DataError(f"{path}: {truth_topic}: no messages")
         a = np.array(truth_rows, dtype=np.float64)
         truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
-    odom_type = topics[odom_topic].msgtype.replace("/msg/", "/") if odom_topic else None
-    src_name = f"{odom_topic} ({odom_type})" if odom_topic else f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}"
+    odom_type = topics[odom_topic].msgtype if odom_topic else None
+    src_name = (f"{odom_topic} ({odom_type.replace('/msg/', '/')})" if odom_topic
+                else f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}")
     if tf_dyn != "/tf":
         notes.append(f"{path}: the transforms are on {tf_dyn} and {tf_static} (no /tf, one namespace's)")
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
-                     has_twist=odom_type == ODOM.replace("/msg/", "/"), mirrored=mirrored)
+                     has_twist=odom_type == ODOM, mirrored=mirrored)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64))
