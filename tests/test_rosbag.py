@@ -325,6 +325,45 @@ def test_transform_topics_remapped_into_a_namespace_are_read(scans, tmp_path, ca
     assert "frames in /tf: odom -> base_link" in capsys.readouterr().out
 
 
+def test_among_several_namespaces_transform_topics_the_scan_topics_robot_is_read(scans, tmp_path, capsys):
+    # Two robots, each with its own remapped /robotN/tf and /robotN/tf_static and no /tf: none was read (no
+    # odometry). The scan topic chosen (/robot2/scan) picks its namespace; with nothing to choose by, one line
+    # names the namespaces.
+    from mcl.datasets.bagwrite import _compose, _inverse
+
+    mount = (0.2, 0.0, 0.0)
+
+    def write(path, scan_topics):
+        with BagOut(path) as b:
+            for r in ("robot1", "robot2"):
+                b.write(f"/{r}/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t,
+                        b.msg("tf2_msgs/msg/TFMessage", transforms=[b.transform(scans[0].t, "base_link", "laser",
+                                                                                mount)]))
+            for s in scans:
+                base = _compose(tuple(s.odom), _inverse(mount))
+                for r, dx in (("robot1", 0.0), ("robot2", 1.0)):  # robot2's odometry 1 m further along x
+                    b.write(f"/{r}/tf", "tf2_msgs/msg/TFMessage", s.t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+                        b.transform(s.t, "odom", "base_link", (base[0] + dx, base[1], base[2]))]))
+                for topic in scan_topics:
+                    _laser(b, topic, s)
+
+    two = tmp_path / "two.mcap"
+    write(two, ["/robot1/scan", "/robot2/scan"])
+    src = open_bag(two, topics=load_config(None, ["topics.scan=/robot2/scan"]).topics)
+    assert src.odom_source == "/robot2/tf odom -> base_link"
+    assert np.allclose(src.laser_offsets["/robot2/scan"], mount, atol=1e-12)
+    first = open_bag(two, topics=load_config(None, ["topics.scan=/robot1/scan"]).topics)
+    assert first.odom_source == "/robot1/tf odom -> base_link"
+    for a, b in zip(first.scans, src.scans):
+        assert np.allclose(np.subtract(b.odom[:2], a.odom[:2]), (1.0, 0.0), atol=1e-9)
+    shared = tmp_path / "shared.mcap"
+    write(shared, ["/scan"])
+    _fails(capsys, tmp_path, shared, match="no /tf, and transforms of several namespaces (/robot1, /robot2): "
+                                           "choose the robot")
+    assert main(["bag", "info", str(two)]) == 0
+    assert "frames in /tf: odom -> base_link" in capsys.readouterr().out
+
+
 def test_a_laser_without_transform_falls_back_with_a_note(scans, tmp_path):
     bag = tmp_path / "nostatic.bag"
     with BagOut(bag) as b:

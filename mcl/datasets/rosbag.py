@@ -131,15 +131,24 @@ def _frame(name: str) -> str:
     return name.lstrip("/")  # ROS 1 frames may start with '/'
 
 
-def _tf_names(topics: dict) -> tuple[str, str]:
+def _tf_spaces(topics: dict) -> list[str]:
+    """The namespaces whose remapped transform topics the bag has (/robot1/tf, /robot1/tf_static: /robot1)."""
+    return sorted({n[: -len(suffix)] for n, i in topics.items() for suffix in ("/tf", "/tf_static")
+                   if n.endswith(suffix) and n != suffix and i.msgtype in TF_TYPES})
+
+
+def _tf_names(topics: dict, prefer=()) -> tuple[str, str]:
     """The bag's (dynamic, static) transform topics: /tf and /tf_static, else one namespace's (a multi-robot
-    recording remaps them: /robot1/tf, /robot1/tf_static); /tf and /tf_static when there are several or none."""
+    recording remaps them: /robot1/tf, /robot1/tf_static). Among several namespaces, the one that a name in
+    ``prefer`` (the scan and odometry topics, /robot2/scan; the odometry frame, robot2/odom) lies in; /tf and
+    /tf_static when none does or there are no such topics."""
     if "/tf" in topics or "/tf_static" in topics:
         return "/tf", "/tf_static"
-    spaces = {n[: -len(suffix)] for n, i in topics.items() for suffix in ("/tf", "/tf_static")
-              if n.endswith(suffix) and i.msgtype in TF_TYPES}
+    spaces = _tf_spaces(topics)
+    if len(spaces) > 1:
+        spaces = [ns for ns in spaces if any(("/" + p.lstrip("/")).startswith(ns + "/") for p in prefer if p)]
     if len(spaces) == 1:
-        ns = spaces.pop()
+        ns = spaces[0]
         return f"{ns}/tf", f"{ns}/tf_static"
     return "/tf", "/tf_static"
 
@@ -571,13 +580,16 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             poses = sorted(n for n, i in topics.items() if i.msgtype in TRUTH_TYPES)
             raise DataError(f"{path}: no truth topic {truth_topic} (pose and odometry topics: {_listing(poses)})")
         _check_type(path, topics, truth_topic, TRUTH_TYPES, "truth")
-    tf_dyn, tf_static = _tf_names(topics)
+    odom_frame, base_frame = _frame(fr.odom), _frame(fr.base)
+    tf_dyn, tf_static = _tf_names(topics, [*scan_topics, odom_topic, odom_frame])
+    if tf_dyn not in topics and tf_static not in topics and len(_tf_spaces(topics)) > 1:
+        raise DataError(f"{path}: no /tf, and transforms of several namespaces ({_listing(_tf_spaces(topics))}): "
+                        "choose the robot with --scan-topic (topics.scan) or frames.odom in its namespace")
     tf_topics = [n for n in (tf_dyn, tf_static) if n in topics]
     for n in tf_topics:
         if topics[n].msgtype not in TF_TYPES:
             raise DataError(f"{path}: {n} is {topics[n].msgtype}, expected tf2_msgs/TFMessage (or ROS 1's "
                             "tf/tfMessage)")
-    odom_frame, base_frame = _frame(fr.odom), _frame(fr.base)
     default_odom = odom_frame == _frame(_Frames().odom)  # a namespaced one (robot1/odom) may stand in for it
     if odom_topic is None and tf_dyn not in topics:
         odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
@@ -735,7 +747,10 @@ def bag_info(path, topics=None, frames=None) -> dict:
                            "count": i.msgcount} for n, i in sorted(tps.items())},
         }
         frames_seen: dict[str, set] = {"/tf": set(), "/tf_static": set()}
-        label = dict(zip(_tf_names(tps), frames_seen))  # a namespace's /robot1/tf is listed as /tf
+        label = {"/tf": "/tf", "/tf_static": "/tf_static"}
+        if "/tf" not in tps and "/tf_static" not in tps:  # remapped into namespaces: /robot1/tf is listed as /tf
+            for ns in _tf_spaces(tps):
+                label.update({f"{ns}/tf": "/tf", f"{ns}/tf_static": "/tf_static"})
         conns = [c for c in reader.connections if c.topic in label and c.msgtype in TF_TYPES]
         for conn, msg in _messages(reader, path, conns):
             for ts in msg.transforms:
