@@ -316,6 +316,11 @@ class QualityConfig:
     # a scan with no beam through a mapped wall is bad only below this (when lower than lost_below): readings short
     # of the map are what people and furniture the map lacks give; 1.0: no such rule
     occluded_below: float = field(default=1.0, metadata=_rng(-2.0, 1.0))
+    # ... and so is a scan whose beams through walls all end within this of a mapped obstacle (m; 0: none is
+    # exempt): near misses, as an estimate a few decimetres off makes them; only its match counts then
+    occluded_depth: float = field(default=0.0, metadata=_rng(0.0, 100.0))
+    # ... while no score of the last 2 lost_after - 1 updates reached this (occlusion creeps in; > 1: always)
+    occluded_prior: float = field(default=2.0, metadata=_rng(-2.0, 2.0))
     # an update is bad also when this share of its beams or more went through mapped walls (0: off)
     contradiction_above: float = field(default=0.0, metadata=_rng(0.0, 1.0))
     # a lost scan that matches under this share (or goes through walls, contradiction_above) refutes the estimate:
