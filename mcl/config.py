@@ -319,7 +319,8 @@ class QualityConfig:
     # ... and so is a scan whose beams through walls all end within this of a mapped obstacle (m; 0: none is
     # exempt): near misses, as an estimate a few decimetres off makes them; only its match counts then
     occluded_depth: float = field(default=0.0, metadata=_rng(0.0, 100.0))
-    # ... while no score of the last 2 lost_after - 1 updates reached this (occlusion creeps in; > 1: always)
+    # ... while no score of the last 2 lost_after - 1 updates reached this (occlusion creeps in; > 1: always), on a
+    # track not lost within doubt_updates updates
     occluded_prior: float = field(default=2.0, metadata=_rng(-2.0, 2.0))
     # an update is bad also when this share of its beams or more went through mapped walls (0: off)
     contradiction_above: float = field(default=0.0, metadata=_rng(0.0, 1.0))

@@ -87,8 +87,8 @@ class Fit:
     beams: int  # beams with a return
     match: float  # fraction of them whose endpoint is within the distance of a mapped obstacle (nan: no beam)
     contradiction: float  # fraction that went through a mapped obstacle and end away from one (nan: no beam)
-    deep: float | None = None  # of those, the fraction ending farther than quality.occluded_depth from every mapped
-    #                            obstacle (None: all of them, as with occluded_depth 0)
+    deep: float | None = None  # fraction that went through one and end farther than quality.occluded_depth from
+    #                            every mapped obstacle (None: not measured, = contradiction, as with occluded_depth 0)
 
     @property
     def deep_through(self) -> float:
