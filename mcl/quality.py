@@ -88,7 +88,7 @@ class Fit:
     match: float  # fraction of them whose endpoint is within the distance of a mapped obstacle (nan: no beam)
     contradiction: float  # fraction that went through a mapped obstacle and end away from one (nan: no beam)
     deep: float | None = None  # fraction that went through one and end farther than quality.occluded_depth from
-    #                            every mapped obstacle (None: not measured, = contradiction, as with occluded_depth 0)
+    #                            every mapped obstacle (ScanQuality.fit measures it; None: taken as contradiction)
 
     @property
     def deep_through(self) -> float:
@@ -138,20 +138,21 @@ class ScanQuality:
         if rest.size:
             segments_blocked(x, y, th, float(laser_xy[0]), float(laser_xy[1]), np.ascontiguousarray(e[:, rest]),
                              self.blocked, self.origin[0], self.origin[1], self.resolution, through)
-        n_through = np.count_nonzero(through)
-        depth = self.cfg.occluded_depth
-        # NaN distance (off the map) is not within any depth: deep
-        deep = None if depth <= 0.0 else float(np.count_nonzero(through & ~(d[rest] <= depth))) / k
-        return Fit(k, float(np.count_nonzero(matched)) / k, float(n_through) / k, deep)
+        # deep: through and not within occluded_depth of the map (NaN, off the map, is within none; with a depth of 0
+        # every beam through is deep, as an unmatched endpoint lies farther than quality.distance from the map)
+        deep = through & ~(d[rest] <= self.cfg.occluded_depth)
+        return Fit(k, float(np.count_nonzero(matched)) / k, float(np.count_nonzero(through)) / k,
+                   float(np.count_nonzero(deep)) / k)
 
-    def bad(self, fit: Fit, near_misses: bool = True) -> bool:
+    def bad(self, fit: Fit, near_misses: bool = False) -> bool:
         """Whether one update's fit says the estimate is wrong (no beam: no evidence either way, not bad).
 
         A scan with no beam through a mapped wall is bad only when its match is below ``occluded_below`` (when
         that is lower than ``lost_below``): its unmatched readings all end short of the map, as readings of people
         and furniture the map lacks do, and nothing it saw contradicts the place. Beams through a wall that end
         within ``occluded_depth`` of a mapped obstacle (``Fit.deep``) are near misses here, not contradictions;
-        ``contradiction_above`` still counts them. ``near_misses`` False: every beam through a wall counts."""
+        ``contradiction_above`` still counts them. With ``near_misses`` False (the default) every beam through a
+        wall counts; :meth:`update` passes True only when its gates allow (``_creeping``)."""
         if fit.beams < self.cfg.min_beams:
             return False
         c = self.cfg.contradiction_above

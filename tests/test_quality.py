@@ -277,15 +277,19 @@ def test_near_misses_through_a_wall_count_as_occlusion_with_occluded_depth():
     assert near.contradiction > 0.0 and near.deep == 0.0
     far = on.fit((4.5, 4.0, 0.0), e)  # 1.5 m off: they end 1.45 m past it
     assert far.deep == pytest.approx(far.contradiction) and far.deep > 0.1
-    assert off.fit((3.45, 4.0, 0.0), e).deep is None  # occluded_depth 0: not measured, every beam through is deep
-    # half the beams on people in front of the walls, a few near misses: bad only with the exemption off
+    plain = off.fit((3.45, 4.0, 0.0), e)  # occluded_depth 0: every beam through is deep
+    assert plain.deep == plain.contradiction > 0.0
+    # half the beams on people in front of the walls, a few near misses: bad only with the exemption off (update
+    # asks for it when its gates allow; bad() on its own counts every beam through a wall)
     crowd = Fit(60, 0.5, 0.05, 0.0)
-    assert on.bad(crowd) is False and off.bad(Fit(60, 0.5, 0.05)) is True
-    assert on.bad(Fit(60, 0.39, 0.05, 0.0)) is True  # below occluded_below: lost all the same
-    assert on.bad(Fit(60, 0.5, 0.05, 1 / 60)) is True  # one beam deep past a wall: lost_below holds
+    assert on.bad(crowd, near_misses=True) is False and off.bad(Fit(60, 0.5, 0.05)) is True
+    assert on.bad(crowd) is True
+    assert on.bad(Fit(60, 0.39, 0.05, 0.0), near_misses=True) is True  # below occluded_below: lost all the same
+    assert on.bad(Fit(60, 0.5, 0.05, 1 / 60), near_misses=True) is True  # one beam deep past a wall: lost_below
     # contradiction_above still counts every beam through a wall, near misses too
     strict = ScanQuality(g, SimpleNamespace(**{**vars(cfg), "contradiction_above": 0.1}))
-    assert strict.bad(Fit(60, 0.85, 0.1, 0.0)) is True and strict.bad(Fit(60, 0.85, 0.05, 0.0)) is False
+    assert strict.bad(Fit(60, 0.85, 0.1, 0.0), near_misses=True) is True
+    assert strict.bad(Fit(60, 0.85, 0.05, 0.0), near_misses=True) is False
 
 
 def test_near_misses_are_exempt_only_once_the_fit_has_sunk_with_occluded_prior():
