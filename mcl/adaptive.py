@@ -419,7 +419,8 @@ class AugmentedMCL:
         else:
             self.averages.update(Recovery.log_mean_likelihood(logw_prior, loglik_per_beam))
 
-    def observe_lost(self, lost: bool, cluster_weight: float = 1.0, dt: float = 0.0, refuted: bool = False) -> None:
+    def observe_lost(self, lost: bool, cluster_weight: float = 1.0, dt: float = 0.0, refuted: bool = False,
+                     collapsed: bool = False) -> None:
         pass
 
     @property
@@ -832,6 +833,7 @@ class LostRecovery:
         self.lost_time = 0.0  # log seconds from the first of them to the last
         self.wait = int(wait)  # lost updates before the spread around the estimate, unless refuted
         self.refuted = False  # a scan of this lost episode refuted the estimate
+        self.collapsed = False  # this lost episode began with a collapse (mcl.quality.ScanQuality.update)
 
     def start_search(self) -> None:
         """Global localization starts (the filter has started ``search``): the set is already spread over the
@@ -840,21 +842,27 @@ class LostRecovery:
         early. The lost count starts again."""
         self.lost_updates = 0
         self.lost_time = 0.0
+        self.collapsed = False
 
     def observe_likelihood(self, logw_prior, loglik_per_beam, injected) -> None:
         pass
 
-    def observe_lost(self, lost: bool, cluster_weight: float = 1.0, dt: float = 0.0, refuted: bool = False) -> None:
+    def observe_lost(self, lost: bool, cluster_weight: float = 1.0, dt: float = 0.0, refuted: bool = False,
+                     collapsed: bool = False) -> None:
         """This update's lost belief, after the filter's ``search`` has seen it (``cluster_weight`` is the
         search's business); ``dt`` the log time since the previous update; ``refuted``: its scan refutes the
-        estimate (``ScanQuality.refutes``; remembered until an update is not lost, through a global search)."""
+        estimate (``ScanQuality.refutes``; remembered until an update is not lost, through a global search);
+        ``collapsed``: its lost call was a collapse (``ScanQuality.update``; remembered until the re-seed, or until
+        an update is not lost)."""
         self.refuted = self.refuted or bool(refuted)
         if self.search.holding:
             return
         if not lost:
             self.lost_updates, self.lost_time = 0, 0.0
             self.refuted = False
+            self.collapsed = False
             return
+        self.collapsed = self.collapsed or bool(collapsed)
         if self.lost_updates:
             self.lost_time += max(float(dt), 0.0)
         self.lost_updates += 1
@@ -890,14 +898,18 @@ class LostRecovery:
     def reseed_due(self) -> bool:
         """With ``reseed``: ``global_due`` (the local spread did not find the pose), so the next resample adds a
         whole global set and starts a search (``start_search``). So does a place a search found, lost or not,
-        when its estimate stalls while the odometry drives on (``StallCheck``)."""
+        when its estimate stalls while the odometry drives on (``StallCheck``), and a lost episode that began with a
+        collapse (``quality.collapse_from``), at once: a held track whose scan went through walls in one update
+        was kidnapped, or slipped to a place no spread around it finds for sure. A spread around the old place
+        finds a look-alike there in a corridor: the kidnapped robot turns, and the old stretch, turned as much,
+        fits again (``corridor-01`` kidnapped: 40 m off for the rest of the run on every seed)."""
         if not self.reseed or self.search.holding:
             return False
         if self.stall is not None and self.stall.stalled:
             return True
         if not self.lost_updates:
             return False
-        return self.global_due or self.on_probation
+        return self.global_due or self.on_probation or self.collapsed
 
     @property
     def global_share(self) -> float:

@@ -312,6 +312,9 @@ class QualityConfig:
     lost_after: int = field(default=3, metadata=_rng(1, 10_000))  # lost when this many of the last 2k-1 updates were bad
     # ... or at once when one update's score is below this (-2: never, no score is lower)
     lost_at_once_below: float = field(default=-2.0, metadata=_rng(-2.0, 1.0))
+    # such a call on a track whose last 2 lost_after - 1 scores were all at least this is a collapse (a kidnap's
+    # signature): lost recovery re-seeds globally at once, unprotected (> 1: never)
+    collapse_from: float = field(default=2.0, metadata=_rng(-2.0, 2.0))
     min_beams: int = field(default=5, metadata=_rng(1, 100_000))  # a fit of fewer beams with a return is no evidence
     # a scan with no beam through a mapped wall is bad only below this (when lower than lost_below): readings short
     # of the map are what people and furniture the map lacks give; 1.0: no such rule

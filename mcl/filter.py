@@ -763,7 +763,8 @@ class ParticleFilter:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
             self.faults.observe(info.lost, c if c == c else 0.0)
         if self.recovery is not None:
-            self.recovery.observe_lost(info.lost, info.cluster_weight, self._dt, self.quality.refutes(fit))
+            self.recovery.observe_lost(info.lost, info.cluster_weight, self._dt, self.quality.refutes(fit),
+                                       self.quality.collapsed)
         if self.stall is not None:
             self.stall.observe(self._dt, self.last_estimate.mean, self.last_estimate.cov, self._odom)
             info.stalled = self.stall.stalled
@@ -859,8 +860,10 @@ class ParticleFilter:
         cloud: the motion has already ruled that place out, and its scans fit as well as anywhere else's."""
         fc = self.cfg.filter
         keep = 0.0 if info.stalled else fc.recovery_reseed_keep
-        # a track, not a place a search just found; or a place found that is challenged (ProbationChallenge)
-        trusted = not getattr(self.recovery, "on_probation", True)
+        # a track, not a place a search just found, nor one that collapsed (a kidnap: the old place kept by odds
+        # against the search would fit again once turned as the robot was, and win); or a place found that is
+        # challenged (ProbationChallenge)
+        trusted = not getattr(self.recovery, "on_probation", True) and not getattr(self.recovery, "collapsed", False)
         if self.challenge is not None and self.challenge.due:
             trusted, self.challenge.due = True, False
         n = min(self.n, fc.particles) if keep > 0.0 else 0  # a set grown by an earlier re-seed is drawn back down

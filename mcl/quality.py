@@ -117,6 +117,7 @@ class ScanQuality:
         self.origin = (float(grid.origin[0]), float(grid.origin[1]))
         self.resolution = float(grid.resolution)
         self.lost = False
+        self.collapsed = False  # this update's lost call was a collapse (update)
         self.since_lost: int | None = None  # updates since the belief was last lost (None: not since the reset)
         self._recent: deque[bool] = deque(maxlen=2 * cfg.lost_after - 1)  # bad or not, last updates with a scan
         self._scores: deque[float] = deque(maxlen=2 * cfg.lost_after - 1)  # their scores
@@ -201,8 +202,12 @@ class ScanQuality:
 
     def update(self, fit: Fit | None) -> bool:
         """Fold one update's fit into the lost belief (None or fewer than ``min_beams`` beams: no evidence, the
-        belief stays) and count ``since_lost``; return the belief."""
+        belief stays) and count ``since_lost``; return the belief. ``collapsed`` says whether this update's lost call
+        was a collapse: at once (``lost_at_once_below``) from a track whose last ``2 lost_after - 1`` scores were all
+        at least ``collapse_from``."""
+        self.collapsed = False
         if fit is not None and fit.beams >= self.cfg.min_beams:
+            held = len(self._scores) == self._scores.maxlen and min(self._scores) >= self.cfg.collapse_from
             self._recent.append(self._bad_now(fit))
             if not math.isnan(fit.score):
                 self._scores.append(fit.score)
@@ -210,6 +215,7 @@ class ScanQuality:
             k = self.cfg.lost_after
             if not self.lost and (n_bad >= k or fit.score < self.cfg.lost_at_once_below):
                 self.lost = True
+                self.collapsed = held and fit.score < self.cfg.lost_at_once_below
                 if not self._doubting():  # a new episode: the track before it is the reference
                     self._before = float(np.median(self._held)) if len(self._held) >= DOUBT_HISTORY // 2 else None
                     self._since_episode = -1  # 0 after this update
@@ -227,6 +233,7 @@ class ScanQuality:
     def reset(self, lost: bool) -> None:
         """Start over with a belief (lost after a global initialisation, not lost when tracking from a pose)."""
         self.lost = lost
+        self.collapsed = False
         self.since_lost = 0 if lost else None
         self._recent.clear()
         self._scores.clear()

@@ -39,7 +39,7 @@ def _scan_from(pose, grid, n=90):
 T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
 QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5, doubt_margin=0.0, doubt_updates=50,
                        contradiction_above=0.0, lost_at_once_below=-2.0, occluded_below=1.0,
-                       occluded_depth=0.0, occluded_prior=2.0)
+                       occluded_depth=0.0, occluded_prior=2.0, collapse_from=2.0)
 
 
 def test_fit_is_high_at_the_true_pose_and_low_away_from_it():
@@ -125,6 +125,34 @@ def test_a_scan_far_below_any_correct_track_calls_lost_at_once():
     assert _feed(q, [good] * 5 + [awful, good, good]) == [False] * 5 + [True, False, False]
     q = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(QCFG), "lost_at_once_below": 0.0}))
     assert _feed(q, [good] * 5 + [awful, poor, good]) == [False] * 5 + [True, True, True]
+
+
+def _collapses(q, fits):
+    """ScanQuality.collapsed after each of ``fits``."""
+    out = []
+    for f in fits:
+        q.update(f)
+        out.append(q.collapsed)
+    return out
+
+
+def test_a_held_track_lost_at_once_is_a_collapse_and_a_track_that_sank_first_is_not():
+    # quality.collapse_from: a lost call at once (lost_at_once_below) on a track whose last 5 scores were all at least
+    # 0.8 is a collapse, a kidnap's signature; lost recovery then re-seeds globally at once (test_recovery.py).
+    cfg = SimpleNamespace(**{**vars(QCFG), "lost_at_once_below": 0.0, "collapse_from": 0.8})
+    good, fair, awful, poor = Fit(60, 0.95, 0.0), Fit(60, 0.75, 0.0), Fit(60, 0.3, 0.4), Fit(60, 0.3, 0.1)
+    assert _collapses(ScanQuality(_box_grid(), cfg), [good] * 5 + [awful, awful]) == [False] * 5 + [True, False]
+    # one score of the five under 0.8: the fit had sunk before (people, clutter), no collapse, though lost at once
+    q = ScanQuality(_box_grid(), cfg)
+    assert _collapses(q, [good, good, fair, good, good, awful]) == [False] * 6 and q.lost
+    # fewer than five scores since the reset: no held track yet
+    assert _collapses(ScanQuality(_box_grid(), cfg), [good] * 4 + [awful]) == [False] * 5
+    # lost by 3 bad of 5, not at once: no collapse
+    q = ScanQuality(_box_grid(), cfg)
+    assert _collapses(q, [good] * 5 + [poor] * 3) == [False] * 8 and q.lost
+    # collapse_from above 1: never
+    off = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(cfg), "collapse_from": 2.0}))
+    assert _collapses(off, [good] * 5 + [awful]) == [False] * 6 and off.lost
 
 
 @pytest.fixture(scope="module")
