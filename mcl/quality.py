@@ -207,15 +207,18 @@ class ScanQuality:
         at least ``collapse_from``."""
         self.collapsed = False
         if fit is not None and fit.beams >= self.cfg.min_beams:
-            held = len(self._scores) == self._scores.maxlen and min(self._scores) >= self.cfg.collapse_from
+            at_once = fit.score < self.cfg.lost_at_once_below
+            # a collapse is judged on the scores before this one joins them
+            scores = self._scores
+            collapse = at_once and len(scores) == scores.maxlen and min(scores) >= self.cfg.collapse_from
             self._recent.append(self._bad_now(fit))
             if not math.isnan(fit.score):
                 self._scores.append(fit.score)
             n_bad = sum(self._recent)
             k = self.cfg.lost_after
-            if not self.lost and (n_bad >= k or fit.score < self.cfg.lost_at_once_below):
+            if not self.lost and (n_bad >= k or at_once):
                 self.lost = True
-                self.collapsed = held and fit.score < self.cfg.lost_at_once_below
+                self.collapsed = collapse
                 if not self._doubting():  # a new episode: the track before it is the reference
                     self._before = float(np.median(self._held)) if len(self._held) >= DOUBT_HISTORY // 2 else None
                     self._since_episode = -1  # 0 after this update
