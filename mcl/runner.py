@@ -439,8 +439,8 @@ def _kidnap(pf, truth, t: float, estimate, min_distance: float) -> dict:
 def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
-    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at``, ``write_bag``, ``compile_note`` (see
-    :func:`_run`). SIGINT and
+    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at``, ``write_bag``, ``compile_note``,
+    ``on_update`` (see :func:`_run`). SIGINT and
     SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true. A signal
     that came after the summary was made (the run is whole) sets ``summary["late_signal"]`` instead.
     """
@@ -480,6 +480,7 @@ def _run(
     kidnap_filter_at: tuple[float, float] | None = None,
     write_bag: bool = False,
     compile_note: bool = False,
+    on_update=None,
 ) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
@@ -487,6 +488,11 @@ def _run(
     (filter.initial_std) around a free pose at least d metres from the truth there (from the estimate without
     truth), drawn with the filter's generator: a kidnapping test on a real log (``mcl eval --suite``).
     ``summary["kidnap"]`` says when, where to and how far.
+
+    ``on_update(t, pf, info, ref)``, if given, is called after every filter update (not for gated scans) with the
+    scan's time, the filter (its weighted set, before the resample that ``info`` describes was drawn when KLD
+    sampling defers it to the next motion), the update's ``StepInfo`` and the reference pose at t (None without
+    one): an instrument's hook (``scripts/truth_mass.py``); it must not change the filter.
     """
     # Heavy imports here so `mcl --help` stays fast.
     from tqdm import tqdm
@@ -643,6 +649,8 @@ def _run(
                 if kidnap_filter_at is not None and kidnap is None and scan.t >= kidnap_filter_at[0]:
                     kidnap = _kidnap(pf, truth, scan.t, last_mean, kidnap_filter_at[1])
                 info = pf.step(control, observation, landmarks=marks, planes=planes)
+                if on_update is not None:
+                    on_update(scan.t, pf, info, truth.at(scan.t) if truth is not None else None)
                 last_odom, last_t = odom, scan.t
                 mean, cov = info.mean, info.cov
                 spread_full = _spread(info.full_cov)
