@@ -7,8 +7,8 @@ them. Which, and when, decides what could mend it: if the scans of the first sec
 rule that ranks places by those scans keeps the true one; if the true place had weight when a resample drew the
 set down, a search that keeps runner-up hypotheses could (docs/measurements.md, "Twenty-third session").
 
-The run is replayed from its folder (``config.yaml``; a real log's kidnapped run is kidnapped again as ``mcl eval``
-did, with the same seed: the same run) through :func:`mcl.runner.run`'s ``on_update`` hook, into a scratch folder,
+The run is replayed from its folder (``config.yaml``; a real log's kidnapped run is kidnapped again at the scan its
+``summary.json`` names, with the same seed: the same run) through :func:`mcl.runner.run`'s ``on_update`` hook, into a scratch folder,
 with the recording off. Per update it writes a CSV row: time, particles, the weight and the count of particles
 within ``--radius`` m and ``--angle`` rad of the reference, the estimate's error, the quality score, the lost
 belief and whether a global search was tempering the scans. With KLD sampling (the default) the weights are those
@@ -52,13 +52,11 @@ def replay(run_dir: Path, radius: float = 1.0, angle: float = 0.5) -> list[dict]
     cfg = load_config(run_dir / "config.yaml", ["rerun.mode=off"])
     if cfg.truth is None:
         raise SystemExit(f"{run_dir / 'config.yaml'}: no truth: nothing to measure against")
-    kidnap = None
-    row_file = run_dir / "row.json"
-    if row_file.exists():
-        row = json.loads(row_file.read_text())
-        # a real log's kidnapped run: the suite kidnapped the filter (a synthetic world's log holds its kidnap)
-        if row.get("mode") == "kidnapped" and not (Path(cfg.map).parent / "sim.yaml").exists():
-            kidnap = (float(row["kidnap_t"]), KIDNAP_M)
+    # a real log's kidnapped run: the run kidnapped the filter and its summary says when (a synthetic world's log
+    # holds its own kidnap); the same scan, seed and distance give the same place
+    summary_file = run_dir / "summary.json"
+    done = json.loads(summary_file.read_text()).get("kidnap") if summary_file.exists() else None
+    kidnap = (float(done["t"]), KIDNAP_M) if done else None
     rows: list[dict] = []
 
     def on_update(t, pf, info, ref):
@@ -99,7 +97,10 @@ def main(argv=None) -> int:
             ",".join(f"{r[c]:.6g}" if isinstance(r[c], float) else str(int(r[c])) for c in COLUMNS) + "\n"
             for r in rows))
     m = milestones(rows, a.floor)
-    fmt = lambda v: "never" if v is None else f"{v:.1f} s"  # noqa: E731
+
+    def fmt(v):
+        return "never" if v is None else f"{v:.1f} s"
+
     print(f"{a.run_dir}: {len(rows)} updates; mass near the reference below {a.floor:g} from {fmt(m['below_floor'])}, "
           f"no particle there from {fmt(m['no_particle'])}, half the weight last at {fmt(m['last_half'])}")
     return 0
