@@ -292,13 +292,18 @@ def test_true_pose_ranks_above_shifted_poses_on_a_real_scan():
 @needs_shared
 @pytest.mark.slow
 def test_beam_model_tracks_mit_csail(tmp_path):
-    # Issue 3: the beam model tracks mit_csail within issue 1's bound, ATE RMSE <= 0.06 m
-    # (5,000 particles, seed 1). Measured 0.057 m.
+    # Issue 3: the beam model tracks mit_csail within issue 1's bound, ATE RMSE <= 0.06 m (5,000 particles, seed 1).
+    # The whole log measured 0.057 m, but it casts 300,000 rays per update for 1,846 updates: 254 s on a slow CI
+    # machine, a benchmark (`mcl run configs/mit_csail_beam.yaml`), not a test. Here the same config runs on the
+    # log's first 400 scans (85 s, 70 reference poses): measured 0.0576 m, and the same bound holds.
     from mcl.runner import run
 
-    c = load_config(PROJECT_ROOT / "configs" / "mit_csail_beam.yaml", ["rerun.mode=off"])
+    lines = (SHARED / "mit_csail" / "log.clf").read_text().splitlines(keepends=True)
+    (tmp_path / "log.clf").write_text("".join(lines[:400]))
+    c = load_config(PROJECT_ROOT / "configs" / "mit_csail_beam.yaml",
+                    ["rerun.mode=off", f"log={tmp_path / 'log.clf'}", f"truth={SHARED / 'mit_csail' / 'truth.tum'}"])
     assert c.sensor.model == "beam" and c.filter.particles == 5000 and c.seed == 1
-    s = run(c, tmp_path, progress=False, echo=lambda *a, **k: None)
+    s = run(c, tmp_path / "out", progress=False, echo=lambda *a, **k: None)
     ev = s["eval"]
     assert ev["ate_rmse"] <= 0.06, ev
-    assert ev["scored"] == 406
+    assert ev["scored"] == 70
