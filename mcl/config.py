@@ -116,6 +116,9 @@ class FilterConfig:
     global_density: float = field(default=0.0, metadata=_rng(0.0, 1e6))  # uniform candidates per m2 of free space
     search_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # laser log-lik x this while searching
     lost_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # ... while lost (lost recovery)
+    # while searching, every particle first takes this many scan-matching steps (ParticleFilter._match_scan); 0: off
+    search_refine: int = field(default=0, metadata=_rng(0, 50))
+    search_refine_dist: float = field(default=0.5, metadata=_rng(0.0, 1e3, lo_open=True))  # endpoints farther: left out
     recovery_alpha_slow: float = field(default=0.001, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_alpha_fast: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
 

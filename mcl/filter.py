@@ -46,8 +46,11 @@ from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.estimate import estimate, wrap_angle
+from mcl.kernels.likelihood import refine_poses, refine_poses_serial
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
+from mcl.maps import byte_mask
 from mcl.motion import allowed_mask, make_motion_model
+from mcl.parallel import choose
 from mcl.quality import Fit, ScanQuality
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
 from mcl.sensors import BeamSkipping, UnmappedObjects, make_sensor_model
@@ -137,6 +140,7 @@ class ParticleFilter:
         self._odom = None  # this update's odometry pose (x, y, theta), None without motion (the stall test)
         self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
+        self._match_maps = None  # (distance, free mask) of the search's scan matching (search_refine), on first use
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
         self.quality = ScanQuality(grid, cfg.quality)
@@ -456,6 +460,8 @@ class ParticleFilter:
                 info.skipped_beams += skipped.shape[1]
                 info.skipped_endpoints = (skipped if info.skipped_endpoints is None
                                           else np.hstack([info.skipped_endpoints, skipped]))
+        if self.cfg.filter.search_refine and self.search.tempering:
+            self._match_scan(observation)
         loglik = self._laser_loglik(self.particles, observation)
         if self._fresh is not None:
             loglik = self._oversample_fresh(observation, loglik)
@@ -464,6 +470,32 @@ class ParticleFilter:
                                              self._injected)
         self._observation = observation
         self.logw += loglik
+
+    MATCH_STEP_XY = 0.15  # m: the most one scan-matching step moves a particle (search_refine)
+    MATCH_STEP_THETA = 0.08  # rad
+
+    def _match_scan(self, observation) -> None:
+        """``filter.search_refine``: while a global search tempers, every particle takes that many Gauss-Newton
+        steps that fit the scan's endpoints to the map's distance field (``refine_poses``) before the scan weighs
+        it. A search's poses are sparse (100,000 over a 150 m corridor: one per 0.3 m x 0.3 m x 6 degrees), so a
+        place's weight says as much about how near to its best pose a particle happened to fall as about the
+        place; matched, each place is weighed at its best pose (the scan-matched proposal of Grisetti et al.'s
+        GMapping, without its weight correction: a search heuristic, like the tempering)."""
+        fc = self.cfg.filter
+        e = np.asarray(self.sensor.endpoints(observation), dtype=np.float64)
+        if e.ndim != 2 or e.shape[0] != 2 or e.shape[1] < 3:
+            return
+        if self._match_maps is None:
+            mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
+            self._match_maps = (np.ascontiguousarray(self.grid.distance), mask)
+        dist, mask = self._match_maps
+        inv_res = 1.0 / float(self.grid.resolution)
+        out = np.empty_like(self.particles)
+        kernel = choose(refine_poses, refine_poses_serial, self.n * e.shape[1] * fc.search_refine)
+        kernel(np.ascontiguousarray(self.particles), np.ascontiguousarray(e * inv_res), dist,
+               float(self.grid.origin[0]), float(self.grid.origin[1]), inv_res, float(fc.search_refine_dist),
+               int(fc.search_refine), self.MATCH_STEP_XY, self.MATCH_STEP_THETA, mask, out)
+        self.particles = out
 
     def _tracking_unmapped(self, observation) -> bool:
         """Whether ``unmapped`` skips beams of this observation: on, prepared by :meth:`prepare`, and tracking (an
