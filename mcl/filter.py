@@ -140,7 +140,7 @@ class ParticleFilter:
         self._odom = None  # this update's odometry pose (x, y, theta), None without motion (the stall test)
         self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
-        self._match_maps = None  # (distance, free mask) of the search's scan matching (search_refine), on first use
+        self._match_mask = None  # cells the search's scan matching may move a particle into (search_refine)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
         self.quality = ScanQuality(grid, cfg.quality)
@@ -482,19 +482,15 @@ class ParticleFilter:
         place; matched, each place is weighed at its best pose (the scan-matched proposal of Grisetti et al.'s
         GMapping, without its weight correction: a search heuristic, like the tempering)."""
         fc = self.cfg.filter
-        e = np.asarray(self.sensor.endpoints(observation), dtype=np.float64)
-        if e.ndim != 2 or e.shape[0] != 2 or e.shape[1] < 3:
-            return
-        if self._match_maps is None:
-            mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
-            self._match_maps = (np.ascontiguousarray(self.grid.distance), mask)
-        dist, mask = self._match_maps
+        if self._match_mask is None:
+            self._match_mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
+        e = np.asarray(self.sensor.endpoints(observation), dtype=np.float64)  # (2, K); under 3 endpoints move nothing
         inv_res = 1.0 / float(self.grid.resolution)
         out = np.empty_like(self.particles)
         kernel = choose(refine_poses, refine_poses_serial, self.n * e.shape[1] * fc.search_refine)
-        kernel(np.ascontiguousarray(self.particles), np.ascontiguousarray(e * inv_res), dist,
+        kernel(np.ascontiguousarray(self.particles), np.ascontiguousarray(e * inv_res), self.grid.distance,
                float(self.grid.origin[0]), float(self.grid.origin[1]), inv_res, float(fc.search_refine_dist),
-               int(fc.search_refine), self.MATCH_STEP_XY, self.MATCH_STEP_THETA, mask, out)
+               int(fc.search_refine), self.MATCH_STEP_XY, self.MATCH_STEP_THETA, self._match_mask, out)
         self.particles = out
 
     def _tracking_unmapped(self, observation) -> bool:
