@@ -119,6 +119,9 @@ class FilterConfig:
     # while searching, every particle first takes this many scan-matching steps (ParticleFilter._match_scan); 0: off
     search_refine: int = field(default=0, metadata=_rng(0, 50))
     search_refine_dist: float = field(default=0.5, metadata=_rng(0.0, 1e3, lo_open=True))  # endpoints farther: left out
+    # which particles: every one at every update while the search tempers, or only a search's fresh uniform poses,
+    # once, at their first scan
+    search_refine_scope: Literal["tempering", "fresh"] = "tempering"
     recovery_alpha_slow: float = field(default=0.001, metadata=_rng(0.0, 1.0, lo_open=True))
     recovery_alpha_fast: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
 

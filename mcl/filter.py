@@ -460,8 +460,12 @@ class ParticleFilter:
                 info.skipped_beams += skipped.shape[1]
                 info.skipped_endpoints = (skipped if info.skipped_endpoints is None
                                           else np.hstack([info.skipped_endpoints, skipped]))
-        if self.cfg.filter.search_refine and self.search.tempering:
-            self._match_scan(observation)
+        fc = self.cfg.filter
+        if fc.search_refine and self.search.tempering:
+            if fc.search_refine_scope == "tempering":
+                self._match_scan(observation)
+            elif self._fresh is not None and self._fresh.size == self.n:
+                self._match_scan(observation, np.flatnonzero(self._fresh))
         loglik = self._laser_loglik(self.particles, observation)
         if self._fresh is not None:
             loglik = self._oversample_fresh(observation, loglik)
@@ -474,24 +478,30 @@ class ParticleFilter:
     MATCH_STEP_XY = 0.15  # m: the most one scan-matching step moves a particle (search_refine)
     MATCH_STEP_THETA = 0.08  # rad
 
-    def _match_scan(self, observation) -> None:
+    def _match_scan(self, observation, idx: np.ndarray | None = None) -> None:
         """``filter.search_refine``: while a global search tempers, every particle takes that many Gauss-Newton
         steps that fit the scan's endpoints to the map's distance field (``refine_poses``) before the scan weighs
         it. A search's poses are sparse (100,000 over a 150 m corridor: one per 0.3 m x 0.3 m x 6 degrees), so a
         place's weight says as much about how near to its best pose a particle happened to fall as about the
         place; matched, each place is weighed at its best pose (the scan-matched proposal of Grisetti et al.'s
-        GMapping, without its weight correction: a search heuristic, like the tempering)."""
+        GMapping, without its weight correction: a search heuristic, like the tempering). With
+        ``search_refine_scope: fresh`` only the fresh uniform poses of a global start or re-seed are matched (``idx``),
+        once, before their first scan: a kept track is not moved, and the cost is one matching per search."""
         fc = self.cfg.filter
         if self._match_mask is None:
             self._match_mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
         e = np.asarray(self.sensor.endpoints(observation), dtype=np.float64)  # (2, K); under 3 endpoints move nothing
         inv_res = 1.0 / float(self.grid.resolution)
-        out = np.empty_like(self.particles)
-        kernel = choose(refine_poses, refine_poses_serial, self.n * e.shape[1] * fc.search_refine)
-        kernel(np.ascontiguousarray(self.particles), np.ascontiguousarray(e * inv_res), self.grid.distance,
+        poses = np.ascontiguousarray(self.particles if idx is None else self.particles[:, idx])
+        out = np.empty_like(poses)
+        kernel = choose(refine_poses, refine_poses_serial, poses.shape[1] * e.shape[1] * fc.search_refine)
+        kernel(poses, np.ascontiguousarray(e * inv_res), self.grid.distance,
                float(self.grid.origin[0]), float(self.grid.origin[1]), inv_res, float(fc.search_refine_dist),
                int(fc.search_refine), self.MATCH_STEP_XY, self.MATCH_STEP_THETA, self._match_mask, out)
-        self.particles = out
+        if idx is None:
+            self.particles = out
+        else:
+            self.particles[:, idx] = out
 
     def _tracking_unmapped(self, observation) -> bool:
         """Whether ``unmapped`` skips beams of this observation: on, prepared by :meth:`prepare`, and tracking (an
@@ -602,6 +612,8 @@ class ParticleFilter:
             return loglik
         pick = resample(self.cfg.filter.resampling, lc, self.rng, n=idx.size)
         self.particles[:, idx] = cand[:, pick]
+        if self.cfg.filter.search_refine and self.cfg.filter.search_refine_scope == "fresh":
+            self._match_scan(observation, idx)  # the drawn poses, matched as the fresh ones were (for the next scan)
         loglik = loglik.copy()
         loglik[idx] = top + math.log(np.mean(np.exp(lc - top)))  # log of the candidates' mean likelihood
         return loglik

@@ -124,9 +124,9 @@ def test_endpoints_farther_than_max_d_from_a_wall_are_left_out():
     np.testing.assert_array_equal(_refine(refine_poses, grid, start, e * 100.0, 5), start)
 
 
-def _filter(refine: int) -> ParticleFilter:
+def _filter(refine: int, *sets: str) -> ParticleFilter:
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-        "rerun.mode=off", f"filter.search_refine={refine}", "filter.particles=3000", "filter.kld=false"])
+        "rerun.mode=off", f"filter.search_refine={refine}", "filter.particles=3000", "filter.kld=false", *sets])
     return ParticleFilter(cfg, _room(), rng=np.random.default_rng(1))
 
 
@@ -153,3 +153,30 @@ def test_search_refine_moves_the_particles_only_while_a_global_search_tempers():
     p1 = track.particles.copy()
     track.correct(e)
     np.testing.assert_array_equal(track.particles, p1)
+
+
+def test_search_refine_scope_fresh_matches_the_fresh_poses_once_and_leaves_a_kept_track_alone():
+    e = _scan(_room())
+    pf = _filter(3, "filter.search_refine_scope=fresh")
+    pf.init_global()
+    # as a re-seed leaves the set: the kept track first, then the fresh uniform poses not yet scored
+    fresh = np.zeros(pf.n, dtype=bool)
+    fresh[pf.n // 2:] = True
+    pf._fresh = fresh
+    p0 = pf.particles.copy()
+    pf.correct(e)
+    np.testing.assert_array_equal(pf.particles[:, ~fresh], p0[:, ~fresh])  # the kept track: not moved
+    moved = np.hypot(pf.particles[0, fresh] - p0[0, fresh], pf.particles[1, fresh] - p0[1, fresh])
+    assert np.count_nonzero(moved > 0.0) > 0.5 * moved.size
+    # the next scan, the search still tempering: nothing fresh is left, nothing moves
+    assert pf.search.tempering
+    p1 = pf.particles.copy()
+    pf.correct(e)
+    np.testing.assert_array_equal(pf.particles, p1)
+    # the same filter with scope tempering moves them again
+    again = _filter(3)
+    again.init_global()
+    again.correct(e)
+    p2 = again.particles.copy()
+    again.correct(e)
+    assert not np.array_equal(again.particles, p2)
