@@ -465,7 +465,9 @@ class ParticleFilter:
             if fc.search_refine_scope == "tempering":
                 self._match_scan(observation)
             elif self._fresh is not None and self._fresh.size == self.n:
-                self._match_scan(observation, np.flatnonzero(self._fresh))
+                idx = np.flatnonzero(self._fresh)
+                if self._oversample_count(idx.size) <= 1:  # else _oversample_fresh draws them anew and matches those
+                    self._match_scan(observation, idx)
         loglik = self._laser_loglik(self.particles, observation)
         if self._fresh is not None:
             loglik = self._oversample_fresh(observation, loglik)
@@ -591,6 +593,10 @@ class ParticleFilter:
         tempers, or waits to): the likelihood field then scores with ``search_interior``'s field."""
         return self.search.tempering or bool(getattr(self.recovery, "lost_updates", 0))
 
+    def _oversample_count(self, fresh: int) -> int:
+        """k, the uniform candidates per fresh pose that ``filter.global_density`` asks for (1 or less: none)."""
+        return min(math.ceil(self.cfg.filter.global_density * self.grid.free_area / max(fresh, 1)), _MAX_OVERSAMPLE)
+
     def _oversample_fresh(self, observation, loglik: np.ndarray) -> np.ndarray:
         """The uniform poses of a global start or re-seed, drawn better on a big map: when they are sparser than
         ``filter.global_density`` poses per m² of free space, k = density x area / count (at most
@@ -602,7 +608,7 @@ class ParticleFilter:
         entries replaced."""
         fresh, self._fresh = self._fresh, None
         idx = np.flatnonzero(fresh) if fresh.size == loglik.size else np.zeros(0, dtype=np.int64)
-        k = min(math.ceil(self.cfg.filter.global_density * self.grid.free_area / max(idx.size, 1)), _MAX_OVERSAMPLE)
+        k = self._oversample_count(idx.size)
         if k <= 1 or idx.size == 0:
             return loglik
         cand = self.sample_uniform(k * idx.size, self.rng)
