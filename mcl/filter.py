@@ -127,7 +127,7 @@ class ParticleFilter:
         # the policies
         self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio)
         self.kld = KLDSampling(fc, grid) if fc.kld else None
-        self.search = GlobalSearch()  # a global start or re-seed until one hypothesis is left
+        self.search = GlobalSearch(settled_std=fc.search_settled_std)  # a global start or re-seed until one place is left
         # odometry faults allowed only around a lost call on a track that had held (motion.fault_*)
         self.faults = FaultWindow(cfg.motion, self.search) if cfg.motion.fault_prob > 0.0 else None
         # a place a search found whose estimate does not follow the odometry is re-seeded (filter.stall_*)
@@ -804,7 +804,7 @@ class ParticleFilter:
         info.fit = fit
         info.lost = self.quality.update(fit)
         # a protected re-seed's search settles by the odds (protect), not by the track's cluster
-        self.search.observe(info.lost, info.cluster_weight if self.protected is None else 0.0)
+        self.search.observe(info.lost, info.cluster_weight if self.protected is None else 0.0, self.last_estimate.cov)
         if self.faults is not None:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
             self.faults.observe(info.lost, c if c == c else 0.0)

@@ -188,8 +188,51 @@ def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_set
     s.start()
     s.observe(True, 0.95)  # settled while lost: both end at once
     assert not s.tempering and not s.holding and s.since_end == 1
+    wide = np.diag([12.0 ** 2, 1.0, 0.1])  # one cluster 12 m wide: a dense set whose weight sits on several places
+    s.start()
+    s.observe(True, 1.0, wide)  # filter.search_settled_std = 0: settled by weight alone
+    assert not s.tempering and not s.holding
     s.reset()
     assert s.since_end is None
+    s = GlobalSearch(settled_std=1.0)
+    s.start()
+    s.observe(True, 1.0, wide)
+    assert s.tempering and s.holding
+    s.observe(True, 1.0, np.diag([0.9 ** 2, 0.9 ** 2, 0.1]))  # x and y std under 1 m: a place
+    assert not s.tempering and not s.holding and s.since_end == 1
+
+
+def test_a_dense_set_weighted_at_two_far_places_settles_a_search_by_weight_unless_search_settled_std():
+    # Clusters are the occupied cells whatever their weight: 100,000 uniform poses on a 10 m box fill every cell,
+    # so they are one cluster that holds all the weight even when only the poses near two far corners carry it.
+    # Settled by weight alone (filter.search_settled_std = 0, the default), the search ends at its first update
+    # and, lost at the mean between the places, re-seeds at the next (with search_refine:
+    # corridor-fast-reversing-h10 re-seeded 175 times); with search_settled_std it goes on.
+    pf = _dense_set_weighted_at_two_corners("filter.search_settled_std=1.0")
+    assert pf.search.tempering and pf.search.holding and not pf.recovery.reseed_due
+    pf = _dense_set_weighted_at_two_corners()
+    assert not pf.search.tempering and not pf.search.holding and pf.recovery.on_probation
+
+
+def _dense_set_weighted_at_two_corners(*sets):
+    """A filter on the 10 m box after one update of a global search (100,000 poses) whose weight sits at
+    (2, 2) and (8, 8), estimated and assessed with no scan."""
+    from mcl.filter import StepInfo
+
+    pf = _filter_on_a_box("filter.particles=100000", "filter.recovery_reseed=true", *sets)
+    pf.init_global()
+    assert pf.search.tempering and pf.search.holding
+    x, y = pf.particles[0], pf.particles[1]
+    near = (np.hypot(x - 2.0, y - 2.0) < 0.5) | (np.hypot(x - 8.0, y - 8.0) < 0.5)
+    pf.logw = np.where(near, 0.0, -50.0)
+    pf._scan_observation = None
+    info = StepInfo(particles=pf.n, ess=float(pf.n))
+    pf.normalize(info)
+    pf.estimate(info)
+    assert info.clusters == 1 and info.cluster_weight == 1.0  # one cluster, all the weight ...
+    assert np.hypot(*info.mean[:2] - 5.0) < 0.5  # ... its mean between the two places
+    pf.assess(info)
+    return pf
 
 
 def test_odometry_faults_are_allowed_from_a_lost_call_on_a_held_track_for_the_window():
