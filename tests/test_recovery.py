@@ -210,7 +210,7 @@ def test_a_dense_set_weighted_at_two_far_places_settles_a_search_by_weight_unles
     # corridor-fast-reversing-h10 re-seeded 175 times); with search_settled_std it goes on.
     pf = _dense_set_weighted_at_two_corners("filter.search_settled_std=1.0")
     assert pf.search.tempering and pf.search.holding and not pf.recovery.reseed_due
-    pf = _dense_set_weighted_at_two_corners()
+    pf = _dense_set_weighted_at_two_corners("filter.search_settled_std=0")
     assert not pf.search.tempering and not pf.search.holding and pf.recovery.on_probation
 
 
