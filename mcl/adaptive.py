@@ -434,6 +434,11 @@ class AugmentedMCL:
 SETTLED_WEIGHT = 0.9  # a global search has settled once the heaviest cluster holds this much of the weight
 
 
+def within_std(cov, std: float) -> bool:
+    """Whether a cluster with covariance ``cov`` (3x3: x, y, theta) is a place: its x and y std both under ``std``."""
+    return max(cov[0][0], cov[1][1]) <= std ** 2
+
+
 class GlobalSearch:
     """A global search under way: from a global start or a re-seed (``start``) until one hypothesis is left.
 
@@ -483,7 +488,7 @@ class GlobalSearch:
     def observe(self, lost: bool, cluster_weight: float = 1.0, cov=None) -> None:
         """This update's lost belief, and the heaviest cluster's weight and covariance (after the estimate;
         ``cov`` None: a place)."""
-        compact = self.settled_std <= 0.0 or cov is None or max(cov[0][0], cov[1][1]) <= self.settled_std ** 2
+        compact = self.settled_std <= 0.0 or cov is None or within_std(cov, self.settled_std)
         settled = cluster_weight >= self.settled_weight and compact
         if self.tempering and settled:
             self.tempering = False
@@ -559,7 +564,7 @@ class StallCheck:
         no_place = search.holding or search.since_end is None  # a track from a pose, or a search under way
         if no_place or search.starts != self.starts:  # ... or a new search ended (perhaps in this very update)
             self.since = None
-        compact = cov is not None and max(cov[0][0], cov[1][1]) <= self.COMPACT ** 2
+        compact = cov is not None and within_std(cov, self.COMPACT)
         if no_place or odom is None or not compact:
             self._forget()
             return
