@@ -190,7 +190,7 @@ def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_set
     assert not s.tempering and not s.holding and s.since_end == 1
     wide = np.diag([12.0 ** 2, 1.0, 0.1])  # one cluster 12 m wide: a dense set whose weight sits on several places
     s.start()
-    s.observe(True, 1.0, wide)  # filter.search_settled_std = 0: settled by weight alone
+    s.observe(True, 1.0, wide)  # settled_std = 0 (the old rule): settled by weight alone
     assert not s.tempering and not s.holding
     s.reset()
     assert s.since_end is None
@@ -205,7 +205,7 @@ def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_set
 def test_a_dense_set_weighted_at_two_far_places_settles_a_search_by_weight_unless_search_settled_std():
     # Clusters are the occupied cells whatever their weight: 100,000 uniform poses on a 10 m box fill every cell,
     # so they are one cluster that holds all the weight even when only the poses near two far corners carry it.
-    # Settled by weight alone (filter.search_settled_std = 0, the default), the search ends at its first update
+    # Settled by weight alone (filter.search_settled_std = 0, the old default), the search ends at its first update
     # and, lost at the mean between the places, re-seeds at the next (with search_refine:
     # corridor-fast-reversing-h10 re-seeded 175 times); with search_settled_std it goes on.
     pf = _dense_set_weighted_at_two_corners("filter.search_settled_std=1.0")

@@ -26,7 +26,7 @@ CONFIGS = PROJECT_ROOT / "configs"
 # When default.yaml changes another key, baseline.yaml follows it (this test says which key drifted).
 BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.estimate", "motion.map_rejection",
                  "filter.search_exponent", "filter.global_density", "sensor.likelihood_field.interior",
-                 "motion.fault_prob", "sensor.unmapped_skip"}
+                 "motion.fault_prob", "sensor.unmapped_skip", "filter.search_refine"}
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
