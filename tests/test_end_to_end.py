@@ -201,13 +201,13 @@ _NEW_DEFAULTS = ["filter.particles=100000", "filter.recovery=lost", "filter.min_
 def test_global_localization_on_the_bundled_demo(tmp_path):
     # Issues 1 and 13: data/demo (seed 7, 5 m laser, kidnapped at 50 s) shows global localization taking
     # seconds, then tracking, then a kidnapping and its recovery. With the defaults above (filter seed 1):
-    # - not localized by the first scan alone (error > 0.3 m at step 0; measured 7.5 m, and 0.75 m with the
-    #   scan-matched search, filter.search_refine 3 and search_settled_std 1, which is why the bound is 0.3 m);
-    # - within 0.3 m after step 0 and by 20 s, and staying there until the kidnapping (measured 0.8 s: the search
-    #   settles on a place the first scan contradicts, and on probation that re-seeds at once, at step 1; 0.4 s
-    #   with the matching; 13.8 s without recovery_probation and lost_exponent);
+    # - not localized by the first scan alone (error > 0.3 m at step 0; measured 0.75 m with the default's
+    #   scan-matched search, filter.search_refine 3 and search_settled_std 1; 7.5 m without it);
+    # - within 0.3 m after step 0 and by 20 s, and staying there until the kidnapping (measured 0.4 s; 0.8 s
+    #   without the matching: the search settles on a place the first scan contradicts, and on probation that
+    #   re-seeds at once, at step 1; 13.8 s without recovery_probation and lost_exponent either);
     # - tracking after that with position RMSE < 0.15 m (measured 0.058 m);
-    # - back within 0.3 m by 60 s (measured 55.0 s on 2026-11-26, 52.8 s with the matching on 2026-11-29, 57.2 s earlier; 53.4 s without sensor.unmapped_skip, that config's luckiest
+    # - back within 0.3 m by 60 s (measured 52.8 s on 2026-11-29 with the matching, 55.0 s on 2026-11-26, 57.2 s earlier; 53.4 s without sensor.unmapped_skip, that config's luckiest
     #   seed: over filter seeds 1-8 both take 57.2-65.2 s, median 57.6 s; 63.4 s with the likelihood field's
     #   interior: zero while tracking, after a re-seed at 62.8 s) and RMSE < 0.15 m from there.
     # One seed: the bounds leave a margin of seconds / 2x on the measured values.

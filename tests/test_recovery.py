@@ -883,8 +883,8 @@ def test_a_robot_kidnapped_in_a_corridor_is_searched_for_not_spread_onto_the_old
 
     now = back_after(tmp_path / "default")
     assert now is not None and now <= 5.0, now
-    # the control pins the unmatched search: with scan matching (filter.search_refine 3, search_settled_std 1) the
-    # matched search finds the robot without the rule too (2.4 s)
+    # the control pins the unmatched search: with the default's scan matching (filter.search_refine 3,
+    # search_settled_std 1) the matched search finds the robot without the rule too (2.4 s)
     before = back_after(tmp_path / "before", "quality.collapse_from=2", "filter.search_refine=0",
                         "filter.search_settled_std=0")
     assert before is None, before
@@ -1040,8 +1040,9 @@ def test_a_protected_reseed_keeps_a_correct_track_and_drops_the_search_without_p
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
     info = pf.step(None, obs)  # no one scan decides (ProtectedReseed.STEP 3 nats < reseed_odds 4.6) ...
     assert not info.confirmed and pf.n == 8000 and pf.protected.odds == -3.0
-    # ... a few do: two, or three with filter.search_refine 3 and search_settled_std 1 (the matched fresh poses
-    # at the track's own place fit almost as well as the track, so the second scan adds 1.4 nats, not 3)
+    # ... a few do: three with the default's filter.search_refine 3 and search_settled_std 1, two without (the
+    # matched fresh poses at the track's own place fit almost as well as the track, so the second scan adds 1.4
+    # nats, not 3)
     for _ in range(3):
         info = pf.step(None, obs)
         assert not info.switched and np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.1
