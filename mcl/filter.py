@@ -213,15 +213,16 @@ class ParticleFilter:
         p += np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
+        self._start_tracking()
+
+    def _start_tracking(self) -> None:
+        """The policies start afresh for a track from a known pose: not lost, no search, nothing on probation."""
         self.recovery = self._make_recovery(False)
         self.search.reset()
         self.quality.reset(lost=False)
-        if self.faults is not None:
-            self.faults.reset()
-        if self.stall is not None:
-            self.stall.reset()
-        if self.challenge is not None:
-            self.challenge.reset()
+        for policy in (self.faults, self.stall, self.challenge):
+            if policy is not None:
+                policy.reset()
 
     def kidnap(self, mean, std) -> None:
         """Particles replaced by N(mean, diag(std^2)) with the policies untouched (recovery averages, lost
@@ -246,11 +247,7 @@ class ParticleFilter:
         p = root @ self.rng.standard_normal((3, n)) + np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
-        self.recovery = self._make_recovery(False)
-        self.search.reset()
-        self.quality.reset(lost=False)
-        if self.faults is not None:
-            self.faults.reset()
+        self._start_tracking()
 
     def init_global(self) -> None:
         """Particles uniform over the poses the map allows (global localization)."""

@@ -357,6 +357,25 @@ def _filter_on_a_box(*sets):
     return ParticleFilter(cfg, grid, rng=np.random.default_rng(3))
 
 
+def test_a_start_from_a_known_pose_resets_every_policy_whichever_form_the_pose_takes():
+    # init_gaussian (--initial-pose) and init_gaussian_cov (a ROS /initialpose) start the same kind of track: no
+    # search, not lost, nothing on probation, no challenge or stall pending from what the filter did before
+    for start in (lambda pf: pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1]),
+                  lambda pf: pf.init_gaussian_cov([5.0, 5.0, 0.0], np.diag([0.01, 0.01, 0.01]))):
+        pf = _filter_on_a_box()
+        pf.init_global()
+        assert pf.search.tempering and pf.search.starts == 1
+        pf.challenge.due, pf.stall.stalled, pf.stall.run = True, True, 3
+        calls = []  # the odometry-fault window must be reset too
+        pf.faults.reset = lambda: calls.append(1)
+        start(pf)
+        assert not pf.search.tempering and not pf.search.holding and pf.search.starts == 0
+        assert pf.search.since_end is None and not pf.quality.lost
+        assert not pf.challenge.due and pf.challenge.scores is None
+        assert not pf.stall.stalled and pf.stall.run == 0
+        assert calls == [1]
+
+
 def test_reseed_adds_a_whole_global_set_with_the_old_cloud_keeping_its_share_of_the_mass():
     from mcl.filter import StepInfo
 
