@@ -50,6 +50,8 @@ def _add_run(sub) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("config", nargs="?", help="YAML config (default: configs/default.yaml, the bundled demo)")
+    p.add_argument("--config", dest="config_option", metavar="CONFIG",
+                   help="the same YAML config, spelled as the other commands take it")
     p.add_argument("--map", help="ROS map_server YAML of the occupancy grid")
     p.add_argument("--log", help="CARMEN log (.clf, plain or gzip; a ROS bag given here is read as --bag); replaces the "
                    "config's log, and its truth "
@@ -91,6 +93,10 @@ def cmd_run(args) -> int:
     from mcl.runner import default_out_dir, run
 
     config_path = args.config
+    if args.config_option is not None:
+        if config_path is not None and config_path != args.config_option:
+            raise MclError(f"two configs given: {config_path} and --config {args.config_option}; give one")
+        config_path = args.config_option
     overrides = []
     if args.log and not args.bag:
         from mcl.datasets.rosbag import is_bag

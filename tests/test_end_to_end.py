@@ -141,6 +141,23 @@ def test_bad_config_is_one_line_and_exit_2(tmp_path, capsys):
     assert "bad.yaml" in err and "filter.particels: unknown key (did you mean particles?)" in err
 
 
+def test_run_takes_the_config_as_the_other_commands_do_with_config_and_one_config_only(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("filter:\n  particels: 10\n")
+    # --config reads the file the positional reads: the same one-line error names it
+    assert main(["run", "--config", str(bad), "--rerun", "off"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "bad.yaml" in err and "filter.particels: unknown key" in err
+    # two different configs: one line naming both, nothing run or written
+    other = tmp_path / "other.yaml"
+    other.write_text("filter:\n  particles: 10\n")
+    out = tmp_path / "o"
+    assert main(["run", str(other), "--config", str(bad), "--out", str(out), "--rerun", "off"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "two configs given" in err and "other.yaml" in err and "bad.yaml" in err
+    assert not out.exists()
+
+
 def test_a_bad_option_value_names_the_option_typed_not_the_key_it_sets(tmp_path, capsys):
     base = ["run", "--map", str(DEMO / "map.yaml"), "--log", str(DEMO / "log.clf"), "--rerun", "off",
             "--out", str(tmp_path / "o")]
