@@ -176,7 +176,8 @@ class LikelihoodFieldConfig:
     # interior_tolerance metres: maps draw walls about a cell thicker than the surface) or zero (AMCL's, the
     # book's as printed)
     interior: Literal["zero", "depth"] = "depth"
-    interior_tolerance: float = field(default=0.05, metadata=_rng(0.0))  # m
+    # null: 0.05 m or one cell of the map, whichever is more (mcl.sensors.DEPTH_TOLERANCE)
+    interior_tolerance: float | None = field(default=None, metadata=_rng(0.0))  # m
     # the same choice while the laser is tempered (a global search, or lost recovery spreading poses)
     search_interior: Literal["zero", "depth"] = "zero"
 

@@ -138,16 +138,27 @@ def field_distance(grid, cfg, interior: str | None = None) -> np.ndarray:
     ``interior`` (the search field passes ``search_interior``)."""
     from mcl.config import sensor_model_view
 
-    tolerance = _depth_tolerance(sensor_model_view(cfg, "likelihood_field"), interior)
+    tolerance = _depth_tolerance(sensor_model_view(cfg, "likelihood_field"), interior, grid)
     return grid.distance if tolerance is None else grid.surface_distance(tolerance)
 
 
-def _depth_tolerance(cfg, interior: str | None) -> float | None:
-    """``interior_tolerance`` when the field scores depth inside obstacles (``interior``, else the config's
-    ``interior``, is ``depth``); None for ``zero``. ``cfg``: the likelihood field's view of the sensor config."""
+DEPTH_TOLERANCE = 0.05  # m: ``interior_tolerance: null`` is this or one cell of the map, whichever is more
+
+
+def _depth_tolerance(cfg, interior: str | None, grid=None) -> float | None:
+    """The tolerance the depth field takes off (m) when the field scores depth inside obstacles (``interior``,
+    else the config's ``interior``, is ``depth``); None for ``zero``. ``cfg``: the likelihood field's view of the
+    sensor config. Its ``interior_tolerance`` when that is a number; null (the default) is DEPTH_TOLERANCE or one
+    cell of ``grid``, whichever is more, so a map coarser than 5 cm gets the tolerance the 5 cm maps have in cells.
+    With 0.05 m on a 10 cm map with clutter (suites/heldout2.yaml clutter-map10cm-h9) correct returns counted as
+    readings inside walls: the filter's likelihood favoured places 4-8 m off by 13-16 nats a scan, and every global
+    run was lost (docs/measurements.md, "Twenty-eighth session")."""
     if (interior or getattr(cfg, "interior", "zero")) == "zero":
         return None
-    return float(getattr(cfg, "interior_tolerance", 0.0))
+    tolerance = getattr(cfg, "interior_tolerance", 0.0)
+    if tolerance is None:
+        return max(DEPTH_TOLERANCE, float(getattr(grid, "resolution", 0.0)))
+    return float(tolerance)
 
 
 SKIP_SUPPORT_PARTICLES = 500  # beam skipping estimates each beam's support from at most this many particles
@@ -196,7 +207,7 @@ class LikelihoodField:
     def _make_table(self, grid, interior: str | None) -> np.ndarray:
         # interior: depth on an OccupancyGrid: the table of ``distance``, then the tiles where the depth field differs
         # (``surface_patches``) rewritten, instead of a copy of the whole map to build it from (the same values)
-        tolerance = _depth_tolerance(self.cfg, interior)
+        tolerance = _depth_tolerance(self.cfg, interior, grid)
         patches = getattr(grid, "surface_patches", None) if tolerance is not None else None
         d = grid.distance if patches is not None else field_distance(grid, self.cfg, interior)
         # in row blocks that stay in cache: the same values, 2.7 s -> 0.5 s on a 100 M-cell map, no float64 copy;

@@ -78,6 +78,23 @@ def test_table_is_log_of_hit_plus_random_at_clipped_distance():
     assert lf.table[40, 112] > lf.offmap  # 0.15 m from the wall at column 109
 
 
+def test_interior_tolerance_null_is_five_centimetres_or_one_cell_whichever_is_more():
+    # a wall 20 cells thick on a 5 cm, a 10 cm and a 2.5 cm map: with null the depth field takes off one cell (0.1 m)
+    # on the 10 cm map, what the 5 cm map's 0.05 m is in cells, and 0.05 m on the others; a number is taken as it is
+    from mcl.config import load_config
+
+    assert load_config(None).sensor.likelihood_field.interior_tolerance is None  # the default config's
+    for res, expected in ((0.05, 0.05), (0.1, 0.1), (0.025, 0.05)):
+        occ = np.zeros((40, 40), dtype=np.int8)
+        occ[:, 10:30] = 100
+        g = OccupancyGrid.from_occupancy(occ, res, (0.0, 0.0))
+        null = LikelihoodField(g, sensor_cfg(interior="depth", interior_tolerance=None)).table
+        same = LikelihoodField(g, sensor_cfg(interior="depth", interior_tolerance=expected)).table
+        np.testing.assert_array_equal(null, same)
+        other = 0.05 if expected != 0.05 else 0.1
+        assert (LikelihoodField(g, sensor_cfg(interior="depth", interior_tolerance=other)).table != null).any()
+
+
 def test_the_search_field_is_search_interiors_and_is_built_only_when_it_differs():
     g = box_grid()
     rng = np.random.default_rng(4)
