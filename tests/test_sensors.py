@@ -81,9 +81,10 @@ def test_table_is_log_of_hit_plus_random_at_clipped_distance():
 def test_interior_tolerance_null_is_five_centimetres_or_one_cell_whichever_is_more():
     # a wall 20 cells thick on a 5 cm, a 10 cm and a 2.5 cm map: with null the depth field takes off one cell (0.1 m)
     # on the 10 cm map, what the 5 cm map's 0.05 m is in cells, and 0.05 m on the others; a number is taken as it is
-    from mcl.config import load_config
+    from mcl.config import PROJECT_ROOT, load_config
 
-    assert load_config(None).sensor.likelihood_field.interior_tolerance is None  # the default config's
+    for path in (None, PROJECT_ROOT / "configs" / "default.yaml"):  # the built-in defaults and the default config
+        assert load_config(path).sensor.likelihood_field.interior_tolerance is None
     for res, expected in ((0.05, 0.05), (0.1, 0.1), (0.025, 0.05)):
         occ = np.zeros((40, 40), dtype=np.int8)
         occ[:, 10:30] = 100
