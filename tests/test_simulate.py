@@ -283,8 +283,17 @@ def test_ground_hits_put_a_line_of_returns_ahead_in_each_window_and_nothing_else
     assert len(windows) == 2 and all(b - a == pytest.approx(2.0) for a, b in windows)
     assert 0.0 <= windows[0][0] and windows[0][1] <= 20.0 + 1.0 and 20.0 - 1.0 <= windows[1][0] <= 40.0
     hit, clean = read_carmen(tmp_path / "g2" / "log.clf").scans, read_carmen(tmp_path / "c" / "log.clf").scans
+    # each scan's line as the simulator drew it: its ground-hit stream (the ninth child of the seed), per window the
+    # window's place, then per scan in it the line's distance and its normal's angle (sim.yaml records the windows)
+    rng = np.random.default_rng(np.random.SeedSequence(4).spawn(9)[8])
+    drawn = {}
+    for w0, w1 in windows:
+        rng.uniform(0.2, 0.8)
+        for i, a in enumerate(hit):
+            if w0 <= a.t < w1:
+                drawn[i] = rng.uniform(1.5, 5.0), rng.uniform(-0.6, 0.6)
     lines, inside_scans = [], 0
-    for a, b in zip(hit, clean):
+    for i, (a, b) in enumerate(zip(hit, clean)):
         if not any(w0 <= a.t < w1 for w0, w1 in windows):
             np.testing.assert_array_equal(a.ranges, b.ranges)
             continue
@@ -296,8 +305,12 @@ def test_ground_hits_put_a_line_of_returns_ahead_in_each_window_and_nothing_else
         xy = np.vstack([a.ranges[short] * np.cos(a.angles[short]), a.ranges[short] * np.sin(a.angles[short])])
         val, vec = np.linalg.eigh(np.cov(xy))
         assert val[0] < 1e-5  # one straight line (residuals at the file's 1 mm rounding)
-        d = abs(float(vec[:, 0] @ xy.mean(axis=1)))  # its distance from the laser
-        assert 1.5 - 0.01 <= d <= 5.0 + 0.01
+        normal = vec[:, 0] if vec[:, 0] @ xy.mean(axis=1) > 0 else -vec[:, 0]  # pointing away from the laser
+        d = float(normal @ xy.mean(axis=1))  # its distance from the laser
+        # the drawn line, to within what the file's 1 mm rounding of the ranges leaves of a fit over a few beams
+        # (measured: 0.1 mm and 2 mrad at most)
+        assert d == pytest.approx(drawn[i][0], abs=0.002) and 1.5 <= drawn[i][0] <= 5.0
+        assert math.atan2(normal[1], normal[0]) == pytest.approx(drawn[i][1], abs=0.01)
         lines.append(round(d, 2))
     assert inside_scans == 20 and len(lines) >= 10
     assert len(set(lines)) > len(lines) // 2  # 5 scans a second, a new line each scan
