@@ -41,6 +41,7 @@ use the matching density (``log_density``).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Callable
 
@@ -87,23 +88,27 @@ def log_prob_triangular(a, sigma):
         return np.log(prob_triangular(a, sigma))
 
 
+@functools.cache
+def _irwin_hall(n: int = 12):
+    """The density of the sum of n uniforms on [0, 1] (Irwin-Hall) and its CDF, as scipy B-splines: the density is
+    the cardinal B-spline of degree n - 1 on the knots 0..n (nan outside them). Twice as fast as the alternating
+    sum of powers, and free of its cancellation; scipy.stats.irwinhall takes 100 times longer."""
+    from scipy.interpolate import BSpline
+
+    pdf = BSpline.basis_element(np.arange(n + 1.0), extrapolate=False)
+    return pdf, pdf.antiderivative()
+
+
 def _irwin_hall_cdf(x, n: int = 12):
     """CDF of the sum of n uniforms on [0, 1] (Irwin-Hall), x an array."""
     x = np.clip(np.asarray(x, dtype=np.float64), 0.0, float(n))
-    out = np.zeros_like(x)
-    for k in range(n + 1):
-        out += (-1) ** k * math.comb(n, k) * np.where(x > k, (x - k), 0.0) ** n
-    return np.clip(out / math.factorial(n), 0.0, 1.0)
+    return np.clip(_irwin_hall(n)[1](x), 0.0, 1.0)
 
 
 def _irwin_hall_pdf(x, n: int = 12):
-    """Density of the sum of n uniforms on [0, 1] (Irwin-Hall), x an array."""
-    x = np.asarray(x, dtype=np.float64)
-    out = np.zeros_like(x)
-    for k in range(n + 1):
-        out += (-1) ** k * math.comb(n, k) * np.where(x > k, (x - k), 0.0) ** (n - 1)
-    out /= math.factorial(n - 1)
-    return np.where((x >= 0) & (x <= n), np.maximum(out, 0.0), 0.0)
+    """Density of the sum of n uniforms on [0, 1] (Irwin-Hall), x an array; zero outside [0, n]."""
+    out = _irwin_hall(n)[0](np.asarray(x, dtype=np.float64))
+    return np.where(np.isnan(out), 0.0, np.maximum(out, 0.0))
 
 
 def prob_normal_twelve(a, sigma):

@@ -10,6 +10,11 @@ import yaml
 
 from mcl.errors import MclError
 
+# libyaml's parser (in PyYAML's wheels) with PyYAML's own safe constructor and resolver: the same documents, 35 times
+# faster than the pure-Python parser (the default config: 1.8 ms against 66 ms); the pure-Python one where PyYAML was
+# built without libyaml
+SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
 
 def read_yaml(path: str | os.PathLike, error: type[MclError]):
     """The parsed document of a YAML file. Any problem raises ``error`` with one line naming
@@ -23,7 +28,7 @@ def read_yaml(path: str | os.PathLike, error: type[MclError]):
     except UnicodeDecodeError:
         raise error(f"{name}: not a UTF-8 text file") from None
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=SAFE_LOADER)  # noqa: S506 - a safe loader
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f":{mark.line + 1}" if mark is not None else ""

@@ -38,6 +38,7 @@ from mcl.maps import load_map
 
 FUZZ = dict(database=None, derandomize=True, deadline=None,
             suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)  # libyaml's emitter: 3.6 ms a config against 15 ms
 
 
 def one_line_naming(msg: str, name: str) -> None:
@@ -397,7 +398,7 @@ def mutated_config(draw):
     elif how == "section":
         key = parts[0]
         data[key] = draw(any_value)
-    return yaml.safe_dump(data, allow_unicode=draw(st.booleans())), how, key
+    return yaml.dump(data, Dumper=DUMPER, allow_unicode=draw(st.booleans())), how, key
 
 
 def _key_named(msg: str, key: str) -> bool:

@@ -333,18 +333,24 @@ def test_infinite_corridor_seed_3_keeps_within_1_m_with_the_shifts(tmp_path):
     # beams that tell (small segments on walls ahead, 0.5-1 m short of them seen from the lagging cloud) skipped as
     # unmapped objects. With the estimate shifted forward along the cloud's major axis (2 std) they are kept:
     # 0.64 m. Seed 3 is fixed; over seeds 1-20 the default stays within 0.89 m with the shifts, and two seeds
-    # exceed 1 m without them (docs/measurements.md, "Eleventh session").
+    # exceed 1 m without them (docs/measurements.md, "Eleventh session"). The test replays the log's first 200 s
+    # (1,001 of 1,941 scans: the same runs up to there, half the CI time): 0.51 m with the shifts, 1.18 m without.
     from mcl.config import load_config
     from mcl.runner import run
 
+    lines = (DATA / "infinite_corridor" / "log.clf").read_text().splitlines(keepends=True)
+    log = tmp_path / "log.clf"
+    log.write_text("".join(line for line in lines if not line.startswith("#") and float(line.split()[-3]) <= 200.0))
+
     def track(spread: str):
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-            f"map={DATA / 'infinite_corridor' / 'map.yaml'}", f"log={DATA / 'infinite_corridor' / 'log.clf'}",
+            f"map={DATA / 'infinite_corridor' / 'map.yaml'}", f"log={log}",
             f"truth={DATA / 'infinite_corridor' / 'truth.tum'}", "rerun.mode=off", "seed=3",
             "filter.global_localization=false",
             "filter.initial_pose=[1.00824, -0.016781, 0.005957]",
             f"sensor.unmapped_spread={spread}"])
         return run(cfg, tmp_path / spread, progress=False, echo=lambda m: None)
 
-    assert track("2.0")["eval"]["ate_max"] < 0.8
+    shifted = track("2.0")["eval"]
+    assert shifted["scored"] >= 1000 and shifted["ate_max"] < 0.8, shifted
     assert track("0")["eval"]["ate_max"] > 1.0
