@@ -202,6 +202,44 @@ def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_set
     assert not s.tempering and not s.holding and s.since_end == 1
 
 
+def test_a_place_that_wins_its_protected_reseed_is_on_probation_again_and_challenged_once():
+    # heldout2 hall-mid-range-people-h9 global s2: a place 14 m off, challenged on probation, won its protected
+    # re-seed among people and was then trusted as if it had started from a known pose (no probation, no stall
+    # test) until a lost call ran protected and moved it 47 m further off (found at 53.2 s). A place a search found
+    # goes back on probation when it wins; the challenge judges each place once.
+    from types import SimpleNamespace
+
+    from mcl.adaptive import GlobalSearch, ProbationChallenge
+
+    s = GlobalSearch()
+    challenge = ProbationChallenge(0.7, s)
+    poor = SimpleNamespace(beams=60, score=0.5)  # a median fit under probation_fit
+    s.start()
+    s.observe(True, 0.95)  # a global search settles: its place is on probation
+    assert s.place == 1 and s.since_end == 1
+    for _ in range(ProbationChallenge.WINDOW):
+        challenge.observe(poor, True)
+    assert challenge.due
+    challenge.due = False  # the filter starts the protected re-seed
+    s.start()
+    s.observe(False, 0.0)  # the re-seed's search stops holding (a scan fits)
+    assert s.place == 2
+    s.confirm()  # the place kept wins
+    assert s.place == 1 and s.since_end == 0 and not s.holding and not s.tempering
+    for _ in range(3 * ProbationChallenge.WINDOW):
+        challenge.observe(poor, True)
+    assert not challenge.due  # challenged once already
+    s.start()
+    s.observe(True, 0.95)  # a search that finds another place: judged afresh
+    for _ in range(ProbationChallenge.WINDOW):
+        challenge.observe(poor, True)
+    assert challenge.due
+    s.reset()  # a track from a known pose that wins its protected re-seed stays off probation
+    s.start()
+    s.confirm()
+    assert s.since_end is None and s.place == 0
+
+
 def test_a_dense_set_weighted_at_two_far_places_settles_a_search_by_weight_unless_search_settled_std():
     # Clusters are the occupied cells whatever their weight: 100,000 uniform poses on a 10 m box fill every cell,
     # so they are one cluster that holds all the weight even when only the poses near two far corners carry it.
