@@ -472,23 +472,18 @@ class GlobalSearch:
         self.holding = False
         self.since_end = None
         self.starts = 0  # searches started so far
-        self.place = 0  # the search (its count of starts) that found the place tracked now; 0: none
-        self._kept = (None, 0)  # since_end and place when the search under way started
 
     def start(self) -> None:
-        self._kept = (self.since_end, self.place)
         self.tempering = True
         self.holding = True
         self.starts += 1
 
     def confirm(self) -> None:
-        """The search a re-seed started lost to the track it kept (``ParticleFilter.protect``): it ends now. A track
-        from a known pose is not on probation; a place an earlier search found is on probation afresh (it won one
-        protected re-seed, which a look-alike place with people around can win too)."""
+        """The search a re-seed started lost to the track it kept (``ParticleFilter.protect``): it ends now, and the
+        track is not on probation (it is not a place a search just found)."""
         self.tempering = False
         self.holding = False
-        since, self.place = self._kept
-        self.since_end = None if since is None else 0
+        self.since_end = None
 
     def observe(self, lost: bool, cluster_weight: float = 1.0, cov=None) -> None:
         """This update's lost belief, and the heaviest cluster's weight and covariance (after the estimate;
@@ -500,7 +495,6 @@ class GlobalSearch:
         if self.holding and (not lost or settled):
             self.holding = False
             self.since_end = 0
-            self.place = self.starts
         if not self.holding and self.since_end is not None:
             self.since_end += 1
 
@@ -619,17 +613,16 @@ class ProbationChallenge:
         self.reset()
 
     def reset(self) -> None:
-        self.place = 0  # the search's place when the scores were last reset
-        self.challenged = 0  # the place challenged last
+        self.starts = 0  # the search's count of starts when the scores were last reset
         self.scores: deque | None = None  # the place's last scores on probation (None: no place, or challenged)
         self.due = False
 
     def observe(self, fit, on_probation: bool) -> None:
         """This update's scan fit at the estimate (``mcl.quality.Fit`` or None) and whether the place a search found
         is on probation (``LostRecovery.on_probation``)."""
-        if self.place != self.search.place:  # another place: judged afresh, unless it was challenged once already
-            self.place = self.search.place
-            self.scores = None if self.place == self.challenged else deque(maxlen=self.WINDOW)
+        if self.starts != self.search.starts:  # a search since: the place it finds is judged afresh
+            self.starts = self.search.starts
+            self.scores = deque(maxlen=self.WINDOW)
         if self.scores is None or self.search.holding or not on_probation:
             return
         if fit is not None and fit.beams and math.isfinite(fit.score):
@@ -637,7 +630,6 @@ class ProbationChallenge:
         if len(self.scores) == self.WINDOW and float(np.median(self.scores)) < self.fit:
             self.due = True
             self.scores = None  # challenged once
-            self.challenged = self.place
 
 
 class ProtectedReseed:

@@ -667,9 +667,8 @@ class ParticleFilter:
 
     def protect(self, info: StepInfo) -> None:
         """Settle a protected re-seed (``filter.reseed_odds``, ``mcl.adaptive.ProtectedReseed``) once one side
-        leads by the odds: the loser is dropped; a track from a known pose that wins stays off probation, and a
-        place a search found goes back on it (``GlobalSearch.confirm``). Until then the weights carry the odds that
-        counted, and the estimate stays on the track."""
+        leads by the odds: the loser is dropped, and a track that wins is not put on probation. Until then the
+        weights carry the odds that counted, and the estimate stays on the track."""
         p = self.protected
         if p is None or info.degenerate:
             return

@@ -202,42 +202,25 @@ def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_set
     assert not s.tempering and not s.holding and s.since_end == 1
 
 
-def test_a_place_that_wins_its_protected_reseed_is_on_probation_again_and_challenged_once():
-    # heldout2 hall-mid-range-people-h9 global s2: a place 14 m off, challenged on probation, won its protected
-    # re-seed among people and was then trusted as if it had started from a known pose (no probation, no stall
-    # test) until a lost call ran protected and moved it 47 m further off (found at 53.2 s). A place a search found
-    # goes back on probation when it wins; the challenge judges each place once.
-    from types import SimpleNamespace
-
-    from mcl.adaptive import GlobalSearch, ProbationChallenge
+def test_a_place_a_search_found_that_wins_its_protected_reseed_leaves_probation():
+    # heldout3 hall-people-dropouts-h10 global: the search found the robot at 24.6 s; people and dropouts kept its
+    # fit at 0.4-0.6, so it was challenged and won its protected re-seed. Put back on probation (the twenty-ninth
+    # session's rule), the next lost call re-seeded it at once, unprotected, and a place 10.7 m off held the
+    # estimate from 45 to 50 s: lost on every seed (heldout3 global 26/36 against 29/36; heldout2 gained one run).
+    # A place that has won its protected re-seed is trusted as a track is: off probation, a lost call re-seeds it
+    # only after recovery_global_after lost updates, and protected.
+    from mcl.adaptive import GlobalSearch
 
     s = GlobalSearch()
-    challenge = ProbationChallenge(0.7, s)
-    poor = SimpleNamespace(beams=60, score=0.5)  # a median fit under probation_fit
     s.start()
-    s.observe(True, 0.95)  # a global search settles: its place is on probation
-    assert s.place == 1 and s.since_end == 1
-    for _ in range(ProbationChallenge.WINDOW):
-        challenge.observe(poor, True)
-    assert challenge.due
-    challenge.due = False  # the filter starts the protected re-seed
-    s.start()
-    s.observe(False, 0.0)  # the re-seed's search stops holding (a scan fits)
-    assert s.place == 2
+    s.observe(True, 0.95)  # the search settles on a place: on probation
+    assert s.since_end == 1 and not s.holding
+    s.start()  # the challenge's protected re-seed
+    s.observe(False, 0.0)
     s.confirm()  # the place kept wins
-    assert s.place == 1 and s.since_end == 0 and not s.holding and not s.tempering
-    for _ in range(3 * ProbationChallenge.WINDOW):
-        challenge.observe(poor, True)
-    assert not challenge.due  # challenged once already
-    s.start()
-    s.observe(True, 0.95)  # a search that finds another place: judged afresh
-    for _ in range(ProbationChallenge.WINDOW):
-        challenge.observe(poor, True)
-    assert challenge.due
-    s.reset()  # a track from a known pose that wins its protected re-seed stays off probation
-    s.start()
-    s.confirm()
-    assert s.since_end is None and s.place == 0
+    assert s.since_end is None and not s.holding and not s.tempering
+    s.observe(True, 1.0)
+    assert s.since_end is None  # and stays off probation
 
 
 def test_a_dense_set_weighted_at_two_far_places_settles_a_search_by_weight_unless_search_settled_std():
