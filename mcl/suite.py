@@ -854,6 +854,41 @@ def _finished(job: Job) -> dict | None:
     return row if row.get("fingerprint") == job.fingerprint else None
 
 
+class _TermAsInterrupt:
+    """While an evaluation runs, SIGTERM to its process (``kill PID``, ``timeout``) stops it as Ctrl-C does: the
+    finished rows kept, exit status 130. (Without this the process died at once and its pool's workers ran on,
+    orphaned, each to the end of its run.)"""
+
+    def __enter__(self):
+        try:
+            self._old = signal.signal(signal.SIGTERM, self._handler)
+        except ValueError:  # not the main thread: the default handling stays
+            self._old = None
+        return self
+
+    @staticmethod
+    def _handler(signum, frame):
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGTERM, self._old)
+
+
+def interrupt_workers() -> None:
+    """Ctrl-C to this process's worker processes: each stops its run at the next update and returns it
+    ``interrupted`` (an idle worker ignores it). A terminal's Ctrl-C reaches them already (a second one is only
+    noted); a signal sent to this process alone (``kill -INT PID``, SIGTERM) reaches them only so, and the pool's
+    shutdown would otherwise wait for every run in flight to finish."""
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        try:
+            os.kill(child.pid, signal.SIGINT)
+        except (ProcessLookupError, TypeError):  # gone already, or not started
+            pass
+
+
 def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=None, cache=None, modes=None,
                    only=None, baseline=True, world=None, progress=None, echo=print) -> int:
     """``mcl eval --suite``: plan, generate the worlds, run what is not finished, write and print the table.
@@ -879,6 +914,7 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     results: dict[str, dict] = {}
     errors: list[str] = []
     interrupted = False
+    term = _TermAsInterrupt().__enter__()
     try:
         worlds = {j.world[0]: j.world[1] for j in job_list if j.world is not None}
         todo_worlds = {w: kw for w, kw in worlds.items() if not Path(w, "sim.yaml").is_file()}
@@ -955,6 +991,7 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                     interrupted = True
                     for f in pending:
                         f.cancel()
+                    interrupt_workers()
                     pool.shutdown(wait=True, cancel_futures=True)
                     for f in pending:
                         if f.done() and not f.cancelled() and f.exception() is None:
@@ -963,9 +1000,15 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
             interrupted = True
         finally:
             bar.close()
+    except KeyboardInterrupt:  # while the worlds were made (no row yet)
+        interrupted = True
+        raise
     finally:
         if pool is not None:
+            if interrupted:
+                interrupt_workers()
             pool.shutdown(wait=True, cancel_futures=True)
+        term.__exit__()
     rows, table = save()
     if rows:
         plot_errors(out, rows)

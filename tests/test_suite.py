@@ -607,3 +607,61 @@ def test_the_runs_the_baseline_alone_keeps_are_named_per_mode():
         "global  default, 1 run paired with the baseline's: kept by default alone 0, by the baseline alone 1: "
         "b seed 1 (within 0.5 m never; baseline at 12.5 s)"]
     assert format_against_baseline([r for r in rows if r["config"] == "default"]) == ""  # no baseline: no line
+
+
+def _children(pid: int) -> set[int]:
+    """The process's child processes (Linux /proc)."""
+    kids = set()
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        kids |= {int(k) for k in (task / "children").read_text().split()}
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"  # a zombie has ended
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_signal_to_the_evaluation_alone_stops_its_workers_runs_too(tmp_path, sig):
+    # `kill PID` or `timeout` signal the evaluating process alone, not its pool's workers (a terminal's Ctrl-C
+    # reaches the whole process group). SIGTERM used to end the process at once and leave the workers running,
+    # orphaned, to the end of their runs (minutes on a big map); SIGINT made the pool's shutdown wait for them.
+    # Now either stops the runs in flight at their next update: exit 130, no worker left.
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    demo = PROJECT_ROOT / "data" / "demo"
+    suite = tmp_path / "s.yaml"
+    suite.write_text(yaml.safe_dump({"name": "s", "modes": ["tracking"], "datasets": [
+        {"name": "demo", "map": str(demo / "map.yaml"), "log": str(demo / "log.clf"), "truth": str(demo / "truth.tum"),
+         "initial_pose": [18.961318, 9.225, 3.0954]}]}))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "mcl", "eval", "--suite", str(suite), "--seeds", "2", "--jobs", "2",
+                             "--no-baseline", "--no-progress", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    # both runs under way: each has opened its trajectory (written as trajectory.tum.partial until the run ends)
+    while len(list(out.glob("runs/demo/tracking/default/seed*/trajectory.tum.partial"))) < 2:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    workers = _children(proc.pid)
+    assert len(workers) >= 2
+    proc.send_signal(getattr(signal, sig))
+    t0 = time.monotonic()
+    out_text, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (out_text, err)
+    assert "interrupted: the finished runs are saved" in out_text
+    # the demo's whole run takes about 10 s a worker; stopped at the next update, the workers are gone at once
+    while any(_alive(w) for w in workers) and time.monotonic() < t0 + 10:
+        time.sleep(0.05)
+    assert not [w for w in workers if _alive(w)]
+    assert not list(out.glob("runs/demo/tracking/default/seed*/row.json"))  # neither run was finished
+    for summary in out.glob("runs/demo/tracking/default/seed*/summary.json"):
+        s = json.loads(summary.read_text())
+        assert s["interrupted"] and s["updates"] < 350, (summary, s["updates"])  # the demo has 350 updates
