@@ -329,8 +329,10 @@ class _Local:
         if self.pool is None:
             results = (fn(it) for it in items)
         else:
+            from mcl.suite import interrupt_workers
+
             futures = [self.pool.submit(fn, it) for it in items]
-            results = _in_order(futures, lambda f: f.result(), lambda f: f.cancel())
+            results = _in_order(futures, lambda f: f.result(), lambda f: f.cancel(), on_interrupt=interrupt_workers)
         for r in results:
             if isinstance(r, dict) and r.get("interrupted"):
                 raise KeyboardInterrupt
@@ -340,14 +342,17 @@ class _Local:
         return list(self.imap(fn, items))
 
 
-def _in_order(handles: list, get, cancel):
-    """Each handle's result in order; every handle cancelled when interrupted."""
+def _in_order(handles: list, get, cancel, on_interrupt=None):
+    """Each handle's result in order; every handle cancelled when interrupted (and ``on_interrupt()`` called on
+    Ctrl-C: the local pool's workers stop their runs, ``mcl.suite.interrupt_workers``)."""
     try:
         for h in handles:
             yield get(h)
-    except BaseException:  # KeyboardInterrupt, or the generator closed early
+    except BaseException as e:  # KeyboardInterrupt, or the generator closed early
         for h in handles:
             cancel(h)
+        if on_interrupt is not None and isinstance(e, KeyboardInterrupt):
+            on_interrupt()
         raise
 
 
