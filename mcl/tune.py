@@ -286,17 +286,20 @@ def objective_values(rows: list[dict]) -> dict:
 
 @contextmanager
 def _sigint_deferred():
-    """Ctrl-C is held while Optuna writes to the journal, and raised after."""
+    """Ctrl-C (or SIGTERM) is held while Optuna writes to the journal, and raised after."""
     caught = []
+    old = {}
     try:
-        old = signal.signal(signal.SIGINT, lambda *a: caught.append(1))
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            old[sig] = signal.signal(sig, lambda *a: caught.append(1))
     except ValueError:  # not the main thread
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
     if caught:
         raise KeyboardInterrupt
 
@@ -948,8 +951,11 @@ def run_from_args(args) -> int:
     with _executor(args.jobs, args.ray) as executor:
         tuner.make_worlds(executor, echo)
         if not args.report:
+            from mcl.suite import _TermAsInterrupt
+
             try:
-                optimise(tuner, trials=s.trials, executor=executor, progress=progress, echo=echo)
+                with _TermAsInterrupt():  # SIGTERM (kill, timeout, a batch scheduler) stops the study as Ctrl-C does
+                    optimise(tuner, trials=s.trials, executor=executor, progress=progress, echo=echo)
             except KeyboardInterrupt:
                 interrupted = True
         write_outputs(tuner, executor, heldout=not interrupted, echo=echo)
