@@ -854,10 +854,10 @@ def _finished(job: Job) -> dict | None:
     return row if row.get("fingerprint") == job.fingerprint else None
 
 
-class _TermAsInterrupt:
-    """While an evaluation runs, SIGTERM to its process (``kill PID``, ``timeout``) stops it as Ctrl-C does: the
-    finished rows kept, exit status 130. (Without this the process died at once and its pool's workers ran on,
-    orphaned, each to the end of its run.)"""
+class TermAsInterrupt:
+    """While an evaluation (or a ``mcl tune`` study) runs, SIGTERM to its process (``kill PID``, ``timeout``)
+    stops it as Ctrl-C does: the finished rows kept, exit status 130. (Without this the process died at once and
+    its pool's workers ran on, orphaned, each to the end of its run.)"""
 
     def __enter__(self):
         try:
@@ -914,7 +914,7 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     results: dict[str, dict] = {}
     errors: list[str] = []
     interrupted = False
-    term = _TermAsInterrupt().__enter__()
+    term = TermAsInterrupt().__enter__()
     try:
         worlds = {j.world[0]: j.world[1] for j in job_list if j.world is not None}
         todo_worlds = {w: kw for w, kw in worlds.items() if not Path(w, "sim.yaml").is_file()}

@@ -951,10 +951,10 @@ def run_from_args(args) -> int:
     with _executor(args.jobs, args.ray) as executor:
         tuner.make_worlds(executor, echo)
         if not args.report:
-            from mcl.suite import _TermAsInterrupt
+            from mcl.suite import TermAsInterrupt
 
             try:
-                with _TermAsInterrupt():  # SIGTERM (kill, timeout, a batch scheduler) stops the study as Ctrl-C does
+                with TermAsInterrupt():  # SIGTERM (kill, timeout, a batch scheduler) stops the study as Ctrl-C does
                     optimise(tuner, trials=s.trials, executor=executor, progress=progress, echo=echo)
             except KeyboardInterrupt:
                 interrupted = True
