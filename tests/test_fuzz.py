@@ -152,17 +152,27 @@ def mutated_log(draw):
     return data, (None if k is None else k + 1), lines, truncated or zipped
 
 
+def _first_word(raw: bytes) -> str | None:
+    """A line's first word as the reader reads it, or None (not UTF-8, or blank)."""
+    try:
+        words = raw.decode("utf-8").split()
+    except UnicodeDecodeError:
+        return None
+    return words[0] if words else None
+
+
 def _check_log(log, path) -> None:
     assert log.scans, "a log without scans must be an error"
     # the file's lines as the reader sees them (gzip decompressed, a truncated stream as far as it goes)
     file_lines = _read_bytes(path, str(path), []).split(b"\n")
     lines = [s.line for s in log.scans]
     assert lines == sorted(set(lines)), lines  # one scan per laser line, in file order
+    # the file's laser lines by number (from 1), each with its kind, its line split as the reader splits it:
+    # UTF-8 text, any Unicode whitespace (U+0085 too)
+    laser_lines = {i: kind for i, raw in enumerate(file_lines, 1) if (kind := _first_word(raw)) in LASER_KINDS}
     for s in log.scans:
-        assert s.kind in LASER_KINDS
-        assert 1 <= s.line <= len(file_lines)  # a real line of the file (0 or past the end is a reader bug)
-        # its own line, split as the reader splits it: UTF-8 text, any Unicode whitespace (U+0085 too)
-        assert file_lines[s.line - 1].decode("utf-8").split()[0] == s.kind, (s.line, file_lines[s.line - 1][:40])
+        # each scan names a laser line of its own kind (a line 0, past the end or of another record: a reader bug)
+        assert laser_lines.get(s.line) == s.kind, (s.line, s.kind, laser_lines.get(s.line))
         assert s.ranges.dtype == np.float64 and s.ranges.ndim == 1
         assert s.odom is not None and s.odom.shape == (3,) and np.isfinite(s.odom).all(), s
         assert np.isfinite(s.t)
