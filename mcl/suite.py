@@ -340,12 +340,18 @@ def make_world(outdir: str, kw: dict) -> str:
         return str(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
+    # A pool worker ignores Ctrl-C between runs (_worker_init); a world can take a minute to make, so here it
+    # hears it: the world is dropped (made again on the next evaluation) and the pool's shutdown waits for nothing
+    old = signal.signal(signal.SIGINT, signal.default_int_handler) if _IN_WORKER else None
     try:
         simulate(tmp, **kw)
         os.replace(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
     return str(out)
 
 

@@ -665,3 +665,37 @@ def test_a_signal_to_the_evaluation_alone_stops_its_workers_runs_too(tmp_path, s
     for summary in out.glob("runs/demo/tracking/default/seed*/summary.json"):
         s = json.loads(summary.read_text())
         assert s["interrupted"] and s["updates"] < 350, (summary, s["updates"])  # the demo has 350 updates
+
+
+def test_a_signal_while_the_worlds_are_made_stops_the_workers_and_leaves_no_world(tmp_path):
+    # Pool workers ignore Ctrl-C between runs; making a world used to go on to its end after a Ctrl-C (a large
+    # world: half a minute), and the finished world was kept. Now the worlds in the making are dropped at once.
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    suite = tmp_path / "s.yaml"
+    # two slow worlds, one per worker (each 15-40 s to make on this machine, uninterrupted)
+    suite.write_text(yaml.safe_dump({"name": "s", "modes": ["tracking"], "datasets": [
+        {"name": f"big-{k}", "simulate": {"kind": "large", "seed": 900 + k, "duration": 1800}} for k in (1, 2)]}))
+    cache = tmp_path / "worlds"
+    proc = subprocess.Popen([sys.executable, "-m", "mcl", "eval", "--suite", str(suite), "--jobs", "2",
+                             "--no-baseline", "--no-progress", "--out", str(tmp_path / "out"), "--cache", str(cache)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    # both worlds under way: each is made in a hidden folder beside its final one (.NAME.xxxx), written at its end
+    while len(list(cache.glob(".big-*"))) < 2:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    time.sleep(1.0)
+    workers = _children(proc.pid)
+    assert len(workers) >= 2
+    proc.send_signal(signal.SIGINT)  # to the evaluating process alone, as `kill -INT PID`
+    out_text, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (out_text, err)
+    t0 = time.monotonic()
+    while any(_alive(w) for w in workers) and time.monotonic() < t0 + 10:
+        time.sleep(0.05)
+    assert not [w for w in workers if _alive(w)]
+    assert sorted(p.name for p in cache.iterdir()) == []  # neither world finished, no half-made folder left
