@@ -779,6 +779,7 @@ def _run(
         "reseeds": reseeds,
         "stall_reseeds": stall_reseeds,
         "fault_updates": fault_updates,
+        "blind_updates": pf.blind_updates,
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / n_up,
         "rejected_particles": counts["rejected"],

@@ -30,7 +30,7 @@ import numpy as np
 
 from mcl.kernels.field import far_runs
 from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik, likelihood_field_loglik_serial
-from mcl.kernels.raycast import segments_blocked
+from mcl.kernels.raycast import cast_rays_serial, segments_blocked
 from mcl.kernels.segments import small_segments
 from mcl.maps import byte_mask
 from mcl.parallel import choose
@@ -385,9 +385,15 @@ class UnmappedObjects:
         self.origin = (float(grid.origin[0]), float(grid.origin[1]))
         self.resolution = float(grid.resolution)
 
-    def candidates(self, scan) -> np.ndarray | None:
-        """(K,) bool over the beams ``beam_endpoints`` keeps for ``scan``: those in a small segment; None when the
-        scan's beams are not in angular order (a fused scan: no neighbours to compare)."""
+    BLIND_WIDTH = 2.5  # m: with nothing mapped in view (blind), a segment this long is a wall the map should show
+    BLIND_MARGIN = 1.0  # m: "in view" reaches this far beyond the laser's range
+    BLIND_DISTANCE = 1.0  # m: blind, an endpoint is skipped only this far from every mapped obstacle: a few readings
+    # of a wall at the laser's limit, seen from an estimate a few decimetres off, are all the scan says (large-06)
+
+    def candidates(self, scan, width: float | None = None) -> np.ndarray | None:
+        """(K,) bool over the beams ``beam_endpoints`` keeps for ``scan``: those in a segment narrower than
+        ``width`` (default ``unmapped_width``; with a width given, the segments at the scan's ends too, by the part
+        seen); None when the scan's beams are not in angular order (a fused scan: no neighbours to compare)."""
         r = np.asarray(scan.ranges, dtype=np.float64).ravel()
         a = np.asarray(scan.angles, dtype=np.float64).ravel()
         if r.size < 3 or not np.all(np.diff(a) > 0.0):
@@ -395,10 +401,51 @@ class UnmappedObjects:
         max_range = getattr(scan, "max_range", None)
         small = np.empty(r.size, dtype=np.bool_)
         small_segments(r, a, valid_returns(r, max_range, self.cfg), float(self.cfg.unmapped_jump),
-                       float(self.cfg.unmapped_width), small)
+                       float(self.cfg.unmapped_width if width is None else width), small, width is not None)
         return small[beam_selection(r, a, max_range, self.cfg)]
 
-    def select(self, observation, candidates, pose, shifts=None):
+    def view(self, scan):
+        """(the directions of the beams a model scores, with or without a return: (A,) rad; the laser's reach in m)
+        of ``scan``, for :meth:`blind`."""
+        r = np.asarray(scan.ranges, dtype=np.float64).ravel()
+        a = np.asarray(scan.angles, dtype=np.float64).ravel()
+        reach = float(self.cfg.range_max)
+        max_range = getattr(scan, "max_range", None)
+        if max_range is not None and 0.0 < float(max_range) < reach:
+            reach = float(max_range)
+        return np.ascontiguousarray(a[_evenly_spaced(r.size, int(self.cfg.max_beams))]), reach
+
+    def any_far(self, observation, pose, distance: float) -> bool:
+        """Whether some endpoint of ``observation`` (robot frame, (2, K)), seen from ``pose``, lies farther than
+        ``distance`` from every mapped obstacle (one field lookup each: :meth:`blind`'s cast is needed only then)."""
+        if observation.shape[1] == 0:
+            return False
+        idx = np.arange(observation.shape[1])
+        far = np.empty(idx.size, dtype=np.bool_)
+        th = float(pose[2])
+        return far_runs(self.dist, self.origin[0], self.origin[1], self.resolution, float(pose[0]), float(pose[1]),
+                        math.cos(th), math.sin(th), np.ascontiguousarray(observation, dtype=np.float64), idx,
+                        _NO_SHIFTS, _NO_SHIFTS, np.float32(distance), far) > 0
+
+    def blind(self, pose, laser_pose, view, blocked, min_beams: int) -> bool:
+        """Whether the map shows the laser fewer than ``min_beams`` obstacles from ``pose``: of the ``view``'s
+        directions, cast from the laser (``laser_pose`` in the robot frame) through ``blocked`` (occupied cells),
+        fewer than that many meet one within the laser's reach and ``BLIND_MARGIN`` beyond it (a wall just out of
+        reach from an estimate a few decimetres off is in reach from the true pose: its few readings near the
+        laser's limit are all the scan says, large-06)."""
+        if view is None:
+            return False
+        angles, reach = view[0], view[1]
+        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        lx, ly, lth = (float(v) for v in laser_pose)
+        at = np.array([[float(pose[0]) + c * lx - s * ly], [float(pose[1]) + s * lx + c * ly],
+                       [float(pose[2]) + lth]])
+        out = np.empty((1, angles.size))
+        reach += self.BLIND_MARGIN
+        cast_rays_serial(at, angles, blocked, self.origin[0], self.origin[1], self.resolution, reach, out)
+        return int(np.count_nonzero(out[0] < reach - self.resolution)) < min_beams
+
+    def select(self, observation, candidates, pose, shifts=None, whole: bool = False, distance: float | None = None):
         """(the observation to score, the skipped robot-frame endpoints (2, k) or None) for the robot-frame
         endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``. With
         ``shifts`` ((M, 2) world-frame offsets of ``pose``, or a function returning them or None, called only
@@ -414,14 +461,14 @@ class UnmappedObjects:
         # candidates is the map's when one shift puts all of it on mapped obstacles (mcl.kernels.field.far_runs)
         args = (self.dist, self.origin[0], self.origin[1], self.resolution, float(pose[0]), float(pose[1]),
                 math.cos(th), math.sin(th), e, idx)
-        d = np.float32(self.cfg.unmapped_distance)  # compared in float32 with the float32 field, as numpy does
+        d = np.float32(self.cfg.unmapped_distance if distance is None else distance)  # in float32, as the field
         n_far = far_runs(*args, _NO_SHIFTS, _NO_SHIFTS, d, far)
         if n_far and callable(shifts):
             shifts = shifts()  # computed only when a candidate is far from the map
         if n_far and shifts is not None:
             sh = np.asarray(shifts, dtype=np.float64)
             n_far = far_runs(*args, np.ascontiguousarray(sh[:, 0]), np.ascontiguousarray(sh[:, 1]), d, far)
-        if n_far == 0 or 2 * n_far >= observation.shape[1]:
+        if n_far == 0 or (2 * n_far >= observation.shape[1] and not whole):
             return observation, None
         skip = np.zeros(observation.shape[1], dtype=bool)
         skip[idx[far]] = True
