@@ -15,9 +15,9 @@ from mcl.maps import OccupancyGrid
 from mcl.sensors import UnmappedObjects, beam_endpoints, beam_selection
 
 
-def _segments_reference(r, a, valid, jump, width):
-    """The rule written out: maximal runs of valid beams with steps <= jump, not touching the scan's ends,
-    whose end points are closer than width."""
+def _segments_reference(r, a, valid, jump, width, ends=False):
+    """The rule written out: maximal runs of valid beams with steps <= jump, not touching the scan's ends (unless
+    ``ends``), whose end points are closer than width."""
     out = np.zeros(r.size, dtype=bool)
     runs, cur = [], []
     for k in range(r.size):
@@ -31,7 +31,7 @@ def _segments_reference(r, a, valid, jump, width):
         runs.append(cur)
     for run in runs:
         i, j = run[0], run[-1]
-        if i == 0 or j == r.size - 1:
+        if not ends and (i == 0 or j == r.size - 1):
             continue
         p = np.array([r[i] * math.cos(a[i]), r[i] * math.sin(a[i])])
         q = np.array([r[j] * math.cos(a[j]), r[j] * math.sin(a[j])])
@@ -73,6 +73,9 @@ def test_small_segments_agrees_with_the_rule_written_out_on_random_scans():
         out = np.empty(b, dtype=bool)
         small_segments(r, a, valid, 0.3, 1.2, out)
         np.testing.assert_array_equal(out, _segments_reference(r, a, valid, 0.3, 1.2), err_msg=f"trial {trial}")
+        # with ends (unmapped_blind's segments), a run touching the scan's first or last beam is judged by the part seen
+        small_segments(r, a, valid, 0.3, 2.5, out, True)
+        np.testing.assert_array_equal(out, _segments_reference(r, a, valid, 0.3, 2.5, True), err_msg=f"ends {trial}")
 
 
 def _select_reference(dist, origin, res, d_max, observation, candidates, pose, shifts):
