@@ -7,6 +7,8 @@ differences wrapped to (-pi, pi] around that mean.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mcl.kernels.moments import pose_moments
@@ -15,6 +17,18 @@ from mcl.kernels.moments import pose_moments
 def wrap_angle(a):
     """Normalise angles to (-pi, pi]."""
     return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a ⊕ b for planar poses (x, y, theta)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], float(wrap_angle(a[2] + b[2]))])
+
+
+def inverse(a: np.ndarray) -> np.ndarray:
+    """⊖a: the pose b with a ⊕ b = 0."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
 
 
 def weighted_mean_pose(particles: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -147,8 +147,7 @@ class ParticleFilter:
         self.quality = ScanQuality(grid, cfg.quality)
         self.unmapped = (UnmappedObjects(grid, cfg.sensor, dist=self.quality.dist)
                          if cfg.sensor.unmapped_skip and cfg.sensor.model == "likelihood_field" else None)
-        self._unmapped_candidates = None  # (observation, (K,) bool) of the scan last prepared
-        self._unmapped_view = None  # (the scan's evenly spaced beam angles, its maximum range): UnmappedObjects.view
+        self._unmapped_candidates = None  # (observation, (K,) bool, scan) of the scan last prepared
         self.blind_updates = 0  # updates whose every return was skipped with nothing mapped in view (unmapped_blind)
         # Recovery draws injected poses from this: sampler(n, rng, observation) -> (3, n). Uniform over the free
         # space the motion model allows unless replaced (a landmark-based pose sampler when landmarks are used).
@@ -313,10 +312,7 @@ class ParticleFilter:
         self._laser_pose = np.asarray(laser_pose, dtype=np.float64)
         observation = self.sensor.prepare(scan, laser_pose)
         if self.unmapped is not None:
-            self._unmapped_candidates = (observation, self.unmapped.candidates(scan))
-            self._unmapped_view = None
-            if self.cfg.sensor.unmapped_blind:
-                self._unmapped_view = (*self.unmapped.view(scan), self.unmapped.candidates(scan, self.unmapped.BLIND_WIDTH))
+            self._unmapped_candidates = (observation, self.unmapped.candidates(scan), scan)
         return observation
 
     def time_backwards(self, dt: float) -> None:
@@ -452,9 +448,8 @@ class ParticleFilter:
         if observation is None:
             return
         if self._tracking_unmapped(observation):
-            blind = self.blind_updates
-            observation, skipped = self._skip_unmapped(observation)
-            if self.blind_updates != blind:
+            observation, skipped, blind = self._skip_unmapped(observation)
+            if blind:
                 self._scan_observation = observation  # the quality signal too weighs no person (unmapped_blind)
             if skipped is not None and info is not None:
                 info.skipped_beams = skipped.shape[1]
@@ -531,37 +526,39 @@ class ParticleFilter:
         ``sensor.unmapped_fit``. At the true pose the rest fits (real logs and corridor-05: score >= 0.87 in 99 % of
         the scans with a skip, >= 0.96 in 95 %); at a look-alike place a global search settled on it does not
         (intel_lab: 0.56-0.91), and skipping what does not fit there would help the filter stay (intel_lab's global
-        run converged at 251 s instead of 92 s); after a kidnap neither fits."""
-        candidates = self._unmapped_candidates[1]
+        run converged at 251 s instead of 92 s); after a kidnap neither fits. Returns (the observation to score,
+        the skipped endpoints or None, whether the update was blind: ``sensor.unmapped_blind``, below)."""
+        _, candidates, scan = self._unmapped_candidates
         if candidates is None or observation.shape[1] == 0:
-            return observation, None
+            return observation, None, False
         pose = self._moved_estimate()
         # ``sensor.unmapped_blind``: with no mapped obstacle in the laser's view from the estimate (open floor, a
         # short-range laser in a hall), the returns off the map are people or furniture whatever their share of the
         # scan, and there is no rest to fit: matched to the map anyway, they pull the cloud to wherever they line up
         # with a wall or a pillar. They are skipped; with nothing left the update only predicts (dead reckoning),
-        # and the quality signal has no evidence for or against the place.
+        # and the quality signal has no evidence for or against the place. The cast is made only when a return
+        # lies that far off the map.
         far = max(self.cfg.sensor.unmapped_distance, self.unmapped.BLIND_DISTANCE)
         blind = (self.cfg.sensor.unmapped_blind and self.unmapped.any_far(observation, pose, far)
-                 and self.unmapped.blind(pose, self._laser_pose, self._unmapped_view, self.quality.blocked,
+                 and self.unmapped.blind(pose, self._laser_pose, scan, self.quality.blocked,
                                          self.cfg.quality.min_beams))
         if blind:
             # then a return off the map is an object the map lacks, a person close by or a group too (segments up to
             # BLIND_WIDTH); a longer one is a wall, which says the estimate is wrong, and is kept
-            candidates = self._unmapped_view[2]
+            candidates = self.unmapped.candidates(scan, self.unmapped.BLIND_WIDTH)
         elif not candidates.any():
-            return observation, None
+            return observation, None, False
         kept, skipped = self.unmapped.select(
             observation, candidates, pose, lambda: self._unmapped_shifts(pose), whole=blind,
             distance=far if blind else None)
         if skipped is None:
-            return observation, None
+            return observation, None, False
         if blind:
             self.blind_updates += 1
-            return kept, skipped
+            return kept, skipped, True
         if self.quality.fit(pose, kept, self._laser_pose[:2]).score < self.cfg.sensor.unmapped_fit:
-            return observation, None
-        return kept, skipped
+            return observation, None, False
+        return kept, skipped, False
 
     def _unmapped_shifts(self, moved):
         """``sensor.unmapped_spread``: offsets of the estimate along the cloud's major axis, forward (the way this

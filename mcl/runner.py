@@ -33,19 +33,7 @@ import numpy as np
 
 from mcl.config import Config, dump_config
 from mcl.errors import ConfigError, DataError
-from mcl.estimate import wrap_angle
-
-
-def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a ⊕ b for planar poses (x, y, theta)."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], float(wrap_angle(a[2] + b[2]))])
-
-
-def inverse(a: np.ndarray) -> np.ndarray:
-    """⊖a: the pose b with a ⊕ b = 0."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
+from mcl.estimate import compose, inverse, wrap_angle  # noqa: F401  (compose, inverse: mcl.runner's too)
 
 
 def _to_world(pose, points) -> np.ndarray:

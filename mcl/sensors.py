@@ -32,8 +32,17 @@ from mcl.kernels.field import far_runs
 from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik, likelihood_field_loglik_serial
 from mcl.kernels.raycast import cast_rays_serial, segments_blocked
 from mcl.kernels.segments import small_segments
+from mcl.estimate import compose
 from mcl.maps import byte_mask
 from mcl.parallel import choose
+
+
+def no_return_range(range_max: float, max_range) -> float:
+    """The range at and beyond which a reading means no return: ``sensor.range_max``, or the scan's own
+    ``max_range`` (None: unknown) when that is smaller."""
+    if max_range is not None and 0.0 < float(max_range) < float(range_max):
+        return float(max_range)
+    return float(range_max)
 
 
 def beam_selection(ranges, angles, max_range, cfg) -> np.ndarray:
@@ -407,13 +416,9 @@ class UnmappedObjects:
     def view(self, scan):
         """(the directions of the beams a model scores, with or without a return: (A,) rad; the laser's reach in m)
         of ``scan``, for :meth:`blind`."""
-        r = np.asarray(scan.ranges, dtype=np.float64).ravel()
         a = np.asarray(scan.angles, dtype=np.float64).ravel()
-        reach = float(self.cfg.range_max)
-        max_range = getattr(scan, "max_range", None)
-        if max_range is not None and 0.0 < float(max_range) < reach:
-            reach = float(max_range)
-        return np.ascontiguousarray(a[_evenly_spaced(r.size, int(self.cfg.max_beams))]), reach
+        reach = no_return_range(self.cfg.range_max, getattr(scan, "max_range", None))
+        return np.ascontiguousarray(a[_evenly_spaced(a.size, int(self.cfg.max_beams))]), reach
 
     def any_far(self, observation, pose, distance: float) -> bool:
         """Whether some endpoint of ``observation`` (robot frame, (2, K)), seen from ``pose``, lies farther than
@@ -427,19 +432,16 @@ class UnmappedObjects:
                         math.cos(th), math.sin(th), np.ascontiguousarray(observation, dtype=np.float64), idx,
                         _NO_SHIFTS, _NO_SHIFTS, np.float32(distance), far) > 0
 
-    def blind(self, pose, laser_pose, view, blocked, min_beams: int) -> bool:
-        """Whether the map shows the laser fewer than ``min_beams`` obstacles from ``pose``: of the ``view``'s
-        directions, cast from the laser (``laser_pose`` in the robot frame) through ``blocked`` (occupied cells),
+    def blind(self, pose, laser_pose, scan, blocked, min_beams: int) -> bool:
+        """Whether the map shows the laser fewer than ``min_beams`` obstacles from ``pose``: of ``scan``'s scored
+        directions (:meth:`view`), cast from the laser (``laser_pose`` in the robot frame) through ``blocked``,
         fewer than that many meet one within the laser's reach and ``BLIND_MARGIN`` beyond it (a wall just out of
         reach from an estimate a few decimetres off is in reach from the true pose: its few readings near the
         laser's limit are all the scan says, large-06)."""
-        if view is None:
+        if scan is None:
             return False
-        angles, reach = view[0], view[1]
-        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
-        lx, ly, lth = (float(v) for v in laser_pose)
-        at = np.array([[float(pose[0]) + c * lx - s * ly], [float(pose[1]) + s * lx + c * ly],
-                       [float(pose[2]) + lth]])
+        angles, reach = self.view(scan)
+        at = compose(np.asarray(pose, dtype=np.float64), np.asarray(laser_pose, dtype=np.float64))[:, None]
         out = np.empty((1, angles.size))
         reach += self.BLIND_MARGIN
         cast_rays_serial(at, angles, blocked, self.origin[0], self.origin[1], self.resolution, reach, out)
@@ -510,9 +512,7 @@ def beam_observation(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0))
     if r.size > max_beams:
         sel = _evenly_spaced(r.size, max_beams)
         r, a = r[sel], a[sel]
-    zmax = float(cfg.range_max)
-    if max_range is not None and 0.0 < float(max_range) < zmax:
-        zmax = float(max_range)
+    zmax = no_return_range(cfg.range_max, max_range)
     with np.errstate(invalid="ignore"):
         keep = ~np.isnan(r) & (r > float(cfg.range_min))
     r, a = r[keep], a[keep]

@@ -380,14 +380,14 @@ def test_blind_when_the_map_shows_the_laser_fewer_than_min_beams_obstacles():
     laser = (0.0, 0.0, 0.0)
     # facing the pillar 4.2 m ahead: 2 of the 60 directions meet it (blind under 5, not under 2); facing the west
     # wall 20 m away, beyond the laser's 8 m: none; 3 m from the south wall, facing it: most directions
-    assert u.blind((20.0, 20.0, 0.0), laser, view, blocked, 5)
-    assert not u.blind((20.0, 20.0, 0.0), laser, view, blocked, 2)
-    assert u.blind((20.0, 20.0, math.pi), laser, view, blocked, 1)
-    assert not u.blind((20.0, 3.0, -math.pi / 2), laser, view, blocked, 5)
+    assert u.blind((20.0, 20.0, 0.0), laser, scan, blocked, 5)
+    assert not u.blind((20.0, 20.0, 0.0), laser, scan, blocked, 2)
+    assert u.blind((20.0, 20.0, math.pi), laser, scan, blocked, 1)
+    assert not u.blind((20.0, 3.0, -math.pi / 2), laser, scan, blocked, 5)
     # the laser mounted 0.5 m ahead, turned to face back: from (20, 3.7) facing north it looks south at the wall
-    assert not u.blind((20.0, 3.7, math.pi / 2), (0.5, 0.0, math.pi), view, blocked, 5)
-    assert u.blind((20.0, 3.7, math.pi / 2), laser, view, blocked, 5)
-    assert not u.blind((20.0, 20.0, 0.0), laser, None, blocked, 5)  # no view (a fused scan): never blind
+    assert not u.blind((20.0, 3.7, math.pi / 2), (0.5, 0.0, math.pi), scan, blocked, 5)
+    assert u.blind((20.0, 3.7, math.pi / 2), laser, scan, blocked, 5)
+    assert not u.blind((20.0, 20.0, 0.0), laser, None, blocked, 5)  # no scan: never blind
 
 
 @pytest.mark.parametrize("blind", ["true", "false"])
