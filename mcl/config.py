@@ -222,6 +222,10 @@ class SensorConfig:
     range_min: float = field(default=0.0, metadata=_rng(0.0))
     range_max: float = field(default=80.0, metadata=_rng(0.0, lo_open=True))  # readings >= this: no return
     time_offset: float = field(default=0.0, metadata=_rng(-1e10, 1e10))  # s added to each scan's stamp
+    # deskewing: s from a scan's first beam to its last (beams in array order, the first at the stamp); each endpoint
+    # is moved by the robot's motion (from the odometry) since the stamp. auto: the input's own beam times (a bag's
+    # LaserScan time_increment; a CARMEN log gives none); 0: off
+    sweep_time: float | Literal["auto"] = field(default="auto", metadata=_rng(0.0, 1.0))
     exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # temper the beam product
     # beam skipping (after AMCL likelihood_field_prob): once converged, ignore the short beams most particles cannot
     # explain (AMCL's own settings: beam_skip_distance 0.5, beam_skip_threshold 0.3, beam_skip_rule amcl)
@@ -472,7 +476,7 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
 
 
 def _check_range(value: Any, meta: dict, key: str) -> None:
-    if "range" not in meta or value is None:
+    if "range" not in meta or value is None or isinstance(value, str):
         return
     lo, hi, lo_open, hi_open = meta["range"]
     if lo is not None and (value < lo or (lo_open and value == lo)):

@@ -83,13 +83,16 @@ def valid_returns(ranges, max_range, cfg) -> np.ndarray:
     return valid
 
 
-def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0)) -> np.ndarray:
+def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0), sweep=None) -> np.ndarray:
     """(2, K) float64 endpoints, in the robot frame, of the valid beams of one scan.
 
     ranges, angles: (B,) readings (m) and beam angles in the laser frame (rad).
     max_range: the scan's own no-return value, or None.
     cfg: reads range_min, range_max, max_beams.
     laser_pose: (x, y, theta) of the laser in the robot frame.
+    sweep: None, or (tau (B,), twist (3,)) from ``sweep_of``: beam j was taken tau[j] s after the scan's stamp
+    while the robot moved at twist = (vx, vy, omega) in its own frame; its endpoint is then moved into the robot
+    frame at the stamp (deskewed).
 
     The beams are ``beam_selection``'s (AMCL's subsampling: evenly spaced over *all* B beams, then the invalid
     ones among them dropped, so K <= max_beams).
@@ -103,7 +106,26 @@ def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0)) -
     out = np.empty((2, r.size))
     out[0] = lx + r * np.cos(ang)
     out[1] = ly + r * np.sin(ang)
+    if sweep is not None:
+        tau, (vx, vy, w) = sweep
+        tau = np.asarray(tau, dtype=np.float64)[sel]
+        # the robot at beam j's time, seen from the robot at the stamp: (vx tau, vy tau, omega tau) to first order
+        c, s = np.cos(w * tau), np.sin(w * tau)
+        x, y = out[0].copy(), out[1].copy()
+        out[0] = vx * tau + c * x - s * y
+        out[1] = vy * tau + s * x + c * y
     return out
+
+
+def sweep_of(scan):
+    """(tau (B,), twist (3,)) for ``beam_endpoints``' deskewing of a ``Scan`` whose beam times and robot velocity
+    are known (``Scan.beam_dt``, ``Scan.twist``), else None."""
+    twist = getattr(scan, "twist", None)
+    dt = float(getattr(scan, "beam_dt", 0.0))
+    if twist is None or dt == 0.0:
+        return None
+    n = np.asarray(scan.ranges).shape[0]
+    return float(getattr(scan, "beam_t0", 0.0)) + dt * np.arange(n, dtype=np.float64), twist
 
 
 def scan_endpoints(scan, cfg, laser_pose=None) -> np.ndarray:
@@ -122,7 +144,7 @@ def scan_endpoints(scan, cfg, laser_pose=None) -> np.ndarray:
         laser_pose = getattr(scan, "laser_offset", None)
     if laser_pose is None:
         laser_pose = (0.0, 0.0, 0.0)
-    return beam_endpoints(ranges, angles, getattr(scan, "max_range", None), cfg, laser_pose)
+    return beam_endpoints(ranges, angles, getattr(scan, "max_range", None), cfg, laser_pose, sweep_of(scan))
 
 
 def point_log_likelihood(d, cfg) -> np.ndarray:
@@ -206,7 +228,7 @@ class LikelihoodField:
 
     def prepare(self, scan, laser_pose) -> np.ndarray:
         """The observation this model scores, made once per scan: robot-frame beam endpoints (2, K)."""
-        return beam_endpoints(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose)
+        return beam_endpoints(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose, sweep_of(scan))
 
     @staticmethod
     def endpoints(observation) -> np.ndarray:

@@ -277,6 +277,23 @@ def _reversal_plan(rng, n_ticks, reversals):
 GROUND_HIT_S = 2.0  # s: how long each of simulate(ground_hits=G)'s episodes lasts
 
 
+def _swept(truth, t, scan_ticks, angles, sweep: float, world, range_max: float) -> np.ndarray:
+    """Ranges (S, B) of scans taken while the robot moves: beam ``j`` of the scan stamped at tick ``k`` is cast
+    from the true pose at ``t[k] + j / (B - 1) * sweep`` (linear between ticks, the heading unwrapped), as a
+    spinning laser sweeps its beams in angle order after the stamp (ROS LaserScan ``time_increment`` > 0)."""
+    from mcl.kernels.raycast import cast_rays
+
+    b = angles.size
+    tb = t[scan_ticks][:, None] + np.arange(b)[None, :] * (sweep / max(b - 1, 1))
+    th = np.unwrap(truth[:, 2])
+    rays = np.vstack([np.interp(tb.ravel(), t, truth[:, 0]), np.interp(tb.ravel(), t, truth[:, 1]),
+                      np.interp(tb.ravel(), t, th) + np.tile(angles, scan_ticks.size)])
+    out = np.empty((rays.shape[1], 1))
+    cast_rays(np.ascontiguousarray(rays), np.zeros(1), world.blocked, world.origin[0], world.origin[1],
+              world.resolution, range_max, out)
+    return out.reshape(scan_ticks.size, b)
+
+
 def _ground_hits(rng, t, angles, episodes: int, duration: float, exact) -> list[tuple[float, float]]:
     """Tilt the laser onto the ground ``episodes`` times, one in each equal share of the run at a random place in
     it, for ``GROUND_HIT_S``: in each scan of an episode (rows of ``exact``, the ranges cast at times ``t``) a flat
@@ -549,7 +566,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
-             scan_rate: float = 5.0) -> dict:
+             scan_rate: float = 5.0, scan_sweep: float = 0.0) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -631,6 +648,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected 0..1000, got {reversals!r}")
     _check(isinstance(ground_hits, (int, np.integer)) and 0 <= ground_hits <= duration / (2 * GROUND_HIT_S),
            "ground_hits", f"expected 0..{int(duration / (2 * GROUND_HIT_S))} for {duration:g} s, got {ground_hits!r}")
+    _check(isinstance(scan_sweep, (int, float, np.number)) and math.isfinite(scan_sweep)
+           and 0.0 <= scan_sweep <= 1.0 / scan_rate + 1e-12, "scan_sweep",
+           f"expected 0..{1.0 / scan_rate:g} s (one scan period), got {scan_sweep!r}")
+    _check(not scan_sweep or not (dynamic_obstacles or unmapped_furniture), "scan_sweep",
+           "a sweeping scan is cast against the mapped world only: set dynamic_obstacles and unmapped_furniture to 0")
     odom_rate, scan_every, sim_dt = _rates(float(scan_rate))
     n_ticks = int(round(duration * odom_rate)) + 1
     kidnap_tick = None
@@ -662,6 +684,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     exact = np.empty((scan_ticks.size, angles.size))
     cast_rays(np.ascontiguousarray(truth[scan_ticks].T), angles, blocked, world.origin[0], world.origin[1],
               world.resolution, range_max, exact)
+    if scan_sweep:
+        exact = _swept(truth, t, scan_ticks, angles, float(scan_sweep), world, range_max)
     furniture = []
     if unmapped_furniture:
         # A seventh child stream: the others are unchanged.
@@ -770,6 +794,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     }
     if reversals:
         params["reversals"] = int(reversals)
+    if scan_sweep:
+        params["laser"]["sweep_s"] = float(scan_sweep)
     if hit_windows:
         params["ground_hits"] = [[round(a, 3), round(b, 3)] for a, b in hit_windows]
     if lm_obs is not None:
@@ -949,14 +975,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scan-rate", type=float, default=5.0, metavar="HZ",
                         help="laser scans per second, 0.5-100; default 5. The odometry (ODOM lines, /odom) runs "
                         "at 10 Hz or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz)")
+    parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
+                        help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
+                        "s a turn), beams in angle order from the stamp, while the robot moves; at most one scan "
+                        "period, needs --dynamic-obstacles 0 --unmapped-furniture 0. A bag (--format) carries it as "
+                        "LaserScan time_increment; default 0 (every beam at the stamp)")
     parser.add_argument("--ground-hits", type=int, default=0, metavar="G",
                         help="tilt the laser onto the ground G times over the run, 2 s each: a line of returns "
                         "1.5-5 m ahead, moving every scan, on no map (a robot rocking on a ramp); default 0")
 
 
-def write_log_as_bag(outdir, fmt: str) -> Path:
+def write_log_as_bag(outdir, fmt: str, sweep: float = 0.0) -> Path:
     """Replace ``outdir/log.clf`` by the same data as a ROS bag (``log.bag``, ``log.db3`` or ``log.mcap``,
-    mcl.datasets.bagwrite): /scan, /odom, /tf_static, and truth.tum as /ground_truth."""
+    mcl.datasets.bagwrite): /scan, /odom, /tf_static, and truth.tum as /ground_truth. ``sweep`` (the world's
+    ``scan_sweep``) gives each LaserScan its time_increment."""
     from mcl.datasets.bagwrite import convert
     from mcl.trajectory import read_tum
 
@@ -964,7 +996,7 @@ def write_log_as_bag(outdir, fmt: str) -> Path:
     bag = out / ("log." + {"bag1": "bag", "db3": "db3", "mcap": "mcap"}[fmt])
     if bag.exists():
         bag.unlink()
-    convert(out / "log.clf", bag, truth=read_tum(out / "truth.tum"), echo=lambda m: None)
+    convert(out / "log.clf", bag, truth=read_tum(out / "truth.tum"), echo=lambda m: None, sweep=sweep)
     (out / "log.clf").unlink()
     return bag
 
@@ -976,10 +1008,11 @@ def run_from_args(args: argparse.Namespace) -> int:
                  dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                  landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
                  depth_every=args.depth_every, map_resolution=args.map_resolution,
-                 reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate)
+                 reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
+                 scan_sweep=args.scan_sweep)
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
-        write_log_as_bag(s["outdir"], fmt)
+        write_log_as_bag(s["outdir"], fmt, sweep=args.scan_sweep)
     x, y, th = s["start_pose"]
     msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
            f"start pose {x:.3f} {y:.3f} {th:.3f}")

@@ -179,13 +179,15 @@ def _inverse(a):
 
 
 def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initial=None, truth=None,
-                truth_topic: str = "/ground_truth", kind: str | None = None) -> int:
+                truth_topic: str = "/ground_truth", kind: str | None = None, sweep: float = 0.0) -> int:
     """Write ``scans`` (Scan records) as a bag (see the module doc); returns the number of scans written.
 
     odom: ``topic`` (/odom), ``tf`` (odom -> base_link on /tf) or ``both``. mount: (x, y, theta) of the laser in
     a new base frame: the odometry is then that of base = robot ∘ laser_offset ∘ mount⁻¹ (same laser poses, a
     laser off the base's centre). grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for
-    /initialpose; truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``.
+    /initialpose; truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``. Each LaserScan's
+    time_increment is the scan's own beam time step (``Scan.beam_dt``, when its first beam is at the stamp), else
+    ``sweep`` / (beams - 1): s from the first beam to the last (0: none).
     """
     n = 0
     with BagOut(out, kind) as b:
@@ -222,11 +224,12 @@ def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initi
                 b.write("/tf", "tf2_msgs/msg/TFMessage", s.t,
                         b.msg("tf2_msgs/msg/TFMessage", transforms=[b.transform(s.t, "odom", "base_link", base)]))
             r = np.asarray(s.ranges, dtype=np.float32)
+            ti = float(s.beam_dt) if s.beam_dt and s.beam_t0 == 0.0 else (sweep / (r.size - 1) if r.size > 1 else 0.0)
             rmax = float(s.max_range) if s.max_range is not None else math.inf
             b.write("/scan", L, s.t, b.msg(
                 L, header=b.header(s.t, "laser"), angle_min=float(s.angle_min),
                 angle_max=float(s.angle_min + s.angle_increment * max(r.size - 1, 0)),
-                angle_increment=float(s.angle_increment), time_increment=0.0, scan_time=0.0, range_min=0.0,
+                angle_increment=float(s.angle_increment), time_increment=ti, scan_time=0.0, range_min=0.0,
                 range_max=rmax, ranges=r, intensities=np.zeros(0, dtype=np.float32)))
             n += 1
         if truth is not None:
@@ -267,7 +270,7 @@ def _clf_line_of(s) -> str:
 
 
 def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=None, grid=None, initial=None,
-            truth=None, laser: str = "auto", echo=print) -> int:
+            truth=None, laser: str = "auto", echo=print, sweep: float = 0.0) -> int:
     """``mcl convert``: a bag to a CARMEN log, a CARMEN log (or a bag) to a bag. Returns the scans written."""
     from mcl.trajectory import LineWriter
 
@@ -295,7 +298,7 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=No
         scans = log.laser_stream(laser)
     if out_kind != "clf":
         return write_scans(out, scans, odom=odom, mount=mount, grid=grid, initial=initial, truth=truth,
-                           kind=out_kind)
+                           kind=out_kind, sweep=sweep)
     w = LineWriter(out, header=f"# mcl convert {src.name}: ROBOTLASER1 + ODOM per scan; poses in the odometry frame")
     n = 0
     try:

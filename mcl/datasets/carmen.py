@@ -66,6 +66,13 @@ class Scan:
     rv: float = 0.0
     kind: str = "FLASER"
     line: int = 0  # 1-based line number in the log
+    # When each beam was taken (a spinning laser's sweep): beam j at t + beam_t0 + j * beam_dt (s). A bag's
+    # LaserScan time_increment; 0 in a CARMEN log (it does not say; sensor.sweep_time can)
+    beam_t0: float = 0.0
+    beam_dt: float = 0.0
+    # (vx, vy, omega) the robot's velocity over the sweep in its frame at t, from the odometry (mcl.runner sets it
+    # when sensor.sweep_time applies); None: the beams are taken as all measured at t
+    twist: np.ndarray | None = None
 
     @property
     def angles(self) -> np.ndarray:

@@ -318,17 +318,33 @@ class BagScans:
     def _scan(self, conn, msg, k: int) -> Scan:
         t = stamp_seconds(msg.header.stamp)
         flip = conn.topic in self.mirrored
+        t0 = dt = 0.0
         if conn.msgtype == LASER:
             ranges, amin, inc, rmax = laser_ranges(msg)
+            t0, dt = beam_times(msg.time_increment, ranges.size)
             if flip:  # beam i at angle a points at -a: reversed, the beams run counter-clockwise again
                 ranges = np.ascontiguousarray(ranges[::-1])
                 amin = -(amin + inc * (ranges.size - 1))
+                t0, dt = t0 + dt * (ranges.size - 1), -dt
         else:
             ranges, amin, inc, rmax = cloud_ranges(msg, self.cloud_z, self.cloud_beams, flip)
         odom, tv, rv = odometry_at(self.odometry, t)
         if not self.has_twist:
             tv = rv = 0.0
-        return Scan(t, ranges, amin, inc, rmax, odom, self.offsets.get(conn.topic), tv, rv, conn.topic, k)
+        return Scan(t, ranges, amin, inc, rmax, odom, self.offsets.get(conn.topic), tv, rv, conn.topic, k,
+                    beam_t0=t0, beam_dt=dt)
+
+
+MAX_SWEEP = 1.0  # s: a LaserScan whose time_increment spreads its beams over longer is not a sweep (ignored)
+
+
+def beam_times(time_increment, n: int) -> tuple[float, float]:
+    """(beam_t0, beam_dt) of a LaserScan of ``n`` beams: beam i taken at the stamp + i * time_increment (REP 117's
+    header stamp is the first beam's). (0, 0) when it says nothing usable: 0, not finite, or a sweep over 1 s."""
+    ti = float(time_increment)
+    if n < 2 or not math.isfinite(ti) or ti == 0.0 or abs(ti) * (n - 1) > MAX_SWEEP:
+        return 0.0, 0.0
+    return 0.0, ti
 
 
 def laser_ranges(msg):
