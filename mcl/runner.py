@@ -305,6 +305,13 @@ def _deskew(scans, log, sweep, echo, timed: bool):
         odometry = np.array([(s.t, *s.odom, s.tv, s.rv) for s in scans], dtype=np.float64).reshape(-1, 6)
     if sweep != "auto":
         echo(f"{log.path}: sensor.sweep_time {float(sweep):g} s: each scan deskewed by the odometry's motion over it")
+    else:
+        swept = {t: v for t, v in getattr(log, "sweeps", {}).items() if v}
+        if not swept:
+            return scans  # no LaserScan says when its beams were taken
+        said = ", ".join(f"{t} {v:.3g} s" for t, v in swept.items())
+        echo(f"{log.path}: a laser sweep takes {said} (LaserScan time_increment): each scan deskewed by the "
+             "odometry's motion over it (sensor.sweep_time: 0 turns it off)")
     return _Deskewed(scans, odometry, sweep)
 
 

@@ -158,3 +158,27 @@ def test_a_swept_worlds_first_beam_is_the_unswept_worlds(tmp_path):
     with pytest.raises(ConfigError, match="scan_sweep"):
         simulate(tmp_path / "d", kind="office", seed=5, duration=10.0, scan_sweep=0.5, dynamic_obstacles=0,
                  unmapped_furniture=0)  # longer than a scan period (5 Hz)
+
+
+def test_bag_info_says_whether_the_scans_will_be_deskewed(swept, tmp_path):
+    from mcl.datasets.rosbag import bag_info, format_info
+    from mcl.simulate import write_log_as_bag
+
+    info = bag_info(swept / "bag" / "log.mcap")
+    assert info["mcl_uses"]["sweep_s"]["/scan"] == pytest.approx(0.2, abs=1e-6)  # float32 time_increment x 359
+    assert "/scan: 0.2 s from the first beam to the last (time_increment): deskewed" in format_info(info)
+    simulate(tmp_path, kind="office", seed=5, duration=4.0)
+    text = format_info(bag_info(write_log_as_bag(tmp_path, "mcap")))
+    assert "/scan: none (time_increment 0): not deskewed" in text
+
+
+def test_mcl_run_says_it_deskews_a_bag(swept, tmp_path, capsys):
+    from mcl.cli import main
+
+    start = yaml.safe_load((swept / "bag" / "sim.yaml").read_text())["start_pose"]
+    argv = ["run", "--map", str(swept / "bag" / "map.yaml"), "--bag", str(swept / "bag" / "log.mcap"),
+            "--initial-pose", *map(str, start), "--rerun", "off", "--out"]
+    assert main(argv + [str(tmp_path / "a")]) == 0
+    assert "a laser sweep takes /scan 0.2 s (LaserScan time_increment): each scan deskewed" in capsys.readouterr().err
+    assert main(argv + [str(tmp_path / "b"), "--set", "sensor.sweep_time=0"]) == 0
+    assert "deskewed" not in capsys.readouterr().err

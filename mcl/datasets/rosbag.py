@@ -263,6 +263,7 @@ class BagSource:
     skipped: dict[str, int] = field(default_factory=dict)
     landmarks: list = field(default_factory=list)
     scan_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))  # every scan's header stamp (s)
+    sweeps: dict = field(default_factory=dict)  # LaserScan topic -> its first message's sweep (s; 0: no beam times)
 
     def stamps_checked(self, offset: float = 0.0) -> list[str]:
         """The scans' stamps (plus ``sensor.time_offset``) against the odometry's time span: DataError when none
@@ -622,6 +623,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     static: dict[str, tuple] = {}  # child -> (parent, pose): /tf_static, and the first /tf of a non-odometry link
     tf_frames: set[str] = set()
     scan_frames: dict[str, str] = {}
+    sweeps: dict[str, float] = {}  # LaserScan topic -> s from its first message's first beam to its last (0: unknown)
     counts: dict[str, int] = {t: 0 for t in scan_topics}
     scan_t: list[float] = []
     grid = initial = None
@@ -636,6 +638,9 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             counts[topic] += 1
             scan_t.append(stamp_seconds(msg.header.stamp))
             order.see(topic, scan_t[-1])
+            if topic not in scan_frames and conn.msgtype == LASER:
+                t0, dt = beam_times(msg.time_increment, len(msg.ranges))
+                sweeps[topic] = abs(dt) * (len(msg.ranges) - 1)
             scan_frames.setdefault(topic, _frame(msg.header.frame_id))
         elif topic in (tf_dyn, tf_static):
             for ts in msg.transforms:
@@ -742,7 +747,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                      has_twist=odom_type == ODOM, mirrored=mirrored)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
-                     warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64))
+                     warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps)
 
 
 # ----------------------------------------------------------------------------- mcl bag info
@@ -786,6 +791,7 @@ def bag_info(path, topics=None, frames=None) -> dict:
             "warnings": src.warnings + stamp_warnings,
             "laser_pose": {t: (None if o is None else [round(float(v), 6) for v in o])
                            for t, o in src.laser_offsets.items()},
+            "sweep_s": {t: round(float(v), 6) for t, v in src.sweeps.items()},
             "map": "from the bag" if src.grid is not None else "needs --map",
             "initial_pose": (None if src.initial_pose is None
                              else [round(float(v), 6) for v in src.initial_pose[0]]),
@@ -815,6 +821,11 @@ def format_info(info: dict) -> str:
         lines.append(f"  stamps:       scans {a:.3f}..{b:.3f} s, odometry {c:.3f}..{d:.3f} s")
         for t, p in u["laser_pose"].items():
             lines.append(f"  laser pose:   {t}: {p if p is not None else 'not in /tf_static or /tf (sensor.laser_pose)'}")
+        for t, v in u.get("sweep_s", {}).items():
+            lines.append(f"  beam times:   {t}: " + (f"{v:.4g} s from the first beam to the last (time_increment): "
+                                                     "deskewed (sensor.sweep_time auto)" if v else
+                                                     "none (time_increment 0): not deskewed unless sensor.sweep_time "
+                                                     "says how long a sweep takes"))
         lines.append(f"  map:          {u['map']}")
         lines.append(f"  initial pose: {u['initial_pose'] if u['initial_pose'] is not None else 'none in the bag'}")
         lines += [f"  warning: {w}" for w in u["warnings"]]
