@@ -277,17 +277,23 @@ def _reversal_plan(rng, n_ticks, reversals):
 GROUND_HIT_S = 2.0  # s: how long each of simulate(ground_hits=G)'s episodes lasts
 
 
-def _swept(truth, t, scan_ticks, angles, sweep: float, world, range_max: float) -> np.ndarray:
+def _swept(truth, pre, t, scan_ticks, angles, sweep: float, world, range_max: float,
+           kidnap_tick: int | None) -> np.ndarray:
     """Ranges (S, B) of scans taken while the robot moves: beam ``j`` of the scan stamped at tick ``k`` is cast
     from the true pose at ``t[k] + j / (B - 1) * sweep`` (linear between ticks, the heading unwrapped), as a
-    spinning laser sweeps its beams in angle order after the stamp (ROS LaserScan ``time_increment`` > 0)."""
+    spinning laser sweeps its beams in angle order after the stamp (ROS LaserScan ``time_increment`` > 0). A scan
+    stamped before a kidnap is swept along the pose before the teleport (``pre``)."""
     from mcl.kernels.raycast import cast_rays
 
     b = angles.size
     tb = t[scan_ticks][:, None] + np.arange(b)[None, :] * (sweep / max(b - 1, 1))
-    th = np.unwrap(truth[:, 2])
-    rays = np.vstack([np.interp(tb.ravel(), t, truth[:, 0]), np.interp(tb.ravel(), t, truth[:, 1]),
-                      np.interp(tb.ravel(), t, th) + np.tile(angles, scan_ticks.size)])
+    before = (scan_ticks < kidnap_tick)[:, None] if kidnap_tick is not None else np.zeros((scan_ticks.size, 1), bool)
+
+    def at(col, src):
+        return np.where(before, np.interp(tb, t, pre[:, col] if col < 2 else np.unwrap(pre[:, 2])),
+                        np.interp(tb, t, src[:, col] if col < 2 else np.unwrap(src[:, 2]))).ravel()
+
+    rays = np.vstack([at(0, truth), at(1, truth), at(2, truth) + np.tile(angles, scan_ticks.size)])
     out = np.empty((rays.shape[1], 1))
     cast_rays(np.ascontiguousarray(rays), np.zeros(1), world.blocked, world.origin[0], world.origin[1],
               world.resolution, range_max, out)
@@ -685,7 +691,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     cast_rays(np.ascontiguousarray(truth[scan_ticks].T), angles, blocked, world.origin[0], world.origin[1],
               world.resolution, range_max, exact)
     if scan_sweep:
-        exact = _swept(truth, t, scan_ticks, angles, float(scan_sweep), world, range_max)
+        exact = _swept(truth, pre, t, scan_ticks, angles, float(scan_sweep), world, range_max, kidnap_tick)
     furniture = []
     if unmapped_furniture:
         # A seventh child stream: the others are unchanged.

@@ -182,3 +182,29 @@ def test_mcl_run_says_it_deskews_a_bag(swept, tmp_path, capsys):
     assert "a laser sweep takes /scan 0.2 s (LaserScan time_increment): each scan deskewed" in capsys.readouterr().err
     assert main(argv + [str(tmp_path / "b"), "--set", "sensor.sweep_time=0"]) == 0
     assert "deskewed" not in capsys.readouterr().err
+
+
+def test_the_spinning_lidar_suite_deskews_each_swept_world_by_its_own_sweep():
+    # suites/spinning-lidar.yaml pairs each swept world with its twin scanned at once; a swept world's
+    # sensor.sweep_time must be its scan_sweep (what a bag's time_increment would say), its twin's nothing.
+    from mcl.suite import load_suite
+
+    suite = load_suite(Path(__file__).resolve().parents[1] / "suites" / "spinning-lidar.yaml")
+    swept = [d for d in suite.datasets if d.simulate.get("scan_sweep")]
+    assert len(swept) == 4 and len(suite.datasets) == 8
+    for d in suite.datasets:
+        assert d.set.get("sensor.sweep_time") == d.simulate.get("scan_sweep")
+        twin = d.name.replace("-swept", "-at-once")
+        assert {k: v for k, v in d.simulate.items() if k != "scan_sweep"} == \
+            next(e.simulate for e in suite.datasets if e.name == twin)
+
+
+def test_mcl_simulate_scan_sweep_writes_time_increment_into_a_bag(tmp_path):
+    from mcl.cli import main
+
+    assert main(["simulate", str(tmp_path / "w"), "--duration", "4", "--scan-sweep", "0.1", "--format", "mcap",
+                 "--dynamic-obstacles", "0", "--unmapped-furniture", "0"]) == 0
+    src = open_bag(tmp_path / "w" / "log.mcap")
+    assert src.sweeps["/scan"] == pytest.approx(0.1, abs=1e-6)
+    s = next(iter(src.scans))
+    assert s.beam_t0 == 0.0 and s.beam_dt * (s.ranges.size - 1) == pytest.approx(0.1, abs=1e-6)
