@@ -45,6 +45,7 @@ from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, ProbationChall
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
+from mcl.deskew import SweepOrder
 from mcl.estimate import estimate, wrap_angle
 from mcl.kernels.likelihood import refine_poses, refine_poses_serial
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
@@ -53,7 +54,7 @@ from mcl.motion import allowed_mask, make_motion_model
 from mcl.parallel import choose
 from mcl.quality import Fit, ScanQuality
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
-from mcl.sensors import BeamSkipping, UnmappedObjects, make_sensor_model
+from mcl.sensors import BeamSkipping, UnmappedObjects, make_sensor_model, sweep_of
 
 __all__ = ["Control", "StepInfo", "ParticleFilter", "EVENT_KINDS"]
 
@@ -148,6 +149,9 @@ class ParticleFilter:
         self.unmapped = (UnmappedObjects(grid, cfg.sensor, dist=self.quality.dist)
                          if cfg.sensor.unmapped_skip and cfg.sensor.model == "likelihood_field" else None)
         self._unmapped_candidates = None  # (observation, (K,) bool, scan) of the scan last prepared
+        # which way a deskewed scan's beams run in time (mcl.deskew; the likelihood field alone moves endpoints)
+        self.sweep_order = SweepOrder() if cfg.sensor.model == "likelihood_field" else None
+        self._sweep_candidates = None  # (as stamped, at once, reversed) observations of the scan last prepared
         self.blind_updates = 0  # updates whose every return was skipped with nothing mapped in view (unmapped_blind)
         # Recovery draws injected poses from this: sampler(n, rng, observation) -> (3, n). Uniform over the free
         # space the motion model allows unless replaced (a landmark-based pose sampler when landmarks are used).
@@ -310,6 +314,12 @@ class ParticleFilter:
         if not self.guard.usable_scan(scan):
             return None
         self._laser_pose = np.asarray(laser_pose, dtype=np.float64)
+        self._sweep_candidates = None
+        if self.sweep_order is not None and sweep_of(scan) is not None:
+            # a deskewed scan (mcl.deskew): as read until the beams' timing is decided, three readings weighed
+            scan, orders = self.sweep_order.choose(scan)
+            if orders is not None:
+                self._sweep_candidates = tuple(self.sensor.prepare(o, laser_pose) for o in orders)
         observation = self.sensor.prepare(scan, laser_pose)
         if self.unmapped is not None:
             self._unmapped_candidates = (observation, self.unmapped.candidates(scan), scan)
@@ -447,6 +457,7 @@ class ParticleFilter:
         self._scan_observation = observation
         if observation is None:
             return
+        self._weigh_sweep_orders()
         if self._tracking_unmapped(observation):
             observation, skipped, blind = self._skip_unmapped(observation)
             if blind:
@@ -478,6 +489,7 @@ class ParticleFilter:
         self._observation = observation
         self.logw += loglik
 
+    SWEEP_MATCH_STEPS = 10  # Gauss-Newton steps fitting each reading of a deskewed scan to the map (mcl.deskew)
     MATCH_STEP_XY = 0.15  # m: the most one scan-matching step moves a particle (search_refine)
     MATCH_STEP_THETA = 0.08  # rad
 
@@ -505,6 +517,29 @@ class ParticleFilter:
             self.particles = out
         else:
             self.particles[:, idx] = out
+
+    def _weigh_sweep_orders(self) -> None:
+        """``mcl.deskew.SweepOrder``: while a tracked set (an estimate, no search, not lost) waits for the scan's
+        beams' timing, each reading's laser log-likelihood at its own best pose: the estimate moved by the odometry,
+        then ``SWEEP_MATCH_STEPS`` Gauss-Newton steps fitting that reading to the map (``refine_poses``). Weighed at
+        the particles instead, the reading the set was corrected with wins: the set has fitted it."""
+        orders, self._sweep_candidates = self._sweep_candidates, None
+        if orders is None or self.last_estimate is None or self._laser_searching() or self.quality.lost:
+            return
+        if self._match_mask is None:
+            self._match_mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
+        inv_res = 1.0 / float(self.grid.resolution)
+        start = np.ascontiguousarray(self._moved_estimate().reshape(3, 1))
+        ev = []
+        for o in orders:
+            e = np.asarray(self.sensor.endpoints(o), dtype=np.float64)
+            pose = np.empty_like(start)
+            refine_poses_serial(start, np.ascontiguousarray(e * inv_res), self.grid.distance,
+                                float(self.grid.origin[0]), float(self.grid.origin[1]), inv_res,
+                                float(self.cfg.filter.search_refine_dist), self.SWEEP_MATCH_STEPS, self.MATCH_STEP_XY,
+                                self.MATCH_STEP_THETA, self._match_mask, pose)
+            ev.append(float(self.sensor.log_likelihood(pose, o)[0]))
+        self.sweep_order.weigh(ev)
 
     def _tracking_unmapped(self, observation) -> bool:
         """Whether ``unmapped`` skips beams of this observation: on, prepared by :meth:`prepare`, and tracking (an

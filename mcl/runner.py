@@ -261,60 +261,6 @@ def _retime(scans, log, offset: float, echo):
     return _Retimed(scans, odometry, offset)
 
 
-class _Deskewed:
-    """The scans of a sized iterable, each with the robot's velocity over its sweep (``Scan.twist``, robot frame at
-    the stamp) from ``odometry`` (rows t, x, y, theta, tv, rv), so that the sensor model can move each beam's
-    endpoint to where it would be had the beam been taken at the stamp (``mcl.sensors.beam_endpoints``).
-    ``sweep``: "auto" keeps each scan's own beam times (a bag's time_increment), a number of seconds sets beam j of
-    n at j / (n - 1) * sweep after the stamp. Lazy, so a bag's scans still stream."""
-
-    def __init__(self, scans, odometry: np.ndarray, sweep) -> None:
-        from mcl.datasets.rosbag import odometry_at
-
-        self.scans, self.sweep, self.at = scans, sweep, odometry_at
-        self.odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
-
-    def __len__(self) -> int:
-        return len(self.scans)
-
-    def __iter__(self):
-        return (self._twisted(s) for s in self.scans)
-
-    def _twisted(self, s):
-        from mcl.estimate import compose, inverse
-
-        n = np.asarray(s.ranges).shape[0]
-        t0, dt = (s.beam_t0, s.beam_dt) if self.sweep == "auto" else (0.0, float(self.sweep) / max(n - 1, 1))
-        if dt == 0.0 or n < 2:
-            return s
-        ta, tb = s.t + min(t0, t0 + dt * (n - 1)), s.t + max(t0, t0 + dt * (n - 1))
-        a, b = self.at(self.odometry, ta)[0], self.at(self.odometry, tb)[0]
-        d = compose(inverse(a), b)  # the robot's motion over the sweep, in its frame at its start
-        return dataclasses.replace(s, beam_t0=t0, beam_dt=dt, twist=d / (tb - ta))
-
-
-def _deskew(scans, log, sweep, echo, timed: bool):
-    """``scans`` with the robot's velocity over each sweep (``_Deskewed``) when ``sensor.sweep_time`` asks for it
-    and the input (``timed``: a bag) may say when its beams were taken; else as they are."""
-    if sweep == 0 or not len(scans):
-        return scans
-    if sweep == "auto" and not timed:  # a CARMEN log does not say when its beams were taken
-        return scans
-    odometry = np.asarray(log.odometry, dtype=np.float64).reshape(-1, 6)
-    if odometry.shape[0] < 2:
-        odometry = np.array([(s.t, *s.odom, s.tv, s.rv) for s in scans], dtype=np.float64).reshape(-1, 6)
-    if sweep != "auto":
-        echo(f"{log.path}: sensor.sweep_time {float(sweep):g} s: each scan deskewed by the odometry's motion over it")
-    else:
-        swept = {t: v for t, v in getattr(log, "sweeps", {}).items() if v}
-        if not swept:
-            return scans  # no LaserScan says when its beams were taken
-        said = ", ".join(f"{t} {v:.3g} s" for t, v in swept.items())
-        echo(f"{log.path}: a laser sweep takes {said} (LaserScan time_increment): each scan deskewed by the "
-             "odometry's motion over it (sensor.sweep_time: 0 turns it off)")
-    return _Deskewed(scans, odometry, sweep)
-
-
 def _open_source(cfg: Config, echo):
     """The run's data: (log, grid, scans, landmark records, truth, initial pose from the bag or None).
 
@@ -322,6 +268,7 @@ def _open_source(cfg: Config, echo):
     ROS bag (``cfg.bag``, mcl.datasets.rosbag) is checked in one pass and its scans streamed; its map
     (``topics.map``) stands in for a missing ``cfg.map``, its truth topic for a missing ``cfg.truth``.
     """
+    from mcl.deskew import deskew
     from mcl.maps import load_map
     from mcl.trajectory import read_tum
 
@@ -359,7 +306,7 @@ def _open_source(cfg: Config, echo):
     for note in log.notes:
         echo(note)
     scans = _retime(scans, log, cfg.sensor.time_offset, echo)
-    scans = _deskew(scans, log, cfg.sensor.sweep_time, echo, timed=cfg.bag is not None)
+    scans = deskew(scans, log, cfg.sensor.sweep_time, echo, timed=cfg.bag is not None)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
     elif cfg.bag is not None and log.truth is not None:
@@ -824,6 +771,8 @@ def _run(
         "stall_reseeds": stall_reseeds,
         "fault_updates": fault_updates,
         "blind_updates": pf.blind_updates,
+        **({"sweep_order": pf.sweep_order.summary()}
+           if pf.sweep_order is not None and pf.sweep_order.weighed else {}),
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / n_up,
         "rejected_particles": counts["rejected"],

@@ -281,12 +281,14 @@ def _swept(truth, pre, t, scan_ticks, angles, sweep: float, world, range_max: fl
            kidnap_tick: int | None) -> np.ndarray:
     """Ranges (S, B) of scans taken while the robot moves: beam ``j`` of the scan stamped at tick ``k`` is cast
     from the true pose at ``t[k] + j / (B - 1) * sweep`` (linear between ticks, the heading unwrapped), as a
-    spinning laser sweeps its beams in angle order after the stamp (ROS LaserScan ``time_increment`` > 0). A scan
-    stamped before a kidnap is swept along the pose before the teleport (``pre``)."""
+    spinning laser sweeps its beams in angle order after the stamp (ROS LaserScan ``time_increment`` > 0); a
+    negative ``sweep`` takes them the other way (the last beam at the stamp). A scan stamped before a kidnap is
+    swept along the pose before the teleport (``pre``)."""
     from mcl.kernels.raycast import cast_rays
 
     b = angles.size
-    tb = t[scan_ticks][:, None] + np.arange(b)[None, :] * (sweep / max(b - 1, 1))
+    order = np.arange(b) if sweep > 0 else np.arange(b)[::-1]  # a negative sweep takes the last beam first
+    tb = t[scan_ticks][:, None] + order[None, :] * (abs(sweep) / max(b - 1, 1))
     before = (scan_ticks < kidnap_tick)[:, None] if kidnap_tick is not None else np.zeros((scan_ticks.size, 1), bool)
 
     def at(col, src):
@@ -655,8 +657,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(ground_hits, (int, np.integer)) and 0 <= ground_hits <= duration / (2 * GROUND_HIT_S),
            "ground_hits", f"expected 0..{int(duration / (2 * GROUND_HIT_S))} for {duration:g} s, got {ground_hits!r}")
     _check(isinstance(scan_sweep, (int, float, np.number)) and math.isfinite(scan_sweep)
-           and 0.0 <= scan_sweep <= 1.0 / scan_rate + 1e-12, "scan_sweep",
-           f"expected 0..{1.0 / scan_rate:g} s (one scan period), got {scan_sweep!r}")
+           and abs(scan_sweep) <= 1.0 / scan_rate + 1e-12, "scan_sweep",
+           f"expected -{1.0 / scan_rate:g}..{1.0 / scan_rate:g} s (one scan period), got {scan_sweep!r}")
     _check(not scan_sweep or not (dynamic_obstacles or unmapped_furniture), "scan_sweep",
            "a sweeping scan is cast against the mapped world only: set dynamic_obstacles and unmapped_furniture to 0")
     odom_rate, scan_every, sim_dt = _rates(float(scan_rate))
@@ -983,9 +985,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "at 10 Hz or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz)")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
-                        "s a turn), beams in angle order from the stamp, while the robot moves; at most one scan "
-                        "period, needs --dynamic-obstacles 0 --unmapped-furniture 0. A bag (--format) carries it as "
-                        "LaserScan time_increment; default 0 (every beam at the stamp)")
+                        "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
+                        "beam first); at most one scan period, needs --dynamic-obstacles 0 --unmapped-furniture 0. "
+                        "A bag (--format) carries |S| as LaserScan time_increment; default 0 (every beam at the "
+                        "stamp)")
     parser.add_argument("--ground-hits", type=int, default=0, metavar="G",
                         help="tilt the laser onto the ground G times over the run, 2 s each: a line of returns "
                         "1.5-5 m ahead, moving every scan, on no map (a robot rocking on a ramp); default 0")
@@ -994,7 +997,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def write_log_as_bag(outdir, fmt: str, sweep: float = 0.0) -> Path:
     """Replace ``outdir/log.clf`` by the same data as a ROS bag (``log.bag``, ``log.db3`` or ``log.mcap``,
     mcl.datasets.bagwrite): /scan, /odom, /tf_static, and truth.tum as /ground_truth. ``sweep`` (the world's
-    ``scan_sweep``) gives each LaserScan its time_increment."""
+    ``scan_sweep``) gives each LaserScan its time_increment, |sweep| / (beams - 1): positive for a negative sweep
+    too, as ``rplidar_ros`` writes beams taken against their order."""
     from mcl.datasets.bagwrite import convert
     from mcl.trajectory import read_tum
 
@@ -1002,7 +1006,7 @@ def write_log_as_bag(outdir, fmt: str, sweep: float = 0.0) -> Path:
     bag = out / ("log." + {"bag1": "bag", "db3": "db3", "mcap": "mcap"}[fmt])
     if bag.exists():
         bag.unlink()
-    convert(out / "log.clf", bag, truth=read_tum(out / "truth.tum"), echo=lambda m: None, sweep=sweep)
+    convert(out / "log.clf", bag, truth=read_tum(out / "truth.tum"), echo=lambda m: None, sweep=abs(sweep))
     (out / "log.clf").unlink()
     return bag
 
