@@ -123,15 +123,19 @@ class SweepOrder:
     def choose(self, scan):
         """(the scan to use, the three readings (as stamped, at once, reversed) to weigh, or None: decided, or the
         robot turned less than ``MIN_TURN`` over the sweep)."""
+        if self.order is not None:
+            return self.used(scan), None
+        self.scans += 1
         at_once = dataclasses.replace(scan, twist=None)
-        if self.order is None:
-            self.scans += 1
-            n = np.asarray(scan.ranges).shape[0]
-            turn = abs(float(scan.twist[2]) * float(scan.beam_dt)) * (n - 1)
-            return at_once, ((scan, at_once, reversed_in_time(scan)) if turn >= MIN_TURN else None)
-        if self.order == 0:
-            return at_once, None
-        return (scan if self.order > 0 else reversed_in_time(scan)), None
+        n = np.asarray(scan.ranges).shape[0]
+        turn = abs(float(scan.twist[2]) * float(scan.beam_dt)) * (n - 1)
+        return at_once, ((scan, at_once, reversed_in_time(scan)) if turn >= MIN_TURN else None)
+
+    def used(self, scan):
+        """The reading of ``scan`` in use: as read until decided, then the decided one."""
+        if self.order is None or self.order == 0:
+            return dataclasses.replace(scan, twist=None)
+        return scan if self.order > 0 else reversed_in_time(scan)
 
     def weigh(self, ev) -> None:
         ev = np.asarray(ev, dtype=np.float64)

@@ -697,6 +697,8 @@ def _run(
                         stats["error/position"] = float(math.hypot(mean[0] - ref[0], mean[1] - ref[1]))
                         stats["error/heading"] = abs(float(wrap_angle(mean[2] - ref[2])))
                     scan_world = None
+                    if pf.sweep_order is not None and sweep_of(scan) is not None:
+                        scan = pf.sweep_order.used(scan)  # the reading the filter uses (mcl.deskew)
                     endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose,
                                                 sweep_of(scan))
                                  if not no_scan else np.zeros((2, 0)))
@@ -772,7 +774,7 @@ def _run(
         "fault_updates": fault_updates,
         "blind_updates": pf.blind_updates,
         **({"sweep_order": pf.sweep_order.summary()}
-           if pf.sweep_order is not None and pf.sweep_order.weighed else {}),
+           if pf.sweep_order is not None and pf.sweep_order.scans else {}),
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / n_up,
         "rejected_particles": counts["rejected"],
