@@ -574,7 +574,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
-             scan_rate: float = 5.0, scan_sweep: float = 0.0) -> dict:
+             scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -661,6 +661,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected -{1.0 / scan_rate:g}..{1.0 / scan_rate:g} s (one scan period), got {scan_sweep!r}")
     _check(not scan_sweep or not (dynamic_obstacles or unmapped_furniture), "scan_sweep",
            "a sweeping scan is cast against the mapped world only: set dynamic_obstacles and unmapped_furniture to 0")
+    _check(isinstance(phantom_furniture, (int, np.integer)) and 0 <= phantom_furniture <= 500, "phantom_furniture",
+           f"expected 0..500, got {phantom_furniture!r}")
     odom_rate, scan_every, sim_dt = _rates(float(scan_rate))
     n_ticks = int(round(duration * odom_rate)) + 1
     kidnap_tick = None
@@ -730,9 +732,16 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     occupancy, map_res = world.occupancy, world.resolution
+    phantoms = []
+    if phantom_furniture:
+        # A tenth child stream: the others are unchanged. Boxes the map shows and the world no longer has (a map
+        # made before furniture, pallets or boxes were moved away): the laser sees through them.
+        rng_ph = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(10)[9])
+        phantoms = _unmapped_furniture(world, truth[:, :2], int(phantom_furniture), robot_radius, rng_ph)
+        occupancy = _painted(occupancy, phantoms, world.origin, world.resolution)
     if map_resolution is not None and abs(map_resolution - world.resolution) > 1e-12:
         map_res = float(map_resolution)
-        occupancy = resample_occupancy(world.occupancy, world.resolution, map_res)
+        occupancy = resample_occupancy(occupancy, world.resolution, map_res)
     grid = OccupancyGrid.from_occupancy(occupancy, map_res, world.origin)
     save_map(grid, out / "map.yaml")
 
@@ -804,6 +813,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["reversals"] = int(reversals)
     if scan_sweep:
         params["laser"]["sweep_s"] = float(scan_sweep)
+    if phantoms:
+        params["phantom_furniture"] = len(phantoms)
     if hit_windows:
         params["ground_hits"] = [[round(a, 3), round(b, 3)] for a, b in hit_windows]
     if lm_obs is not None:
@@ -883,6 +894,17 @@ def _unmapped_furniture(world: World, path_xy: np.ndarray, n: int, radius: float
         hw, hh = rng.uniform(0.15, 0.45, 2)
         boxes.append((float(cx - hw), float(cy - hh), float(cx + hw), float(cy + hh)))
     return boxes
+
+
+def _painted(occupancy: np.ndarray, boxes, origin, resolution: float) -> np.ndarray:
+    """A copy of ``occupancy`` with the ``boxes`` (x0, y0, x1, y1) drawn occupied (100)."""
+    out = occupancy.copy()
+    h, w = out.shape
+    for x0, y0, x1, y1 in boxes:
+        i0, i1 = max(int((y0 - origin[1]) / resolution), 0), min(int(math.ceil((y1 - origin[1]) / resolution)), h)
+        j0, j1 = max(int((x0 - origin[0]) / resolution), 0), min(int(math.ceil((x1 - origin[0]) / resolution)), w)
+        out[i0:i1, j0:j1] = 100
+    return out
 
 
 def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angles: np.ndarray, range_max: float,
@@ -983,6 +1005,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scan-rate", type=float, default=5.0, metavar="HZ",
                         help="laser scans per second, 0.5-100; default 5. The odometry (ODOM lines, /odom) runs "
                         "at 10 Hz or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz)")
+    parser.add_argument("--phantom-furniture", type=int, default=0, metavar="N",
+                        help="N boxes (0.3-0.9 m) the map shows near walls within 6 m of the path that the world "
+                        "no longer has (furniture moved away since the map was made): the laser sees through "
+                        "them; default 0")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1019,7 +1045,7 @@ def run_from_args(args: argparse.Namespace) -> int:
                  landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
                  depth_every=args.depth_every, map_resolution=args.map_resolution,
                  reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
-                 scan_sweep=args.scan_sweep)
+                 scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture)
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
         write_log_as_bag(s["outdir"], fmt, sweep=args.scan_sweep)

@@ -403,6 +403,8 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(reversals=2.5), "reversals"),
     (dict(scan_rate=0.1), "scan_rate"),
     (dict(scan_rate=float("nan")), "scan_rate"),
+    (dict(phantom_furniture=-1), "phantom_furniture"),
+    (dict(scan_sweep=0.3), "scan_sweep"),
 ])
 def test_bad_options_raise_config_error(tmp_path, kw, key):
     with pytest.raises(ConfigError, match=key):
@@ -466,3 +468,24 @@ def test_bundled_demo_is_consistent():
     ix, iy = g.world_to_cell(p[0], p[1])
     assert g.distance[iy, ix].min() >= params["robot"]["radius"] + g.resolution / 2
     assert sum(f.stat().st_size for f in demo.iterdir()) < 3_000_000
+
+
+def test_phantom_furniture_is_on_the_map_only(tmp_path):
+    # Boxes the map shows and the world no longer has: the laser, the drive and the truth are the world's (the
+    # same bytes as without), the map gains occupied cells on free ones only, none on the robot's path.
+    from mcl.maps import load_map
+
+    simulate(tmp_path / "a", kind="office", seed=6, duration=20.0)
+    simulate(tmp_path / "b", kind="office", seed=6, duration=20.0, phantom_furniture=12)
+    for f in ("log.clf", "truth.tum"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+    a, b = load_map(tmp_path / "a" / "map.yaml"), load_map(tmp_path / "b" / "map.yaml")
+    added = (b.occupancy == 100) & (a.occupancy != 100)
+    assert added.sum() > 12 * 36  # 12 boxes of at least 0.3 m x 0.3 m: 36 cells of 5 cm each
+    assert np.all(a.occupancy[added] == 0)  # drawn on free cells only
+    assert np.array_equal(b.occupancy[~added], a.occupancy[~added])
+    t, poses = read_tum(tmp_path / "b" / "truth.tum")
+    ix = ((poses[0] - b.origin[0]) / b.resolution).astype(int)
+    iy = ((poses[1] - b.origin[1]) / b.resolution).astype(int)
+    assert not added[iy, ix].any()
+    assert yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["phantom_furniture"] == 12
