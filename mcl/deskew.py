@@ -94,9 +94,13 @@ def deskew(scans, log, sweep, echo, timed: bool):
 
 
 def reversed_in_time(scan):
-    """``scan`` with its beams' times the other way round: the last beam at the first one's time."""
+    """``scan`` with its beams' times the other way round, centred on the stamp: beam j at
+    t0 + ((n - 1) / 2 - j) dt. A driver that writes its beams against time stamps either the first beam taken
+    (``rplidar_ros``: its last array beam) or the last (the TurtleBot's LDS driver stamps when the turn is done: its
+    first array beam); the scans' shapes are the same, so they cannot tell which. Centred, the times are half a
+    sweep off either way: the mean time error of the scan read as is, without its shear."""
     n = np.asarray(scan.ranges).shape[0]
-    return dataclasses.replace(scan, beam_t0=scan.beam_t0 + scan.beam_dt * (n - 1), beam_dt=-scan.beam_dt)
+    return dataclasses.replace(scan, beam_t0=scan.beam_t0 + scan.beam_dt * (n - 1) / 2, beam_dt=-scan.beam_dt)
 
 
 class SweepOrder:
