@@ -6,14 +6,15 @@ endpoint is moved into the robot frame at the scan's stamp by the robot's motion
 (``mcl.sensors.beam_endpoints``): the odometry over the sweep gives a velocity (vx, vy, omega) in the robot frame,
 and beam j, taken tau_j after the stamp, is moved by (vx tau_j, vy tau_j, omega tau_j) (first order).
 
-Which way the beams run in time is not always what the data says: ``rplidar_ros`` writes its beams against time
-(``ranges[node_count-1-i]``) with a positive ``time_increment``. Deskewed the wrong way, the shear doubles.
+Which way the beams run in time is not always what the data says: ``rplidar_ros`` and the TurtleBot's LDS driver
+write their beams against time (``ranges[node_count-1-i]``, ``ranges[359-index]``) with a positive
+``time_increment``. Deskewed the wrong way, the shear doubles.
 :class:`SweepOrder` decides it from the scans themselves: until it has, the filter uses each scan as read (as if
 every beam were taken at the stamp) and, on scans taken while the robot turns (``MIN_TURN``), weighs three readings
 (as stamped, reversed, all at once: a driver that deskews by itself) each at its own best pose: scan-matched to
 the map from the estimate, by the laser log-likelihood there, summed over the updates (a profile likelihood
 ratio); once one leads the others by ``DECIDE_NATS`` it is used from then on. (Weighed at the particles, "all at
-once" wins: the set was corrected with it.)
+once" wins: the set was corrected with it.) The reversed reading is centred on the stamp (``reversed_in_time``).
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ DECIDE_NATS = 20.0  # summed log-likelihood lead that decides the timing (a wron
 class Deskewed:
     """The scans of a sized iterable, each with the robot's velocity over its sweep (``Scan.twist``, robot frame at
     the stamp; averaged over the sweep and ``TWIST_MARGIN`` s either side) from ``odometry`` (rows t, x, y, theta,
-    tv, rv), so that the sensor model can move each beam's
-    endpoint to where it would be had the beam been taken at the stamp (``mcl.sensors.beam_endpoints``).
+    tv, rv), so that the sensor model can move each beam's endpoint to where it would be had the beam been taken
+    at the stamp (``mcl.sensors.beam_endpoints``).
     ``sweep``: "auto" keeps each scan's own beam times (a bag's time_increment), a number of seconds sets beam j of
     n at j / (n - 1) * sweep after the stamp. Lazy, so a bag's scans still stream."""
 
