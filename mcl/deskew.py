@@ -75,7 +75,8 @@ def deskew(scans, log, sweep, echo, timed: bool):
     it and the input (``timed``: a bag) may say when its beams were taken; else as they are."""
     if sweep == 0 or not len(scans):
         return scans
-    if sweep == "auto" and not timed:  # a CARMEN log does not say when its beams were taken
+    swept = {t: v for t, v in getattr(log, "sweeps", {}).items() if v} if timed else {}
+    if sweep == "auto" and not swept:  # a CARMEN log, or a bag none of whose LaserScans says when beams were taken
         return scans
     odometry = np.asarray(log.odometry, dtype=np.float64).reshape(-1, 6)
     if odometry.shape[0] < 2:
@@ -84,9 +85,6 @@ def deskew(scans, log, sweep, echo, timed: bool):
         echo(f"{log.path}: sensor.sweep_time {float(sweep):g} s: each scan deskewed by the odometry's motion over it "
              "(which way its beams run in time is found from the scans)")
     else:
-        swept = {t: v for t, v in getattr(log, "sweeps", {}).items() if v}
-        if not swept:
-            return scans  # no LaserScan says when its beams were taken
         said = ", ".join(f"{t} {v:.3g} s" for t, v in swept.items())
         echo(f"{log.path}: a laser sweep takes {said} (LaserScan time_increment): each scan deskewed by the "
              "odometry's motion over it (which way its beams run in time is found from the scans; "
@@ -128,13 +126,12 @@ class SweepOrder:
     def choose(self, scan):
         """(the scan to use, the three readings (as stamped, at once, reversed) to weigh, or None: decided, or the
         robot turned less than ``MIN_TURN`` over the sweep)."""
+        use = self.used(scan)
         if self.order is not None:
-            return self.used(scan), None
+            return use, None
         self.scans += 1
-        at_once = dataclasses.replace(scan, twist=None)
-        n = np.asarray(scan.ranges).shape[0]
-        turn = abs(float(scan.twist[2]) * float(scan.beam_dt)) * (n - 1)
-        return at_once, ((scan, at_once, reversed_in_time(scan)) if turn >= MIN_TURN else None)
+        turn = abs(float(scan.twist[2]) * float(scan.beam_dt)) * (np.asarray(scan.ranges).shape[0] - 1)
+        return use, ((scan, use, reversed_in_time(scan)) if turn >= MIN_TURN else None)
 
     def used(self, scan):
         """The reading of ``scan`` in use: as read until decided, then the decided one."""

@@ -318,9 +318,10 @@ class ParticleFilter:
         if self.sweep_order is not None and sweep_of(scan) is not None:
             # a deskewed scan (mcl.deskew): as read until the beams' timing is decided, three readings weighed
             scan, orders = self.sweep_order.choose(scan)
-            if orders is not None:
+            if orders is not None:  # (as stamped, as read, reversed): the second is the observation used
                 self._sweep_candidates = tuple(self.sensor.prepare(o, laser_pose) for o in orders)
-        observation = self.sensor.prepare(scan, laser_pose)
+        observation = (self._sweep_candidates[1] if self._sweep_candidates is not None
+                       else self.sensor.prepare(scan, laser_pose))
         if self.unmapped is not None:
             self._unmapped_candidates = (observation, self.unmapped.candidates(scan), scan)
         return observation
@@ -502,21 +503,29 @@ class ParticleFilter:
         GMapping, without its weight correction: a search heuristic, like the tempering). With
         ``search_refine_scope: fresh`` only the fresh uniform poses of a global start or re-seed are matched (``idx``),
         once, before their first scan: a kept track is not moved, and the cost is one matching per search."""
-        fc = self.cfg.filter
-        if self._match_mask is None:
-            self._match_mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
-        e = np.asarray(self.sensor.endpoints(observation), dtype=np.float64)  # (2, K); under 3 endpoints move nothing
-        inv_res = 1.0 / float(self.grid.resolution)
-        poses = np.ascontiguousarray(self.particles if idx is None else self.particles[:, idx])
-        out = np.empty_like(poses)
-        kernel = choose(refine_poses, refine_poses_serial, poses.shape[1] * e.shape[1] * fc.search_refine)
-        kernel(poses, np.ascontiguousarray(e * inv_res), self.grid.distance,
-               float(self.grid.origin[0]), float(self.grid.origin[1]), inv_res, float(fc.search_refine_dist),
-               int(fc.search_refine), self.MATCH_STEP_XY, self.MATCH_STEP_THETA, self._match_mask, out)
+        out = self._refined(self.particles if idx is None else self.particles[:, idx], observation,
+                            int(self.cfg.filter.search_refine))
         if idx is None:
             self.particles = out
         else:
             self.particles[:, idx] = out
+
+    def _refined(self, poses: np.ndarray, observation, steps: int) -> np.ndarray:
+        """(3, N) ``poses`` after ``steps`` Gauss-Newton steps fitting ``observation``'s endpoints to the map's
+        distance field (``refine_poses``; endpoints farther than ``filter.search_refine_dist`` from a wall left out;
+        under 3 endpoints move nothing)."""
+        if self._match_mask is None:
+            self._match_mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
+        e = np.asarray(self.sensor.endpoints(observation), dtype=np.float64)  # (2, K)
+        inv_res = 1.0 / float(self.grid.resolution)
+        poses = np.ascontiguousarray(poses)
+        out = np.empty_like(poses)
+        kernel = choose(refine_poses, refine_poses_serial, poses.shape[1] * e.shape[1] * steps)
+        kernel(poses, np.ascontiguousarray(e * inv_res), self.grid.distance,
+               float(self.grid.origin[0]), float(self.grid.origin[1]), inv_res,
+               float(self.cfg.filter.search_refine_dist), steps, self.MATCH_STEP_XY, self.MATCH_STEP_THETA,
+               self._match_mask, out)
+        return out
 
     def _weigh_sweep_orders(self) -> None:
         """``mcl.deskew.SweepOrder``: while a tracked set (an estimate, no search, not lost) waits for the scan's
@@ -526,20 +535,9 @@ class ParticleFilter:
         orders, self._sweep_candidates = self._sweep_candidates, None
         if orders is None or self.last_estimate is None or self._laser_searching() or self.quality.lost:
             return
-        if self._match_mask is None:
-            self._match_mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
-        inv_res = 1.0 / float(self.grid.resolution)
-        start = np.ascontiguousarray(self._moved_estimate().reshape(3, 1))
-        ev = []
-        for o in orders:
-            e = np.asarray(self.sensor.endpoints(o), dtype=np.float64)
-            pose = np.empty_like(start)
-            refine_poses_serial(start, np.ascontiguousarray(e * inv_res), self.grid.distance,
-                                float(self.grid.origin[0]), float(self.grid.origin[1]), inv_res,
-                                float(self.cfg.filter.search_refine_dist), self.SWEEP_MATCH_STEPS, self.MATCH_STEP_XY,
-                                self.MATCH_STEP_THETA, self._match_mask, pose)
-            ev.append(float(self.sensor.log_likelihood(pose, o)[0]))
-        self.sweep_order.weigh(ev)
+        start = self._moved_estimate().reshape(3, 1)
+        self.sweep_order.weigh([float(self.sensor.log_likelihood(self._refined(start, o, self.SWEEP_MATCH_STEPS), o)[0])
+                                for o in orders])
 
     def _tracking_unmapped(self, observation) -> bool:
         """Whether ``unmapped`` skips beams of this observation: on, prepared by :meth:`prepare`, and tracking (an

@@ -291,11 +291,11 @@ def _swept(truth, pre, t, scan_ticks, angles, sweep: float, world, range_max: fl
     tb = t[scan_ticks][:, None] + order[None, :] * (abs(sweep) / max(b - 1, 1))
     before = (scan_ticks < kidnap_tick)[:, None] if kidnap_tick is not None else np.zeros((scan_ticks.size, 1), bool)
 
-    def at(col, src):
-        return np.where(before, np.interp(tb, t, pre[:, col] if col < 2 else np.unwrap(pre[:, 2])),
-                        np.interp(tb, t, src[:, col] if col < 2 else np.unwrap(src[:, 2]))).ravel()
+    def at(col: int) -> np.ndarray:  # x, y or the unwrapped heading at each beam's time
+        a, b = (pre[:, col], truth[:, col]) if col < 2 else (np.unwrap(pre[:, 2]), np.unwrap(truth[:, 2]))
+        return np.where(before, np.interp(tb, t, a), np.interp(tb, t, b)).ravel()
 
-    rays = np.vstack([at(0, truth), at(1, truth), at(2, truth) + np.tile(angles, scan_ticks.size)])
+    rays = np.vstack([at(0), at(1), at(2) + np.tile(angles, scan_ticks.size)])
     out = np.empty((rays.shape[1], 1))
     cast_rays(np.ascontiguousarray(rays), np.zeros(1), world.blocked, world.origin[0], world.origin[1],
               world.resolution, range_max, out)
@@ -896,14 +896,18 @@ def _unmapped_furniture(world: World, path_xy: np.ndarray, n: int, radius: float
     return boxes
 
 
+def _box_cells(box, origin, resolution: float) -> tuple[slice, slice]:
+    """(rows, columns) of the cells a box (x0, y0, x1, y1) covers on a grid at ``origin``."""
+    x0, y0, x1, y1 = box
+    return (slice(max(int((y0 - origin[1]) / resolution), 0), max(int(math.ceil((y1 - origin[1]) / resolution)), 0)),
+            slice(max(int((x0 - origin[0]) / resolution), 0), max(int(math.ceil((x1 - origin[0]) / resolution)), 0)))
+
+
 def _painted(occupancy: np.ndarray, boxes, origin, resolution: float) -> np.ndarray:
     """A copy of ``occupancy`` with the ``boxes`` (x0, y0, x1, y1) drawn occupied (100)."""
     out = occupancy.copy()
-    h, w = out.shape
-    for x0, y0, x1, y1 in boxes:
-        i0, i1 = max(int((y0 - origin[1]) / resolution), 0), min(int(math.ceil((y1 - origin[1]) / resolution)), h)
-        j0, j1 = max(int((x0 - origin[0]) / resolution), 0), min(int(math.ceil((x1 - origin[0]) / resolution)), w)
-        out[i0:i1, j0:j1] = 100
+    for box in boxes:
+        out[_box_cells(box, origin, resolution)] = 100
     return out
 
 
@@ -932,9 +936,8 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
     free = world.occupancy[sub] == 0
     h, w = base.shape
     static = np.zeros_like(base)
-    for x0, y0, x1, y1 in boxes:
-        static[max(int((y0 - oy) / res), 0):max(int(math.ceil((y1 - oy) / res)), 0),
-               max(int((x0 - ox) / res), 0):max(int(math.ceil((x1 - ox) / res)), 0)] = True
+    for box in boxes:
+        static[_box_cells(box, (ox, oy), res)] = True
     if not people:  # static only: one cast of every scan
         cast_rays(np.ascontiguousarray(poses.T), angles, np.ascontiguousarray(base | (static & free)), ox, oy, res,
                   range_max, out)
