@@ -121,6 +121,48 @@ def test_odometry_from_tf_is_interpolated_at_each_scan_stamp(scans, tmp_path):
         assert np.array_equal(got[k].odom, scans[k].odom)  # a stamp with its own transform: that pose exactly
 
 
+def test_a_topic_stamped_0_throughout_is_timed_by_the_record_times(scans, tmp_path, capsys):
+    # Some drivers never set header.stamp. A topic whose every stamp is 0 reads the bag's record times (here the
+    # log's stamps, as a recorder would have seen them), with a note; the records are those of the stamped bag.
+    # Odometry from /tf stamped 0 the same. A few zero stamps among real ones (a simulator's first messages, before
+    # its clock) are stamps, not a sign: kept as 0, no note.
+    def bag(name, scan_zero, odom):
+        path = tmp_path / f"{name}.mcap"
+        with BagOut(path) as b:
+            for k, s in enumerate(scans):
+                zero = 0.0 if odom in ("zero", "tf-zero") or (odom == "first-zero" and k < 2) else None
+                if odom.startswith("tf"):
+                    b.write("/tf", "tf2_msgs/msg/TFMessage", s.t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+                        b.transform(s.t if zero is None else zero, "odom", "base_link", s.odom)]))
+                else:
+                    _odom(b, s, stamp=zero)
+                _laser(b, "/scan", s, frame="base_link", stamp=0.0 if scan_zero else None)
+                P = "geometry_msgs/msg/PoseStamped"  # a truth topic, stamped as the scans
+                b.write("/truth", P, s.t, b.msg(P, header=b.header(0.0 if scan_zero else s.t, "map"),
+                                                pose=b.pose(*s.odom)))
+        return open_bag(path, load_config(None, ["topics.truth=/truth"]).topics)
+
+    assert scans[1].t > 0
+    ref = bag("stamped", False, "stamped")
+    assert not any("stamp is 0" in n for n in ref.notes), ref.notes
+    for name, scan_zero, odom, said in (("scans", True, "stamped", ["/scan", "/truth"]),
+                                        ("odom", False, "zero", ["/odom"]),
+                                        ("both", True, "zero", ["/scan", "/odom", "/truth"]),
+                                        ("tf", True, "tf-zero", ["/scan", "/tf odom -> base_link", "/truth"])):
+        src = bag(name, scan_zero, odom)
+        noted = [n.split(": ")[1] for n in src.notes if "every header stamp is 0" in n]
+        assert sorted(noted) == sorted(said), (name, src.notes)
+        assert np.array_equal(src.scan_stamps, ref.scan_stamps), name
+        assert np.array_equal(src.truth[0], ref.truth[0]) and np.array_equal(src.truth[1], ref.truth[1]), name
+        for a, g in zip(ref.scans, src.scans):
+            assert a.t == g.t and np.array_equal(a.odom, g.odom), name
+    few = bag("few", False, "first-zero")
+    assert not any("stamp is 0" in n for n in few.notes), few.notes
+    assert list(few.odometry[:3, 0]) == [0.0, 0.0, scans[2].t]
+    assert main(["bag", "info", str(tmp_path / "both.mcap")]) == 0
+    assert "/scan: every header stamp is 0; the bag's record times stand in for them" in capsys.readouterr().out
+
+
 def _old_style_bag(path, scans, tf_type: str) -> None:
     """A ROS 1 bag as recorded before tf2: every transform on /tf (no /tf_static), the laser's mounting among them
     at every scan, frames with a leading '/', typed ``tf_type``."""
@@ -813,21 +855,22 @@ def _explode_after(items, n):
 # ----------------------------------------------------------------------------- helpers writing raw messages
 
 
-def _odom(b: BagOut, s) -> None:
+def _odom(b: BagOut, s, stamp=None) -> None:
     cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*s.odom), covariance=np.zeros(36))
     v3 = lambda x, z: b.msg("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)  # noqa: E731
     tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
                twist=b.msg("geometry_msgs/msg/Twist", linear=v3(0.0, 0.0), angular=v3(0.0, 0.0)),
                covariance=np.zeros(36))
-    b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=b.header(s.t, "odom"),
+    h = b.header(s.t if stamp is None else stamp, "odom")
+    b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=h,
                                                         child_frame_id="base_link", pose=cov, twist=tw))
 
 
-def _laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.0, t=None) -> None:
+def _laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.0, t=None, stamp=None) -> None:
     r = np.asarray(s.ranges if ranges is None else ranges, dtype=np.float32)
     t = s.t if t is None else t
     L = "sensor_msgs/msg/LaserScan"
-    b.write(topic, L, t, b.msg(L, header=b.header(t, frame), angle_min=s.angle_min,
+    b.write(topic, L, t, b.msg(L, header=b.header(t if stamp is None else stamp, frame), angle_min=s.angle_min,
                                 angle_max=s.angle_min + s.angle_increment * (r.size - 1),
                                 angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0,
                                 range_min=range_min, range_max=s.max_range, ranges=r,

@@ -25,6 +25,8 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
 * **map** (``nav_msgs/OccupancyGrid`` on ``topics.map``), **initial pose** (the first
   ``PoseWithCovarianceStamped`` on ``topics.initial_pose``, with its x, y, yaw covariance) and **truth**
   (``PoseStamped``, ``PoseWithCovarianceStamped`` or ``Odometry`` on ``topics.truth``).
+* **stamps**: each message's header stamp; a topic (or the ``/tf`` odometry link) whose stamps are all 0, a
+  driver that never sets them, is timed by the bag's record times instead, with a note.
 
 Streaming: :func:`open_bag` makes one pass over the bag that checks every message (order, decoding) and keeps
 only the small ones (odometry, transforms, map, initial pose, truth); :class:`BagScans` then reads the scans
@@ -121,6 +123,12 @@ def stamp_seconds(stamp) -> float:
     return float(f"{int(stamp.sec)}.{int(stamp.nanosec):09d}")
 
 
+def record_seconds(t_ns: int) -> float:
+    """A bag's record time (integer nanoseconds) as float seconds, rounded as ``stamp_seconds`` rounds."""
+    t_ns = int(t_ns)
+    return float(f"{t_ns // 1_000_000_000}.{t_ns % 1_000_000_000:09d}")
+
+
 def yaw_of(q) -> float:
     """Heading (rad) of a quaternion: the rotation about z of its planar part, to 1e-12 rad (which removes the
     last-bit noise of the quaternion round trip: a heading written as a quaternion reads back the same)."""
@@ -205,15 +213,15 @@ def _why(e: Exception) -> str:
 
 
 def _messages(reader, path, connections):
-    """(connection, deserialized message) in time order; DataError naming the topic on damage. No connections:
-    nothing (the library reads every message for an empty list)."""
+    """(connection, record time in s, deserialized message) in time order; DataError naming the topic on damage.
+    No connections: nothing (the library reads every message for an empty list)."""
     if not connections:
         return
     it = reader.messages(connections=connections)
     conn = None
     while True:
         try:
-            conn, _, raw = next(it)
+            conn, t_ns, raw = next(it)
             msg = reader.deserialize(raw, conn.msgtype)
         except StopIteration:
             return
@@ -225,7 +233,7 @@ def _messages(reader, path, connections):
                         "metadata.yaml that says so")
             raise DataError(f"{path}: cannot read a message{where} (truncated or corrupt?): "
                             f"{_why(e).rstrip('.')}{hint}") from None
-        yield conn, msg
+        yield conn, record_seconds(t_ns), msg
 
 
 @dataclass
@@ -296,9 +304,10 @@ class BagScans:
     one message at a time (odometry interpolated at each stamp, the mounting pose of its topic)."""
 
     def __init__(self, path: Path, topics: list[str], count: int, odometry: np.ndarray, offsets: dict,
-                 cloud_z, cloud_beams: int, has_twist: bool, mirrored=frozenset()):
+                 cloud_z, cloud_beams: int, has_twist: bool, mirrored=frozenset(), unstamped=frozenset()):
         self.path, self.topics, self.count = path, topics, count
         self.mirrored = frozenset(mirrored)  # topics whose frame is upside down
+        self.unstamped = frozenset(unstamped)  # topics whose header stamps are all 0: their record times
         self.odometry, self.offsets = odometry, offsets
         self.cloud_z, self.cloud_beams, self.has_twist = cloud_z, int(cloud_beams), has_twist
 
@@ -310,14 +319,14 @@ class BagScans:
         try:
             conns = [c for c in reader.connections if c.topic in self.topics]
             index: dict[str, int] = {}
-            for conn, msg in _messages(reader, self.path, conns):
+            for conn, rec, msg in _messages(reader, self.path, conns):
                 k = index[conn.topic] = index.get(conn.topic, 0) + 1
-                yield self._scan(conn, msg, k)
+                yield self._scan(conn, msg, k, rec)
         finally:
             reader.close()
 
-    def _scan(self, conn, msg, k: int) -> Scan:
-        t = stamp_seconds(msg.header.stamp)
+    def _scan(self, conn, msg, k: int, rec: float) -> Scan:
+        t = rec if conn.topic in self.unstamped else stamp_seconds(msg.header.stamp)
         flip = conn.topic in self.mirrored
         t0 = dt = 0.0
         if conn.msgtype == LASER:
@@ -626,17 +635,22 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     sweeps: dict[str, float] = {}  # LaserScan topic -> s from its first message's first beam to its last (0: unknown)
     counts: dict[str, int] = {t: 0 for t in scan_topics}
     scan_t: list[float] = []
+    scan_rec: list[float] = []  # each scan's record time, and its topic (for a topic whose stamps are all 0)
+    scan_of: list[str] = []
     grid = initial = None
     truth_rows: list[tuple] = []
     other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
     odom_child = None  # the Odometry topic's child_frame_id
     seen: dict[str, int] = {}
-    for conn, msg in _messages(reader, path, conns):
+    # Odometry and truth rows carry their record time last, for a source whose header stamps are all 0.
+    for conn, rec, msg in _messages(reader, path, conns):
         topic = conn.topic
         seen[topic] = seen.get(topic, 0) + 1
         if topic in counts:
             counts[topic] += 1
             scan_t.append(stamp_seconds(msg.header.stamp))
+            scan_rec.append(rec)
+            scan_of.append(topic)
             order.see(topic, scan_t[-1])
             if topic not in scan_frames and conn.msgtype == LASER:
                 t0, dt = beam_times(msg.time_increment, len(msg.ranges))
@@ -650,13 +664,13 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                 if topic == tf_dyn and odom_topic is None and parent == odom_frame and child == base_frame:
                     t = stamp_seconds(ts.header.stamp)
                     order.see(topic, t, f" {odom_frame} -> {base_frame}")
-                    odom_rows.append((t, *_tf_pose(ts.transform), 0.0, 0.0))
+                    odom_rows.append((t, *_tf_pose(ts.transform), 0.0, 0.0, rec))
                 elif topic == tf_dyn and odom_topic is None and not odom_rows and (
                         parent == odom_frame or (default_odom and _basename(parent) == odom_frame)):
                     # odom -> another frame (nav2's base_footprint), or a namespaced odom (robot1/odom): kept in case
                     # frames.odom -> frames.base never appears
                     other_rows.setdefault((parent, child), []).append((stamp_seconds(ts.header.stamp),
-                                                                       *_tf_pose(ts.transform), 0.0, 0.0))
+                                                                       *_tf_pose(ts.transform), 0.0, 0.0, rec))
                 elif topic == tf_static or child not in static:
                     if parent != odom_frame or child != base_frame:
                         static[child] = (parent, _tf_mount(ts.transform))
@@ -667,15 +681,15 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                 if odom_child is None:
                     odom_child = _frame(msg.child_frame_id)
                 odom_rows.append((t, *_pose_msg(msg), float(msg.twist.twist.linear.x),
-                                  float(msg.twist.twist.angular.z)))
+                                  float(msg.twist.twist.angular.z), rec))
             else:  # a pose topic (ODOM_TYPES): no child frame, no velocities
-                odom_rows.append((t, *_pose_msg(msg), 0.0, 0.0))
+                odom_rows.append((t, *_pose_msg(msg), 0.0, 0.0, rec))
         if topic == map_topic and grid is None:
             grid = _grid_from_msg(path, topic, msg)
         if topic == init_topic and initial is None:
             initial = (np.array(_pose_msg(msg)), _cov3(msg.pose.covariance))
         if topic == truth_topic:
-            truth_rows.append((stamp_seconds(msg.header.stamp), *_pose_msg(msg)))
+            truth_rows.append((stamp_seconds(msg.header.stamp), *_pose_msg(msg), rec))
 
     for t in sorted(wanted):
         if seen.get(t, 0) != topics[t].msgcount:
@@ -686,6 +700,12 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     empty = [t for t in scan_topics if counts[t] == 0]
     if empty:
         raise DataError(f"{path}: {empty[0]}: no messages")
+    # A topic whose header stamps are all 0 (a driver that never sets them) is timed by the bag's record times;
+    # a few zero stamps among real ones (a simulator's first messages, before its clock runs) are kept.
+    unstamped = set(scan_topics) - {o for v, o in zip(scan_t, scan_of) if v}
+    for t in sorted(unstamped):
+        notes.append(f"{path}: {t}: every header stamp is 0; the bag's record times stand in for them")
+    scan_t = [r if o in unstamped else v for v, r, o in zip(scan_t, scan_rec, scan_of)]
     pick = None
     if not odom_rows and odom_topic is None and other_rows and base_frame == _frame(_Frames().base):
         # frames.base (the default) never appears under the odometry frame. One namespaced pair (robot1/odom ->
@@ -708,6 +728,11 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                         f"{_listing(seen[:12])}{', ...' if len(seen) > 12 else ''}); set frames.odom / frames.base "
                         "or --odom-topic")
     odometry = np.array(odom_rows, dtype=np.float64)
+    odom_name = odom_topic or f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}"
+    if not odometry[:, 0].any():
+        odometry[:, 0] = odometry[:, -1]
+        notes.append(f"{path}: {odom_name}: every header stamp is 0; the bag's record times stand in for them")
+    odometry = odometry[:, :-1]
     odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
     if not np.isfinite(odometry).all():
         raise DataError(f"{path}: {odom_topic or '/tf'}: non-finite odometry")
@@ -737,14 +762,17 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         if not truth_rows:
             raise DataError(f"{path}: {truth_topic}: no messages")
         a = np.array(truth_rows, dtype=np.float64)
-        truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
+        if not a[:, 0].any():
+            a[:, 0] = a[:, -1]
+            notes.append(f"{path}: {truth_topic}: every header stamp is 0; the bag's record times stand in for them")
+        truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:-1].T))
     odom_type = topics[odom_topic].msgtype if odom_topic else None
     src_name = (f"{odom_topic} ({odom_type.replace('/msg/', '/')})" if odom_topic
                 else f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}")
     if tf_dyn != "/tf":
         notes.append(f"{path}: the transforms are on {tf_dyn} and {tf_static} (no /tf, one namespace's)")
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
-                     has_twist=odom_type == ODOM, mirrored=mirrored)
+                     has_twist=odom_type == ODOM, mirrored=mirrored, unstamped=unstamped)
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps)
@@ -773,7 +801,7 @@ def bag_info(path, topics=None, frames=None) -> dict:
             for ns in _tf_spaces(tps):
                 label.update({f"{ns}/tf": "/tf", f"{ns}/tf_static": "/tf_static"})
         conns = [c for c in reader.connections if c.topic in label and c.msgtype in TF_TYPES]
-        for conn, msg in _messages(reader, path, conns):
+        for conn, _, msg in _messages(reader, path, conns):
             for ts in msg.transforms:
                 frames_seen[label[conn.topic]].add(f"{_frame(ts.header.frame_id)} -> {_frame(ts.child_frame_id)}")
         info["frames"] = {k: sorted(v) for k, v in frames_seen.items()}
@@ -828,5 +856,6 @@ def format_info(info: dict) -> str:
                                                      "says how long a sweep takes"))
         lines.append(f"  map:          {u['map']}")
         lines.append(f"  initial pose: {u['initial_pose'] if u['initial_pose'] is not None else 'none in the bag'}")
+        lines += [f"  note: {n}" for n in u.get("notes", [])]
         lines += [f"  warning: {w}" for w in u["warnings"]]
     return "\n".join(lines)
