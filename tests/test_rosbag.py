@@ -305,6 +305,37 @@ def test_nav2_frames_base_footprint_without_base_link_are_found_with_a_note(scan
             assert np.allclose(compose(g.odom, g.laser_offset), a.odom, atol=1e-9)
 
 
+def test_odometry_under_another_name_is_the_transform_that_moves_the_laser(scans, tmp_path, capsys):
+    # A robot_pose_ekf robot of the tf era: /tf holds map -> odom_combined (a localizer's correction, moving too),
+    # odom_combined -> base_footprint (the odometry), and the fixed links base_footprint -> base_link ->
+    # base_laser_link repeated on /tf (no /tf_static before ROS Indigo). No odom frame: with the default frames the
+    # lowest moving link above the laser is the odometry, with a note; the records are the log's.
+    from mcl.datasets.bagwrite import _compose, _inverse
+    from mcl.runner import compose
+
+    up, mount = (0.0, 0.0, 0.0), (0.25, -0.05, 0.1)
+    bag = tmp_path / "ekf.mcap"
+    with BagOut(bag) as b:
+        for k, s in enumerate(scans):
+            base = _compose(tuple(s.odom), _inverse(mount))
+            b.write("/tf", "tf2_msgs/msg/TFMessage", s.t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+                b.transform(s.t, "map", "odom_combined", (0.01 * k, 0.0, 0.002 * k)),
+                b.transform(s.t, "odom_combined", "base_footprint", base),
+                b.transform(s.t, "base_footprint", "base_link", up),
+                b.transform(s.t, "base_link", "base_laser_link", mount)]))
+            _laser(b, "/base_scan", s, frame="base_laser_link")
+    src = open_bag(bag)
+    assert src.odom_source == "/tf odom_combined -> base_footprint"
+    assert any("the odometry is odom_combined -> base_footprint, the transform that moves base_laser_link" in n
+               for n in src.notes), src.notes
+    assert np.allclose(src.laser_offsets["/base_scan"], mount, atol=1e-12)
+    for a, g in zip(scans, src.scans):
+        assert np.allclose(compose(g.odom, g.laser_offset), a.odom, atol=1e-9)
+    # A frame the user names is not second-guessed.
+    _fails(capsys, tmp_path, bag, "--base-frame", "base_footprint",
+           match="/tf: the transform odom -> base_footprint never appears")
+
+
 def _namespaced_bag(path, scans, robots, mount=(0.2, 0.0, 0.0)):
     """Odometry on /tf as R/odom -> R/base_link for each robot R of ``robots`` (multi-robot namespaces), the laser
     R/laser on /tf_static, the scans from the first robot's laser."""

@@ -14,7 +14,9 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
 * **odometry**: ``nav_msgs/Odometry`` on a topic, or the ``frames.odom -> frames.base`` transform of ``/tf``, or a
   ``PoseStamped`` / ``PoseWithCovarianceStamped`` topic in the odometry frame named as ``topics.odom``;
   interpolated at each scan's header stamp (linear in x, y, shortest angle in theta; an exact stamp gives the
-  message's own pose). Velocities from the Odometry twist (0 from /tf: the runner derives them).
+  message's own pose). Velocities from the Odometry twist (0 from /tf: the runner derives them). With the
+  default frames and no such transform: the only ``odom -> X`` (nav2's base_footprint), else the lowest /tf link
+  above the laser that moves (``_moving_link``: robot_pose_ekf's ``odom_combined -> base_footprint``), with a note.
 * **transforms**: ``tf2_msgs/TFMessage`` on ``/tf`` and ``/tf_static``, or ROS 1's older ``tf/tfMessage`` (the same
   fields; bags recorded before tf2 put the static links on ``/tf`` too); a frame's leading '/' is dropped.
 * **laser mounting**: ``frames.base -> scan frame`` from ``/tf_static`` (or the first ``/tf`` that has it),
@@ -575,6 +577,34 @@ def _static_chain(static: dict, base: str, frame: str):
     return pose
 
 
+MOVED = 1e-3  # m or rad: a /tf link whose pose changes more than this over the bag moves
+
+
+def _moving_link(reader, path, tf_topic: str, static: dict, frame: str):
+    """((parent, child), odometry rows) of the lowest /tf link above ``frame`` (a laser's) that moves over the bag,
+    or None: the robot's odometry when it is not named ``odom -> base_link`` (a robot_pose_ekf's
+    ``odom_combined -> base_footprint``). The chain is walked through ``static`` (child -> (parent, pose): the
+    first pose of each link); a second pass over ``tf_topic`` reads the chain's links."""
+    chain, f = [], frame
+    while f in static and len(chain) < 64:
+        chain.append((static[f][0], f))
+        f = static[f][0]
+    if not chain:
+        return None
+    rows: dict[tuple, list] = {e: [] for e in chain}
+    for _, rec, msg in _messages(reader, path, [c for c in reader.connections if c.topic == tf_topic]):
+        for ts in msg.transforms:
+            e = (_frame(ts.header.frame_id), _frame(ts.child_frame_id))
+            if e in rows:
+                rows[e].append((stamp_seconds(ts.header.stamp), *_tf_pose(ts.transform), 0.0, 0.0, rec))
+    for e in chain:  # from the laser up: the first that moves (not map -> odom above it)
+        if len(rows[e]) > 1:
+            a = np.array(rows[e])[:, 1:4]
+            if max(np.ptp(a[:, 0]), np.ptp(a[:, 1]), np.ptp(np.unwrap(a[:, 2]))) > MOVED:
+                return e, rows[e]
+    return None
+
+
 def open_bag(path, topics=None, frames=None) -> BagSource:
     """Read a bag's small records and set up its scan stream (see the module doc).
 
@@ -720,6 +750,19 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         notes.append(f"{path}: {tf_dyn}: no {odom_frame} -> {base_frame}; the odometry is {odom_parent} -> "
                      f"{odom_child}, the only such transform (frames.odom and frames.base choose)")
         odom_frame = odom_parent
+    if (not odom_rows and odom_topic is None and tf_dyn in topics and default_odom
+            and base_frame == _frame(_Frames().base)):
+        # Neither odom -> base_link nor any odom -> X: the link that moves the first laser (robot_pose_ekf's
+        # odom_combined -> base_footprint; a bag recorded before tf_static repeats the fixed links on /tf).
+        found = _moving_link(reader, path, tf_dyn, static, scan_frames[scan_topics[0]])
+        if found is not None:
+            (odom_frame, odom_child), odom_rows = found
+            for row in odom_rows:
+                order.see(tf_dyn, row[0], f" {odom_frame} -> {odom_child}")
+            notes.append(f"{path}: {tf_dyn}: no {_frame(_Frames().odom)} -> {base_frame}; the odometry is "
+                         f"{odom_frame} -> {odom_child}, the transform that moves {scan_frames[scan_topics[0]]} "
+                         "(frames.odom and frames.base choose)")
+            base_frame = odom_child
     if not odom_rows:
         if odom_topic is not None:
             raise DataError(f"{path}: {odom_topic}: no messages")
