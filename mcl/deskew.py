@@ -20,8 +20,11 @@ once" wins: the set was corrected with it.) The reversed reading is centred on t
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
+
+from mcl.datasets import ScanMap
 
 # s of odometry before and after a sweep that its velocity is averaged over: an odometry pose's noise between two
 # ticks 0.1 s apart is a velocity error as large as the turn (generated drives: alphas 0.05 in the variance form);
@@ -36,42 +39,29 @@ MIN_TURN = 0.04
 DECIDE_NATS = 20.0  # summed log-likelihood lead that decides the timing (a wrong reading led by 0.6 at most)
 
 
-class Deskewed:
-    """The scans of a sized iterable, each with the robot's velocity over its sweep (``Scan.twist``, robot frame at
-    the stamp; averaged over the sweep and ``TWIST_MARGIN`` s either side) from ``odometry`` (rows t, x, y, theta,
-    tv, rv), so that the sensor model can move each beam's endpoint to where it would be had the beam been taken
-    at the stamp (``mcl.sensors.beam_endpoints``).
-    ``sweep``: "auto" keeps each scan's own beam times (a bag's time_increment), a number of seconds sets beam j of
-    n at j / (n - 1) * sweep after the stamp. Lazy, so a bag's scans still stream."""
+def deskewed(s, odometry: np.ndarray, sweep):
+    """Scan ``s`` with the robot's velocity over its sweep (``Scan.twist``, robot frame at the stamp; averaged over
+    the sweep and ``TWIST_MARGIN`` s either side) from ``odometry`` (rows t, x, y, theta, tv, rv, time-sorted), so
+    that the sensor model can move each beam's endpoint to where it would be had the beam been taken at the stamp
+    (``mcl.sensors.beam_endpoints``).
+    ``sweep``: "auto" keeps the scan's own beam times (a bag's time_increment), a number of seconds sets beam j of
+    n at j / (n - 1) * sweep after the stamp."""
+    from mcl.datasets.rosbag import odometry_at
+    from mcl.estimate import compose, inverse
 
-    def __init__(self, scans, odometry: np.ndarray, sweep) -> None:
-        from mcl.datasets.rosbag import odometry_at
-
-        self.scans, self.sweep, self.at = scans, sweep, odometry_at
-        self.odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
-
-    def __len__(self) -> int:
-        return len(self.scans)
-
-    def __iter__(self):
-        return (self._twisted(s) for s in self.scans)
-
-    def _twisted(self, s):
-        from mcl.estimate import compose, inverse
-
-        n = np.asarray(s.ranges).shape[0]
-        t0, dt = (s.beam_t0, s.beam_dt) if self.sweep == "auto" else (0.0, float(self.sweep) / max(n - 1, 1))
-        if dt == 0.0 or n < 2:
-            return s
-        ta = s.t + min(t0, t0 + dt * (n - 1)) - TWIST_MARGIN
-        tb = s.t + max(t0, t0 + dt * (n - 1)) + TWIST_MARGIN
-        a, b = self.at(self.odometry, ta)[0], self.at(self.odometry, tb)[0]
-        d = compose(inverse(a), b)  # the robot's motion over the sweep and the margins, in its frame at the start
-        return dataclasses.replace(s, beam_t0=t0, beam_dt=dt, twist=d / (tb - ta))
+    n = np.asarray(s.ranges).shape[0]
+    t0, dt = (s.beam_t0, s.beam_dt) if sweep == "auto" else (0.0, float(sweep) / max(n - 1, 1))
+    if dt == 0.0 or n < 2:
+        return s
+    ta = s.t + min(t0, t0 + dt * (n - 1)) - TWIST_MARGIN
+    tb = s.t + max(t0, t0 + dt * (n - 1)) + TWIST_MARGIN
+    a, b = odometry_at(odometry, ta)[0], odometry_at(odometry, tb)[0]
+    d = compose(inverse(a), b)  # the robot's motion over the sweep and the margins, in its frame at the start
+    return dataclasses.replace(s, beam_t0=t0, beam_dt=dt, twist=d / (tb - ta))
 
 
 def deskew(scans, log, sweep, echo, timed: bool):
-    """``scans`` with the robot's velocity over each sweep (:class:`Deskewed`) when ``sensor.sweep_time`` asks for
+    """``scans`` with the robot's velocity over each sweep (``deskewed``, lazily) when ``sensor.sweep_time`` asks for
     it and the input (``timed``: a bag) may say when its beams were taken; else as they are."""
     if sweep == 0 or not len(scans):
         return scans
@@ -89,7 +79,8 @@ def deskew(scans, log, sweep, echo, timed: bool):
         echo(f"{log.path}: a laser sweep takes {said} (LaserScan time_increment): each scan deskewed by the "
              "odometry's motion over it (which way its beams run in time is found from the scans; "
              "sensor.sweep_time: 0 turns it off)")
-    return Deskewed(scans, odometry, sweep)
+    odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
+    return ScanMap(scans, functools.partial(deskewed, odometry=odometry, sweep=sweep))
 
 
 def reversed_in_time(scan):

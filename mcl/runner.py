@@ -19,6 +19,7 @@ the recording and says ``"interrupted": true`` in the summary.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import json
 import math
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from mcl.config import Config, dump_config
+from mcl.datasets import ScanMap
 from mcl.errors import ConfigError, DataError
 from mcl.estimate import compose, inverse, wrap_angle  # noqa: F401  (compose, inverse: mcl.runner's too)
 
@@ -222,33 +224,21 @@ class _Unpaired:
         return ((s, None) for s in self.scans)
 
 
-class _Retimed:
-    """The scans of a sized iterable with their stamps moved by ``offset`` seconds (``sensor.time_offset``) and
-    each paired with the robot's odometry pose at the new stamp, interpolated in ``odometry`` (rows t, x, y, theta,
-    tv, rv; ``mcl.datasets.rosbag.odometry_at``). A scan's own pose (a FLASER line's) is dropped; its velocities and
-    laser mounting are kept. Lazy, so a bag's scans still stream."""
+def _retimed(s, odometry: np.ndarray, offset: float):
+    """Scan ``s`` with its stamp moved by ``offset`` seconds (``sensor.time_offset``) and paired with the robot's
+    odometry pose at the new stamp, interpolated in ``odometry`` (rows t, x, y, theta, tv, rv, time-sorted;
+    ``mcl.datasets.rosbag.odometry_at``). Its own pose (a FLASER line's) is dropped; its velocities and laser
+    mounting are kept."""
+    from mcl.datasets.rosbag import odometry_at
 
-    def __init__(self, scans, odometry: np.ndarray, offset: float) -> None:
-        from mcl.datasets.rosbag import odometry_at
-
-        self.scans, self.offset, self.at = scans, float(offset), odometry_at
-        self.odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
-
-    def __len__(self) -> int:
-        return len(self.scans)
-
-    def __iter__(self):
-        return (self._moved(s) for s in self.scans)
-
-    def _moved(self, s):
-        t = s.t + self.offset
-        return dataclasses.replace(s, t=t, odom=self.at(self.odometry, t)[0])
+    t = s.t + offset
+    return dataclasses.replace(s, t=t, odom=odometry_at(odometry, t)[0])
 
 
 def _retime(scans, log, offset: float, echo):
-    """``scans`` with ``sensor.time_offset`` applied (``_Retimed``), or as they are when it is 0. The odometry is
-    the log's own stream (a CARMEN log's ODOM lines, a bag's odometry topic or transforms); a CARMEN log without
-    ODOM lines interpolates its scans' own poses."""
+    """``scans`` with ``sensor.time_offset`` applied (``_retimed``, lazily), or as they are when it is 0. The
+    odometry is the log's own stream (a CARMEN log's ODOM lines, a bag's odometry topic or transforms); a CARMEN
+    log without ODOM lines interpolates its scans' own poses."""
     if offset == 0.0 or not len(scans):
         return scans
     odometry = np.asarray(log.odometry, dtype=np.float64).reshape(-1, 6)
@@ -258,7 +248,8 @@ def _retime(scans, log, offset: float, echo):
         what = "its scans' own odometry poses"
     echo(f"{log.path}: sensor.time_offset {offset:+g} s: each scan paired with the {what} at its stamp "
          f"{'+' if offset > 0 else '-'} {abs(offset):g} s")
-    return _Retimed(scans, odometry, offset)
+    odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
+    return ScanMap(scans, functools.partial(_retimed, odometry=odometry, offset=float(offset)))
 
 
 def _open_source(cfg: Config, echo):

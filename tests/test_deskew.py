@@ -1,5 +1,5 @@
 """Deskewing a spinning laser's scan (``sensor.sweep_time``): each beam's endpoint moved into the robot frame at
-the stamp by the robot's motion since then (mcl.sensors.beam_endpoints, mcl.runner._Deskewed)."""
+the stamp by the robot's motion since then (mcl.sensors.beam_endpoints, mcl.deskew.deskewed)."""
 
 from __future__ import annotations
 
