@@ -530,6 +530,29 @@ def test_map_initial_pose_and_truth_from_the_bag(world, scans, tmp_path):
     assert summary["eval"]["ate_rmse"] < 0.15  # 8 s of tracking from the true pose; measured 0.05
 
 
+def test_a_bag_recorded_while_mapping_gives_its_last_map(world, scans, tmp_path):
+    # SLAM (gmapping, slam_toolbox) publishes /map again as it grows: the first is a corner of the building, the
+    # last the whole of it. The last is used, with a note.
+    from mcl.datasets.bagwrite import _write_grid
+    from mcl.maps import OccupancyGrid
+
+    grid = load_map(world / "map.yaml")
+    h, w = grid.occupancy.shape
+    part = OccupancyGrid.from_occupancy(grid.occupancy[: h // 2, : w // 3].copy(), grid.resolution, grid.origin)
+    bag = tmp_path / "slam.mcap"
+    with BagOut(bag) as b:
+        for k, s in enumerate(scans):
+            if k in (0, 20):
+                _write_grid(b, part, s.t)
+            if k == 30:
+                _write_grid(b, grid, s.t)
+            _odom(b, s)
+            _laser(b, "/scan", s, frame="base_link")
+    src = open_bag(bag)
+    assert np.array_equal(src.grid.occupancy, grid.occupancy)
+    assert f"/map: 3 maps (one being built?); the last, {w} x {h} cells, is used" in " ".join(src.notes)
+
+
 def test_a_bag_map_with_a_rotated_origin_is_turned_onto_the_axes(world, scans, tmp_path):
     # /map's origin turned by a quarter turn about its first cell: the grid read is the array turned (exactly), its
     # corner where the turn puts it; it was refused ("a rotated map origin is not supported")

@@ -24,7 +24,8 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
   A laser mounted upside down (the frame's z axis pointing down: rolled or pitched by pi, as AMCL allows)
   sees the plane mirrored, a beam at angle a pointing at -a: its ranges are reversed and its angle_min
   mirrored, so the records hold the beams counter-clockwise in an upright frame with the mounting's yaw.
-* **map** (``nav_msgs/OccupancyGrid`` on ``topics.map``), **initial pose** (the first
+* **map** (the last ``nav_msgs/OccupancyGrid`` on ``topics.map``: a bag recorded while mapping holds the map
+  as it grew), **initial pose** (the first
   ``PoseWithCovarianceStamped`` on ``topics.initial_pose``, with its x, y, yaw covariance) and **truth**
   (``PoseStamped``, ``PoseWithCovarianceStamped`` or ``Odometry`` on ``topics.truth``).
 * **stamps**: each message's header stamp; a topic (or the ``/tf`` odometry link) whose stamps are all 0, a
@@ -667,7 +668,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     scan_t: list[float] = []
     scan_rec: list[float] = []  # each scan's record time, and its topic (for a topic whose stamps are all 0)
     scan_of: list[str] = []
-    grid = initial = None
+    grid = initial = map_msg = None
+    n_maps = 0
     truth_rows: list[tuple] = []
     other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
     odom_child = None  # the Odometry topic's child_frame_id
@@ -714,8 +716,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                                   float(msg.twist.twist.angular.z), rec))
             else:  # a pose topic (ODOM_TYPES): no child frame, no velocities
                 odom_rows.append((t, *_pose_msg(msg), 0.0, 0.0, rec))
-        if topic == map_topic and grid is None:
-            grid = _grid_from_msg(path, topic, msg)
+        if topic == map_topic:  # the last one: a bag recorded while mapping holds the map as it grew
+            map_msg, n_maps = msg, n_maps + 1
         if topic == init_topic and initial is None:
             initial = (np.array(_pose_msg(msg)), _cov3(msg.pose.covariance))
         if topic == truth_topic:
@@ -727,6 +729,11 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                             "(truncated or corrupt?)")
     warnings: list[str] = []
     notes: list[str] = []
+    if map_msg is not None:
+        grid = _grid_from_msg(path, map_topic, map_msg)
+        if n_maps > 1:
+            notes.append(f"{path}: {map_topic}: {n_maps} maps (one being built?); the last, "
+                         f"{map_msg.info.width} x {map_msg.info.height} cells, is used")
     empty = [t for t in scan_topics if counts[t] == 0]
     if empty:
         raise DataError(f"{path}: {empty[0]}: no messages")
