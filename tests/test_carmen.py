@@ -130,6 +130,8 @@ def test_corrupt_gzip(tmp_path):
     ("ODOM 0 0 zero 0 0 0 10 host 10", "ODOM"),
     (ROBOTLASER1.replace(" 5 1 2 3 4 5 0 ", " 6 1 2 3 4 5 0 "), "ROBOTLASER1"),
     ("RAWLASER2 0 -1.0 2.0 0.5 20.0 0.01 1 5 5 4 3 2 1 3 7 8 11 host 0.4", "RAWLASER2"),  # 3 remissions, 2 given
+    (ROBOTLASER1.replace(" -1.5 3.0 0.75 ", " -1.5 3.0 0 "), "ROBOTLASER1: angular resolution 0"),  # 5 beams, 1 way
+    (ROBOTLASER1.replace(" -1.5 3.0 0.75 ", " nan 3.0 0.75 "), "ROBOTLASER1: non-finite beam geometry"),
 ])
 def test_malformed_line_names_file_line_and_type(tmp_path, bad, kind):
     p = write(tmp_path, [ODOM_A, FLASER, bad, FLASER])

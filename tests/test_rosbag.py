@@ -6,6 +6,7 @@ synthetic world (mcl simulate, 8 s, 41 scans)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import types
 from pathlib import Path
@@ -485,6 +486,34 @@ def test_laser_scan_no_return_and_invalid_readings(scans, tmp_path):
         _laser(b, "/scan", s, ranges=r, range_min=0.1)
     (got,) = list(open_bag(bag).scans)
     assert got.ranges.tolist() == [1.5, s.max_range, 0.0, 0.0, 0.0, 2.25]
+
+
+def test_a_scan_that_does_not_say_where_its_beams_point(world, scans, tmp_path, capsys):
+    # A broken driver's message: angle_increment 0 (every beam one way) or a NaN angle. One such scan among good
+    # ones is read without a reading (the update only predicts, one pose per scan kept), with a warning counting
+    # them; a topic of nothing else stops with one line.
+    def bag(name, bad):
+        path = tmp_path / f"{name}.mcap"
+        with BagOut(path) as b:
+            for k, s in enumerate(scans):
+                _odom(b, s)
+                g = s
+                if bad(k):  # every beam one way, or a NaN first angle
+                    g = dataclasses.replace(s, **({"angle_min": math.nan} if k % 2 else {"angle_increment": 0.0}))
+                _laser(b, "/scan", g, frame="base_link")
+        return path
+
+    some = bag("some", lambda k: k in (5, 6))
+    src = open_bag(some)
+    assert src.warnings == [f"{some}: /scan: 2 of {len(scans)} scans do not say where their beams point (angle_min "
+                            "or angle_increment not finite, or angle_increment 0): read without a reading, the "
+                            "update only predicts"]
+    got = list(src.scans)
+    assert [k for k, g in enumerate(got) if not np.any(g.ranges > 0)] == [5, 6]
+    assert np.array_equal(got[7].ranges, scans[7].ranges)
+    summary, _ = _run(tmp_path, "r", map=world / "map.yaml", bag=some)
+    assert summary["scans"] == len(scans) and summary["events"]["empty_scans"] == 2
+    _fails(capsys, tmp_path, bag("all", lambda k: True), match="/scan: no message says where its beams point")
 
 
 def test_pointcloud_is_projected_within_the_height_band(scans, tmp_path):

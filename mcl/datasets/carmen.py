@@ -252,6 +252,8 @@ def _parse_laser_config(parts: list[str], kind: str, extra: int) -> tuple[np.nda
                    f"({expect} in all), got {len(parts)} fields")
     ranges = _floats(parts[9:9 + n], "range", kind)
     _floats(parts[i_rem + 1:i_rem + 1 + m], "remission", kind)
+    if n > 1 and config[3] == 0.0:
+        raise _Bad(f"{kind}: angular resolution 0 with {n} beams: where they point is unknown")
     return config, ranges, i_rem + 1 + m
 
 

@@ -360,8 +360,19 @@ def beam_times(time_increment, n: int) -> tuple[float, float]:
     return 0.0, ti
 
 
+def beams_directed(msg) -> bool:
+    """Whether a LaserScan says where its beams point: angle_min and angle_increment finite, and the increment not
+    0 when there are several beams (a broken driver's message)."""
+    amin, inc = float(msg.angle_min), float(msg.angle_increment)
+    return math.isfinite(amin) and math.isfinite(inc) and (inc != 0.0 or len(msg.ranges) < 2)
+
+
 def laser_ranges(msg):
-    """(ranges float64, angle_min, angle_increment, max_range or None) of a LaserScan (see the module doc)."""
+    """(ranges float64, angle_min, angle_increment, max_range or None) of a LaserScan (see the module doc). One
+    that does not say where its beams point (``beams_directed``) has no reading (0 for every beam): the update only
+    predicts."""
+    if not beams_directed(msg):
+        return np.zeros(len(msg.ranges)), 0.0, 0.0, None
     r = np.round(np.asarray(msg.ranges, dtype=np.float64), 5)
     rmax = f32(msg.range_max)
     rmax = rmax if math.isfinite(rmax) and rmax > 0 else None
@@ -665,6 +676,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     scan_frames: dict[str, str] = {}
     sweeps: dict[str, float] = {}  # LaserScan topic -> s from its first message's first beam to its last (0: unknown)
     counts: dict[str, int] = {t: 0 for t in scan_topics}
+    undirected: dict[str, int] = {}  # LaserScan topic -> messages that do not say where their beams point
     scan_t: list[float] = []
     scan_rec: list[float] = []  # each scan's record time, and its topic (for a topic whose stamps are all 0)
     scan_of: list[str] = []
@@ -684,7 +696,9 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             scan_rec.append(rec)
             scan_of.append(topic)
             order.see(topic, scan_t[-1])
-            if topic not in scan_frames and conn.msgtype == LASER:
+            if conn.msgtype == LASER and not beams_directed(msg):
+                undirected[topic] = undirected.get(topic, 0) + 1
+            elif topic not in sweeps and conn.msgtype == LASER:
                 t0, dt = beam_times(msg.time_increment, len(msg.ranges))
                 sweeps[topic] = abs(dt) * (len(msg.ranges) - 1)
             scan_frames.setdefault(topic, _frame(msg.header.frame_id))
@@ -737,6 +751,12 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     empty = [t for t in scan_topics if counts[t] == 0]
     if empty:
         raise DataError(f"{path}: {empty[0]}: no messages")
+    for t, k in undirected.items():
+        why = "angle_min or angle_increment not finite, or angle_increment 0"
+        if k == counts[t]:
+            raise DataError(f"{path}: {t}: no message says where its beams point ({why})")
+        warnings.append(f"{path}: {t}: {k} of {counts[t]} scans do not say where their beams point ({why}): read "
+                        "without a reading, the update only predicts")
     # A topic whose header stamps are all 0 (a driver that never sets them) is timed by the bag's record times;
     # a few zero stamps among real ones (a simulator's first messages, before its clock runs) are kept.
     unstamped = set(scan_topics) - {o for v, o in zip(scan_t, scan_of) if v}
