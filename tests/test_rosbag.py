@@ -486,6 +486,24 @@ def test_laser_scan_no_return_and_invalid_readings(scans, tmp_path):
         _laser(b, "/scan", s, ranges=r, range_min=0.1)
     (got,) = list(open_bag(bag).scans)
     assert got.ranges.tolist() == [1.5, s.max_range, 0.0, 0.0, 0.0, 2.25]
+    # A range_min that is not a number says nothing: every reading above 0 counts (it dropped every reading).
+    nan_min = tmp_path / "nanmin.mcap"
+    with BagOut(nan_min) as b:
+        _odom(b, s)
+        _laser(b, "/scan", s, ranges=r, range_min=math.nan)
+    (got,) = list(open_bag(nan_min).scans)
+    assert got.ranges.tolist() == [1.5, s.max_range, 0.0, 0.0, 0.05, 2.25]
+
+
+def test_a_laser_mounting_that_is_not_finite_stops_with_one_line(scans, tmp_path, capsys):
+    bag = tmp_path / "nanmount.mcap"
+    with BagOut(bag) as b:
+        b.write("/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+            b.transform(scans[0].t, "base_link", "laser", (math.nan, 0.0, 0.0))]))
+        for s in scans[:3]:
+            _odom(b, s)
+            _laser(b, "/scan", s)
+    _fails(capsys, tmp_path, bag, match="/scan: the transform base_link -> laser is not finite")
 
 
 def test_a_scan_that_does_not_say_where_its_beams_point(world, scans, tmp_path, capsys):

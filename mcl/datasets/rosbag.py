@@ -377,6 +377,7 @@ def laser_ranges(msg):
     rmax = f32(msg.range_max)
     rmax = rmax if math.isfinite(rmax) and rmax > 0 else None
     rmin = f32(msg.range_min)
+    rmin = rmin if math.isfinite(rmin) and rmin > 0 else 0.0  # not given: every reading above 0 counts
     with np.errstate(invalid="ignore"):
         if rmax is not None:
             r[np.isposinf(r)] = rmax  # REP 117: +inf is no return
@@ -822,6 +823,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             notes.append(f"{path}: {t}: no transform {base_frame} -> {f} in /tf_static or /tf; the laser pose comes "
                          "from sensor.laser_pose (else the robot centre)")
         else:
+            if not all(math.isfinite(v) for v in pose[:3]):
+                raise DataError(f"{path}: {t}: the transform {base_frame} -> {f} is not finite ({pose[:3]})")
             offsets[t] = np.array(pose[:3], dtype=np.float64)
             if pose[3] < 0:
                 mirrored.add(t)
