@@ -123,7 +123,8 @@ class ParticleFilter:
         self.rng = rng if rng is not None else np.random.default_rng(cfg.seed)
         fc = cfg.filter
         self.motion = make_motion_model(cfg.motion)
-        self.allowed = allowed_mask(grid, cfg.motion.robot_radius) if cfg.motion.map_rejection else None
+        self.allowed = (allowed_mask(grid, cfg.motion.robot_radius, cfg.motion.map_unknown)
+                        if cfg.motion.map_rejection else None)
         self.sensor = make_sensor_model(grid, cfg.sensor)
         # the policies
         self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio)
@@ -514,8 +515,10 @@ class ParticleFilter:
         """(3, N) ``poses`` after ``steps`` Gauss-Newton steps fitting ``observation``'s endpoints to the map's
         distance field (``refine_poses``; endpoints farther than ``filter.search_refine_dist`` from a wall left out;
         under 3 endpoints move nothing)."""
-        if self._match_mask is None:
-            self._match_mask = self.allowed if self.allowed is not None else byte_mask(self.grid.free)
+        if self._match_mask is None:  # where a search may move a hypothesis: free cells (clear of walls under rejection)
+            self._match_mask = (byte_mask(self.grid.free) if self.allowed is None
+                                else self.allowed if self.cfg.motion.map_unknown == "reject"
+                                else allowed_mask(self.grid, self.cfg.motion.robot_radius))
         e = np.asarray(self.sensor.endpoints(observation), dtype=np.float64)  # (2, K)
         inv_res = 1.0 / float(self.grid.resolution)
         poses = np.ascontiguousarray(poses)
