@@ -165,17 +165,15 @@ def _mixture_log(log_f, log_fk, weight: float):
     return np.logaddexp(math.log1p(-weight) + log_f, math.log(weight) + log_fk)
 
 
-def allowed_mask(grid, robot_radius: float, unknown: str = "reject") -> np.ndarray:
+def allowed_mask(grid, robot_radius: float, unknown: bool = False) -> np.ndarray:
     """uint8 (H, W) mask of the cells a robot centre may occupy: distance > robot_radius from every occupied cell,
-    and free (``unknown="allow"``: free or unknown, i.e. not occupied).
+    and free (``unknown``: free or unknown, i.e. not occupied; ``motion.unknown_prior`` then weighs the unknown).
 
     ``grid`` needs the bool ``free`` and ``occupied`` and float ``distance`` (metres to the nearest occupied cell
     centre) arrays of ``OccupancyGrid``. Compute once per map.
     """
-    if unknown not in ("allow", "reject"):
-        raise ValueError(f"motion.map_unknown: expected allow or reject, got {unknown!r}")
     dist = np.asarray(grid.distance)
-    space = ~np.asarray(grid.occupied, dtype=bool) if unknown == "allow" else np.asarray(grid.free, dtype=bool)
+    space = ~np.asarray(grid.occupied, dtype=bool) if unknown else np.asarray(grid.free, dtype=bool)
     return byte_mask(space & (dist > float(robot_radius)))
 
 
@@ -658,7 +656,7 @@ def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np
     else:
         logp = log_motion_model_odometry(xn, u, x_prev, cfg, **kw)
     if allowed is None:
-        allowed = allowed_mask(grid, float(getattr(cfg, "robot_radius", 0.0)), getattr(cfg, "map_unknown", "reject"))
+        allowed = allowed_mask(grid, float(getattr(cfg, "robot_radius", 0.0)))
     mask = np.ascontiguousarray(allowed, dtype=np.uint8)
     ix = np.floor((xn[0] - float(grid.origin[0])) / float(grid.resolution))
     iy = np.floor((xn[1] - float(grid.origin[1])) / float(grid.resolution))

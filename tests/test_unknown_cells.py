@@ -1,7 +1,8 @@
-"""Unknown map cells under the map-based motion model (``motion.map_unknown``): a map's unexplored floor (grey in
+"""Unknown map cells under the map-based motion model (``motion.unknown_prior``): a map's unexplored floor (grey in
 the PGM: a room behind a door closed while mapping, the floor under furniture moved since) is no wall. Rejecting
 every pose there gave each particle weight zero while the robot drove over such a patch, and the default config lost
-every generated world so edited (docs/measurements.md, "Thirty-third session")."""
+every generated world so edited (docs/measurements.md, "Thirty-third session"). Now a pose there is weighed by
+p(x | m) = unknown_prior against a free cell's 1."""
 
 from __future__ import annotations
 
@@ -23,11 +24,29 @@ def test_allowed_mask_takes_unknown_cells_clear_of_walls_only_when_asked():
     # one row: wall, free, free, unknown, unknown, unknown, free; cells 0.1 m
     occ = np.array([[100, 0, 0, -1, -1, -1, 0]], dtype=np.int8)
     g = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
-    assert allowed_mask(g, 0.15, "reject").tolist() == [[0, 0, 1, 0, 0, 0, 1]]
-    assert allowed_mask(g, 0.15, "allow").tolist() == [[0, 0, 1, 1, 1, 1, 1]]
-    assert allowed_mask(g, 0.15).tolist() == allowed_mask(g, 0.15, "reject").tolist()  # the function's default
-    with pytest.raises(ValueError, match="map_unknown"):
-        allowed_mask(g, 0.15, "maybe")
+    assert allowed_mask(g, 0.15).tolist() == [[0, 0, 1, 0, 0, 0, 1]]
+    assert allowed_mask(g, 0.15, unknown=True).tolist() == [[0, 0, 1, 1, 1, 1, 1]]
+
+
+def test_particles_on_unknown_cells_are_weighed_by_the_prior():
+    # A corridor of free cells with an unknown strip: a cloud moved half onto the strip has that half's weights
+    # times unknown_prior (log-weight + log 0.5), the rest untouched; with the whole cloud on it, every weight the
+    # same (nothing to choose by); 1 weighs nothing; 0 never lets a particle stay there (weight zero).
+    from mcl.filter import ParticleFilter
+
+    occ = np.zeros((20, 40), dtype=np.int8)
+    occ[0, :] = occ[-1, :] = 100
+    occ[1:-1, 20:30] = -1
+    g = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
+    pts = np.array([[1.0, 2.5], [1.0, 1.0], [0.0, 0.0]])  # x 1.0 m (free) and 2.5 m (unknown), y 1.0 m
+    for q, expect in ((0.5, [0.0, np.log(0.5)]), (1.0, [0.0, 0.0])):
+        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [f"motion.unknown_prior={q}"])
+        pf = ParticleFilter(cfg, g)
+        logw = np.zeros(2)
+        pf._weigh_unknown(logw, pts)
+        assert np.allclose(logw, expect), q
+    assert ParticleFilter(load_config(PROJECT_ROOT / "configs" / "default.yaml",
+                                      ["motion.unknown_prior=0"]), g).allowed[10, 25] == 0
 
 
 @pytest.fixture(scope="module")
@@ -66,6 +85,6 @@ def test_a_robot_driving_over_unknown_floor_keeps_its_track(grey_world, tmp_path
     # Seed 1, a fixed trajectory. Allowed (the default): within 0.3 m all the way (measured 0.085 m). Rejected (the
     # default before): every particle on the patch gets weight zero and the track is lost (measured 7.4 m).
     kept = _track(grey_world, tmp_path / "allow")
-    lost = _track(grey_world, tmp_path / "reject", "motion.map_unknown=reject")
+    lost = _track(grey_world, tmp_path / "reject", "motion.unknown_prior=0")
     assert kept < 0.3, kept
     assert lost > 1.0, lost

@@ -21,6 +21,13 @@ def wrap(a):
 
 
 @njit(cache=True)
+def in_mask(particles, mask, ox, oy, inv_res, out):
+    """out[i] = whether particle i's cell is a nonzero cell of ``mask`` (``allowed_at``), for the (3, N) poses."""
+    for i in range(particles.shape[1]):
+        out[i] = allowed_at(mask, particles[0, i], particles[1, i], ox, oy, inv_res)
+
+
+@njit(cache=True)
 def allowed_at(allowed, x, y, ox, oy, inv_res):
     """Whether world point (x, y) falls in a nonzero cell of the (H, W) mask ``allowed``.
 
