@@ -640,8 +640,9 @@ def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np
     """p(x_t | u_t, x_{t-1}, m) = eta p(x_t | u_t, x_{t-1}) p(x_t | m) over N hypotheses (seed 5.5), (N,).
 
     p(x_t | m) is 0 for a hypothesis whose cell is not in ``allowed`` (default
-    ``allowed_mask(grid, cfg.robot_radius)``; off the map counts as not
-    allowed) and a constant otherwise. eta normalises over the given set of
+    ``allowed_mask(grid, cfg.robot_radius)``, unknown cells too when
+    ``cfg.unknown_prior`` > 0; off the map counts as not allowed), that prior on
+    an unknown cell, and a constant otherwise. eta normalises over the given set of
     hypotheses: the result sums to 1 over x_new, a discrete posterior over the
     candidates (the constant p(x|m) and the continuous normaliser cancel). It is
     the book's approximation, good for motions shorter than about half the
@@ -655,15 +656,21 @@ def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np
         logp = log_motion_model_velocity(xn, u, x_prev, cfg, **kw)
     else:
         logp = log_motion_model_odometry(xn, u, x_prev, cfg, **kw)
+    q = float(getattr(cfg, "unknown_prior", 0.0))
     if allowed is None:
-        allowed = allowed_mask(grid, float(getattr(cfg, "robot_radius", 0.0)))
+        allowed = allowed_mask(grid, float(getattr(cfg, "robot_radius", 0.0)), q > 0.0)
     mask = np.ascontiguousarray(allowed, dtype=np.uint8)
     ix = np.floor((xn[0] - float(grid.origin[0])) / float(grid.resolution))
     iy = np.floor((xn[1] - float(grid.origin[1])) / float(grid.resolution))
     inside = (ix >= 0) & (ix < mask.shape[1]) & (iy >= 0) & (iy < mask.shape[0])
+    cells = (iy[inside].astype(np.int64), ix[inside].astype(np.int64))
     free = np.zeros(xn.shape[1], dtype=bool)
-    free[inside] = mask[iy[inside].astype(np.int64), ix[inside].astype(np.int64)] != 0
+    free[inside] = mask[cells] != 0
     logp = np.where(free, logp, -np.inf)
+    if 0.0 < q < 1.0:  # p(x | m) = unknown_prior on an unknown cell (the sampler's weight)
+        unknown = np.zeros(xn.shape[1], dtype=bool)
+        unknown[inside] = np.asarray(grid.unknown)[cells]
+        logp = np.where(unknown & free, logp + math.log(q), logp)
     top = np.max(logp) if logp.size else -np.inf
     if not np.isfinite(top):
         return np.zeros(xn.shape[1])

@@ -88,3 +88,23 @@ def test_a_robot_driving_over_unknown_floor_keeps_its_track(grey_world, tmp_path
     lost = _track(grey_world, tmp_path / "reject", "motion.unknown_prior=0")
     assert kept < 0.3, kept
     assert lost > 1.0, lost
+
+
+def test_the_map_based_density_weighs_unknown_cells_by_the_prior():
+    # Seed 5.5's p(x_t | u_t, x_{t-1}, m) with p(x | m) = 1 free, unknown_prior unknown, 0 in a wall: two hypotheses
+    # at the same distance from the odometry's prediction, one on free floor and one on unknown, differ by that
+    # factor; 0 gives the unknown one nothing.
+    from mcl.motion import motion_model_odometry, motion_model_with_map
+
+    occ = np.zeros((40, 60), dtype=np.int8)
+    occ[:, 40:] = -1  # unknown from x = 2.0 m
+    grid = OccupancyGrid.from_occupancy(occ, 0.05, (0.0, 0.0))
+    u = (np.zeros(3), np.array([0.5, 0.0, 0.0]))
+    xp = np.array([1.5, 1.0, 0.0])
+    hyp = np.array([[1.9, 2.1], [1.0, 1.0], [0.0, 0.0]])  # 0.1 m short of the prediction (2.0, 1.0), 0.1 m past
+    for q in (0.5, 0.0):
+        c = load_config(PROJECT_ROOT / "configs" / "default.yaml", [f"motion.unknown_prior={q}"]).motion
+        free = motion_model_odometry(hyp, u, xp, c)
+        p = motion_model_with_map(hyp, u, xp, grid, c)
+        assert p.sum() == pytest.approx(1.0)
+        assert p[1] / p[0] == pytest.approx(q * free[1] / free[0], rel=1e-9), q
