@@ -48,7 +48,7 @@ from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.deskew import SweepOrder
 from mcl.estimate import estimate, wrap_angle
 from mcl.kernels.likelihood import refine_poses, refine_poses_serial
-from mcl.kernels.motion import in_mask
+from mcl.kernels.motion import add_in_mask
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
 from mcl.maps import byte_mask
 from mcl.motion import allowed_mask, make_motion_model
@@ -422,10 +422,11 @@ class ParticleFilter:
         the known floor through a map's gap loses to the rest."""
         if self._unknown is None:
             return
-        on = np.empty(particles.shape[1], dtype=np.bool_)
-        in_mask(np.ascontiguousarray(particles), self._unknown, float(self.grid.origin[0]),
-                float(self.grid.origin[1]), 1.0 / float(self.grid.resolution), on)
-        logw[on] += self._log_unknown
+        w = logw if logw.flags.c_contiguous else np.ascontiguousarray(logw)
+        add_in_mask(np.ascontiguousarray(particles), self._unknown, float(self.grid.origin[0]),
+                    float(self.grid.origin[1]), 1.0 / float(self.grid.resolution), self._log_unknown, w)
+        if w is not logw:
+            logw[:] = w
 
     def _hedge_jump(self, control: Control | None, info: StepInfo) -> None:
         """An odometry jump: a glitch (the robot did not move so) or real motion (a log with a scan every few

@@ -21,10 +21,12 @@ def wrap(a):
 
 
 @njit(cache=True)
-def in_mask(particles, mask, ox, oy, inv_res, out):
-    """out[i] = whether particle i's cell is a nonzero cell of ``mask`` (``allowed_at``), for the (3, N) poses."""
+def add_in_mask(particles, mask, ox, oy, inv_res, value, logw):
+    """logw[i] += value for each particle i of the (3, N) poses whose cell is a nonzero cell of ``mask``
+    (``allowed_at``)."""
     for i in range(particles.shape[1]):
-        out[i] = allowed_at(mask, particles[0, i], particles[1, i], ox, oy, inv_res)
+        if allowed_at(mask, particles[0, i], particles[1, i], ox, oy, inv_res):
+            logw[i] += value
 
 
 @njit(cache=True)
