@@ -574,7 +574,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              landmark_range: float = 8.0, landmark_sigma=(0.05, 0.02), landmark_miss: float = 0.05,
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
-             scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0) -> dict:
+             scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
+             unknown_floor: int = 0) -> dict:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -663,6 +664,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            "a sweeping scan is cast against the mapped world only: set dynamic_obstacles and unmapped_furniture to 0")
     _check(isinstance(phantom_furniture, (int, np.integer)) and 0 <= phantom_furniture <= 500, "phantom_furniture",
            f"expected 0..500, got {phantom_furniture!r}")
+    _check(isinstance(unknown_floor, (int, np.integer)) and 0 <= unknown_floor <= 20, "unknown_floor",
+           f"expected 0..20, got {unknown_floor!r}")
     odom_rate, scan_every, sim_dt = _rates(float(scan_rate))
     n_ticks = int(round(duration * odom_rate)) + 1
     kidnap_tick = None
@@ -739,6 +742,12 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         rng_ph = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(10)[9])
         phantoms = _unmapped_furniture(world, truth[:, :2], int(phantom_furniture), robot_radius, rng_ph)
         occupancy = _painted(occupancy, phantoms, world.origin, world.resolution)
+    grey = []
+    if unknown_floor:
+        # Floor the map never saw (a room behind a door closed while mapping, the floor under furniture moved since):
+        # N stretches of the drive, evenly spread, with the free cells within GREY_RADIUS of the path made unknown.
+        grey = _grey_windows(t, int(unknown_floor), float(duration))
+        occupancy = _greyed(occupancy, truth, t, grey, world.origin, world.resolution)
     if map_resolution is not None and abs(map_resolution - world.resolution) > 1e-12:
         map_res = float(map_resolution)
         occupancy = resample_occupancy(occupancy, world.resolution, map_res)
@@ -815,6 +824,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["laser"]["sweep_s"] = float(scan_sweep)
     if phantoms:
         params["phantom_furniture"] = len(phantoms)
+    if grey:
+        params["unknown_floor"] = [[round(a, 3), round(b, 3)] for a, b in grey]
     if hit_windows:
         params["ground_hits"] = [[round(a, 3), round(b, 3)] for a, b in hit_windows]
     if lm_obs is not None:
@@ -901,6 +912,42 @@ def _box_cells(box, origin, resolution: float) -> tuple[slice, slice]:
     x0, y0, x1, y1 = box
     return (slice(max(int((y0 - origin[1]) / resolution), 0), max(int(math.ceil((y1 - origin[1]) / resolution)), 0)),
             slice(max(int((x0 - origin[0]) / resolution), 0), max(int(math.ceil((x1 - origin[0]) / resolution)), 0)))
+
+
+GREY_RADIUS = 1.5  # m: --unknown-floor makes the free cells this near the path unknown
+GREY_SECONDS = 10.0  # s of drive per unknown stretch
+
+
+def _grey_windows(t: np.ndarray, n: int, duration: float) -> list:
+    """``n`` windows of GREY_SECONDS (at most half the time between their centres) centred at k / (n + 1) of the
+    run, k = 1..n."""
+    half = 0.5 * min(GREY_SECONDS, duration / (2.0 * (n + 1)))
+    return [(max(c - half, 0.0), min(c + half, float(t[-1]))) for c in
+            (duration * (k + 1) / (n + 1) for k in range(n))]
+
+
+def _greyed(occupancy: np.ndarray, truth: np.ndarray, t: np.ndarray, windows, origin, resolution: float) -> np.ndarray:
+    """A copy of ``occupancy`` with its free cells within GREY_RADIUS of the path (``truth`` (T, 3) at times ``t``)
+    over each window made unknown (-1); walls and the rest stay."""
+    out = occupancy.copy()
+    h, w = out.shape
+    r = int(math.ceil(GREY_RADIUS / resolution))
+    dy, dx = np.mgrid[-r:r + 1, -r:r + 1]
+    disc = (dx * dx + dy * dy) * resolution * resolution <= GREY_RADIUS * GREY_RADIUS
+    for a, b in windows:
+        pts = truth[(t >= a) & (t <= b), :2]
+        last = None
+        for x, y in pts:
+            if last is not None and math.hypot(x - last[0], y - last[1]) < 0.25:
+                continue
+            last = (x, y)
+            cx, cy = int((x - origin[0]) / resolution), int((y - origin[1]) / resolution)
+            ys, xs = cy + dy[disc], cx + dx[disc]
+            ok = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+            ys, xs = ys[ok], xs[ok]
+            free = out[ys, xs] == 0
+            out[ys[free], xs[free]] = -1
+    return out
 
 
 def _painted(occupancy: np.ndarray, boxes, origin, resolution: float) -> np.ndarray:
@@ -1012,6 +1059,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="N boxes (0.3-0.9 m) the map shows near walls within 6 m of the path that the world "
                         "no longer has (furniture moved away since the map was made): the laser sees through "
                         "them; default 0")
+    parser.add_argument("--unknown-floor", type=int, default=0, metavar="N",
+                        help="N stretches of the drive (10 s each, evenly spread) over floor the map never saw: its "
+                        "free cells within 1.5 m of the path are unknown on the map (a room behind a door closed "
+                        "while mapping, the floor under furniture moved since); default 0")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1048,7 +1099,8 @@ def run_from_args(args: argparse.Namespace) -> int:
                  landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
                  depth_every=args.depth_every, map_resolution=args.map_resolution,
                  reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
-                 scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture)
+                 scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
+                 unknown_floor=args.unknown_floor)
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
         write_log_as_bag(s["outdir"], fmt, sweep=args.scan_sweep)

@@ -404,6 +404,7 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(scan_rate=0.1), "scan_rate"),
     (dict(scan_rate=float("nan")), "scan_rate"),
     (dict(phantom_furniture=-1), "phantom_furniture"),
+    (dict(unknown_floor=21), "unknown_floor"),
     (dict(scan_sweep=0.3), "scan_sweep"),
 ])
 def test_bad_options_raise_config_error(tmp_path, kw, key):
@@ -489,3 +490,33 @@ def test_phantom_furniture_is_on_the_map_only(tmp_path):
     iy = ((poses[1] - b.origin[1]) / b.resolution).astype(int)
     assert not added[iy, ix].any()
     assert yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["phantom_furniture"] == 12
+
+
+def test_unknown_floor_is_on_the_map_only(tmp_path):
+    # Stretches of floor the map never saw: the laser, the drive and the truth are the world's (the same bytes as
+    # without); the map turns free cells unknown only, and those are the cells within 1.5 m of the path over each
+    # window (every pose of the path in a window stands on one; none outside the windows' reach).
+    from mcl.maps import load_map
+
+    simulate(tmp_path / "a", kind="office", seed=6, duration=30.0)
+    simulate(tmp_path / "b", kind="office", seed=6, duration=30.0, unknown_floor=2)
+    for f in ("log.clf", "truth.tum"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+    a, b = load_map(tmp_path / "a" / "map.yaml"), load_map(tmp_path / "b" / "map.yaml")
+    grey = (b.occupancy == -1) & (a.occupancy != -1)
+    assert grey.sum() > 1000 and np.all(a.occupancy[grey] == 0)  # free cells only
+    assert np.array_equal(b.occupancy[~grey], a.occupancy[~grey])
+    windows = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["unknown_floor"]
+    # two, centred at a third and two thirds of the run, each half the time between them (5 s; 10 s at most)
+    assert windows == [[7.5, 12.5], [17.5, 22.5]]
+    t, poses = read_tum(tmp_path / "b" / "truth.tum")
+    ix = ((poses[0] - b.origin[0]) / b.resolution).astype(int)
+    iy = ((poses[1] - b.origin[1]) / b.resolution).astype(int)
+    w = ((t >= 7.5) & (t <= 12.5)) | ((t >= 17.5) & (t <= 22.5))
+    inside = ((t >= 7.7) & (t <= 12.3)) | ((t >= 17.7) & (t <= 22.3))
+    assert grey[iy[inside], ix[inside]].all()
+    far = ~grey & (a.occupancy == 0)  # free floor left free: more than 1.5 m from the windows' path
+    ys, xs = np.nonzero(grey)
+    gx, gy = b.origin[0] + (xs + 0.5) * b.resolution, b.origin[1] + (ys + 0.5) * b.resolution
+    d = np.min(np.hypot(gx[:, None] - poses[0, w][None, :], gy[:, None] - poses[1, w][None, :]), axis=1)
+    assert d.max() < 1.5 + 2 * b.resolution and far.any()
