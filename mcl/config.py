@@ -148,11 +148,12 @@ class MotionConfig:
     # normal_twelve (sum of twelve uniforms) or triangular (two uniforms)
     noise: Literal["normal", "normal_twelve", "triangular"] = "normal"
     map_rejection: bool = True  # map-based motion model (seed 5.5): resample poses that land off free space
-    # p(x | m) of a pose on an unknown cell (a map's unexplored floor, a closed door's room, the floor under furniture
-    # moved since) relative to a free one: the particle's weight is multiplied by it. 0 rejects the pose as off free
-    # space (mcl before the thirty-third session: every particle died while the robot drove over a grey patch); 1
-    # takes unknown for free (then a cloud leaks off the known floor through a map's gaps)
-    unknown_prior: float = field(default=0.5, metadata=_rng(0.0, 1.0))
+    # a pose on an unknown cell (a map's unexplored floor, a closed door's room, the floor under furniture moved
+    # since): "fallback" draws again as off free space, but a particle whose every try lands off free space keeps its
+    # last try when that is on an unknown cell (a robot on a grey patch keeps its particles); "reject" gives it
+    # weight zero (mcl before the thirty-third session: every particle died while the robot drove over a grey patch);
+    # "free" takes unknown for free (then a cloud leaks off the known floor through a map's gaps)
+    map_unknown: Literal["fallback", "reject", "free"] = "fallback"
     max_tries: int = field(default=10, metadata=_rng(1, 1000))
     robot_radius: float = field(default=0.0, metadata=_rng(0.0))  # m of clearance a pose needs
     # Odometry faults (wheel slip, a bump, a bad encoder; an mcl extension): while the filter is lost, and for

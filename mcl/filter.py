@@ -48,7 +48,6 @@ from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.deskew import SweepOrder
 from mcl.estimate import estimate, wrap_angle
 from mcl.kernels.likelihood import refine_poses, refine_poses_serial
-from mcl.kernels.motion import add_in_mask
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
 from mcl.maps import byte_mask
 from mcl.motion import allowed_mask, make_motion_model
@@ -124,11 +123,11 @@ class ParticleFilter:
         self.rng = rng if rng is not None else np.random.default_rng(cfg.seed)
         fc = cfg.filter
         self.motion = make_motion_model(cfg.motion)
-        q = float(cfg.motion.unknown_prior)
-        self.allowed = allowed_mask(grid, cfg.motion.robot_radius, q > 0.0) if cfg.motion.map_rejection else None
-        # p(x | m) = unknown_prior on unknown cells (a log-weight), when they are allowed at all
-        self._unknown = byte_mask(grid.unknown) if cfg.motion.map_rejection and 0.0 < q < 1.0 else None
-        self._log_unknown = math.log(q) if 0.0 < q else -math.inf
+        mu = cfg.motion.map_unknown
+        self.allowed = allowed_mask(grid, cfg.motion.robot_radius, mu == "free") if cfg.motion.map_rejection else None
+        # where a particle that never landed on free space may stay: an unknown cell clear of walls
+        self._fallback = (allowed_mask(grid, cfg.motion.robot_radius, True)
+                          if cfg.motion.map_rejection and mu == "fallback" else None)
         self.sensor = make_sensor_model(grid, cfg.sensor)
         # the policies
         self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio)
@@ -400,7 +399,6 @@ class ParticleFilter:
         self.particles = new
         info.tries = float(tries)
         self._weigh_motion(self.logw, ok, lw, info)
-        self._weigh_unknown(self.logw, new)
 
     @staticmethod
     def _weigh_motion(logw: np.ndarray, ok, lw, info: StepInfo) -> None:
@@ -415,19 +413,6 @@ class ParticleFilter:
             info.rejected = int(np.count_nonzero(bad))
             logw[bad] = -np.inf
 
-    def _weigh_unknown(self, logw: np.ndarray, particles: np.ndarray) -> None:
-        """The map-based motion model's p(x | m) on unknown cells (``motion.unknown_prior``): the log-weights
-        ``logw`` (in place, a view allowed) of the ``particles`` that moved onto one. When the whole cloud is on
-        unknown floor (the robot on a map's unexplored patch) it weighs nothing; a part of the cloud leaking off
-        the known floor through a map's gap loses to the rest."""
-        if self._unknown is None:
-            return
-        w = logw if logw.flags.c_contiguous else np.ascontiguousarray(logw)
-        add_in_mask(np.ascontiguousarray(particles), self._unknown, float(self.grid.origin[0]),
-                    float(self.grid.origin[1]), 1.0 / float(self.grid.resolution), self._log_unknown, w)
-        if w is not logw:
-            logw[:] = w
-
     def _hedge_jump(self, control: Control | None, info: StepInfo) -> None:
         """An odometry jump: a glitch (the robot did not move so) or real motion (a log with a scan every few
         metres). Every other particle takes the step ``control`` (None: non-finite odometry, none does), the
@@ -441,7 +426,6 @@ class ParticleFilter:
         new[:, 0::2] = self._draw_around(stay, std, stay.shape[1])
         new[:, 1::2], ok, _, lw = self._move(go, control)
         self._weigh_motion(self.logw[1::2], ok, lw, info)  # a view: the moving half's weights
-        self._weigh_unknown(self.logw[1::2], new[:, 1::2])
         self.particles = new
 
     def _move(self, particles: np.ndarray, control: Control):
@@ -451,7 +435,8 @@ class ParticleFilter:
         fault = self.faults.proposal(float(control.dt)) if self.faults is not None else None
         lw = np.empty(particles.shape[1]) if fault is not None else None
         new, ok, tries = self.motion.sample_control(particles, control, self.rng, allowed=self.allowed,
-                                                    grid=self.grid, fault=fault, log_weight=lw)
+                                                    grid=self.grid, fault=fault, log_weight=lw,
+                                                    fallback=self._fallback)
         fin = np.isfinite(new).all(axis=0)
         if not fin.all():
             new[:, ~fin] = particles[:, ~fin]
@@ -536,7 +521,7 @@ class ParticleFilter:
         under 3 endpoints move nothing)."""
         if self._match_mask is None:  # where a search may move a hypothesis: free cells (clear of walls under rejection)
             self._match_mask = (byte_mask(self.grid.free) if self.allowed is None
-                                else self.allowed if self.cfg.motion.unknown_prior == 0.0
+                                else self.allowed if self.cfg.motion.map_unknown != "free"
                                 else allowed_mask(self.grid, self.cfg.motion.robot_radius))
         e = np.asarray(self.sensor.endpoints(observation), dtype=np.float64)  # (2, K)
         inv_res = 1.0 / float(self.grid.resolution)

@@ -167,7 +167,7 @@ def _mixture_log(log_f, log_fk, weight: float):
 
 def allowed_mask(grid, robot_radius: float, unknown: bool = False) -> np.ndarray:
     """uint8 (H, W) mask of the cells a robot centre may occupy: distance > robot_radius from every occupied cell,
-    and free (``unknown``: free or unknown, i.e. not occupied; ``motion.unknown_prior`` then weighs the unknown).
+    and free (``unknown``: free or unknown, i.e. not occupied: ``motion.map_unknown``'s fallback).
 
     ``grid`` needs the bool ``free`` and ``occupied`` and float ``distance`` (metres to the nearest occupied cell
     centre) arrays of ``OccupancyGrid``. Compute once per map.
@@ -198,13 +198,15 @@ class OdometryMotionModel:
             self._all = np.arange(n, dtype=np.int64)
         return self._noise, self._all
 
-    def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None):
+    def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None,
+                       fallback=None):
         """``sample`` for a :class:`mcl.filter.Control` (uses its odometry pair)."""
         return self.sample(particles, control.odom_prev, control.odom_now, rng, allowed=allowed, grid=grid,
-                           fault=fault, log_weight=log_weight)
+                           fault=fault, log_weight=log_weight, fallback=fallback)
 
     def sample(self, particles, odom_prev, odom_now, rng: np.random.Generator,
-               allowed=None, grid=None, out=None, fault: FaultProposal | None = None, log_weight=None):
+               allowed=None, grid=None, out=None, fault: FaultProposal | None = None, log_weight=None,
+               fallback=None):
         """Move every particle by the odometry step odom_prev -> odom_now, with noise.
 
         particles: (3, N) float64 (x, y, theta); odom_prev, odom_now: (x, y, theta).
@@ -214,6 +216,8 @@ class OdometryMotionModel:
 
         fault: a ``FaultProposal``: a share of the particles takes the fault component's noise; then
         log_weight, an (N,) float64 array, receives their importance weights (``fault_log_weights``).
+        fallback: None, or a mask like ``allowed`` (``allowed_mask(grid, r, unknown=True)``): a particle whose
+        every try missed ``allowed`` but whose last try lies in ``fallback`` is kept there (``motion.map_unknown``).
 
         Returns (new (3, N), ok (N,) bool, mean_tries): ok[i] is False when
         particle i never landed in an allowed cell in max_tries tries (its pose
@@ -239,7 +243,7 @@ class OdometryMotionModel:
             return _k.sample_odometry_map(p, nz, idx, rot1, trans, rot2, s1, st, s2, mask, ox, oy, inv_res, o, ok)
 
         result = _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, self.max_tries, allowed, grid, out,
-                                  scales)
+                                  scales, fallback)
         if fault is not None and log_weight is not None:
             log_weight[:] = fault_log_weights(noise, (s1, st, s2), kind, fault, k)
         return result
@@ -542,7 +546,8 @@ def _particles_and_out(particles, out):
     return p, out
 
 
-def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, allowed, grid, out, scales=None):
+def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, allowed, grid, out, scales=None,
+                     fallback=None):
     """Map-based sampling (seed 5.5) shared by the models: move all, then redraw the rejected.
 
     move(noise, out) moves every particle; move_map(noise, idx, mask, ox, oy,
@@ -550,7 +555,9 @@ def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, al
     how many landed. Same semantics as ``OdometryMotionModel.sample``. With
     ``scales`` (a fault proposal's (3, n) multipliers) a redraw keeps
     its particle's multiplier, and ``noise`` ends holding the noise each
-    particle last moved with (for its importance weight).
+    particle last moved with (for its importance weight). With ``fallback`` (a mask like ``allowed``), a
+    particle whose every try missed ``allowed`` is kept (ok) where its last try landed when that is in ``fallback``:
+    no more draws, so the random stream is the one without it.
     """
     if allowed is None:
         move(noise, out)
@@ -575,6 +582,9 @@ def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, al
             fresh *= scales[:, idx]
             noise[:, idx] = fresh
         n_ok += move_map(fresh, idx, mask, ox, oy, inv_res, out, ok)
+    if fallback is not None and n_ok < n:
+        idx = np.flatnonzero(~ok) if idx is None else idx[~ok[idx]]
+        ok[idx[grid.mask_at(fallback, out[0, idx], out[1, idx])]] = True
     return out, ok, draws / n if n else 0.0
 
 
@@ -595,13 +605,14 @@ class VelocityMotionModel:
         self._noise = np.empty((3, 0))
         self._all = np.empty(0, dtype=np.int64)
 
-    def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None):
+    def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None,
+                       fallback=None):
         """``sample`` for a :class:`mcl.filter.Control` (uses its v, w, dt)."""
         return self.sample(particles, control.v, control.w, control.dt, rng, allowed=allowed, grid=grid,
-                           fault=fault, log_weight=log_weight)
+                           fault=fault, log_weight=log_weight, fallback=fallback)
 
     def sample(self, particles, v, w, dt, rng: np.random.Generator, allowed=None, grid=None, out=None,
-               fault: FaultProposal | None = None, log_weight=None):
+               fault: FaultProposal | None = None, log_weight=None, fallback=None):
         """Move every particle by the command (v, w) for dt, with noise. Returns (new, ok, mean_tries); ``fault``
         and ``log_weight`` as for ``OdometryMotionModel.sample``."""
         from mcl.kernels import velocity as _kv
@@ -627,7 +638,7 @@ class VelocityMotionModel:
             return _kv.sample_velocity_map(p, nz, idx, v, w, dt, sv, sw, sg, mask, ox, oy, inv_res, o, ok)
 
         result = _sample_with_map(move, move_map, n, noise, self._all, rng, self.noise_kind, self.max_tries,
-                                  allowed, grid, out, scales)
+                                  allowed, grid, out, scales, fallback)
         if fault is not None and log_weight is not None:
             log_weight[:] = fault_log_weights(noise, (sv, sw, sg), self.noise_kind, fault, k)
         return result
@@ -641,8 +652,9 @@ def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np
 
     p(x_t | m) is 0 for a hypothesis whose cell is not in ``allowed`` (default
     ``allowed_mask(grid, cfg.robot_radius)``, unknown cells too when
-    ``cfg.unknown_prior`` > 0; off the map counts as not allowed), that prior on
-    an unknown cell, and a constant otherwise. eta normalises over the given set of
+    ``cfg.map_unknown`` is "free"; off the map counts as not allowed) and a
+    constant otherwise (the sampler's fallback onto unknown cells is a last
+    resort of the sampling, not a density). eta normalises over the given set of
     hypotheses: the result sums to 1 over x_new, a discrete posterior over the
     candidates (the constant p(x|m) and the continuous normaliser cancel). It is
     the book's approximation, good for motions shorter than about half the
@@ -656,21 +668,16 @@ def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np
         logp = log_motion_model_velocity(xn, u, x_prev, cfg, **kw)
     else:
         logp = log_motion_model_odometry(xn, u, x_prev, cfg, **kw)
-    q = float(getattr(cfg, "unknown_prior", 0.0))
     if allowed is None:
-        allowed = allowed_mask(grid, float(getattr(cfg, "robot_radius", 0.0)), q > 0.0)
+        allowed = allowed_mask(grid, float(getattr(cfg, "robot_radius", 0.0)),
+                               getattr(cfg, "map_unknown", "reject") == "free")
     mask = np.ascontiguousarray(allowed, dtype=np.uint8)
     ix = np.floor((xn[0] - float(grid.origin[0])) / float(grid.resolution))
     iy = np.floor((xn[1] - float(grid.origin[1])) / float(grid.resolution))
     inside = (ix >= 0) & (ix < mask.shape[1]) & (iy >= 0) & (iy < mask.shape[0])
-    cells = (iy[inside].astype(np.int64), ix[inside].astype(np.int64))
     free = np.zeros(xn.shape[1], dtype=bool)
-    free[inside] = mask[cells] != 0
+    free[inside] = mask[iy[inside].astype(np.int64), ix[inside].astype(np.int64)] != 0
     logp = np.where(free, logp, -np.inf)
-    if 0.0 < q < 1.0:  # p(x | m) = unknown_prior on an unknown cell (the sampler's weight)
-        unknown = np.zeros(xn.shape[1], dtype=bool)
-        unknown[inside] = np.asarray(grid.unknown)[cells]
-        logp = np.where(unknown & free, logp + math.log(q), logp)
     top = np.max(logp) if logp.size else -np.inf
     if not np.isfinite(top):
         return np.zeros(xn.shape[1])

@@ -1,8 +1,8 @@
-"""Unknown map cells under the map-based motion model (``motion.unknown_prior``): a map's unexplored floor (grey in
+"""Unknown map cells under the map-based motion model (``motion.map_unknown``): a map's unexplored floor (grey in
 the PGM: a room behind a door closed while mapping, the floor under furniture moved since) is no wall. Rejecting
 every pose there gave each particle weight zero while the robot drove over such a patch, and the default config lost
-every generated world so edited (docs/measurements.md, "Thirty-third session"). Now a pose there is weighed by
-p(x | m) = unknown_prior against a free cell's 1."""
+every generated world so edited (docs/measurements.md, "Thirty-third session"). Now ("fallback") a particle is drawn
+again as before, but one whose every try lands off free space keeps its last try when that is on an unknown cell."""
 
 from __future__ import annotations
 
@@ -28,25 +28,47 @@ def test_allowed_mask_takes_unknown_cells_clear_of_walls_only_when_asked():
     assert allowed_mask(g, 0.15, unknown=True).tolist() == [[0, 0, 1, 1, 1, 1, 1]]
 
 
-def test_particles_on_unknown_cells_are_weighed_by_the_prior():
-    # A corridor of free cells with an unknown strip: a cloud moved half onto the strip has that half's weights
-    # times unknown_prior (log-weight + log 0.5), the rest untouched; with the whole cloud on it, every weight the
-    # same (nothing to choose by); 1 weighs nothing; 0 never lets a particle stay there (weight zero).
+def test_a_particle_that_never_lands_on_free_space_stays_on_unknown_floor_with_the_fallback():
+    # A corridor of free cells with an unknown stretch from x = 2 m. Particles at x = 1.0 m (free) and 2.5 m
+    # (unknown) move 0.1 m along x with little noise: the first lands on free floor at its first try; the second's
+    # every try lands on unknown floor. "reject": weight zero (ok False); "fallback": kept where its last try landed,
+    # with the same draws (the same poses, the same mean tries); "free": taken at its first try.
+    from mcl.motion import OdometryMotionModel
+
+    occ = np.zeros((20, 60), dtype=np.int8)
+    occ[0, :] = occ[-1, :] = 100
+    occ[1:-1, 20:] = -1
+    g = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", ["motion.alpha1=0.001", "motion.alpha2=0.001",
+                                                                   "motion.alpha3=0.001", "motion.alpha4=0.001"]).motion
+    model = OdometryMotionModel(cfg)
+    pts = np.array([[1.0, 2.5], [1.0, 1.0], [0.0, 0.0]])
+    step = (np.zeros(3), np.array([0.1, 0.0, 0.0]))
+    runs = {}
+    for name, allowed, fallback in (("reject", allowed_mask(g, 0.1), None),
+                                    ("fallback", allowed_mask(g, 0.1), allowed_mask(g, 0.1, unknown=True)),
+                                    ("free", allowed_mask(g, 0.1, unknown=True), None)):
+        runs[name] = model.sample(pts, *step, np.random.default_rng(4), allowed=allowed, grid=g, fallback=fallback)
+    (new_r, ok_r, tries_r), (new_f, ok_f, tries_f), (new_u, ok_u, tries_u) = runs.values()
+    assert ok_r.tolist() == [True, False] and ok_f.tolist() == [True, True] and ok_u.tolist() == [True, True]
+    assert np.array_equal(new_r, new_f) and tries_r == tries_f == (1 + cfg.max_tries) / 2  # 1 try and max_tries
+    assert tries_u == 1.0
+    assert 2.55 < new_f[0, 1] < 2.65  # moved 0.1 m on the unknown floor
+
+
+def test_the_filter_passes_the_fallback_by_config():
     from mcl.filter import ParticleFilter
 
     occ = np.zeros((20, 40), dtype=np.int8)
-    occ[0, :] = occ[-1, :] = 100
     occ[1:-1, 20:30] = -1
     g = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
-    pts = np.array([[1.0, 2.5], [1.0, 1.0], [0.0, 0.0]])  # x 1.0 m (free) and 2.5 m (unknown), y 1.0 m
-    for q, expect in ((0.5, [0.0, np.log(0.5)]), (1.0, [0.0, 0.0])):
-        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [f"motion.unknown_prior={q}"])
-        pf = ParticleFilter(cfg, g)
-        logw = np.zeros(2)
-        pf._weigh_unknown(logw, pts)
-        assert np.allclose(logw, expect), q
-    assert ParticleFilter(load_config(PROJECT_ROOT / "configs" / "default.yaml",
-                                      ["motion.unknown_prior=0"]), g).allowed[10, 25] == 0
+    base = PROJECT_ROOT / "configs" / "default.yaml"
+    pf = ParticleFilter(load_config(base), g)
+    assert pf._fallback is not None and pf._fallback[10, 25] == 1 and pf.allowed[10, 25] == 0
+    pf = ParticleFilter(load_config(base, ["motion.map_unknown=reject"]), g)
+    assert pf._fallback is None and pf.allowed[10, 25] == 0
+    pf = ParticleFilter(load_config(base, ["motion.map_unknown=free"]), g)
+    assert pf._fallback is None and pf.allowed[10, 25] == 1
 
 
 @pytest.fixture(scope="module")
@@ -82,18 +104,18 @@ def _track(d: Path, out: Path, *extra):
 
 
 def test_a_robot_driving_over_unknown_floor_keeps_its_track(grey_world, tmp_path):
-    # Seed 1, a fixed trajectory. Allowed (the default): within 0.3 m all the way (measured 0.085 m). Rejected (the
-    # default before): every particle on the patch gets weight zero and the track is lost (measured 7.4 m).
+    # Seed 1, a fixed trajectory. The fallback (the default): within 0.3 m all the way (measured 0.083 m).
+    # Rejected (the default before): every particle on the patch gets weight zero and the track is lost (measured
+    # 7.4 m).
     kept = _track(grey_world, tmp_path / "allow")
-    lost = _track(grey_world, tmp_path / "reject", "motion.unknown_prior=0")
+    lost = _track(grey_world, tmp_path / "reject", "motion.map_unknown=reject")
     assert kept < 0.3, kept
     assert lost > 1.0, lost
 
 
-def test_the_map_based_density_weighs_unknown_cells_by_the_prior():
-    # Seed 5.5's p(x_t | u_t, x_{t-1}, m) with p(x | m) = 1 free, unknown_prior unknown, 0 in a wall: two hypotheses
-    # at the same distance from the odometry's prediction, one on free floor and one on unknown, differ by that
-    # factor; 0 gives the unknown one nothing.
+def test_the_map_based_density_takes_unknown_cells_as_free_only_when_asked():
+    # Seed 5.5's p(x_t | u_t, x_{t-1}, m), p(x | m) 1 on allowed cells and 0 elsewhere: an unknown cell is allowed
+    # with map_unknown "free" only (the fallback is a last resort of the sampler, not a density).
     from mcl.motion import motion_model_odometry, motion_model_with_map
 
     occ = np.zeros((40, 60), dtype=np.int8)
@@ -102,9 +124,9 @@ def test_the_map_based_density_weighs_unknown_cells_by_the_prior():
     u = (np.zeros(3), np.array([0.5, 0.0, 0.0]))
     xp = np.array([1.5, 1.0, 0.0])
     hyp = np.array([[1.9, 2.1], [1.0, 1.0], [0.0, 0.0]])  # 0.1 m short of the prediction (2.0, 1.0), 0.1 m past
-    for q in (0.5, 0.0):
-        c = load_config(PROJECT_ROOT / "configs" / "default.yaml", [f"motion.unknown_prior={q}"]).motion
+    for mode, share in (("free", None), ("fallback", 0.0), ("reject", 0.0)):
+        c = load_config(PROJECT_ROOT / "configs" / "default.yaml", [f"motion.map_unknown={mode}"]).motion
         free = motion_model_odometry(hyp, u, xp, c)
         p = motion_model_with_map(hyp, u, xp, grid, c)
         assert p.sum() == pytest.approx(1.0)
-        assert p[1] / p[0] == pytest.approx(q * free[1] / free[0], rel=1e-9), q
+        assert p[1] == pytest.approx(free[1] / free.sum() if share is None else share, rel=1e-9), mode

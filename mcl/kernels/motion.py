@@ -21,15 +21,6 @@ def wrap(a):
 
 
 @njit(cache=True)
-def add_in_mask(particles, mask, ox, oy, inv_res, value, logw):
-    """logw[i] += value for each particle i of the (3, N) poses whose cell is a nonzero cell of ``mask``
-    (``allowed_at``)."""
-    for i in range(particles.shape[1]):
-        if allowed_at(mask, particles[0, i], particles[1, i], ox, oy, inv_res):
-            logw[i] += value
-
-
-@njit(cache=True)
 def allowed_at(allowed, x, y, ox, oy, inv_res):
     """Whether world point (x, y) falls in a nonzero cell of the (H, W) mask ``allowed``.
 
