@@ -132,6 +132,18 @@ def record_seconds(t_ns: int) -> float:
     return float(f"{t_ns // 1_000_000_000}.{t_ns % 1_000_000_000:09d}")
 
 
+UNSTAMPED = "every header stamp is 0; the bag's record times stand in for them"
+
+
+def _record_timed(rows: np.ndarray, what: str, path, notes: list) -> np.ndarray:
+    """``rows`` (t, ..., record time) without their last column; when every stamp t is 0 (a driver that never sets
+    them) the record times stand in, with a note naming ``what``."""
+    if not rows[:, 0].any():
+        rows[:, 0] = rows[:, -1]
+        notes.append(f"{path}: {what}: {UNSTAMPED}")
+    return rows[:, :-1]
+
+
 def yaw_of(q) -> float:
     """Heading (rad) of a quaternion: the rotation about z of its planar part, to 1e-12 rad (which removes the
     last-bit noise of the quaternion round trip: a heading written as a quaternion reads back the same)."""
@@ -762,7 +774,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     # a few zero stamps among real ones (a simulator's first messages, before its clock runs) are kept.
     unstamped = set(scan_topics) - {o for v, o in zip(scan_t, scan_of) if v}
     for t in sorted(unstamped):
-        notes.append(f"{path}: {t}: every header stamp is 0; the bag's record times stand in for them")
+        notes.append(f"{path}: {t}: {UNSTAMPED}")
     scan_t = [r if o in unstamped else v for v, r, o in zip(scan_t, scan_rec, scan_of)]
     pick = None
     if not odom_rows and odom_topic is None and other_rows and base_frame == _frame(_Frames().base):
@@ -798,12 +810,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         raise DataError(f"{path}: /tf: the transform {odom_frame} -> {base_frame} never appears (it has: "
                         f"{_listing(seen[:12])}{', ...' if len(seen) > 12 else ''}); set frames.odom / frames.base "
                         "or --odom-topic")
-    odometry = np.array(odom_rows, dtype=np.float64)
-    odom_name = odom_topic or f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}"
-    if not odometry[:, 0].any():
-        odometry[:, 0] = odometry[:, -1]
-        notes.append(f"{path}: {odom_name}: every header stamp is 0; the bag's record times stand in for them")
-    odometry = odometry[:, :-1]
+    tf_odom = f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}"
+    odometry = _record_timed(np.array(odom_rows, dtype=np.float64), odom_topic or tf_odom, path, notes)
     odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
     if not np.isfinite(odometry).all():
         raise DataError(f"{path}: {odom_topic or '/tf'}: non-finite odometry")
@@ -834,14 +842,10 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     if truth_topic is not None:
         if not truth_rows:
             raise DataError(f"{path}: {truth_topic}: no messages")
-        a = np.array(truth_rows, dtype=np.float64)
-        if not a[:, 0].any():
-            a[:, 0] = a[:, -1]
-            notes.append(f"{path}: {truth_topic}: every header stamp is 0; the bag's record times stand in for them")
-        truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:-1].T))
+        a = _record_timed(np.array(truth_rows, dtype=np.float64), truth_topic, path, notes)
+        truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
     odom_type = topics[odom_topic].msgtype if odom_topic else None
-    src_name = (f"{odom_topic} ({odom_type.replace('/msg/', '/')})" if odom_topic
-                else f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}")
+    src_name = f"{odom_topic} ({odom_type.replace('/msg/', '/')})" if odom_topic else tf_odom
     if tf_dyn != "/tf":
         notes.append(f"{path}: the transforms are on {tf_dyn} and {tf_static} (no /tf, one namespace's)")
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
