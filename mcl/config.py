@@ -359,13 +359,14 @@ class QualityConfig:
 class TopicsConfig:
     """What mcl reads from a ROS bag (mcl.datasets.rosbag); topic names as in the bag."""
 
-    scan: str = "auto"  # auto (/scan, else the only LaserScan), all (fuse every scan topic), or a topic name
+    scan: str = "auto"  # auto (/scan, else the only LaserScan / MultiEchoLaserScan), all (fuse every scan topic), or a topic name
     odom: str = "auto"  # auto (/odom, else the only Odometry topic, else /tf), tf, or a nav_msgs/Odometry topic
     map: str | None = "/map"  # nav_msgs/OccupancyGrid used when no map file is given; null: never
     initial_pose: str | None = "/initialpose"  # first PoseWithCovarianceStamped starts tracking; null: ignore
     truth: str | None = None  # PoseStamped, PoseWithCovarianceStamped or Odometry topic with reference poses
     cloud_z: tuple[float, float] = (-0.1, 0.1)  # PointCloud2: z band (m, in the cloud's frame) kept as a plane
     cloud_beams: int = field(default=720, metadata=_rng(8, 100_000))  # PointCloud2: bearing bins over 360 deg
+    echo: Literal["first", "last"] = "first"  # MultiEchoLaserScan: the return read per beam (first: the nearest)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -534,6 +534,42 @@ def test_a_scan_that_does_not_say_where_its_beams_point(world, scans, tmp_path, 
     _fails(capsys, tmp_path, bag("all", lambda k: True), match="/scan: no message says where its beams point")
 
 
+@pytest.mark.parametrize("kind", ["bag1", "mcap"])
+def test_a_multi_echo_laser_reads_one_echo_per_beam(world, scans, tmp_path, kind):
+    # A SICK LMS5xx's or Hokuyo UTM-30LX-EW's driver: sensor_msgs/MultiEchoLaserScan, each beam's returns nearest
+    # first. Here each beam's first echo is the log's reading, every third beam has a second one 2.5 m farther (the
+    # wall behind a pane of glass), every tenth none (not a reading). The only laser topic, named /echoes, is found;
+    # topics.echo: first (the default) reads exactly what a LaserScan of the first echoes reads, to the trajectory;
+    # last reads the far returns.
+    n = scans[0].ranges.size
+    far, none = np.arange(n) % 3 == 0, np.arange(n) % 10 == 0
+    plain, multi = tmp_path / f"plain.{KINDS[kind]}", tmp_path / f"multi.{KINDS[kind]}"
+    with BagOut(plain) as a, BagOut(multi) as b:
+        for s in scans:
+            first = np.where(none, np.nan, s.ranges).astype(np.float32)
+            _odom(a, s)
+            _laser(a, "/scan", s, ranges=first)
+            _odom(b, s)
+            _echoes(b, "/echoes", s, [[] if no else ([r, r + 2.5] if f else [r])
+                                      for r, f, no in zip(s.ranges.astype(np.float32), far, none)])
+    want = list(open_bag(plain).scans)
+    src = open_bag(multi)
+    assert src.scans.topics == ["/echoes"]
+    got = list(src.scans)
+    assert len(got) == len(want) == len(scans)
+    for g, w in zip(got, want):
+        _same_records(g, w)
+    assert not np.any(got[0].ranges[none]) and np.all(got[0].ranges[~none] > 0)
+    last = list(open_bag(multi, load_config(None, ["topics.echo=last"]).topics).scans)
+    for g, s in zip(last, scans):
+        assert np.array_equal(g.ranges[~far & ~none], s.ranges[~far & ~none])
+        assert np.allclose(g.ranges[far & ~none], s.ranges[far & ~none] + 2.5, rtol=0, atol=1e-5)
+    s_plain, o_plain = _run(tmp_path, "plain", map=world / "map.yaml", bag=plain)
+    s_multi, o_multi = _run(tmp_path, "multi", map=world / "map.yaml", bag=multi)
+    assert s_multi["updates"] == s_plain["updates"] > 30
+    assert (o_multi / "trajectory.tum").read_bytes() == (o_plain / "trajectory.tum").read_bytes()
+
+
 def test_pointcloud_is_projected_within_the_height_band(scans, tmp_path):
     s = scans[0]
     pts = np.array([[2.0, 0.0, 0.0], [1.0, 0.0, 0.05], [0.0, 3.0, 0.0], [0.0, 0.5, 1.0], [-1.0, -1.0, -0.05]],
@@ -976,3 +1012,13 @@ def _laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.
                                 angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0,
                                 range_min=range_min, range_max=s.max_range, ranges=r,
                                 intensities=np.zeros(0, dtype=np.float32)))
+
+
+def _echoes(b: BagOut, topic: str, s, echoes, *, frame="laser") -> None:
+    """A MultiEchoLaserScan of ``s``'s geometry whose beam i holds the returns ``echoes[i]`` (m)."""
+    E, M = "sensor_msgs/msg/LaserEcho", "sensor_msgs/msg/MultiEchoLaserScan"
+    beams = [b.msg(E, echoes=np.asarray(e, dtype=np.float32)) for e in echoes]
+    b.write(topic, M, s.t, b.msg(M, header=b.header(s.t, frame), angle_min=s.angle_min,
+                                 angle_max=s.angle_min + s.angle_increment * (len(beams) - 1),
+                                 angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0, range_min=0.0,
+                                 range_max=s.max_range, ranges=beams, intensities=[]))

@@ -9,8 +9,10 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
   +inf, the REP 117 no-return, becomes range_max, a no-return reading as in a CARMEN log; below range_min,
   -inf and NaN are dropped as beams); ``sensor_msgs/PointCloud2`` projected to the plane: points whose z (in
   the cloud's frame) lies in ``topics.cloud_z`` binned by bearing into ``topics.cloud_beams`` beams, the
-  nearest point per beam (as pointcloud_to_laserscan / Beluga). One topic, or every scan topic fused
-  (``topics.scan: all``), each with its own mounting pose.
+  nearest point per beam (as pointcloud_to_laserscan / Beluga); ``sensor_msgs/MultiEchoLaserScan`` (a SICK
+  LMS5xx's or a Hokuyo UTM-30LX-EW's several returns per beam) as a LaserScan of one echo per beam,
+  ``topics.echo``: ``first`` (the nearest, as cartographer_ros reads it; default) or ``last``. One topic, or
+  every scan topic fused (``topics.scan: all``), each with its own mounting pose.
 * **odometry**: ``nav_msgs/Odometry`` on a topic, or the ``frames.odom -> frames.base`` transform of ``/tf``, or a
   ``PoseStamped`` / ``PoseWithCovarianceStamped`` topic in the odometry frame named as ``topics.odom``;
   interpolated at each scan's header stamp (linear in x, y, shortest angle in theta; an exact stamp gives the
@@ -60,8 +62,10 @@ __all__ = ["BAG_SUFFIXES", "is_bag", "bag_kind", "open_bag", "BagSource", "BagSc
 
 BAG_SUFFIXES = {".bag": "bag1", ".db3": "db3", ".mcap": "mcap"}
 LASER = "sensor_msgs/msg/LaserScan"
+ECHOES = "sensor_msgs/msg/MultiEchoLaserScan"
+LASERS = (LASER, ECHOES)  # read as a LaserScan (a multi-echo one through ``one_echo``)
 CLOUD = "sensor_msgs/msg/PointCloud2"
-SCAN_TYPES = (LASER, CLOUD)
+SCAN_TYPES = (LASER, ECHOES, CLOUD)
 ODOM = "nav_msgs/msg/Odometry"
 GRID = "nav_msgs/msg/OccupancyGrid"
 PWCS = "geometry_msgs/msg/PoseWithCovarianceStamped"
@@ -260,6 +264,7 @@ class _Topics:
     truth: str | None = None
     cloud_z: tuple[float, float] = (-0.1, 0.1)
     cloud_beams: int = 720
+    echo: str = "first"
 
 
 @dataclass
@@ -319,12 +324,14 @@ class BagScans:
     one message at a time (odometry interpolated at each stamp, the mounting pose of its topic)."""
 
     def __init__(self, path: Path, topics: list[str], count: int, odometry: np.ndarray, offsets: dict,
-                 cloud_z, cloud_beams: int, has_twist: bool, mirrored=frozenset(), unstamped=frozenset()):
+                 cloud_z, cloud_beams: int, has_twist: bool, mirrored=frozenset(), unstamped=frozenset(),
+                 echo: str = "first"):
         self.path, self.topics, self.count = path, topics, count
         self.mirrored = frozenset(mirrored)  # topics whose frame is upside down
         self.unstamped = frozenset(unstamped)  # topics whose header stamps are all 0: their record times
         self.odometry, self.offsets = odometry, offsets
         self.cloud_z, self.cloud_beams, self.has_twist = cloud_z, int(cloud_beams), has_twist
+        self.echo = echo  # which return of a MultiEchoLaserScan's beam: first or last
 
     def __len__(self) -> int:
         return self.count
@@ -344,7 +351,9 @@ class BagScans:
         t = rec if conn.topic in self.unstamped else stamp_seconds(msg.header.stamp)
         flip = conn.topic in self.mirrored
         t0 = dt = 0.0
-        if conn.msgtype == LASER:
+        if conn.msgtype in LASERS:
+            if conn.msgtype == ECHOES:
+                msg = one_echo(msg, self.echo)
             ranges, amin, inc, rmax = laser_ranges(msg)
             t0, dt = beam_times(msg.time_increment, ranges.size)
             if flip:  # beam i at angle a points at -a: reversed, the beams run counter-clockwise again
@@ -377,6 +386,29 @@ def beams_directed(msg) -> bool:
     0 when there are several beams (a broken driver's message)."""
     amin, inc = float(msg.angle_min), float(msg.angle_increment)
     return math.isfinite(amin) and math.isfinite(inc) and (inc != 0.0 or len(msg.ranges) < 2)
+
+
+def one_echo(msg, which: str = "first"):
+    """A ``sensor_msgs/MultiEchoLaserScan`` as a LaserScan (the fields ``laser_ranges`` reads): per beam its
+    first echo (the nearest return: dust, rain or glass before the wall; what cartographer_ros reads) or its
+    ``last`` (the farthest), NaN (not a reading) for a beam without one. The per-beam echo lists are Python
+    objects once the bag library has decoded them; taking one of each is the decoding's cost, once per scan."""
+    pick = 0 if which == "first" else -1
+    echoes = [e.echoes for e in msg.ranges]
+    r = np.fromiter((e[pick] if len(e) else math.nan for e in echoes), dtype=np.float32, count=len(echoes))
+    return _Echo(msg.angle_min, msg.angle_increment, msg.time_increment, msg.range_min, msg.range_max, r)
+
+
+@dataclass(frozen=True)
+class _Echo:
+    """The LaserScan fields of a MultiEchoLaserScan with one echo per beam (``one_echo``)."""
+
+    angle_min: float
+    angle_increment: float
+    time_increment: float
+    range_min: float
+    range_max: float
+    ranges: np.ndarray
 
 
 def laser_ranges(msg):
@@ -488,10 +520,10 @@ def _choose_scan_topics(path, topics: dict, want: str) -> list[str]:
     scan_like = _scan_like(topics)
     if want == "all":
         if not scan_like:
-            raise DataError(f"{path}: no LaserScan or PointCloud2 topic (topics: {_listing(sorted(topics))})")
+            raise DataError(f"{path}: no LaserScan, MultiEchoLaserScan or PointCloud2 topic (topics: {_listing(sorted(topics))})")
         return scan_like
     if want == "auto":
-        lasers = [n for n in scan_like if topics[n].msgtype == LASER]
+        lasers = [n for n in scan_like if topics[n].msgtype in LASERS]
         if "/scan" in scan_like:
             return ["/scan"]
         if len(lasers) == 1:
@@ -499,13 +531,13 @@ def _choose_scan_topics(path, topics: dict, want: str) -> list[str]:
         if not lasers and len(scan_like) == 1:
             return scan_like
         if not scan_like:
-            raise DataError(f"{path}: no LaserScan or PointCloud2 topic (topics: {_listing(sorted(topics))})")
+            raise DataError(f"{path}: no LaserScan, MultiEchoLaserScan or PointCloud2 topic (topics: {_listing(sorted(topics))})")
         raise DataError(f"{path}: several scan topics ({_listing(scan_like)}); choose one with --scan-topic "
                         "(topics.scan) or fuse them with topics.scan: all")
     if want not in topics:
         raise DataError(f"{path}: no topic {want} (scan-like topics: {_listing(scan_like)})")
     if topics[want].msgtype not in SCAN_TYPES:
-        raise DataError(f"{path}: {want} is {topics[want].msgtype}, not a LaserScan or PointCloud2 "
+        raise DataError(f"{path}: {want} is {topics[want].msgtype}, not a LaserScan, MultiEchoLaserScan or PointCloud2 "
                         f"(scan-like topics: {_listing(scan_like)})")
     return [want]
 
@@ -709,9 +741,9 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             scan_rec.append(rec)
             scan_of.append(topic)
             order.see(topic, scan_t[-1])
-            if conn.msgtype == LASER and not beams_directed(msg):
+            if conn.msgtype in LASERS and not beams_directed(msg):
                 undirected[topic] = undirected.get(topic, 0) + 1
-            elif topic not in sweeps and conn.msgtype == LASER:
+            elif topic not in sweeps and conn.msgtype in LASERS:
                 t0, dt = beam_times(msg.time_increment, len(msg.ranges))
                 sweeps[topic] = abs(dt) * (len(msg.ranges) - 1)
             scan_frames.setdefault(topic, _frame(msg.header.frame_id))
@@ -849,7 +881,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     if tf_dyn != "/tf":
         notes.append(f"{path}: the transforms are on {tf_dyn} and {tf_static} (no /tf, one namespace's)")
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
-                     has_twist=odom_type == ODOM, mirrored=mirrored, unstamped=unstamped)
+                     has_twist=odom_type == ODOM, mirrored=mirrored, unstamped=unstamped,
+                     echo=getattr(tp, "echo", "first"))
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps)
