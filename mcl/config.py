@@ -359,7 +359,9 @@ class QualityConfig:
 class TopicsConfig:
     """What mcl reads from a ROS bag (mcl.datasets.rosbag); topic names as in the bag."""
 
-    scan: str = "auto"  # auto (/scan, else the only LaserScan / MultiEchoLaserScan), all (fuse every scan topic), or a topic name
+    # auto (/scan, else the only LaserScan / MultiEchoLaserScan, else the level fixed ones), all (fuse every scan
+    # topic), or a topic name
+    scan: str = "auto"
     odom: str = "auto"  # auto (/odom, else the only Odometry topic, else /tf), tf, or a nav_msgs/Odometry topic
     map: str | None = "/map"  # nav_msgs/OccupancyGrid used when no map file is given; null: never
     initial_pose: str | None = "/initialpose"  # first PoseWithCovarianceStamped starts tracking; null: ignore

@@ -19,7 +19,7 @@ from mcl.config import load_config
 from mcl.datasets.bagwrite import BagOut, convert, write_scans
 from mcl.datasets.carmen import read_carmen
 from mcl.datasets.rosbag import bag_info, open_bag
-from mcl.errors import ConfigError, DataError
+from mcl.errors import ConfigError
 from mcl.maps import load_map
 from mcl.runner import run
 from mcl.simulate import simulate
@@ -460,10 +460,14 @@ def test_several_lasers_fused_each_with_its_mounting(scans, tmp_path):
             _odom(b, s)
             _laser(b, "/front/scan", s, frame="front")
             _laser(b, "/rear/scan", s, frame="rear")
-    with pytest.raises(DataError, match="several scan topics.*/front/scan, /rear/scan"):
-        open_bag(bag)
+    # auto: two lasers mounted level and fixed at one height (an AGV's front and rear) are fused, with a note, as
+    # topics.scan: all does
+    auto = open_bag(bag)
+    assert auto.scans.topics == ["/front/scan", "/rear/scan"] and len(auto.scans) == 2 * len(scans)
+    assert any("/front/scan, /rear/scan are mounted level and fixed at one height: fused" in n for n in auto.notes)
     cfg = load_config(None, ["topics.scan=all"])
     src = open_bag(bag, cfg.topics, cfg.frames)
+    assert not any("fused" in n for n in src.notes)
     got = list(src.scans)
     assert len(got) == 2 * len(scans)
     front = [g for g in got if g.kind == "/front/scan"]
@@ -473,6 +477,59 @@ def test_several_lasers_fused_each_with_its_mounting(scans, tmp_path):
     assert np.allclose(rear[0].laser_offset, (-0.2, 0.1, 3.0))  # through the chain base_link -> mount -> rear
     one = open_bag(bag, load_config(None, ["topics.scan=/rear/scan"]).topics)
     assert one.scans.topics == ["/rear/scan"] and len(one.scans) == len(scans)
+
+
+def _tilted(b: BagOut, t: float, parent: str, child: str, xyz, pitch: float):
+    """A TransformStamped parent -> child at ``xyz`` pitched by ``pitch`` (rad, about y)."""
+    tr = b.msg("geometry_msgs/msg/Transform",
+               translation=b.msg("geometry_msgs/msg/Vector3", x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2])),
+               rotation=b.msg("geometry_msgs/msg/Quaternion", x=0.0, y=math.sin(pitch / 2), z=0.0,
+                              w=math.cos(pitch / 2)))
+    return b.msg("geometry_msgs/msg/TransformStamped", header=b.header(t, parent), child_frame_id=child, transform=tr)
+
+
+def test_among_several_lasers_the_level_fixed_one_is_read(world, scans, tmp_path, capsys):
+    # A PR2: /base_scan on a fixed level mount, /tilt_scan on a frame that pitches up and down on /tf (a tilting
+    # laser sweeps the floor and over the walls); and a laser fixed looking 30 degrees down at the floor. With no
+    # /scan, auto reads /base_scan alone, with a note naming why the others are not read; the run matches one
+    # with --scan-topic /base_scan to the byte.
+    bag = tmp_path / "pr2.bag"
+    with BagOut(bag) as b:
+        t0 = scans[0].t
+        b.write("/tf_static", "tf2_msgs/msg/TFMessage", t0, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+            _tilted(b, t0, "base_link", "base_laser_link", (0.1, 0.0, 0.3), 0.0),
+            _tilted(b, t0, "base_link", "floor_laser", (0.2, 0.0, 0.5), math.radians(30.0))]))
+        for k, s in enumerate(scans):
+            _odom(b, s)
+            b.write("/tf", "tf2_msgs/msg/TFMessage", s.t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+                _tilted(b, s.t, "base_link", "tilt_mount", (0.0, 0.0, 1.0), 0.0),
+                _tilted(b, s.t, "tilt_mount", "laser_tilt_link", (0.1, 0.0, 0.0), 0.6 * math.sin(k))]))
+            _laser(b, "/base_scan", s, frame="base_laser_link")
+            _laser(b, "/tilt_scan", s, frame="laser_tilt_link")
+            _laser(b, "/floor_scan", s, frame="floor_laser")
+    src = open_bag(bag)
+    assert src.scans.topics == ["/base_scan"] and len(src.scans) == len(scans)
+    assert np.allclose(src.laser_offsets["/base_scan"], (0.1, 0.0, 0.0))
+    note = next(n for n in src.notes if "several laser topics" in n)
+    assert "/base_scan is the one mounted level and fixed" in note
+    assert "/tilt_scan: laser_tilt_link moves on /tf" in note and "/floor_scan: tilted 30 deg from level" in note
+    s_auto, o_auto = _run(tmp_path, "auto", map=world / "map.yaml", bag=bag)
+    s_one, o_one = _run(tmp_path, "one", map=world / "map.yaml", bag=bag, **{"topics.scan": "/base_scan"})
+    assert s_auto["updates"] == s_one["updates"] > 30
+    assert (o_auto / "trajectory.tum").read_bytes() == (o_one / "trajectory.tum").read_bytes()
+
+
+def test_several_lasers_on_one_frame_stop_with_one_line_asking_to_choose(scans, tmp_path, capsys):
+    # The same laser's raw and filtered scans (one frame): no way to tell which to read.
+    bag = tmp_path / "rawfiltered.mcap"
+    with BagOut(bag) as b:
+        for s in scans[:3]:
+            _odom(b, s)
+            _laser(b, "/base_scan_raw", s, frame="base_link")
+            _laser(b, "/base_scan", s, frame="base_link")
+    err = _fails(capsys, tmp_path, bag, match="several scan topics (/base_scan: level; /base_scan_raw: level); "
+                                              "choose one with --scan-topic")
+    assert "topics.scan: all" in err
 
 
 def test_laser_scan_no_return_and_invalid_readings(scans, tmp_path):

@@ -12,7 +12,8 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
   nearest point per beam (as pointcloud_to_laserscan / Beluga); ``sensor_msgs/MultiEchoLaserScan`` (a SICK
   LMS5xx's or a Hokuyo UTM-30LX-EW's several returns per beam) as a LaserScan of one echo per beam,
   ``topics.echo``: ``first`` (the nearest, as cartographer_ros reads it; default) or ``last``. One topic, or
-  every scan topic fused (``topics.scan: all``), each with its own mounting pose.
+  every scan topic fused (``topics.scan: all``), each with its own mounting pose. ``auto``: /scan, else the only
+  laser topic, else of several those mounted level and fixed (``_level_lasers``).
 * **odometry**: ``nav_msgs/Odometry`` on a topic, or the ``frames.odom -> frames.base`` transform of ``/tf``, or a
   ``PoseStamped`` / ``PoseWithCovarianceStamped`` topic in the odometry frame named as ``topics.odom``;
   interpolated at each scan's header stamp (linear in x, y, shortest angle in theta; an exact stamp gives the
@@ -520,7 +521,8 @@ def _choose_scan_topics(path, topics: dict, want: str) -> list[str]:
     scan_like = _scan_like(topics)
     if want == "all":
         if not scan_like:
-            raise DataError(f"{path}: no LaserScan, MultiEchoLaserScan or PointCloud2 topic (topics: {_listing(sorted(topics))})")
+            raise DataError(f"{path}: no LaserScan, MultiEchoLaserScan or PointCloud2 topic "
+                            f"(topics: {_listing(sorted(topics))})")
         return scan_like
     if want == "auto":
         lasers = [n for n in scan_like if topics[n].msgtype in LASERS]
@@ -531,15 +533,69 @@ def _choose_scan_topics(path, topics: dict, want: str) -> list[str]:
         if not lasers and len(scan_like) == 1:
             return scan_like
         if not scan_like:
-            raise DataError(f"{path}: no LaserScan, MultiEchoLaserScan or PointCloud2 topic (topics: {_listing(sorted(topics))})")
-        raise DataError(f"{path}: several scan topics ({_listing(scan_like)}); choose one with --scan-topic "
-                        "(topics.scan) or fuse them with topics.scan: all")
+            raise DataError(f"{path}: no LaserScan, MultiEchoLaserScan or PointCloud2 topic "
+                            f"(topics: {_listing(sorted(topics))})")
+        if len(lasers) > 1:
+            return lasers  # several lasers: the first pass decides by their mountings (``_level_lasers``)
+        raise DataError(f"{path}: {_SEVERAL.format(_listing(scan_like))}")
     if want not in topics:
         raise DataError(f"{path}: no topic {want} (scan-like topics: {_listing(scan_like)})")
     if topics[want].msgtype not in SCAN_TYPES:
         raise DataError(f"{path}: {want} is {topics[want].msgtype}, not a LaserScan, MultiEchoLaserScan or PointCloud2 "
                         f"(scan-like topics: {_listing(scan_like)})")
     return [want]
+
+
+_SEVERAL = "several scan topics ({}); choose one with --scan-topic (topics.scan) or fuse them with topics.scan: all"
+LEVEL_TILT = math.radians(10.0)  # a laser whose scan plane tilts more than this sees the floor or over the walls
+LEVEL_HEIGHT = 0.2  # m: level lasers mounted within this of each other's height see the same walls
+
+
+def _level_lasers(path, lasers: list[str], scan_frames: dict, links: dict, moved: set, base: str, odom: str,
+                  notes: list):
+    """The laser topics ``topics.scan: auto`` reads when a bag has several and no /scan: those mounted level and
+    fixed on ``base`` (every link from ``base`` to the scan frame fixed, the scan plane within ``LEVEL_TILT`` of
+    level): a PR2's base_scan and not its tilt_scan (its frame pitches on /tf), nor a laser looking down at the
+    floor. One such: that one; several on distinct frames within ``LEVEL_HEIGHT`` of each other's height (an AGV's
+    front and rear lasers): all, fused; else (the same frame's raw and filtered scans, lasers at other heights, no
+    transforms) one line asking to choose. ``links``: child -> (parent, rotation, translation) of the first
+    transform of each link; ``moved``: the children whose /tf transform changes over the bag. The walk up from a
+    scan frame ends at ``base``, or at a frame hung from ``odom`` (nav2's base_footprint with no base_link)."""
+    from scipy.spatial.transform import Rotation
+
+    why: dict[str, str] = {}
+    height: dict[str, float] = {}
+    for t in lasers:
+        f = scan_frames[t]
+        rot, tr, seen, moving = Rotation.identity(), np.zeros(3), set(), []
+        while f != base and f in links and f not in seen and links[f][0] != odom:
+            seen.add(f)
+            parent, r, x = links[f]
+            rot, tr = r * rot, r.apply(tr) + x
+            if f in moved:
+                moving.append(f)
+            f = parent
+        if f != base and not (f in links and links[f][0] == odom):
+            why[t] = f"no transform {base} -> {scan_frames[t]}"
+        elif moving:
+            why[t] = f"{moving[0]} moves on /tf"
+        else:
+            tilt = math.acos(min(1.0, abs(float(rot.apply((0.0, 0.0, 1.0))[2]))))
+            if tilt > LEVEL_TILT:
+                why[t] = f"tilted {math.degrees(tilt):.0f} deg from level"
+            height[t] = float(tr[2])
+    level = [t for t in lasers if t not in why]
+    frames = {scan_frames[t] for t in level}
+    if level and len(frames) == len(level) and max(height[t] for t in level) - min(height[t] for t in level) \
+            <= LEVEL_HEIGHT:
+        left = "; ".join(f"{t}: {w}" for t, w in why.items())
+        what = (f"{level[0]} is the one mounted level and fixed" if len(level) == 1 else
+                f"{', '.join(level)} are mounted level and fixed at one height: fused")
+        notes.append(f"{path}: several laser topics ({', '.join(lasers)}); {what}{f' ({left})' if left else ''} "
+                     "(--scan-topic chooses)")
+        return level
+    detail = "; ".join(f"{t}: {why.get(t, 'level')}" for t in lasers)
+    raise DataError(f"{path}: {_SEVERAL.format(detail)}")
 
 
 def _choose_odom(path, topics: dict, want: str) -> str | None:
@@ -637,6 +693,15 @@ def _static_chain(static: dict, base: str, frame: str):
 MOVED = 1e-3  # m or rad: a /tf link whose pose changes more than this over the bag moves
 
 
+def _moved(a: tuple, b: tuple) -> bool:
+    """Whether two transforms (x, y, z, qx, qy, qz, qw) differ by more than MOVED (m, or rad of rotation)."""
+    if max(abs(a[i] - b[i]) for i in range(3)) > MOVED:
+        return True
+    dot = abs(sum(a[i] * b[i] for i in range(3, 7)))
+    na = math.sqrt(sum(v * v for v in a[3:])) * math.sqrt(sum(v * v for v in b[3:]))
+    return na > 0 and 2.0 * math.acos(min(1.0, dot / na)) > MOVED
+
+
 def _moving_link(reader, path, tf_topic: str, static: dict, frame: str):
     """((parent, child), odometry rows) of the lowest /tf link above ``frame`` (a laser's) that moves over the bag,
     or None: the robot's odometry when it is not named ``odom -> base_link`` (a robot_pose_ekf's
@@ -730,6 +795,12 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     truth_rows: list[tuple] = []
     other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
     odom_child = None  # the Odometry topic's child_frame_id
+    several = tp.scan == "auto" and len(scan_topics) > 1  # lasers to choose among by their mountings
+    links: dict[str, tuple] = {}  # child -> (parent, rotation, translation): each link's first transform
+    first: dict[str, tuple] = {}  # child -> that transform as (x, y, z, qx, qy, qz, qw)
+    moved: set[str] = set()  # children whose /tf transform changes
+    if several:
+        from scipy.spatial.transform import Rotation
     seen: dict[str, int] = {}
     # Odometry and truth rows carry their record time last, for a source whose header stamps are all 0.
     for conn, rec, msg in _messages(reader, path, conns):
@@ -765,6 +836,15 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                 elif topic == tf_static or child not in static:
                     if parent != odom_frame or child != base_frame:
                         static[child] = (parent, _tf_mount(ts.transform))
+                if several:  # the mountings of the lasers to choose among (``_level_lasers``)
+                    x = ts.transform.translation
+                    q = ts.transform.rotation
+                    pose = (float(x.x), float(x.y), float(x.z), float(q.x), float(q.y), float(q.z), float(q.w))
+                    if child not in links or topic == tf_static:
+                        first[child] = pose
+                        links[child] = (parent, Rotation.from_quat(pose[3:]), np.array(pose[:3]))
+                    elif topic == tf_dyn and child not in moved and _moved(first[child], pose):
+                        moved.add(child)
         elif topic == odom_topic:
             t = stamp_seconds(msg.header.stamp)
             order.see(topic, t)
@@ -793,6 +873,13 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         if n_maps > 1:
             notes.append(f"{path}: {map_topic}: {n_maps} maps (one being built?); the last, "
                          f"{map_msg.info.width} x {map_msg.info.height} cells, is used")
+    if several:
+        scan_topics = _level_lasers(path, scan_topics, scan_frames, links, moved, base_frame, odom_frame, notes)
+        keep = [o in scan_topics for o in scan_of]
+        scan_t, scan_rec, scan_of = ([v for v, k in zip(a, keep) if k] for a in (scan_t, scan_rec, scan_of))
+        counts = {t: counts[t] for t in scan_topics}
+        undirected = {t: k for t, k in undirected.items() if t in counts}
+        sweeps = {t: v for t, v in sweeps.items() if t in counts}
     empty = [t for t in scan_topics if counts[t] == 0]
     if empty:
         raise DataError(f"{path}: {empty[0]}: no messages")
