@@ -60,7 +60,8 @@ def _add_run(sub) -> None:
                    "its /map stands in for --map (see 'mcl bag info')")
     p.add_argument("--scan-topic", metavar="TOPIC", help="bag: LaserScan/PointCloud2 topic, or 'all' to fuse them (topics.scan)")
     p.add_argument("--odom-topic", metavar="TOPIC", help="bag: nav_msgs/Odometry topic (or a PoseStamped / PoseWithCovarianceStamped "
-                   "topic in the odometry frame), or 'tf' for odom -> base on /tf (topics.odom)")
+                   "topic in the odometry frame), 'tf' for odom -> base on /tf, or 'laser' for the scans' own "
+                   "motion (scan matching; what a bag without odometry gets) (topics.odom)")
     p.add_argument("--odom-frame", metavar="FRAME", help="bag: odometry frame (frames.odom, default odom)")
     p.add_argument("--base-frame", metavar="FRAME", help="bag: robot frame (frames.base, default base_link)")
     p.add_argument("--write-bag", action="store_true",

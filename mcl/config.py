@@ -362,7 +362,7 @@ class TopicsConfig:
     # auto (/scan, else the only LaserScan / MultiEchoLaserScan, else the level fixed ones), all (fuse every scan
     # topic), or a topic name
     scan: str = "auto"
-    odom: str = "auto"  # auto (/odom, else the only Odometry topic, else /tf), tf, or a nav_msgs/Odometry topic
+    odom: str = "auto"  # auto (/odom, else the only Odometry topic, else /tf, else laser), tf, laser, or a topic
     map: str | None = "/map"  # nav_msgs/OccupancyGrid used when no map file is given; null: never
     initial_pose: str | None = "/initialpose"  # first PoseWithCovarianceStamped starts tracking; null: ignore
     truth: str | None = None  # PoseStamped, PoseWithCovarianceStamped or Odometry topic with reference poses

@@ -19,7 +19,8 @@ What a bag gives mcl (topics and frames from ``topics:`` / ``frames:`` of the co
   interpolated at each scan's header stamp (linear in x, y, shortest angle in theta; an exact stamp gives the
   message's own pose). Velocities from the Odometry twist (0 from /tf: the runner derives them). With the
   default frames and no such transform: the only ``odom -> X`` (nav2's base_footprint), else the lowest /tf link
-  above the laser that moves (``_moving_link``: robot_pose_ekf's ``odom_combined -> base_footprint``), with a note.
+  above the laser that moves (``_moving_link``: robot_pose_ekf's ``odom_combined -> base_footprint``), with a note;
+  with none of these (or ``topics.odom: laser``), the scans' own motion (:mod:`mcl.laser_odometry`), with a note.
 * **transforms**: ``tf2_msgs/TFMessage`` on ``/tf`` and ``/tf_static``, or ROS 1's older ``tf/tfMessage`` (the same
   fields; bags recorded before tf2 put the static links on ``/tf`` too); a frame's leading '/' is dropped.
 * **laser mounting**: ``frames.base -> scan frame`` from ``/tf_static`` (or the first ``/tf`` that has it),
@@ -601,7 +602,7 @@ def _level_lasers(path, lasers: list[str], scan_frames: dict, links: dict, moved
 def _choose_odom(path, topics: dict, want: str) -> str | None:
     """The odometry topic to use (an Odometry, or a pose topic named), or None for /tf."""
     odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
-    if want == "tf":
+    if want in ("tf", "laser"):
         return None
     if want == "auto":
         if "/odom" in odoms:
@@ -769,7 +770,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
             raise DataError(f"{path}: {n} is {topics[n].msgtype}, expected tf2_msgs/TFMessage (or ROS 1's "
                             "tf/tfMessage)")
     default_odom = odom_frame == _frame(_Frames().odom)  # a namespaced one (robot1/odom) may stand in for it
-    if odom_topic is None and tf_dyn not in topics:
+    from_scans = tp.odom == "laser"  # the motion from scan matching (mcl.laser_odometry); auto: when none is found
+    if odom_topic is None and tf_dyn not in topics and tp.odom not in ("auto", "laser"):
         odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
         poses = sorted(n for n, i in topics.items() if i.msgtype in (POSE, PWCS))
         hint = (f"; a pose topic in the odometry frame can be named with --odom-topic: {_listing(poses)}"
@@ -895,6 +897,8 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     for t in sorted(unstamped):
         notes.append(f"{path}: {t}: {UNSTAMPED}")
     scan_t = [r if o in unstamped else v for v, r, o in zip(scan_t, scan_rec, scan_of)]
+    if from_scans:
+        odom_rows, other_rows = [], {}
     pick = None
     if not odom_rows and odom_topic is None and other_rows and base_frame == _frame(_Frames().base):
         # frames.base (the default) never appears under the odometry frame. One namespaced pair (robot1/odom ->
@@ -909,7 +913,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
         notes.append(f"{path}: {tf_dyn}: no {odom_frame} -> {base_frame}; the odometry is {odom_parent} -> "
                      f"{odom_child}, the only such transform (frames.odom and frames.base choose)")
         odom_frame = odom_parent
-    if (not odom_rows and odom_topic is None and tf_dyn in topics and default_odom
+    if (not odom_rows and odom_topic is None and tf_dyn in topics and default_odom and not from_scans
             and base_frame == _frame(_Frames().base)):
         # Neither odom -> base_link nor any odom -> X: the link that moves the first laser (robot_pose_ekf's
         # odom_combined -> base_footprint; a bag recorded before tf_static repeats the fixed links on /tf).
@@ -922,7 +926,13 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                          f"{odom_frame} -> {odom_child}, the transform that moves {scan_frames[scan_topics[0]]} "
                          "(frames.odom and frames.base choose)")
             base_frame = odom_child
-    if not odom_rows:
+    if not odom_rows and odom_topic is None and tp.odom == "auto":
+        from_scans = True
+        where = (f"no {odom_frame} -> {base_frame} on {tf_dyn}" if tf_dyn in topics else "no /tf")
+        notes.append(f"{path}: no odometry (no nav_msgs/Odometry topic, {where}); the motion comes from the scans "
+                     f"(laser odometry: scan matching of {scan_topics[0]}; topics.odom / frames.odom name another "
+                     "source)")
+    if not odom_rows and not from_scans:
         if odom_topic is not None:
             raise DataError(f"{path}: {odom_topic}: no messages")
         seen = sorted(tf_frames)
@@ -930,6 +940,9 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                         f"{_listing(seen[:12])}{', ...' if len(seen) > 12 else ''}); set frames.odom / frames.base "
                         "or --odom-topic")
     tf_odom = f"{tf_dyn} {odom_frame} -> {odom_child or base_frame}"
+    if from_scans:  # a stand-in until the scans are matched, below (times only)
+        span = [min(scan_t), max(scan_t)]
+        odom_rows = [(t, 0.0, 0.0, 0.0, 0.0, 0.0, t) for t in span]
     odometry = _record_timed(np.array(odom_rows, dtype=np.float64), odom_topic or tf_odom, path, notes)
     odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
     if not np.isfinite(odometry).all():
@@ -970,9 +983,27 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
                      has_twist=odom_type == ODOM, mirrored=mirrored, unstamped=unstamped,
                      echo=getattr(tp, "echo", "first"))
+    if from_scans:
+        odometry = _scan_odometry(path, scans, scan_topics[0], offsets[scan_topics[0]], warnings)
+        scans.odometry = odometry
+        src_name = f"laser odometry (scan matching of {scan_topics[0]})"
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps)
+
+
+def _scan_odometry(path, scans: "BagScans", topic: str, mount, warnings: list) -> np.ndarray:
+    """Odometry rows (t, x, y, theta, 0, 0) from the scans of ``topic`` matched one to the next
+    (:func:`mcl.laser_odometry.laser_odometry`), with a warning when many did not match."""
+    from mcl.laser_odometry import laser_odometry
+
+    rows, failed = laser_odometry((s for s in scans if s.kind == topic), mount)
+    if rows.shape[0] < 2:
+        raise DataError(f"{path}: no odometry, and {topic} has {rows.shape[0]} scan: nothing to match")
+    if failed > 0.05 * rows.shape[0]:
+        warnings.append(f"{path}: laser odometry: {failed} of {rows.shape[0]} scans of {topic} matched no "
+                        "earlier one (too few returns or too far moved); they take no motion")
+    return rows[np.argsort(rows[:, 0], kind="stable")]
 
 
 # ----------------------------------------------------------------------------- mcl bag info

@@ -1,0 +1,161 @@
+"""Laser odometry: the robot's motion from its own scans, for a recording without wheel odometry.
+
+A bag from a robot (or a hand-held rig) that recorded no ``nav_msgs/Odometry`` and no ``odom -> base`` transform
+still gives the filter a control ``u_t``: the motion between consecutive scans found by scan matching, as ROS's
+laser_scan_matcher does. Each scan is matched to a key scan by point-to-line ICP (Censi, "An ICP variant using a
+point-to-line metric", ICRA 2008): the current scan's points are moved by the pose guess, paired with their nearest
+key-scan point (``scipy.spatial.cKDTree``), and the pose is the Gauss-Newton step that minimises the distances to
+the lines through those points,
+
+    min over (t, theta)  sum_i ( n_j . (R(theta) p_i + t - q_j) )^2 ,
+
+n_j the key scan's normal at q_j (from its neighbours along the scan). Pairs farther than ``max_pair`` are
+dropped, as are residuals over three times the median. A direction the scene does not constrain (the axis of a
+featureless corridor) has a near-zero eigenvalue in the normal equations; a weak prior at the guess, ``PRIOR``
+pairs' worth, keeps the pose there at the guess: the previous step's velocity (constant velocity), the only
+evidence there is (in a simulated corridor, without it the matches stuck at the key scan and the motion
+decayed to 0 over ten scans). The key scan is renewed after ``KEY_DISTANCE`` m or ``KEY_ANGLE`` rad, which keeps a
+slow robot from accumulating one small error per scan.
+
+The result is in the odometry's form (rows t, x, y, theta, 0, 0 from the first scan at the origin), so the
+motion model and its noise (``motion.alpha1..4``) apply unchanged: drift is what the filter corrects.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+KEY_DISTANCE = 0.1  # m: the key scan is renewed once the robot moved this far from it ...
+KEY_ANGLE = 0.1  # rad ... or turned this much
+PRIOR = 5.0  # the guess weighs as much as this many pairs (per m^2 in x, y; per rad^2 in theta: a 1 m lever)
+MAX_POINTS = 540  # a scan's points are thinned to about this many (every k-th)
+GOOD_PAIRS = 0.5  # a match pairing fewer of the scan's points is tried from a second start too
+MIN_PAIRS = 20  # fewer paired points: the match fails and the step is the guess
+MAX_ITERATIONS = 30
+
+
+def _compose(a, b) -> np.ndarray:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    th = a[2] + b[2]
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], math.atan2(math.sin(th), math.cos(th))])
+
+
+def _inverse(a) -> np.ndarray:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
+
+
+def scan_points(ranges, angles, max_range: float | None) -> np.ndarray:
+    """(2, K) laser-frame points of the returns of a scan (a range above 0, finite, under ``max_range`` when known:
+    no-return readings are not points), thinned to about ``MAX_POINTS``, in angular order."""
+    r = np.asarray(ranges, dtype=np.float64)
+    a = np.asarray(angles, dtype=np.float64)
+    ok = np.isfinite(r) & (r > 0.0)
+    if max_range is not None:
+        ok &= r < float(max_range) - 1e-6
+    idx = np.flatnonzero(ok)
+    idx = idx[:: max(1, -(-idx.size // MAX_POINTS))]
+    return np.vstack((r[idx] * np.cos(a[idx]), r[idx] * np.sin(a[idx])))
+
+
+class _Key:
+    """A key scan: its points, a k-d tree over them, and unit normals (NaN where the neighbours give none)."""
+
+    def __init__(self, pts: np.ndarray):
+        self.pts = pts
+        self.tree = cKDTree(pts.T)
+        k = pts.shape[1]
+        n = np.full((2, k), np.nan)
+        if k >= 3:
+            tang = pts[:, 2:] - pts[:, :-2]  # the line through each point's two neighbours along the scan
+            length = np.hypot(tang[0], tang[1])
+            rng = np.hypot(pts[0, 1:-1], pts[1, 1:-1])
+            good = (length > 1e-9) & (length < np.maximum(0.3, 0.1 * rng))  # not across a gap between objects
+            n[0, 1:-1] = np.where(good, -tang[1] / np.where(good, length, 1.0), np.nan)
+            n[1, 1:-1] = np.where(good, tang[0] / np.where(good, length, 1.0), np.nan)
+        self.normals = n
+
+
+def icp(key: _Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None):
+    """(pose (3,) of the scan ``pts`` in the key scan's frame, paired points, cost) by point-to-line ICP from
+    ``guess`` (see the module doc); the pose is ``guess`` and the count 0 when fewer than ``MIN_PAIRS`` pair. The
+    cost (to compare starts) sums min(r^2, max_pair^2) over the points, an unpaired point counting max_pair^2,
+    and the prior's term.
+    ``prior``: where the weak prior sits (default ``guess``)."""
+    x, y, th = (float(v) for v in guess)
+    gx, gy, gth = (float(v) for v in (guess if prior is None else prior))
+    pairs = 0
+    for it in range(MAX_ITERATIONS):
+        c, s = math.cos(th), math.sin(th)
+        px = c * pts[0] - s * pts[1] + x
+        py = s * pts[0] + c * pts[1] + y
+        reach = max_pair * max(1.0, 4.0 * 0.5 ** it)  # coarse to fine: 4x, 2x, then max_pair
+        d, j = key.tree.query(np.column_stack((px, py)), distance_upper_bound=reach)
+        m = np.isfinite(d)
+        j = np.where(m, j, 0)
+        nx, ny = key.normals[0, j], key.normals[1, j]
+        m &= np.isfinite(nx)
+        if np.count_nonzero(m) < MIN_PAIRS:
+            return np.array(guess, dtype=np.float64), 0, math.inf
+        nx, ny, jm = nx[m], ny[m], j[m]
+        qx, qy, ax, ay = key.pts[0, jm], key.pts[1, jm], px[m], py[m]
+        r = nx * (ax - qx) + ny * (ay - qy)
+        keep = np.abs(r) <= 3.0 * max(float(np.median(np.abs(r))), 1e-3)
+        if np.count_nonzero(keep) < MIN_PAIRS:
+            return np.array(guess, dtype=np.float64), 0, math.inf
+        nx, ny, ax, ay, r = nx[keep], ny[keep], ax[keep], ay[keep], r[keep]
+        jac = np.vstack((nx, ny, nx * -(ay - y) + ny * (ax - x)))  # d r / d (x, y, theta)
+        # a weak prior at the guess (PRIOR pairs' worth): it decides only where the scene does not
+        h = jac @ jac.T + PRIOR * np.eye(3)
+        g = jac @ r + PRIOR * np.array([x - gx, y - gy, math.remainder(th - gth, 2.0 * math.pi)])
+        step = np.linalg.solve(h, -g)
+        x, y, th = x + step[0], y + step[1], th + step[2]
+        pairs = int(r.size)
+        cost = (float(np.sum(np.minimum(r * r, max_pair ** 2))) + max_pair ** 2 * (pts.shape[1] - pairs)
+                + PRIOR * ((x - gx) ** 2 + (y - gy) ** 2 + math.remainder(th - gth, 2.0 * math.pi) ** 2))
+        if it >= 2 and abs(step[0]) + abs(step[1]) < 1e-6 and abs(step[2]) < 1e-6:
+            break
+    return np.array([x, y, math.atan2(math.sin(th), math.cos(th))]), pairs, cost
+
+
+def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
+    """(rows (M, 6): t, x, y, theta, 0, 0 of the robot at each scan, the first at the origin; how many scans did
+    not match and took the constant-velocity guess) for ``scans`` (records with t, ranges, angles, max_range, in
+    time order; scans of one laser). ``mount``: the laser's pose (3,) on the robot (None: at its centre); the
+    scans give the laser's motion, turned into the robot's."""
+    mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
+    mount_inv = _inverse(mount)
+    rows = []
+    laser = np.zeros(3)  # the laser's pose in the odometry frame of the laser's first pose
+    key, key_pose = None, np.zeros(3)
+    velocity = np.zeros(3)  # the last step, in the laser's frame
+    failed = 0
+    for scan in scans:
+        pts = scan_points(scan.ranges, scan.angles, scan.max_range)
+        if key is None:
+            if pts.shape[1] >= MIN_PAIRS:
+                key, key_pose = _Key(pts), laser.copy()
+        else:
+            # from the last step again (constant velocity); when under GOOD_PAIRS of the points pair, from no
+            # motion too, the better match kept (a robot that stopped turning or reversed: the old velocity led
+            # into a wrong match); the prior stays at constant velocity for both
+            guesses = [_compose(_inverse(key_pose), _compose(laser, v)) for v in (velocity, np.zeros(3))]
+            rel, pairs = guesses[0], 0
+            if pts.shape[1] >= MIN_PAIRS:
+                best = icp(key, pts, guesses[0])
+                if best[1] < GOOD_PAIRS * pts.shape[1]:
+                    best = min(best, icp(key, pts, guesses[1], prior=guesses[0]), key=lambda m: m[2])
+                rel, pairs, _ = best
+            failed += pairs == 0
+            new = _compose(key_pose, rel)
+            velocity = _compose(_inverse(laser), new) if pairs else np.zeros(3)  # lost: no guess to carry on
+            laser = new
+            if pts.shape[1] >= MIN_PAIRS and (math.hypot(rel[0], rel[1]) > KEY_DISTANCE or abs(rel[2]) > KEY_ANGLE
+                                             or pairs == 0):
+                key, key_pose = _Key(pts), laser.copy()
+        robot = _compose(_compose(mount, laser), mount_inv)  # the robot's pose, its first at the origin
+        rows.append((float(scan.t), *robot, 0.0, 0.0))
+    return np.array(rows, dtype=np.float64).reshape(-1, 6), failed
