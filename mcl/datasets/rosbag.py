@@ -771,9 +771,11 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                             "tf/tfMessage)")
     default_odom = odom_frame == _frame(_Frames().odom)  # a namespaced one (robot1/odom) may stand in for it
     from_scans = tp.odom == "laser"  # the motion from scan matching (mcl.laser_odometry); auto: when none is found
-    if odom_topic is None and tf_dyn not in topics and tp.odom not in ("auto", "laser"):
-        odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
-        poses = sorted(n for n, i in topics.items() if i.msgtype in (POSE, PWCS))
+    poses = sorted(n for n, i in topics.items() if i.msgtype in (POSE, PWCS) and n not in (init_topic, truth_topic))
+    odoms = sorted(n for n, i in topics.items() if i.msgtype == ODOM)
+    if odom_topic is None and tf_dyn not in topics and (tp.odom == "tf" or (tp.odom == "auto" and (poses or odoms))):
+        # Odometry topics to choose among, or a pose topic that may be the odometry (robot_pose_ekf's): named, not
+        # passed over for the scans' motion
         hint = (f"; a pose topic in the odometry frame can be named with --odom-topic: {_listing(poses)}"
                 if poses else "")
         raise DataError(f"{path}: no odometry: no nav_msgs/Odometry topic{'' if not odoms else ' chosen'} "
@@ -926,7 +928,9 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                          f"{odom_frame} -> {odom_child}, the transform that moves {scan_frames[scan_topics[0]]} "
                          "(frames.odom and frames.base choose)")
             base_frame = odom_child
-    if not odom_rows and odom_topic is None and tp.odom == "auto":
+    if (not odom_rows and odom_topic is None and tp.odom == "auto" and not other_rows and default_odom
+            and base_frame == _frame(_Frames().base)):
+        # nothing that could be odometry (frames you name, or several robots' odom links, stay one line)
         from_scans = True
         where = (f"no {odom_frame} -> {base_frame} on {tf_dyn}" if tf_dyn in topics else "no /tf")
         notes.append(f"{path}: no odometry (no nav_msgs/Odometry topic, {where}); the motion comes from the scans "
