@@ -32,6 +32,7 @@ KEY_DISTANCE = 0.1  # m: the key scan is renewed once the robot moved this far f
 KEY_ANGLE = 0.1  # rad ... or turned this much
 PRIOR = 5.0  # the guess weighs as much as this many pairs (per m^2 in x, y; per rad^2 in theta: a 1 m lever)
 MAX_POINTS = 540  # a scan's points are thinned to about this many (every k-th)
+COARSE = 4.0  # the first iteration pairs points up to COARSE x max_pair apart, the second half that, then max_pair
 GOOD_PAIRS = 0.5  # a match pairing fewer of the scan's points is tried from a second start too
 MIN_PAIRS = 20  # fewer paired points: the match fails and the step is the guess
 MAX_ITERATIONS = 30
@@ -92,7 +93,7 @@ def icp(key: _Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None):
         c, s = math.cos(th), math.sin(th)
         px = c * pts[0] - s * pts[1] + x
         py = s * pts[0] + c * pts[1] + y
-        reach = max_pair * max(1.0, 4.0 * 0.5 ** it)  # coarse to fine: 4x, 2x, then max_pair
+        reach = max_pair * max(1.0, COARSE * 0.5 ** it)  # coarse to fine
         d, j = key.tree.query(np.column_stack((px, py)), distance_upper_bound=reach)
         m = np.isfinite(d)
         j = np.where(m, j, 0)
