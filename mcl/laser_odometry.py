@@ -36,6 +36,7 @@ COARSE = 4.0  # the first iteration pairs points up to COARSE x max_pair apart, 
 GOOD_PAIRS = 0.5  # a match pairing fewer of the scan's points is tried from a second start too
 MIN_PAIRS = 20  # fewer paired points: the match fails and the step is the guess
 MAX_ITERATIONS = 30
+MAX_MISSES = 3  # scans in a row not matched before the constant-velocity guess stops
 
 
 def _compose(a, b) -> np.ndarray:
@@ -123,8 +124,8 @@ def icp(key: _Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None):
 
 
 def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
-    """(rows (M, 6): t, x, y, theta, 0, 0 of the robot at each scan, the first at the origin; how many scans did
-    not match and took the constant-velocity guess) for ``scans`` (records with t, ranges, angles, max_range, in
+    """(rows (M, 6): t, x, y, theta, 0, 0 of the robot at each scan, the first at the origin; how many scans after
+    the first were not matched: no motion, or none before a scan with returns enough) for ``scans`` (records with t, ranges, angles, max_range, in
     time order; scans of one laser). ``mount``: the laser's pose (3,) on the robot (None: at its centre); the
     scans give the laser's motion, turned into the robot's."""
     mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
@@ -133,10 +134,11 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
     laser = np.zeros(3)  # the laser's pose in the odometry frame of the laser's first pose
     key, key_pose = None, np.zeros(3)
     velocity = np.zeros(3)  # the last step, in the laser's frame
-    failed = 0
+    failed = misses = 0
     for scan in scans:
         pts = scan_points(scan.ranges, scan.angles, scan.max_range)
-        if key is None:
+        if key is None:  # no scan with returns enough yet: this one is not matched (and counts so after the first)
+            failed += bool(rows)
             if pts.shape[1] >= MIN_PAIRS:
                 key, key_pose = _Key(pts), laser.copy()
         else:
@@ -151,8 +153,10 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
                     best = min(best, icp(key, pts, guesses[1], prior=guesses[0]), key=lambda m: m[2])
                 rel, pairs, _ = best
             failed += pairs == 0
+            misses = 0 if pairs else misses + 1
             new = _compose(key_pose, rel)
-            velocity = _compose(_inverse(laser), new) if pairs else np.zeros(3)  # lost: no guess to carry on
+            # a scan not matched took the last step again; after MAX_MISSES such in a row, no more guessing
+            velocity = _compose(_inverse(laser), new) if misses < MAX_MISSES else np.zeros(3)
             laser = new
             if pts.shape[1] >= MIN_PAIRS and (math.hypot(rel[0], rel[1]) > KEY_DISTANCE or abs(rel[2]) > KEY_ANGLE
                                              or pairs == 0):

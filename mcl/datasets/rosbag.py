@@ -1006,7 +1006,7 @@ def _scan_odometry(path, scans: "BagScans", topic: str, mount, warnings: list) -
         raise DataError(f"{path}: no odometry, and {topic} has {rows.shape[0]} scan: nothing to match")
     if failed > 0.05 * rows.shape[0]:
         warnings.append(f"{path}: laser odometry: {failed} of {rows.shape[0]} scans of {topic} matched no "
-                        "earlier one (too few returns or too far moved); they take no motion")
+                        "earlier one (too few returns, or moved too far): their motion is the last step's, or none")
     return rows[np.argsort(rows[:, 0], kind="stable")]
 
 
