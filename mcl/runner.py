@@ -252,7 +252,7 @@ def _retime(scans, log, offset: float, echo):
     return ScanMap(scans, functools.partial(_retimed, odometry=odometry, offset=float(offset)))
 
 
-def _open_source(cfg: Config, echo):
+def _open_source(cfg: Config, echo, progress: bool | None = False):
     """The run's data: (log, grid, scans, landmark records, truth, initial pose from the bag or None).
 
     ``log`` carries ``path``, ``skipped``, ``warnings`` and ``notes``. A CARMEN log (``cfg.log``) is read whole; a
@@ -273,7 +273,7 @@ def _open_source(cfg: Config, echo):
 
         if cfg.landmarks.use:
             raise ConfigError("landmarks.use: a ROS bag carries no LANDMARK records")
-        log = open_bag(cfg.bag, cfg.topics, cfg.frames)
+        log = open_bag(cfg.bag, cfg.topics, cfg.frames, progress=progress)
         log.warnings.extend(log.stamps_checked(cfg.sensor.time_offset))
         if cfg.map is not None:
             grid = load_map(cfg.map)
@@ -486,7 +486,7 @@ def _run(
 
     echo = echo or (lambda msg: print(msg, file=sys.stderr))
     wall0 = time.perf_counter()
-    log, grid, scans, marks_all, truth, bag_initial = _open_source(cfg, echo)
+    log, grid, scans, marks_all, truth, bag_initial = _open_source(cfg, echo, progress)
     landmark_map = None
     if cfg.landmarks.use:
         from mcl.landmarks import load_landmarks

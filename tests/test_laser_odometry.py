@@ -69,6 +69,18 @@ def _scan_only_bag(path: Path, scans, blank=()) -> None:
                                            intensities=np.zeros(0, dtype=np.float32)))
 
 
+def test_the_matching_shows_its_progress_when_asked(world, tmp_path, capsys):
+    # A long bag's matching takes minutes (3 ms a scan): mcl run shows a bar over it, as over the run.
+    d, scans, t, truth = world
+    bag = tmp_path / "scans.mcap"
+    _scan_only_bag(bag, scans[:40])
+    open_bag(bag)
+    assert "laser odometry" not in capsys.readouterr().err
+    open_bag(bag, progress=True)
+    err = capsys.readouterr().err
+    assert "laser odometry" in err and "/40 " in err
+
+
 def test_a_bag_without_odometry_is_tracked_on_the_scans_motion(world, tmp_path):
     # No Odometry topic, no /tf: the motion comes from the scans, with a note (it was one line asking for
     # odometry). Tracking from the true start, default config: RMSE 0.060 m, max 0.21 m (the CARMEN log with its

@@ -728,23 +728,24 @@ def _moving_link(reader, path, tf_topic: str, static: dict, frame: str):
     return None
 
 
-def open_bag(path, topics=None, frames=None) -> BagSource:
+def open_bag(path, topics=None, frames=None, progress: bool | None = False) -> BagSource:
     """Read a bag's small records and set up its scan stream (see the module doc).
 
     ``topics`` and ``frames`` are the config sections (or any objects with the same attributes; None: the
-    defaults). DataError naming the bag and the topic or frame for every problem found.
+    defaults). DataError naming the bag and the topic or frame for every problem found. ``progress``: a progress
+    bar over the scans while laser odometry matches them (None: on a terminal only).
     """
     path = Path(path)
     tp = topics or _Topics()
     fr = frames or _Frames()
     reader = _open_reader(path)
     try:
-        return _first_pass(path, reader, tp, fr)
+        return _first_pass(path, reader, tp, fr, progress)
     finally:
         reader.close()
 
 
-def _first_pass(path: Path, reader, tp, fr) -> BagSource:
+def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False) -> BagSource:
     topics = reader.topics
     for name, info in topics.items():
         if info.msgtype is None:
@@ -988,7 +989,7 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                      has_twist=odom_type == ODOM, mirrored=mirrored, unstamped=unstamped,
                      echo=getattr(tp, "echo", "first"))
     if from_scans:
-        odometry = _scan_odometry(path, scans, scan_topics[0], offsets[scan_topics[0]], warnings)
+        odometry = _scan_odometry(path, scans, scan_topics[0], offsets[scan_topics[0]], warnings, counts, progress)
         scans.odometry = odometry
         src_name = f"laser odometry (scan matching of {scan_topics[0]})"
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
@@ -996,12 +997,23 @@ def _first_pass(path: Path, reader, tp, fr) -> BagSource:
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps)
 
 
-def _scan_odometry(path, scans: "BagScans", topic: str, mount, warnings: list) -> np.ndarray:
+def _scan_odometry(path, scans: "BagScans", topic: str, mount, warnings: list, counts: dict,
+                   progress: bool | None) -> np.ndarray:
     """Odometry rows (t, x, y, theta, 0, 0) from the scans of ``topic`` matched one to the next
     (:func:`mcl.laser_odometry.laser_odometry`), with a warning when many did not match."""
+    from tqdm import tqdm
+
     from mcl.laser_odometry import laser_odometry
 
-    rows, failed = laser_odometry((s for s in scans if s.kind == topic), mount)
+    with tqdm(total=counts[topic], unit="scan", desc="laser odometry", leave=False, dynamic_ncols=True,
+              disable=(None if progress is None else not progress)) as bar:
+        def stream():
+            for s in scans:
+                if s.kind == topic:
+                    bar.update()
+                    yield s
+
+        rows, failed = laser_odometry(stream(), mount)
     if rows.shape[0] < 2:
         raise DataError(f"{path}: no odometry, and {topic} has {rows.shape[0]} scan: nothing to match")
     if failed > 0.05 * rows.shape[0]:
