@@ -125,9 +125,10 @@ def icp(key: _Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None):
 
 def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
     """(rows (M, 6): t, x, y, theta, 0, 0 of the robot at each scan, the first at the origin; how many scans after
-    the first were not matched: no motion, or none before a scan with returns enough) for ``scans`` (records with t, ranges, angles, max_range, in
-    time order; scans of one laser). ``mount``: the laser's pose (3,) on the robot (None: at its centre); the
-    scans give the laser's motion, turned into the robot's."""
+    the first were not matched: too few points, no pairs, or no scan with returns enough before them) for
+    ``scans`` (records with t, ranges, angles, max_range, in time order; scans of one laser). ``mount``: the
+    laser's pose (3,) on the robot (None: at its centre); the scans give the laser's motion, turned into the
+    robot's. A scan not matched takes the last step again (``MAX_MISSES`` in a row: no motion)."""
     mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
     mount_inv = _inverse(mount)
     rows = []

@@ -542,8 +542,8 @@ def _choose_scan_topics(path, topics: dict, want: str) -> list[str]:
     if want not in topics:
         raise DataError(f"{path}: no topic {want} (scan-like topics: {_listing(scan_like)})")
     if topics[want].msgtype not in SCAN_TYPES:
-        raise DataError(f"{path}: {want} is {topics[want].msgtype}, not a LaserScan, MultiEchoLaserScan or PointCloud2 "
-                        f"(scan-like topics: {_listing(scan_like)})")
+        raise DataError(f"{path}: {want} is {topics[want].msgtype}, not a LaserScan, MultiEchoLaserScan or "
+                        f"PointCloud2 (scan-like topics: {_listing(scan_like)})")
     return [want]
 
 
