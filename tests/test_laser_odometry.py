@@ -145,3 +145,37 @@ def test_scans_without_returns_are_counted_in_a_warning_and_one_scan_is_one_line
                  "--no-progress"]) == 2
     e = capsys.readouterr().err.strip()
     assert len(e.splitlines()) == 1 and "no odometry, and /scan has 1 scan: nothing to match" in e and not out.exists()
+
+
+def test_a_backpack_bag_multi_echo_lasers_no_odometry_runs_as_its_level_laser_alone(world, tmp_path):
+    # The shape of cartographer's public backpack bags: two MultiEchoLaserScan topics, one level, one turned 90
+    # degrees up (its plane vertical), fixed links on /tf_static, no odometry at all. auto reads the level laser's
+    # first echoes and matches them for the motion: the same trajectory, to the byte, as the LaserScan-only bag.
+    from tests.test_rosbag import _echoes, _tilted
+
+    d, scans, t, truth = world
+    pack, bare = tmp_path / "backpack.bag", tmp_path / "bare.bag"
+    _scan_only_bag(bare, scans)
+    with BagOut(pack) as b:
+        b.write("/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+            _tilted(b, scans[0].t, "base_link", "horizontal_laser_link", (0.0, 0.0, 0.0), 0.0),
+            _tilted(b, scans[0].t, "base_link", "vertical_laser_link", (0.1, 0.0, 0.3), -math.pi / 2)]))
+        for s in scans:
+            _echoes(b, "/horizontal_laser_2d", s, [[r, r + 1.0] for r in s.ranges.astype(np.float32)],
+                    frame="horizontal_laser_link")
+            _echoes(b, "/vertical_laser_2d", s, [[1.5]] * s.ranges.size, frame="vertical_laser_link")
+    src = open_bag(pack)
+    assert src.scans.topics == ["/horizontal_laser_2d"]
+    assert src.odom_source == "laser odometry (scan matching of /horizontal_laser_2d)"
+    assert any("/vertical_laser_2d: tilted 90 deg from level" in n for n in src.notes), src.notes
+    assert np.array_equal(src.odometry, open_bag(bare).odometry)
+    x, y, th = truth[:, 0]
+    outs = []
+    for bag in (pack, bare):
+        cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "default.yaml",
+                          ["rerun.mode=off", "log=null", f"bag={bag}", f"map={d / 'map.yaml'}", "truth=null",
+                           f"filter.initial_pose=[{x}, {y}, {th}]", "filter.global_localization=false"])
+        out = tmp_path / bag.stem
+        run(cfg, out, progress=False, echo=lambda *a, **k: None)
+        outs.append((out / "trajectory.tum").read_bytes())
+    assert outs[0] == outs[1]
