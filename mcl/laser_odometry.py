@@ -14,7 +14,10 @@ dropped, as are residuals over three times the median. A direction the scene doe
 featureless corridor) has a near-zero eigenvalue in the normal equations; a weak prior at the guess, ``PRIOR``
 pairs' worth, keeps the pose there at the guess: the previous step's velocity (constant velocity), the only
 evidence there is (in a simulated corridor, without it the matches stuck at the key scan and the motion
-decayed to 0 over ten scans). The key scan is renewed after ``KEY_DISTANCE`` m or ``KEY_ANGLE`` rad, which keeps a
+decayed to 0 over ten scans). That velocity is smoothed over ``SMOOTH`` s (an exponential average of the
+steps): at 40 Hz one scan's step along a corridor is mostly the matcher's noise, and a guess made of it
+random-walked (a generated 40 Hz world: the motion over 1 s erred by 0.92 m at the 95th percentile, against
+0.05 m smoothed). The key scan is renewed after ``KEY_DISTANCE`` m or ``KEY_ANGLE`` rad, which keeps a
 slow robot from accumulating one small error per scan.
 
 The result is in the odometry's form (rows t, x, y, theta, 0, 0 from the first scan at the origin), so the
@@ -36,6 +39,7 @@ COARSE = 4.0  # the first iteration pairs points up to COARSE x max_pair apart, 
 GOOD_PAIRS = 0.5  # a match pairing fewer of the scan's points is tried from a second start too
 MIN_PAIRS = 20  # fewer paired points: the match fails and the step is the guess
 MAX_ITERATIONS = 30
+SMOOTH = 0.5  # s: the guess is the velocity smoothed over about this long (see the module doc)
 MAX_MISSES = 3  # scans in a row not matched before the constant-velocity guess stops
 
 
@@ -136,6 +140,8 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
     key, key_pose = None, np.zeros(3)
     velocity = np.zeros(3)  # the last step, in the laser's frame
     failed = misses = 0
+    rate = np.zeros(3)  # smoothed velocity (m/s, m/s, rad/s) in the laser's frame
+    t_prev, started = None, False
     for scan in scans:
         pts = scan_points(scan.ranges, scan.angles, scan.max_range)
         if key is None:  # no scan with returns enough yet: this one is not matched (and counts so after the first)
@@ -157,11 +163,23 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
             misses = 0 if pairs else misses + 1
             new = _compose(key_pose, rel)
             # a scan not matched took the last step again; after MAX_MISSES such in a row, no more guessing
-            velocity = _compose(_inverse(laser), new) if misses < MAX_MISSES else np.zeros(3)
+            step = _compose(_inverse(laser), new)
+            dt = float(scan.t) - t_prev
+            if misses >= MAX_MISSES:
+                velocity = np.zeros(3)
+            elif SMOOTH > 0 and dt > 0:
+                # the guess for the next scan: the velocity smoothed over about SMOOTH s, scaled to this step's dt
+                w = 1.0 - math.exp(-dt / SMOOTH) if started else 1.0
+                rate = (1.0 - w) * rate + w * step / dt
+                started = True
+                velocity = rate * dt
+            else:
+                velocity = step
             laser = new
             if pts.shape[1] >= MIN_PAIRS and (math.hypot(rel[0], rel[1]) > KEY_DISTANCE or abs(rel[2]) > KEY_ANGLE
                                              or pairs == 0):
                 key, key_pose = _Key(pts), laser.copy()
+        t_prev = float(scan.t)
         robot = _compose(_compose(mount, laser), mount_inv)  # the robot's pose, its first at the origin
         rows.append((float(scan.t), *robot, 0.0, 0.0))
     return np.array(rows, dtype=np.float64).reshape(-1, 6), failed

@@ -42,16 +42,33 @@ def _step_errors(rows, scans, t, truth, gap=5):
     return np.array(out)
 
 
-def test_the_scans_give_the_motion_as_well_as_the_wheels(world):
+def test_the_scans_give_the_motion_about_as_well_as_the_wheels(world):
     # Over 1 s (5 scans, 0.5 m of travel) the simulated wheel odometry errs by 0.027 m (median) / 0.075 m (95th
-    # percentile); the scans matched give 0.012 / 0.052 m (measured). The bounds, 0.02 and 0.08 m, fail a matcher
-    # that stalls along the corridor (0.05 / 0.5 m before the prior at the guess) or mistakes the turn's sign.
+    # percentile); the scans matched give 0.013 / 0.133 m (measured; 0.012 / 0.052 m with the guess unsmoothed,
+    # which the 40 Hz test below needs). The bounds, 0.02 and 0.2 m, fail a matcher that stalls along the corridor
+    # (0.05 / 0.5 m before the prior at the guess) or mistakes the turn's sign.
     d, scans, t, truth = world
     rows, failed = laser_odometry(scans, scans[0].laser_offset)
     assert failed == 0 and rows.shape == (len(scans), 6)
     assert np.array_equal(rows[:, 0], [s.t for s in scans]) and np.all(rows[0, 1:] == 0.0)
     err = _step_errors(rows, scans, t, truth)
-    assert np.median(err) < 0.02 and np.percentile(err, 95) < 0.08, (np.median(err), np.percentile(err, 95))
+    assert np.median(err) < 0.02 and np.percentile(err, 95) < 0.2, (np.median(err), np.percentile(err, 95))
+
+
+def test_at_40_hz_the_guess_is_a_smoothed_velocity(tmp_path):
+    # A 40 Hz, 1081-beam, 270 degree, 30 m laser (a UTM-30LX's), 40 s: over 1 s (40 scans) the matched motion errs
+    # by 0.007 m (median) / 0.052 m (95th percentile) with the guess smoothed over SMOOTH = 0.5 s; with the last
+    # step as the guess, 0.008 / 0.92 m: along the corridor each step is the matcher's noise and the guess
+    # random-walked. Bound 0.1 m at the 95th percentile.
+    simulate(tmp_path, seed=1, duration=40.0, n_beams=1081, fov=math.radians(270.0), range_max=30.0,
+             scan_rate=40.0)
+    scans = read_carmen(tmp_path / "log.clf").laser_stream()
+    t, poses = read_tum(tmp_path / "truth.tum")[:2]
+    poses = np.asarray(poses)
+    rows, failed = laser_odometry(scans, scans[0].laser_offset)
+    err = _step_errors(rows, scans, np.asarray(t), poses if poses.shape[0] == 3 else poses.T, gap=40)
+    assert failed == 0 and np.median(err) < 0.02 and np.percentile(err, 95) < 0.1, (np.median(err),
+                                                                                   np.percentile(err, 95))
 
 
 def _scan_only_bag(path: Path, scans, blank=()) -> None:
@@ -83,9 +100,9 @@ def test_the_matching_shows_its_progress_when_asked(world, tmp_path, capsys):
 
 def test_a_bag_without_odometry_is_tracked_on_the_scans_motion(world, tmp_path):
     # No Odometry topic, no /tf: the motion comes from the scans, with a note (it was one line asking for
-    # odometry). Tracking from the true start, default config: RMSE 0.060 m, max 0.21 m (the CARMEN log with its
-    # wheel odometry: 0.058 / 0.12 m). Bounds 0.1 / 0.4 m: a run without motion (every scan at the first pose)
-    # is metres off by 10 s.
+    # odometry). Tracking from the true start, default config: RMSE 0.066 m, max 0.26 m (the CARMEN log with its
+    # wheel odometry: 0.058 / 0.12 m). Bounds 0.1 / 0.4 m: a run without motion (every scan at the first pose) is
+    # metres off by 10 s.
     d, scans, t, truth = world
     bag = tmp_path / "scans.mcap"
     _scan_only_bag(bag, scans)
@@ -124,9 +141,9 @@ def test_topics_odom_laser_replaces_the_bags_odometry(world, tmp_path):
 
 def test_scans_without_returns_are_counted_in_a_warning_and_one_scan_is_one_line(world, tmp_path, capsys):
     # Every fourth scan without a return (a laser facing open space) cannot be matched: a warning counts them
-    # (here 75 of 301); each takes the last step again and the scans around them still give the motion: the 1 s
-    # error is 0.012 m (median) / 0.055 m (95th percentile) against 0.012 / 0.052 m with every scan; 0.56 m when
-    # a miss stopped the motion. A bag of one scan has nothing to match: one line, exit 2.
+    # (here 75 of 301); each takes the guess (the smoothed velocity) and the scans around them still give the
+    # motion: the 1 s error is 0.121 m at the 95th percentile against 0.133 m with every scan; 0.56 m when a miss
+    # stopped the motion. Bound 0.2 m. A bag of one scan has nothing to match: one line, exit 2.
     from mcl.cli import main
 
     d, scans, t, truth = world
@@ -137,7 +154,7 @@ def test_scans_without_returns_are_counted_in_a_warning_and_one_scan_is_one_line
     assert any(f"laser odometry: {len(blank)} of {len(scans)} scans of /scan matched no earlier one" in w
                for w in src.warnings), src.warnings
     err = _step_errors(src.odometry, scans, t, truth)
-    assert np.percentile(err, 95) < 0.08, np.percentile(err, 95)
+    assert np.percentile(err, 95) < 0.2, np.percentile(err, 95)
     one = tmp_path / "one.mcap"
     _scan_only_bag(one, scans[:1])
     out = tmp_path / "out"
