@@ -273,7 +273,7 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
 
         if cfg.landmarks.use:
             raise ConfigError("landmarks.use: a ROS bag carries no LANDMARK records")
-        log = open_bag(cfg.bag, cfg.topics, cfg.frames, progress=progress)
+        log = open_bag(cfg.bag, cfg.topics, cfg.frames, progress=progress, laser_pose=cfg.sensor.laser_pose)
         log.warnings.extend(log.stamps_checked(cfg.sensor.time_offset))
         if cfg.map is not None:
             grid = load_map(cfg.map)

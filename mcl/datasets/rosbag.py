@@ -728,24 +728,26 @@ def _moving_link(reader, path, tf_topic: str, static: dict, frame: str):
     return None
 
 
-def open_bag(path, topics=None, frames=None, progress: bool | None = False) -> BagSource:
+def open_bag(path, topics=None, frames=None, progress: bool | None = False, laser_pose=None) -> BagSource:
     """Read a bag's small records and set up its scan stream (see the module doc).
 
     ``topics`` and ``frames`` are the config sections (or any objects with the same attributes; None: the
     defaults). DataError naming the bag and the topic or frame for every problem found. ``progress``: a progress
-    bar over the scans while laser odometry matches them (None: on a terminal only).
+    bar over the scans while laser odometry matches them (None: on a terminal only). ``laser_pose``: the config's
+    ``sensor.laser_pose`` (x, y, theta), which the run uses in place of the bag's mounting: laser odometry turns
+    the laser's motion into the robot's with it too.
     """
     path = Path(path)
     tp = topics or _Topics()
     fr = frames or _Frames()
     reader = _open_reader(path)
     try:
-        return _first_pass(path, reader, tp, fr, progress)
+        return _first_pass(path, reader, tp, fr, progress, laser_pose)
     finally:
         reader.close()
 
 
-def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False) -> BagSource:
+def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser_pose=None) -> BagSource:
     topics = reader.topics
     for name, info in topics.items():
         if info.msgtype is None:
@@ -989,7 +991,8 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False) -> Ba
                      has_twist=odom_type == ODOM, mirrored=mirrored, unstamped=unstamped,
                      echo=getattr(tp, "echo", "first"))
     if from_scans:
-        odometry = _scan_odometry(path, scans, scan_topics[0], offsets[scan_topics[0]], warnings, counts, progress)
+        mount = offsets[scan_topics[0]] if laser_pose is None else np.asarray(laser_pose, dtype=np.float64)
+        odometry = _scan_odometry(path, scans, scan_topics[0], mount, warnings, counts, progress)
         scans.odometry = odometry
         src_name = f"laser odometry (scan matching of {scan_topics[0]})"
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
