@@ -625,6 +625,16 @@ def _alive(pid: int) -> bool:
     return stat.rsplit(")", 1)[1].split()[0] != "Z"  # a zombie has ended
 
 
+def _sigint_default() -> None:
+    """In the child before exec: SIGINT back to its default, as for a command typed at a terminal. A process
+    started in the background of a script inherits SIGINT ignored, and Python then installs no KeyboardInterrupt
+    handler: run so (pytest in a background job), the evaluating process never heard ``kill -INT`` and these tests
+    saw exit 0."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
 def test_a_signal_to_the_evaluation_alone_stops_its_workers_runs_too(tmp_path, sig):
     # `kill PID` or `timeout` signal the evaluating process alone, not its pool's workers (a terminal's Ctrl-C
@@ -644,7 +654,7 @@ def test_a_signal_to_the_evaluation_alone_stops_its_workers_runs_too(tmp_path, s
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "mcl", "eval", "--suite", str(suite), "--seeds", "2", "--jobs", "2",
                              "--no-baseline", "--no-progress", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_sigint_default)
     deadline = time.monotonic() + 120
     # both runs under way: each has opened its trajectory (written as trajectory.tum.partial until the run ends)
     while len(list(out.glob("runs/demo/tracking/default/seed*/trajectory.tum.partial"))) < 2:
@@ -682,7 +692,7 @@ def test_a_signal_while_the_worlds_are_made_stops_the_workers_and_leaves_no_worl
     cache = tmp_path / "worlds"
     proc = subprocess.Popen([sys.executable, "-m", "mcl", "eval", "--suite", str(suite), "--jobs", "2",
                              "--no-baseline", "--no-progress", "--out", str(tmp_path / "out"), "--cache", str(cache)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_sigint_default)
     deadline = time.monotonic() + 120
     # both worlds under way: each is made in a hidden folder beside its final one (.NAME.xxxx), written at its end
     while len(list(cache.glob(".big-*"))) < 2:
