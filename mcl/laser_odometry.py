@@ -31,6 +31,8 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from mcl.estimate import compose, inverse
+
 KEY_DISTANCE = 0.1  # m: the key scan is renewed once the robot moved this far from it ...
 KEY_ANGLE = 0.1  # rad ... or turned this much
 PRIOR = 5.0  # the guess weighs as much as this many pairs (per m^2 in x, y; per rad^2 in theta: a 1 m lever)
@@ -41,17 +43,6 @@ MIN_PAIRS = 20  # fewer paired points: the match fails and the step is the guess
 MAX_ITERATIONS = 30
 SMOOTH = 0.5  # s: the guess is the velocity smoothed over about this long (see the module doc)
 MAX_MISSES = 3  # scans in a row not matched before the constant-velocity guess stops
-
-
-def _compose(a, b) -> np.ndarray:
-    c, s = math.cos(a[2]), math.sin(a[2])
-    th = a[2] + b[2]
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], math.atan2(math.sin(th), math.cos(th))])
-
-
-def _inverse(a) -> np.ndarray:
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
 
 
 def scan_points(ranges, angles, max_range: float | None) -> np.ndarray:
@@ -134,7 +125,7 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
     laser's pose (3,) on the robot (None: at its centre); the scans give the laser's motion, turned into the
     robot's. A scan not matched takes the last step again (``MAX_MISSES`` in a row: no motion)."""
     mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
-    mount_inv = _inverse(mount)
+    mount_inv = inverse(mount)
     rows = []
     laser = np.zeros(3)  # the laser's pose in the odometry frame of the laser's first pose
     key, key_pose = None, np.zeros(3)
@@ -152,7 +143,7 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
             # from the last step again (constant velocity); when under GOOD_PAIRS of the points pair, from no
             # motion too, the better match kept (a robot that stopped turning or reversed: the old velocity led
             # into a wrong match); the prior stays at constant velocity for both
-            guesses = [_compose(_inverse(key_pose), _compose(laser, v)) for v in (velocity, np.zeros(3))]
+            guesses = [compose(inverse(key_pose), compose(laser, v)) for v in (velocity, np.zeros(3))]
             rel, pairs = guesses[0], 0
             if pts.shape[1] >= MIN_PAIRS:
                 best = icp(key, pts, guesses[0])
@@ -161,9 +152,9 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
                 rel, pairs, _ = best
             failed += pairs == 0
             misses = 0 if pairs else misses + 1
-            new = _compose(key_pose, rel)
+            new = compose(key_pose, rel)
             # a scan not matched took the last step again; after MAX_MISSES such in a row, no more guessing
-            step = _compose(_inverse(laser), new)
+            step = compose(inverse(laser), new)
             dt = float(scan.t) - t_prev
             if misses >= MAX_MISSES:
                 velocity = np.zeros(3)
@@ -180,6 +171,6 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
                                              or pairs == 0):
                 key, key_pose = _Key(pts), laser.copy()
         t_prev = float(scan.t)
-        robot = _compose(_compose(mount, laser), mount_inv)  # the robot's pose, its first at the origin
+        robot = compose(compose(mount, laser), mount_inv)  # the robot's pose, its first at the origin
         rows.append((float(scan.t), *robot, 0.0, 0.0))
     return np.array(rows, dtype=np.float64).reshape(-1, 6), failed

@@ -15,7 +15,8 @@ from mcl.config import load_config
 from mcl.datasets.bagwrite import BagOut
 from mcl.datasets.carmen import read_carmen
 from mcl.datasets.rosbag import bag_info, open_bag
-from mcl.laser_odometry import _compose, _inverse, laser_odometry
+from mcl.estimate import compose, inverse
+from mcl.laser_odometry import laser_odometry
 from mcl.runner import run
 from mcl.simulate import simulate
 from mcl.trajectory import read_tum
@@ -36,8 +37,8 @@ def _step_errors(rows, scans, t, truth, gap=5):
     idx = np.clip(np.searchsorted(t, [s.t for s in scans]), 0, t.size - 1)
     out = []
     for k in range(0, len(scans) - gap, gap):
-        want = _compose(_inverse(truth[:, idx[k]]), truth[:, idx[k + gap]])
-        got = _compose(_inverse(rows[k, 1:4]), rows[k + gap, 1:4])
+        want = compose(inverse(truth[:, idx[k]]), truth[:, idx[k + gap]])
+        got = compose(inverse(rows[k, 1:4]), rows[k + gap, 1:4])
         out.append(math.hypot(got[0] - want[0], got[1] - want[1]))
     return np.array(out)
 

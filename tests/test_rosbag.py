@@ -519,6 +519,22 @@ def test_among_several_lasers_the_level_fixed_one_is_read(world, scans, tmp_path
     assert (o_auto / "trajectory.tum").read_bytes() == (o_one / "trajectory.tum").read_bytes()
 
 
+def test_a_mounting_quaternion_of_norm_0_is_read_as_no_rotation(scans, tmp_path):
+    # A broken robot description's zero quaternion on one of several lasers' links raised scipy's ValueError (a
+    # traceback) while the lasers were told apart; it is read as no rotation, as the planar mounting reads it.
+    bag = tmp_path / "zeroq.mcap"
+    with BagOut(bag) as b:
+        zero = _tilted(b, scans[0].t, "base_link", "rear", (-0.2, 0.0, 0.2), 0.0)
+        zero.transform.rotation.w = 0.0
+        b.write("/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+            _tilted(b, scans[0].t, "base_link", "front", (0.2, 0.0, 0.2), 0.0), zero]))
+        for s in scans[:3]:
+            _odom(b, s)
+            _laser(b, "/front/scan", s, frame="front")
+            _laser(b, "/rear/scan", s, frame="rear")
+    assert open_bag(bag).scans.topics == ["/front/scan", "/rear/scan"]
+
+
 def test_several_lasers_on_one_frame_stop_with_one_line_asking_to_choose(scans, tmp_path, capsys):
     # The same laser's raw and filtered scans (one frame): no way to tell which to read.
     bag = tmp_path / "rawfiltered.mcap"

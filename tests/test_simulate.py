@@ -471,16 +471,22 @@ def test_bundled_demo_is_consistent():
     assert sum(f.stat().st_size for f in demo.iterdir()) < 3_000_000
 
 
+def _map_only(tmp_path, duration: float, **option):
+    """The office world (seed 6) without and with a map-only ``option``: the laser, the drive and the truth must be
+    the same bytes; returns the two maps (tmp_path / "a", tmp_path / "b")."""
+    from mcl.maps import load_map
+
+    simulate(tmp_path / "a", kind="office", seed=6, duration=duration)
+    simulate(tmp_path / "b", kind="office", seed=6, duration=duration, **option)
+    for f in ("log.clf", "truth.tum"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+    return load_map(tmp_path / "a" / "map.yaml"), load_map(tmp_path / "b" / "map.yaml")
+
+
 def test_phantom_furniture_is_on_the_map_only(tmp_path):
     # Boxes the map shows and the world no longer has: the laser, the drive and the truth are the world's (the
     # same bytes as without), the map gains occupied cells on free ones only, none on the robot's path.
-    from mcl.maps import load_map
-
-    simulate(tmp_path / "a", kind="office", seed=6, duration=20.0)
-    simulate(tmp_path / "b", kind="office", seed=6, duration=20.0, phantom_furniture=12)
-    for f in ("log.clf", "truth.tum"):
-        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
-    a, b = load_map(tmp_path / "a" / "map.yaml"), load_map(tmp_path / "b" / "map.yaml")
+    a, b = _map_only(tmp_path, 20.0, phantom_furniture=12)
     added = (b.occupancy == 100) & (a.occupancy != 100)
     assert added.sum() > 12 * 36  # 12 boxes of at least 0.3 m x 0.3 m: 36 cells of 5 cm each
     assert np.all(a.occupancy[added] == 0)  # drawn on free cells only
@@ -496,13 +502,7 @@ def test_unknown_floor_is_on_the_map_only(tmp_path):
     # Stretches of floor the map never saw: the laser, the drive and the truth are the world's (the same bytes as
     # without); the map turns free cells unknown only, and those are the cells within 1.5 m of the path over each
     # window (every pose of the path in a window stands on one; none outside the windows' reach).
-    from mcl.maps import load_map
-
-    simulate(tmp_path / "a", kind="office", seed=6, duration=30.0)
-    simulate(tmp_path / "b", kind="office", seed=6, duration=30.0, unknown_floor=2)
-    for f in ("log.clf", "truth.tum"):
-        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
-    a, b = load_map(tmp_path / "a" / "map.yaml"), load_map(tmp_path / "b" / "map.yaml")
+    a, b = _map_only(tmp_path, 30.0, unknown_floor=2)
     grey = (b.occupancy == -1) & (a.occupancy != -1)
     assert grey.sum() > 1000 and np.all(a.occupancy[grey] == 0)  # free cells only
     assert np.array_equal(b.occupancy[~grey], a.occupancy[~grey])

@@ -559,8 +559,8 @@ def _level_lasers(path, lasers: list[str], scan_frames: dict, links: dict, moved
     level): a PR2's base_scan and not its tilt_scan (its frame pitches on /tf), nor a laser looking down at the
     floor. One such: that one; several on distinct frames within ``LEVEL_HEIGHT`` of each other's height (an AGV's
     front and rear lasers): all, fused; else (the same frame's raw and filtered scans, lasers at other heights, no
-    transforms) one line asking to choose. ``links``: child -> (parent, rotation, translation) of the first
-    transform of each link; ``moved``: the children whose /tf transform changes over the bag. The walk up from a
+    transforms) one line asking to choose. ``links``: child -> (parent, (x, y, z, qx, qy, qz, qw)) of the first
+    transform of each link (a quaternion of norm 0 or not finite counts as no rotation); ``moved``: the children whose /tf transform changes over the bag. The walk up from a
     scan frame ends at ``base``, or at a frame hung from ``odom`` (nav2's base_footprint with no base_link)."""
     from scipy.spatial.transform import Rotation
 
@@ -571,8 +571,10 @@ def _level_lasers(path, lasers: list[str], scan_frames: dict, links: dict, moved
         rot, tr, seen, moving = Rotation.identity(), np.zeros(3), set(), []
         while f != base and f in links and f not in seen and links[f][0] != odom:
             seen.add(f)
-            parent, r, x = links[f]
-            rot, tr = r * rot, r.apply(tr) + x
+            parent, p = links[f]
+            q = np.array(p[3:])
+            r = Rotation.from_quat(q) if np.isfinite(q).all() and q.any() else Rotation.identity()
+            rot, tr = r * rot, r.apply(tr) + np.array(p[:3])
             if f in moved:
                 moving.append(f)
             f = parent
@@ -803,11 +805,8 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
     odom_child = None  # the Odometry topic's child_frame_id
     several = tp.scan == "auto" and len(scan_topics) > 1  # lasers to choose among by their mountings
-    links: dict[str, tuple] = {}  # child -> (parent, rotation, translation): each link's first transform
-    first: dict[str, tuple] = {}  # child -> that transform as (x, y, z, qx, qy, qz, qw)
+    links: dict[str, tuple] = {}  # child -> (parent, (x, y, z, qx, qy, qz, qw)): each link's first transform
     moved: set[str] = set()  # children whose /tf transform changes
-    if several:
-        from scipy.spatial.transform import Rotation
     seen: dict[str, int] = {}
     # Odometry and truth rows carry their record time last, for a source whose header stamps are all 0.
     for conn, rec, msg in _messages(reader, path, conns):
@@ -848,9 +847,8 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
                     q = ts.transform.rotation
                     pose = (float(x.x), float(x.y), float(x.z), float(q.x), float(q.y), float(q.z), float(q.w))
                     if child not in links or topic == tf_static:
-                        first[child] = pose
-                        links[child] = (parent, Rotation.from_quat(pose[3:]), np.array(pose[:3]))
-                    elif topic == tf_dyn and child not in moved and _moved(first[child], pose):
+                        links[child] = (parent, pose)
+                    elif topic == tf_dyn and child not in moved and _moved(links[child][1], pose):
                         moved.add(child)
         elif topic == odom_topic:
             t = stamp_seconds(msg.header.stamp)
