@@ -329,7 +329,8 @@ def _kld_batch(particles, logw, rng, b: int, scheme: str, inject_p: float, sampl
     """One batch of ``kld_resample``: (b ancestors drawn with ``scheme`` and shuffled, with a Binomial(b,
     inject_p) of its slots taken by ``sampler``; the injected mask)."""
     idx = resample(scheme, logw, rng, n=b)
-    batch = particles[:, rng.permutation(idx)]
+    rng.shuffle(idx)  # the draws of rng.permutation(idx), without its copy
+    batch = np.take(particles, idx, axis=1)  # a quarter of particles[:, idx]'s time
     n_inj = draw_injected(b, inject_p, rng) if sampler is not None else 0
     mask = np.zeros(b, dtype=bool)
     if n_inj:

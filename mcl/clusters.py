@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcl.estimate import estimate, moments
-from mcl.kernels.clusters import cell_keys, label_cells
+from mcl.kernels.clusters import occupied_cells, particle_clusters
 
 
 
@@ -53,26 +53,23 @@ def cluster_labels(particles: np.ndarray, cell_xy: float, cell_theta: float) -> 
     if not (cell_xy > 0 and cell_theta > 0):
         raise ValueError(f"cluster cell sizes must be > 0, got {cell_xy}, {cell_theta}")
     n_th = max(1, int(round(2.0 * math.pi / cell_theta)))
-    keys = np.empty(n, dtype=np.int64)
-    ny, n_keys = cell_keys(np.ascontiguousarray(p), float(cell_xy), n_th, keys)
-    cells, inverse = _occupied_cells(keys, int(n_keys))
-    cell_labels = np.empty(cells.size, dtype=np.int64)
-    n_clusters = label_cells(cells, ny, n_th, cell_labels)
-    return cell_labels[inverse], int(n_clusters)
+    labels = np.empty(n, dtype=np.int64)
+    n_clusters = particle_clusters(np.ascontiguousarray(p), float(cell_xy), n_th, labels)
+    return labels, int(n_clusters)
 
 
 def _occupied_cells(keys: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
     """(the sorted distinct keys, each key's index among them): ``np.unique(keys, return_inverse=True)``.
 
     A compact cloud (a tracked one: a few cells) spans few keys, so they are counted instead of sorted, which
-    costs O(N + n_keys) instead of O(N log N); a spread cloud's range would not fit and takes the sort.
+    costs O(N + n_keys) instead of O(N log N); a spread cloud's range would not fit and takes the sort
+    (``mcl.kernels.clusters.occupied_cells``).
     """
-    if n_keys <= 4 * keys.size + 4096:
-        occupied = np.bincount(keys, minlength=n_keys) > 0
-        rank = np.cumsum(occupied) - 1
-        return np.flatnonzero(occupied), rank[keys]
-    cells, inverse = np.unique(keys, return_inverse=True)
-    return cells, inverse.ravel()
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    cells = np.empty(keys.size, dtype=np.int64)
+    inverse = np.empty(keys.size, dtype=np.int64)
+    m = occupied_cells(keys, int(n_keys), cells, inverse)
+    return cells[:m], inverse
 
 
 def cluster_estimate(particles: np.ndarray, w: np.ndarray, cell_xy: float = 0.5,

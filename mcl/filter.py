@@ -918,7 +918,7 @@ class ParticleFilter:
             return
         n_inj = draw_injected(self.n, p, self.rng)
         idx = resample(fc.resampling, self.logw, self.rng, n=self.n - n_inj)
-        new = self.particles[:, idx]
+        new = np.take(self.particles, idx, axis=1)  # a quarter of fancy indexing's time
         if n_inj:
             new = np.concatenate([new, inject(n_inj)], axis=1)
         fresh = np.arange(new.shape[1]) >= new.shape[1] - n_inj

@@ -92,3 +92,56 @@ def cell_keys(particles, cell_xy, n_th, keys):
         t = np.int64(np.floor((particles[2, i] + np.pi) / th_cell)) % n_th
         keys[i] = ((ix[i] - x_lo + 1) * ny + (iy[i] - y_lo + 1)) * n_th + t
     return ny, (x_hi - x_lo + 3) * ny * n_th
+
+
+@njit(cache=True)
+def occupied_cells(keys, n_keys, cells, inverse):
+    """``np.unique(keys, return_inverse=True)`` into ``cells`` (the sorted distinct keys, first m entries) and
+    ``inverse`` (N,) (each key's index among them); return m.
+
+    Keys spanning at most ``4 N + 4096`` values (a tracked cloud: a few cells) are counted, O(N + n_keys); wider
+    ones are sorted, O(N log N) (a spread cloud's range would not fit in a count).
+    """
+    n = keys.shape[0]
+    if n_keys <= 4 * n + 4096:
+        rank = np.full(n_keys, -1, dtype=np.int64)
+        for i in range(n):
+            rank[keys[i]] = 0
+        m = 0
+        for k in range(n_keys):
+            if rank[k] == 0:
+                rank[k] = m
+                cells[m] = k
+                m += 1
+        for i in range(n):
+            inverse[i] = rank[keys[i]]
+        return m
+    order = np.argsort(keys, kind="mergesort")
+    m = 0
+    for j in range(n):
+        i = order[j]
+        if m == 0 or keys[i] != cells[m - 1]:
+            cells[m] = keys[i]
+            m += 1
+        inverse[i] = m - 1
+    return m
+
+
+@njit(cache=True)
+def particle_clusters(particles, cell_xy, n_th, labels):
+    """The histogram cluster of each particle into ``labels`` (N,) int64; return the number of clusters.
+
+    ``cell_keys``, ``occupied_cells`` and ``label_cells`` in one call (one dispatch and no NumPy temporaries per
+    update): the clusters of ``mcl.clusters.cluster_labels``, numbered the same way.
+    """
+    n = particles.shape[1]
+    keys = np.empty(n, dtype=np.int64)
+    ny, n_keys = cell_keys(particles, cell_xy, n_th, keys)
+    cells = np.empty(n, dtype=np.int64)
+    inverse = np.empty(n, dtype=np.int64)
+    m = occupied_cells(keys, n_keys, cells, inverse)
+    cell_labels = np.empty(m, dtype=np.int64)
+    count = label_cells(cells[:m], ny, n_th, cell_labels)
+    for i in range(n):
+        labels[i] = cell_labels[inverse[i]]
+    return count
