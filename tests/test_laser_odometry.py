@@ -169,7 +169,8 @@ def test_a_backpack_bag_multi_echo_lasers_no_odometry_runs_as_its_level_laser_al
     # The shape of cartographer's public backpack bags: two MultiEchoLaserScan topics, one level, one turned 90
     # degrees up (its plane vertical), fixed links on /tf_static, no odometry at all. auto reads the level laser's
     # first echoes and matches them for the motion: the same trajectory, to the byte, as the LaserScan-only bag.
-    from tests.test_rosbag import _echoes, _tilted
+    from tests.bagmsgs import multi_echo as _echoes
+    from tests.bagmsgs import tilted as _tilted
 
     d, scans, t, truth = world
     pack, bare = tmp_path / "backpack.bag", tmp_path / "bare.bag"

@@ -24,6 +24,8 @@ from mcl.maps import load_map
 from mcl.runner import run
 from mcl.simulate import simulate
 from mcl.trajectory import read_tum
+from tests.bagmsgs import multi_echo as _echoes
+from tests.bagmsgs import tilted as _tilted
 
 KINDS = {"bag1": "bag", "db3": "db3", "mcap": "mcap"}
 
@@ -477,15 +479,6 @@ def test_several_lasers_fused_each_with_its_mounting(scans, tmp_path):
     assert np.allclose(rear[0].laser_offset, (-0.2, 0.1, 3.0))  # through the chain base_link -> mount -> rear
     one = open_bag(bag, load_config(None, ["topics.scan=/rear/scan"]).topics)
     assert one.scans.topics == ["/rear/scan"] and len(one.scans) == len(scans)
-
-
-def _tilted(b: BagOut, t: float, parent: str, child: str, xyz, pitch: float):
-    """A TransformStamped parent -> child at ``xyz`` pitched by ``pitch`` (rad, about y)."""
-    tr = b.msg("geometry_msgs/msg/Transform",
-               translation=b.msg("geometry_msgs/msg/Vector3", x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2])),
-               rotation=b.msg("geometry_msgs/msg/Quaternion", x=0.0, y=math.sin(pitch / 2), z=0.0,
-                              w=math.cos(pitch / 2)))
-    return b.msg("geometry_msgs/msg/TransformStamped", header=b.header(t, parent), child_frame_id=child, transform=tr)
 
 
 def test_among_several_lasers_the_level_fixed_one_is_read(world, scans, tmp_path, capsys):
@@ -1085,13 +1078,3 @@ def _laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.
                                 angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0,
                                 range_min=range_min, range_max=s.max_range, ranges=r,
                                 intensities=np.zeros(0, dtype=np.float32)))
-
-
-def _echoes(b: BagOut, topic: str, s, echoes, *, frame="laser") -> None:
-    """A MultiEchoLaserScan of ``s``'s geometry whose beam i holds the returns ``echoes[i]`` (m)."""
-    E, M = "sensor_msgs/msg/LaserEcho", "sensor_msgs/msg/MultiEchoLaserScan"
-    beams = [b.msg(E, echoes=np.asarray(e, dtype=np.float32)) for e in echoes]
-    b.write(topic, M, s.t, b.msg(M, header=b.header(s.t, frame), angle_min=s.angle_min,
-                                 angle_max=s.angle_min + s.angle_increment * (len(beams) - 1),
-                                 angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0, range_min=0.0,
-                                 range_max=s.max_range, ranges=beams, intensities=[]))
