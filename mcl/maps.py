@@ -188,13 +188,30 @@ class OccupancyGrid:
             return []
         h, w = occ.shape
         per_row = -(-w // tile)
-        tiles = np.unique((ys // tile) * per_row + xs // tile)
+        tile_of = (ys // tile) * per_row + xs // tile
+        # each such cell's depth by a search in rings out to ``margin`` cells (mcl.kernels.depth): walls a few cells
+        # thick resolve at once; a tile with a cell deeper than that takes the transforms below
+        from mcl.kernels.depth import ring_depths
+
+        ring = np.empty(ys.size, dtype=np.int64)
+        ring_depths(byte_mask(occ), ys, xs, int(margin), ring)
+        deep = set(np.unique(tile_of[ring < 0]).tolist())
+        order = np.argsort(tile_of, kind="stable")  # per tile, its cells in row-major order (as a mask assigns)
+        tiles, starts = np.unique(tile_of[order], return_index=True)
         whole = None  # the whole map's transform, made once when windows do not do (see below)
         widened = 0
         patches = []
-        for t in tiles:
+        for t, lo, hi in zip(tiles.tolist(), starts.tolist(), [*starts[1:].tolist(), order.size]):
             ty, tx = divmod(int(t), per_row)
             y0, y1, x0, x1 = ty * tile, min(ty * tile + tile, h), tx * tile, min(tx * tile + tile, w)
+            if t not in deep:  # only the cells deeper than one cell differ from ``distance`` (the others are 0 there)
+                cells = order[lo:hi]
+                mine = np.zeros((y1 - y0, x1 - x0), dtype=bool)
+                mine[ys[cells] - y0, xs[cells] - x0] = True
+                depth = np.sqrt(ring[cells].astype(np.float64))
+                metres = (np.maximum(depth - 1.0 - extra_cells, 0.0) * self.resolution).astype(np.float32)
+                patches.append((y0, y1, x0, x1, mine, metres))
+                continue
             sq, m = None, margin
             while whole is None and m <= tile and widened <= _MAX_WIDENED:
                 wy0, wy1, wx0, wx1 = max(y0 - m, 0), min(y1 + m, h), max(x0 - m, 0), min(x1 + m, w)

@@ -493,3 +493,41 @@ def test_a_map_too_big_for_the_memory_is_one_line_before_its_pixels_are_decoded(
     assert load_map(y).occupancy.shape == (600, 1000) and decoded
     monkeypatch.setattr(maps, "available_memory", lambda: None)  # not known (not Linux): no check
     assert load_map(y).occupancy.shape == (600, 1000)
+
+
+def test_ring_depths_are_the_exact_transform_within_the_radius_and_minus_one_beyond():
+    """``mcl.kernels.depth.ring_depths`` (the interior cells' depth, ``_surface_patches``): the squared distance to
+    the nearest non-occupied cell, the integer scipy.ndimage's exact transform gives, wherever that cell lies within
+    the radius (Chebyshev); -1 beyond it. Off the map counts as occupied: blocks against the map's edges."""
+    from scipy.ndimage import distance_transform_edt
+
+    from mcl.kernels.depth import ring_depths
+
+    rng = np.random.default_rng(9)
+    occ = rng.random((60, 70)) < 0.3
+    occ[5:25, 10:40] = True  # depth up to 10 cells
+    occ[40:60, 50:70] = True  # in the map's corner: nearest free cells only inward
+    occ[0:4, :] = True
+    ref = distance_transform_edt(occ) ** 2
+    ys, xs = np.nonzero(occ)
+    for radius in (1, 3, 8, 40):
+        out = np.empty(ys.size, dtype=np.int64)
+        ring_depths(occ.view(np.uint8), ys, xs, radius, out)
+        within = np.sqrt(ref[ys, xs]) <= radius  # nearest free cell within the radius in Euclidean distance ...
+        found = out >= 0
+        np.testing.assert_array_equal(out[found], np.rint(ref[ys, xs][found]).astype(np.int64))
+        assert found[within].all()  # ... is always found (it lies within the radius in Chebyshev distance too)
+        assert not found.all() or radius == 40  # the deep block's centre lies beyond the smaller radii
+    # the nearest free cell can lie on a later ring than the first one found: (3, 3) on ring 3 is 18 away, (4, 0) on
+    # ring 4 only 16
+    block = np.ones((11, 11), dtype=np.uint8)
+    block[5 + 3, 5 + 3] = 0
+    block[5, 5 + 4] = 0
+    out = np.empty(1, dtype=np.int64)
+    ring_depths(block, np.array([5]), np.array([5]), 10, out)
+    assert out[0] == 16
+    # no free cell at all: nothing found at any radius
+    full = np.ones((5, 6), dtype=np.uint8)
+    out = np.empty(30, dtype=np.int64)
+    ring_depths(full, *np.nonzero(full), 10, out)
+    assert (out == -1).all()
