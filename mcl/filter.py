@@ -48,6 +48,7 @@ from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.deskew import SweepOrder
 from mcl.estimate import estimate, wrap_angle
 from mcl.kernels.likelihood import refine_poses, refine_poses_serial
+from mcl.kernels.raycast import segments_blocked
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
 from mcl.maps import byte_mask
 from mcl.motion import allowed_mask, make_motion_model
@@ -566,12 +567,56 @@ class ParticleFilter:
         ``sensor.unmapped_fit``. At the true pose the rest fits (real logs and corridor-05: score >= 0.87 in 99 % of
         the scans with a skip, >= 0.96 in 95 %); at a look-alike place a global search settled on it does not
         (intel_lab: 0.56-0.91), and skipping what does not fit there would help the filter stay (intel_lab's global
-        run converged at 251 s instead of 92 s); after a kidnap neither fits. Returns (the observation to score,
-        the skipped endpoints or None, whether the update was blind: ``sensor.unmapped_blind``, below)."""
+        run converged at 251 s instead of 92 s); after a kidnap neither fits. First, ``sensor.unmapped_unknown``:
+        the beams that end on an unknown cell in view (``_on_unknown``) go, and leave the quality signal's view, when
+        the rest fits as well (a region the map never saw: its walls are no misfit). Returns (the observation to
+        score, the skipped endpoints or None, whether the update was blind: ``sensor.unmapped_blind``, below, or
+        every beam on unknown cells)."""
         _, candidates, scan = self._unmapped_candidates
-        if candidates is None or observation.shape[1] == 0:
+        if observation.shape[1] == 0:
             return observation, None, False
         pose = self._moved_estimate()
+        if self.cfg.sensor.unmapped_unknown:
+            on = self._on_unknown(observation, pose)
+            known = np.ascontiguousarray(observation[:, ~on]) if on.any() else None
+            # skipped when the rest fits the map at the estimate (or nothing is left): at a wrong place the rest does
+            # not, and the whole scan stays in the quality signal's view to call it lost
+            if known is not None and (known.shape[1] == 0 or self.quality.fit(pose, known, self._laser_pose[:2]).score
+                                      >= self.cfg.sensor.unmapped_fit):
+                unknown, observation = observation[:, on], known
+                self._scan_observation = observation  # the quality signal weighs no beam the map says nothing of
+                if observation.shape[1] == 0:
+                    self.blind_updates += 1
+                    return observation, unknown, True
+                kept, skipped, blind = self._skip_unmapped_of(
+                    observation, None if candidates is None else candidates[~on], scan, pose)
+                return kept, (unknown if skipped is None else np.hstack([unknown, skipped])), blind
+        if candidates is None:
+            return observation, None, False
+        return self._skip_unmapped_of(observation, candidates, scan, pose)
+
+    def _on_unknown(self, observation, pose) -> np.ndarray:
+        """(K,) bool: the endpoints of ``observation`` that fall, seen from ``pose``, on an unknown map cell, their beam
+        crossing no mapped obstacle. A beam through a mapped wall into the unknown beyond it is a wall's return seen
+        from an estimate a little off (or the wrong place): the evidence that corrects it, kept."""
+        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        x = float(pose[0]) + c * observation[0] - s * observation[1]
+        y = float(pose[1]) + s * observation[0] + c * observation[1]
+        on = self.grid.mask_at(self.grid.unknown, x, y)
+        if on.any():
+            idx = np.flatnonzero(on)
+            through = np.zeros(idx.size, dtype=np.bool_)
+            q = self.quality
+            segments_blocked(float(pose[0]), float(pose[1]), float(pose[2]), float(self._laser_pose[0]),
+                             float(self._laser_pose[1]), np.ascontiguousarray(observation[:, idx]), q.blocked,
+                             q.origin[0], q.origin[1], q.resolution, through)
+            on[idx[through]] = False
+        return on
+
+    def _skip_unmapped_of(self, observation, candidates, scan, pose):
+        """``_skip_unmapped``'s small segments off the map (``candidates``: ``observation``'s beams) from ``pose``."""
+        if candidates is None or observation.shape[1] == 0:
+            return observation, None, False
         # ``sensor.unmapped_blind``: with no mapped obstacle in the laser's view from the estimate (open floor, a
         # short-range laser in a hall), the returns off the map are people or furniture whatever their share of the
         # scan, and there is no rest to fit: matched to the map anyway, they pull the cloud to wherever they line up

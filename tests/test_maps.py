@@ -169,8 +169,10 @@ def test_surface_distance_is_depth_inside_obstacles_against_brute_force():
 
 
 def test_surface_distance_by_tiles_is_exact_when_obstacles_are_deeper_than_the_window():
-    """The depth runs per tile in a window ``margin`` cells wider; from the first tile whose obstacle is deeper
-    than the margin on, the whole map's transform: each way the reference (scipy.ndimage's exact transform to the nearest non-occupied cell)."""
+    """A cell within ``margin`` cells of a non-occupied one takes its depth from the ring search; a tile with a
+    deeper cell runs the transform in a window ``margin`` cells wider, and from the first tile whose obstacle is
+    deeper than that window on, the whole map's transform: each way the reference (scipy.ndimage's exact transform
+    to the nearest non-occupied cell)."""
     from scipy.ndimage import distance_transform_edt
 
     rng = np.random.default_rng(7)

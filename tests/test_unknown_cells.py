@@ -130,3 +130,37 @@ def test_the_map_based_density_takes_unknown_cells_as_free_only_when_asked():
         p = motion_model_with_map(hyp, u, xp, grid, c)
         assert p.sum() == pytest.approx(1.0)
         assert p[1] == pytest.approx(free[1] / free.sum() if share is None else share, rel=1e-9), mode
+
+
+@pytest.fixture(scope="module")
+def unmapped_world(tmp_path_factory):
+    """A generated office (the synthetic suite's office-01, 50 s) whose map has every cell within 1.5 m of the
+    robot's path from 30 to 40 s made unknown, walls too: a region the map never saw (a SLAM map's hole, a wing
+    added since). The robot sees walls there that the map lacks."""
+    d = tmp_path_factory.mktemp("unmapped")
+    simulate(d, seed=101, duration=50.0)
+    meta = yaml.safe_load((d / "map.yaml").read_text())
+    im = np.array(Image.open(d / meta["image"]))
+    res, (ox, oy) = meta["resolution"], meta["origin"][:2]
+    truth = np.loadtxt(d / "truth.tum")
+    h, w = im.shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    cx, cy = ox + (xx + 0.5) * res, oy + (h - 1 - yy + 0.5) * res
+    near = np.zeros(im.shape, dtype=bool)
+    for x, y in truth[(truth[:, 0] >= 30.0) & (truth[:, 0] <= 40.0), 1:3]:
+        near |= (cx - x) ** 2 + (cy - y) ** 2 < 1.5 ** 2
+    assert np.count_nonzero(near & (im < 5)) > 100  # walls among the cells made unknown
+    im[near] = 128
+    Image.fromarray(im).save(d / meta["image"])
+    return d
+
+
+def test_a_region_the_map_never_saw_is_dead_reckoned_not_a_reason_to_be_lost(unmapped_world, tmp_path):
+    # sensor.unmapped_unknown: while tracking, the beams that end on an unknown cell at the estimate are skipped and
+    # left out of the quality signal (the map says nothing there) when the rest fits. Without it the unmapped walls
+    # score as misfits, the quality signal calls the filter lost, recovery spreads the cloud and it settles on a
+    # place 12 m off (measured 12.2 m); with it the track holds (measured 0.18 m). Seed 1, a fixed trajectory.
+    kept = _track(unmapped_world, tmp_path / "skip", "sensor.unmapped_unknown=true")
+    lost = _track(unmapped_world, tmp_path / "score", "sensor.unmapped_unknown=false")
+    assert kept < 0.4, kept
+    assert lost > 2.0, lost
