@@ -251,7 +251,7 @@ class SensorConfig:
     unmapped_spread: float = field(default=2.0, metadata=_rng(0.0))  # ... unless a forward shift (std) fits them
     unmapped_fit: float = field(default=0.9, metadata=_rng(-2.0, 1.0))  # the rest of the scan must fit this well
     unmapped_after: int = field(default=50, metadata=_rng(0, 1_000_000))  # updates since a lost call before any skip
-    unmapped_unknown: bool = True  # while tracking, skip the beams that end on an unknown cell (the map says nothing)
+    unmapped_unknown: bool = True  # while tracking, skip beams running over unknown cells only (a region never mapped)
     unmapped_blind: bool = True  # every return off the map and no mapped obstacle in the laser's view: predict only
     laser_pose: tuple[float, float, float] | None = None  # mounting pose in the robot frame; null -> from the log
 

@@ -148,6 +148,7 @@ class ParticleFilter:
         self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
         self._match_mask = None  # cells the search's scan matching may move a particle into (search_refine)
+        self._known = None  # uint8 mask of the known cells (free or occupied), made on first use (sensor.unmapped_unknown)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
         self.quality = ScanQuality(grid, cfg.quality)
@@ -568,8 +569,8 @@ class ParticleFilter:
         the scans with a skip, >= 0.96 in 95 %); at a look-alike place a global search settled on it does not
         (intel_lab: 0.56-0.91), and skipping what does not fit there would help the filter stay (intel_lab's global
         run converged at 251 s instead of 92 s); after a kidnap neither fits. First, ``sensor.unmapped_unknown``:
-        the beams that end on an unknown cell in view (``_on_unknown``) go, and leave the quality signal's view, when
-        the rest fits as well (a region the map never saw: its walls are no misfit). Returns (the observation to
+        the beams that run over unknown cells only (``_on_unknown``: a region the map never saw, whose walls are no
+        misfit) go, and leave the quality signal's view, when the rest fits as well. Returns (the observation to
         score, the skipped endpoints or None, whether the update was blind: ``sensor.unmapped_blind``, below, or
         every beam on unknown cells)."""
         _, candidates, scan = self._unmapped_candidates
@@ -596,21 +597,25 @@ class ParticleFilter:
         return self._skip_unmapped_of(observation, candidates, scan, pose)
 
     def _on_unknown(self, observation, pose) -> np.ndarray:
-        """(K,) bool: the endpoints of ``observation`` that fall, seen from ``pose``, on an unknown map cell, their beam
-        crossing no mapped obstacle. A beam through a mapped wall into the unknown beyond it is a wall's return seen
-        from an estimate a little off (or the wrong place): the evidence that corrects it, kept."""
+        """(K,) bool: the beams of ``observation`` that, seen from ``pose``, run from the laser to their endpoint over
+        unknown map cells only: the laser stands in a region the map never saw, and so does what it hit. A beam that
+        crosses a known cell says something the map can weigh and is kept: through a mapped wall into the grey beyond
+        it (an estimate a little off: the evidence that corrects it), or along a mapped corridor into the grey at its
+        end (a junction's opening, which places the robot along the corridor; infinite_corridor at 25 s)."""
         c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
         x = float(pose[0]) + c * observation[0] - s * observation[1]
         y = float(pose[1]) + s * observation[0] + c * observation[1]
         on = self.grid.mask_at(self.grid.unknown, x, y)
         if on.any():
+            if self._known is None:
+                self._known = byte_mask(~self.grid.unknown)
             idx = np.flatnonzero(on)
-            through = np.zeros(idx.size, dtype=np.bool_)
-            q = self.quality
+            crosses = np.zeros(idx.size, dtype=np.bool_)
             segments_blocked(float(pose[0]), float(pose[1]), float(pose[2]), float(self._laser_pose[0]),
-                             float(self._laser_pose[1]), np.ascontiguousarray(observation[:, idx]), q.blocked,
-                             q.origin[0], q.origin[1], q.resolution, through)
-            on[idx[through]] = False
+                             float(self._laser_pose[1]), np.ascontiguousarray(observation[:, idx]), self._known,
+                             float(self.grid.origin[0]), float(self.grid.origin[1]), float(self.grid.resolution),
+                             crosses)
+            on[idx[crosses]] = False
         return on
 
     def _skip_unmapped_of(self, observation, candidates, scan, pose):

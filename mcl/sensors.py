@@ -15,7 +15,7 @@ table gather per beam (``mcl.kernels.likelihood``).
 
 * Endpoints that fall off the map score the value at d = likelihood_max_dist.
 * Endpoints in unknown cells use the distance field like any other cell (while tracking, the filter skips those
-  its estimate puts on an unknown cell in view: ``sensor.unmapped_unknown``, ``ParticleFilter._on_unknown``).
+  its estimate puts in a region the map never saw: ``sensor.unmapped_unknown``, ``ParticleFilter._on_unknown``).
 * Beams without a return (>= range_max, >= the scan's own max_range, NaN,
   inf, <= range_min) are skipped: the book's "if z_t^k != z_max".
 * ``exponent`` (0 < e <= 1) tempers the product of beams, which treats the
