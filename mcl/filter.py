@@ -148,7 +148,7 @@ class ParticleFilter:
         self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
         self._match_mask = None  # cells the search's scan matching may move a particle into (search_refine)
-        self._known = None  # uint8 mask of the known cells (free or occupied), made on first use (sensor.unmapped_unknown)
+        self._known = None  # uint8 mask of the known cells (free or occupied), made on first use (unmapped_unknown)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
         self.quality = ScanQuality(grid, cfg.quality)
@@ -603,9 +603,17 @@ class ParticleFilter:
         it (an estimate a little off: the evidence that corrects it), or along a mapped corridor into the grey at its
         end (a junction's opening, which places the robot along the corridor; infinite_corridor at 25 s)."""
         c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        g = self.grid
+        # a laser on a known cell (a robot on mapped floor: every shared log) starts every beam on one: none qualifies
+        bx, by = float(self._laser_pose[0]), float(self._laser_pose[1])
+        lx = (float(pose[0]) + c * bx - s * by - g.origin[0]) / g.resolution
+        ly = (float(pose[1]) + s * bx + c * by - g.origin[1]) / g.resolution
+        if not (0.0 <= lx < g.width and 0.0 <= ly < g.height) or g.free[int(ly), int(lx)] \
+                or g.occupied[int(ly), int(lx)]:
+            return np.zeros(observation.shape[1], dtype=bool)
         x = float(pose[0]) + c * observation[0] - s * observation[1]
         y = float(pose[1]) + s * observation[0] + c * observation[1]
-        on = self.grid.mask_at(self.grid.unknown, x, y)
+        on = g.mask_at(g.unknown, x, y)
         if on.any():
             if self._known is None:
                 self._known = byte_mask(~self.grid.unknown)
