@@ -71,12 +71,9 @@ def test_the_filter_passes_the_fallback_by_config():
     assert pf._fallback is None and pf.allowed[10, 25] == 1
 
 
-@pytest.fixture(scope="module")
-def grey_world(tmp_path_factory):
-    """A generated office whose map has the floor within 1.2 m of the robot's path from 10 to 16 s made unknown
-    (walls kept), as a SLAM map's unexplored patch."""
-    d = tmp_path_factory.mktemp("grey")
-    simulate(d, seed=3, duration=24.0)
+def _greyed_near_path(d: Path, t0: float, t1: float, radius: float, walls: bool):
+    """Make the cells of ``d``'s map image within ``radius`` m of the robot's path from ``t0`` to ``t1`` s unknown
+    (p = 0.5): the free ones, or every one with ``walls``. Returns (the image before, the mask of those cells)."""
     meta = yaml.safe_load((d / "map.yaml").read_text())
     im = np.array(Image.open(d / meta["image"]))
     res, (ox, oy) = meta["resolution"], meta["origin"][:2]
@@ -85,10 +82,21 @@ def grey_world(tmp_path_factory):
     yy, xx = np.mgrid[0:h, 0:w]
     cx, cy = ox + (xx + 0.5) * res, oy + (h - 1 - yy + 0.5) * res
     near = np.zeros(im.shape, dtype=bool)
-    for x, y in truth[(truth[:, 0] >= 10.0) & (truth[:, 0] <= 16.0), 1:3]:
-        near |= (cx - x) ** 2 + (cy - y) ** 2 < 1.2 ** 2
-    im[near & (im > 250)] = 128  # free -> unknown (p = 0.5)
+    for x, y in truth[(truth[:, 0] >= t0) & (truth[:, 0] <= t1), 1:3]:
+        near |= (cx - x) ** 2 + (cy - y) ** 2 < radius ** 2
+    before = im.copy()
+    im[near if walls else near & (im > 250)] = 128
     Image.fromarray(im).save(d / meta["image"])
+    return before, near
+
+
+@pytest.fixture(scope="module")
+def grey_world(tmp_path_factory):
+    """A generated office whose map has the floor within 1.2 m of the robot's path from 10 to 16 s made unknown
+    (walls kept), as a SLAM map's unexplored patch."""
+    d = tmp_path_factory.mktemp("grey")
+    simulate(d, seed=3, duration=24.0)
+    _, near = _greyed_near_path(d, 10.0, 16.0, 1.2, walls=False)
     grid = load_map(d / "map.yaml")
     assert np.count_nonzero(grid.occupancy == -1) > np.count_nonzero(near) // 2  # the patch is on the map, unknown
     return d
@@ -139,19 +147,8 @@ def unmapped_world(tmp_path_factory):
     added since). The robot sees walls there that the map lacks."""
     d = tmp_path_factory.mktemp("unmapped")
     simulate(d, seed=101, duration=50.0)
-    meta = yaml.safe_load((d / "map.yaml").read_text())
-    im = np.array(Image.open(d / meta["image"]))
-    res, (ox, oy) = meta["resolution"], meta["origin"][:2]
-    truth = np.loadtxt(d / "truth.tum")
-    h, w = im.shape
-    yy, xx = np.mgrid[0:h, 0:w]
-    cx, cy = ox + (xx + 0.5) * res, oy + (h - 1 - yy + 0.5) * res
-    near = np.zeros(im.shape, dtype=bool)
-    for x, y in truth[(truth[:, 0] >= 30.0) & (truth[:, 0] <= 40.0), 1:3]:
-        near |= (cx - x) ** 2 + (cy - y) ** 2 < 1.5 ** 2
-    assert np.count_nonzero(near & (im < 5)) > 100  # walls among the cells made unknown
-    im[near] = 128
-    Image.fromarray(im).save(d / meta["image"])
+    before, near = _greyed_near_path(d, 30.0, 40.0, 1.5, walls=True)
+    assert np.count_nonzero(near & (before < 5)) > 100  # walls among the cells made unknown
     return d
 
 
