@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcl.estimate import estimate, moments
-from mcl.kernels.clusters import occupied_cells, particle_clusters
+from mcl.kernels.clusters import particle_clusters
 
 
 
@@ -56,20 +56,6 @@ def cluster_labels(particles: np.ndarray, cell_xy: float, cell_theta: float) -> 
     labels = np.empty(n, dtype=np.int64)
     n_clusters = particle_clusters(np.ascontiguousarray(p), float(cell_xy), n_th, labels)
     return labels, int(n_clusters)
-
-
-def _occupied_cells(keys: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
-    """(the sorted distinct keys, each key's index among them): ``np.unique(keys, return_inverse=True)``.
-
-    A compact cloud (a tracked one: a few cells) spans few keys, so they are counted instead of sorted, which
-    costs O(N + n_keys) instead of O(N log N); a spread cloud's range would not fit and takes the sort
-    (``mcl.kernels.clusters.occupied_cells``).
-    """
-    keys = np.ascontiguousarray(keys, dtype=np.int64)
-    cells = np.empty(keys.size, dtype=np.int64)
-    inverse = np.empty(keys.size, dtype=np.int64)
-    m = occupied_cells(keys, int(n_keys), cells, inverse)
-    return cells[:m], inverse
 
 
 def cluster_estimate(particles: np.ndarray, w: np.ndarray, cell_xy: float = 0.5,

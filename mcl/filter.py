@@ -46,7 +46,7 @@ from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.deskew import SweepOrder
-from mcl.estimate import estimate, wrap_angle
+from mcl.estimate import compose, estimate, wrap_angle
 from mcl.kernels.likelihood import refine_poses, refine_poses_serial
 from mcl.kernels.raycast import segments_blocked
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
@@ -579,12 +579,12 @@ class ParticleFilter:
         pose = self._moved_estimate()
         if self.cfg.sensor.unmapped_unknown:
             on = self._on_unknown(observation, pose)
-            known = np.ascontiguousarray(observation[:, ~on]) if on.any() else None
+            rest = np.ascontiguousarray(observation[:, ~on]) if on.any() else None
             # skipped when the rest fits the map at the estimate (or nothing is left): at a wrong place the rest does
             # not, and the whole scan stays in the quality signal's view to call it lost
-            if known is not None and (known.shape[1] == 0 or self.quality.fit(pose, known, self._laser_pose[:2]).score
-                                      >= self.cfg.sensor.unmapped_fit):
-                unknown, observation = observation[:, on], known
+            if rest is not None and (rest.shape[1] == 0 or self.quality.fit(pose, rest, self._laser_pose[:2]).score
+                                     >= self.cfg.sensor.unmapped_fit):
+                unknown, observation = observation[:, on], rest
                 self._scan_observation = observation  # the quality signal weighs no beam the map says nothing of
                 if observation.shape[1] == 0:
                     self.blind_updates += 1
@@ -602,27 +602,25 @@ class ParticleFilter:
         crosses a known cell says something the map can weigh and is kept: through a mapped wall into the grey beyond
         it (an estimate a little off: the evidence that corrects it), or along a mapped corridor into the grey at its
         end (a junction's opening, which places the robot along the corridor; infinite_corridor at 25 s)."""
-        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
         g = self.grid
+        x, y, th = (float(v) for v in pose[:3])
+        lx, ly = float(self._laser_pose[0]), float(self._laser_pose[1])
         # a laser on a known cell (a robot on mapped floor: every shared log) starts every beam on one: none qualifies
-        bx, by = float(self._laser_pose[0]), float(self._laser_pose[1])
-        lx = (float(pose[0]) + c * bx - s * by - g.origin[0]) / g.resolution
-        ly = (float(pose[1]) + s * bx + c * by - g.origin[1]) / g.resolution
-        if not (0.0 <= lx < g.width and 0.0 <= ly < g.height) or g.free[int(ly), int(lx)] \
-                or g.occupied[int(ly), int(lx)]:
+        at = compose(np.array([x, y, th]), np.array([lx, ly, 0.0]))
+        fx, fy = (at[0] - g.origin[0]) / g.resolution, (at[1] - g.origin[1]) / g.resolution
+        if not (0.0 <= fx < g.width and 0.0 <= fy < g.height) or g.free[int(fy), int(fx)] \
+                or g.occupied[int(fy), int(fx)]:  # off the map (or NaN): no region to speak of
             return np.zeros(observation.shape[1], dtype=bool)
-        x = float(pose[0]) + c * observation[0] - s * observation[1]
-        y = float(pose[1]) + s * observation[0] + c * observation[1]
-        on = g.mask_at(g.unknown, x, y)
+        c, s = math.cos(th), math.sin(th)
+        on = g.mask_at(g.unknown, x + c * observation[0] - s * observation[1],
+                       y + s * observation[0] + c * observation[1])
         if on.any():
             if self._known is None:
-                self._known = byte_mask(~self.grid.unknown)
+                self._known = byte_mask(~g.unknown)
             idx = np.flatnonzero(on)
             crosses = np.zeros(idx.size, dtype=np.bool_)
-            segments_blocked(float(pose[0]), float(pose[1]), float(pose[2]), float(self._laser_pose[0]),
-                             float(self._laser_pose[1]), np.ascontiguousarray(observation[:, idx]), self._known,
-                             float(self.grid.origin[0]), float(self.grid.origin[1]), float(self.grid.resolution),
-                             crosses)
+            segments_blocked(x, y, th, lx, ly, np.ascontiguousarray(observation[:, idx]), self._known,
+                             float(g.origin[0]), float(g.origin[1]), float(g.resolution), crosses)
             on[idx[crosses]] = False
         return on
 

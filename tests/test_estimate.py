@@ -119,12 +119,14 @@ def test_labels_match_a_numpy_flood_fill_oracle():
 def test_occupied_cells_counted_or_sorted_equal_numpys_unique():
     # A compact cloud's cell keys are counted (no sort), a spread one's sorted: both must be np.unique's
     # (sorted distinct keys, each key's index), so the labels do not depend on the path.
-    from mcl.clusters import _occupied_cells
+    # (mcl.kernels.clusters.occupied_cells, the step of particle_clusters that finds them)
+    from mcl.kernels.clusters import occupied_cells
 
     rng = np.random.default_rng(6)
     for n, span in ((5000, 600), (5000, 20_000), (300, 10**9), (1, 1)):
-        keys = rng.integers(0, span, n)
-        cells, inverse = _occupied_cells(keys, span)
+        keys = rng.integers(0, span, n).astype(np.int64)
+        cells, inverse = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+        cells = cells[:occupied_cells(keys, span, cells, inverse)]
         u, inv = np.unique(keys, return_inverse=True)
         assert np.array_equal(cells, u) and np.array_equal(inverse, inv.ravel()), (n, span)
 

@@ -560,8 +560,9 @@ def _level_lasers(path, lasers: list[str], scan_frames: dict, links: dict, moved
     floor. One such: that one; several on distinct frames within ``LEVEL_HEIGHT`` of each other's height (an AGV's
     front and rear lasers): all, fused; else (the same frame's raw and filtered scans, lasers at other heights, no
     transforms) one line asking to choose. ``links``: child -> (parent, (x, y, z, qx, qy, qz, qw)) of the first
-    transform of each link (a quaternion of norm 0 or not finite counts as no rotation); ``moved``: the children whose /tf transform changes over the bag. The walk up from a
-    scan frame ends at ``base``, or at a frame hung from ``odom`` (nav2's base_footprint with no base_link)."""
+    transform of each link (a quaternion of norm 0 or not finite counts as no rotation); ``moved``: the children
+    whose /tf transform changes over the bag. The walk up from a scan frame ends at ``base``, or at a frame hung from
+    ``odom`` (nav2's base_footprint with no base_link)."""
     from scipy.spatial.transform import Rotation
 
     why: dict[str, str] = {}
