@@ -46,7 +46,7 @@ from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.deskew import SweepOrder
-from mcl.estimate import compose, estimate, wrap_angle
+from mcl.estimate import estimate, wrap_angle
 from mcl.kernels.likelihood import refine_poses, refine_poses_serial
 from mcl.kernels.raycast import segments_blocked
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
@@ -606,12 +606,13 @@ class ParticleFilter:
         x, y, th = (float(v) for v in pose[:3])
         lx, ly = float(self._laser_pose[0]), float(self._laser_pose[1])
         # a laser on a known cell (a robot on mapped floor: every shared log) starts every beam on one: none qualifies
-        at = compose(np.array([x, y, th]), np.array([lx, ly, 0.0]))
-        fx, fy = (at[0] - g.origin[0]) / g.resolution, (at[1] - g.origin[1]) / g.resolution
+        c, s = math.cos(th), math.sin(th)
+        # the laser's cell (mcl.estimate.compose written out: this runs every tracked update)
+        fx = (x + c * lx - s * ly - g.origin[0]) / g.resolution
+        fy = (y + s * lx + c * ly - g.origin[1]) / g.resolution
         if not (0.0 <= fx < g.width and 0.0 <= fy < g.height) or g.free[int(fy), int(fx)] \
                 or g.occupied[int(fy), int(fx)]:  # off the map (or NaN): no region to speak of
             return np.zeros(observation.shape[1], dtype=bool)
-        c, s = math.cos(th), math.sin(th)
         on = g.mask_at(g.unknown, x + c * observation[0] - s * observation[1],
                        y + s * observation[0] + c * observation[1])
         if on.any():

@@ -167,12 +167,14 @@ class Truth:
 
 @contextmanager
 def small_pages():
-    """NumPy allocations without its transparent-huge-page advice, for the map tables built at the start of a
-    run. Where the kernel compacts memory on a fault in an advised region (``defrag: madvise``, Debian's
-    default), the half-dozen map-sized arrays of the default config (distance, depth, the map-rejection mask,
-    the likelihood tables) stalled in compaction: the filter's set-up on a 250 m map took 1.7-1.9 s with the
-    advice and 1.0 s without, the same arrays. The loop's arrays keep the advice. A NumPy without the switch
-    is left as it is."""
+    """NumPy allocations without its transparent-huge-page advice, for a whole run (:func:`run`). Where the kernel
+    compacts memory on a fault in an advised region (``defrag: madvise``, Debian's default), the half-dozen
+    map-sized arrays of the default config (distance, depth, the map-rejection mask, the likelihood tables)
+    stalled in compaction: the filter's set-up on a 250 m map took 1.7-1.9 s with the advice and 1.0 s without,
+    the same arrays. The same holds for the map-sized masks made on first use in the loop (the known-cell mask of
+    ``sensor.unmapped_unknown``: 147 ms with the advice, 25 ms without, on infinite_corridor). NumPy advises only
+    allocations of 4 MiB or more, which the loop's own arrays are not (100,000 particles: 2.4 MB). A NumPy
+    without the switch is left as it is."""
     try:
         from numpy._core import multiarray
     except ImportError:  # NumPy 1.x
@@ -425,7 +427,7 @@ def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true. A signal
     that came after the summary was made (the run is whole) sets ``summary["late_signal"]`` instead.
     """
-    with _Interrupts() as signals:
+    with _Interrupts() as signals, small_pages():
         summary = _run(cfg, out_dir, signals, **kwargs)
     # A signal noted after the summary was made (while it was written): the run is whole, but the caller must
     # still hear of the Ctrl-C (mcl eval and mcl tune run jobs in this process with --jobs 1).
@@ -517,9 +519,8 @@ def _run(
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "config.yaml", dump_config(cfg))
 
-    with small_pages():  # the map tables (see small_pages)
-        pf = ParticleFilter(cfg, grid, landmark_map=landmark_map,
-                            plane_model=plane_sensor.model if plane_sensor is not None else None)
+    pf = ParticleFilter(cfg, grid, landmark_map=landmark_map,
+                        plane_model=plane_sensor.model if plane_sensor is not None else None)
     if from_bag:  # the bag's /initialpose, covariance included
         mean0, cov0 = bag_initial
         if not np.any(cov0):  # no covariance given: filter.initial_std

@@ -471,6 +471,33 @@ def test_the_map_tables_are_built_without_numpys_huge_page_advice_and_the_advice
         multiarray._set_madvise_hugepage(before)
 
 
+def test_a_run_keeps_the_huge_page_advice_off_in_its_loop_too_and_gives_it_back(tmp_path):
+    # The map-sized masks made on first use in the loop (the known-cell mask of sensor.unmapped_unknown, the search
+    # table) stalled in compaction like the set-up's (147 ms against 25 ms on infinite_corridor), so run() holds
+    # small_pages over the whole run; before, only the filter's construction was inside it.
+    from numpy._core import multiarray
+
+    from mcl.config import load_config
+    from mcl.runner import run
+
+    demo = Path(__file__).resolve().parents[1] / "data" / "demo"
+    cfg = load_config(None, [f"map={demo / 'map.yaml'}", f"log={demo / 'log.clf'}", "truth=null", "rerun.mode=off",
+                             "filter.particles=500"])
+    seen = []
+
+    def on_update(t, pf, info, truth):
+        if len(seen) < 5:
+            seen.append(multiarray._get_madvise_hugepage())
+
+    before = multiarray._set_madvise_hugepage(True)
+    try:
+        s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None, on_update=on_update)
+        assert multiarray._get_madvise_hugepage() is True
+    finally:
+        multiarray._set_madvise_hugepage(before)
+    assert s["updates"] > 5 and seen == [False] * 5
+
+
 def test_a_map_too_big_for_the_memory_is_one_line_before_its_pixels_are_decoded(tmp_path, monkeypatch, capsys):
     # BYTES_PER_CELL (17) per cell against the memory available: 1000 x 600 cells need 10.2 MB. With 8 MB
     # available the map is refused, naming the file, the cells and what to do; with 12 MB it loads.
