@@ -467,9 +467,7 @@ class ParticleFilter:
             return
         self._weigh_sweep_orders()
         if self._tracking_unmapped(observation):
-            observation, skipped, blind = self._skip_unmapped(observation)
-            if blind:
-                self._scan_observation = observation  # the quality signal too weighs no person (unmapped_blind)
+            observation, skipped, self._scan_observation = self._skip_unmapped(observation)
             if skipped is not None and info is not None:
                 info.skipped_beams = skipped.shape[1]
                 info.skipped_endpoints = skipped
@@ -571,12 +569,14 @@ class ParticleFilter:
         run converged at 251 s instead of 92 s); after a kidnap neither fits. First, ``sensor.unmapped_unknown``:
         the beams that run over unknown cells only (``_on_unknown``: a region the map never saw, whose walls are no
         misfit) go, and leave the quality signal's view, when the rest fits as well. Returns (the observation to
-        score, the skipped endpoints or None, whether the update was blind: ``sensor.unmapped_blind``, below, or
-        every beam on unknown cells)."""
+        score, the skipped endpoints or None, the observation the quality signal weighs: the whole scan, less the
+        beams on unknown cells, and on a blind update (``sensor.unmapped_blind``, below, or every beam on unknown
+        cells) the scored beams alone: no person either)."""
         _, candidates, scan = self._unmapped_candidates
         if observation.shape[1] == 0:
-            return observation, None, False
+            return observation, None, observation
         pose = self._moved_estimate()
+        unknown, beams = None, None  # the beams skipped on unknown cells; the scan's beams left ((K,) bool, None: all)
         if self.cfg.sensor.unmapped_unknown:
             on = self._on_unknown(observation, pose)
             rest = np.ascontiguousarray(observation[:, ~on]) if on.any() else None
@@ -584,17 +584,15 @@ class ParticleFilter:
             # not, and the whole scan stays in the quality signal's view to call it lost
             if rest is not None and (rest.shape[1] == 0 or self.quality.fit(pose, rest, self._laser_pose[:2]).score
                                      >= self.cfg.sensor.unmapped_fit):
-                unknown, observation = observation[:, on], rest
-                self._scan_observation = observation  # the quality signal weighs no beam the map says nothing of
+                unknown, observation, beams = observation[:, on], rest, ~on
                 if observation.shape[1] == 0:
                     self.blind_updates += 1
-                    return observation, unknown, True
-                kept, skipped, blind = self._skip_unmapped_of(
-                    observation, None if candidates is None else candidates[~on], scan, pose)
-                return kept, (unknown if skipped is None else np.hstack([unknown, skipped])), blind
-        if candidates is None:
-            return observation, None, False
-        return self._skip_unmapped_of(observation, candidates, scan, pose)
+                    return observation, unknown, observation
+        kept, skipped, blind = (self._skip_unmapped_of(observation, candidates, scan, pose, beams)
+                                if candidates is not None else (observation, None, False))
+        if unknown is not None:
+            skipped = unknown if skipped is None else np.hstack([unknown, skipped])
+        return kept, skipped, (kept if blind else observation)
 
     def _on_unknown(self, observation, pose) -> np.ndarray:
         """(K,) bool: the beams of ``observation`` that, seen from ``pose``, run from the laser to their endpoint over
@@ -625,10 +623,13 @@ class ParticleFilter:
             on[idx[crosses]] = False
         return on
 
-    def _skip_unmapped_of(self, observation, candidates, scan, pose):
-        """``_skip_unmapped``'s small segments off the map (``candidates``: ``observation``'s beams) from ``pose``."""
+    def _skip_unmapped_of(self, observation, candidates, scan, pose, beams=None):
+        """``_skip_unmapped``'s small segments off the map from ``pose``: ``observation`` holds the ``beams`` ((K,)
+        bool, None: all) of the prepared scan, ``candidates`` is over all of them."""
         if candidates is None or observation.shape[1] == 0:
             return observation, None, False
+        if beams is not None:
+            candidates = candidates[beams]
         # ``sensor.unmapped_blind``: with no mapped obstacle in the laser's view from the estimate (open floor, a
         # short-range laser in a hall), the returns off the map are people or furniture whatever their share of the
         # scan, and there is no rest to fit: matched to the map anyway, they pull the cloud to wherever they line up
@@ -643,6 +644,8 @@ class ParticleFilter:
             # then a return off the map is an object the map lacks, a person close by or a group too (segments up to
             # BLIND_WIDTH); a longer one is a wall, which says the estimate is wrong, and is kept
             candidates = self.unmapped.candidates(scan, self.unmapped.BLIND_WIDTH)
+            if beams is not None and candidates is not None:
+                candidates = candidates[beams]  # the beams left after those on unknown cells (they were over all)
         elif not candidates.any():
             return observation, None, False
         kept, skipped = self.unmapped.select(
