@@ -287,11 +287,14 @@ def kld_resample(
     few poses (AMCL does this, and its sets shrink to the minimum too early).
 
     With ``min_particles >= max_particles`` the size is fixed: one batch of
-    ``max_particles``, the same draws, and no bins counted (k = 0).
+    ``max_particles``, no bins counted (k = 0) and no shuffle (a whole batch
+    has no prefix to cut): the ancestors in the scheme's order, the draws of a
+    plain resample (53 us of 5,000 a resample saved).
     """
     counter.reset()
     if min_particles >= max_particles:  # N fixed (e.g. --particles at or below min_particles): nothing to count
-        batch, mask = _kld_batch(particles, logw, rng, max(int(max_particles), 1), scheme, inject_p, sampler)
+        batch, mask = _kld_batch(particles, logw, rng, max(int(max_particles), 1), scheme, inject_p, sampler,
+                                 shuffle=False)
         if move is not None:
             batch = move(batch)
         return np.ascontiguousarray(batch), mask, 0
@@ -325,11 +328,12 @@ def kld_resample(
     return out, np.concatenate(masks), k
 
 
-def _kld_batch(particles, logw, rng, b: int, scheme: str, inject_p: float, sampler):
-    """One batch of ``kld_resample``: (b ancestors drawn with ``scheme`` and shuffled, with a Binomial(b,
-    inject_p) of its slots taken by ``sampler``; the injected mask)."""
+def _kld_batch(particles, logw, rng, b: int, scheme: str, inject_p: float, sampler, shuffle: bool = True):
+    """One batch of ``kld_resample``: (b ancestors drawn with ``scheme`` and shuffled (so that any prefix is an
+    unbiased draw), with a Binomial(b, inject_p) of its slots taken by ``sampler``; the injected mask)."""
     idx = resample(scheme, logw, rng, n=b)
-    rng.shuffle(idx)  # the draws of rng.permutation(idx), without its copy
+    if shuffle:
+        rng.shuffle(idx)  # the draws of rng.permutation(idx), without its copy
     batch = np.take(particles, idx, axis=1)  # a quarter of particles[:, idx]'s time
     n_inj = draw_injected(b, inject_p, rng) if sampler is not None else 0
     mask = np.zeros(b, dtype=bool)
