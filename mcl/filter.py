@@ -51,7 +51,7 @@ from mcl.kernels.likelihood import refine_poses, refine_poses_serial
 from mcl.kernels.raycast import segments_blocked
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
 from mcl.maps import byte_mask
-from mcl.motion import allowed_mask, make_motion_model
+from mcl.motion import allowed_mask, allowed_masks, make_motion_model
 from mcl.parallel import choose
 from mcl.quality import Fit, ScanQuality
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
@@ -125,10 +125,13 @@ class ParticleFilter:
         fc = cfg.filter
         self.motion = make_motion_model(cfg.motion)
         mu = cfg.motion.map_unknown
-        self.allowed = allowed_mask(grid, cfg.motion.robot_radius, mu == "free") if cfg.motion.map_rejection else None
-        # where a particle that never landed on free space may stay: an unknown cell clear of walls
-        self._fallback = (allowed_mask(grid, cfg.motion.robot_radius, True)
-                          if cfg.motion.map_rejection and mu == "fallback" else None)
+        self.allowed = self._fallback = None
+        if cfg.motion.map_rejection:
+            # the free cells clear of walls (with map_unknown: free, the unknown ones too); and where a particle that
+            # never landed on free space may stay (map_unknown: fallback): an unknown cell clear of walls
+            kinds = (mu == "free",) + ((True,) if mu == "fallback" else ())
+            masks = allowed_masks(grid, cfg.motion.robot_radius, kinds)
+            self.allowed, self._fallback = masks[0], (masks[1] if len(masks) > 1 else None)
         self.sensor = make_sensor_model(grid, cfg.sensor)
         # the policies
         self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio)

@@ -172,9 +172,22 @@ def allowed_mask(grid, robot_radius: float, unknown: bool = False) -> np.ndarray
     ``grid`` needs the bool ``free`` and ``occupied`` and float ``distance`` (metres to the nearest occupied cell
     centre) arrays of ``OccupancyGrid``. Compute once per map.
     """
-    dist = np.asarray(grid.distance)
-    space = ~np.asarray(grid.occupied, dtype=bool) if unknown else np.asarray(grid.free, dtype=bool)
-    return byte_mask(space & (dist > float(robot_radius)))
+    return allowed_masks(grid, robot_radius, (unknown,))[0]
+
+
+def allowed_masks(grid, robot_radius: float, unknown: tuple[bool, ...]) -> tuple[np.ndarray, ...]:
+    """``allowed_mask(grid, robot_radius, u)`` for each ``u`` of ``unknown``, the clearance test made once (the
+    map-based motion model's mask and its fallback: a map-sized float comparison less at set-up)."""
+    clear = np.asarray(grid.distance) > float(robot_radius)
+    out = []
+    for u in unknown:
+        if u:  # not occupied: a fresh array, cleared in place
+            space = ~np.asarray(grid.occupied, dtype=bool)
+            space &= clear
+        else:  # the grid's own free mask: never written to
+            space = np.asarray(grid.free, dtype=bool) & clear
+        out.append(byte_mask(space))
+    return tuple(out)
 
 
 class OdometryMotionModel:

@@ -524,6 +524,31 @@ def test_a_map_too_big_for_the_memory_is_one_line_before_its_pixels_are_decoded(
     assert load_map(y).occupancy.shape == (600, 1000)
 
 
+def test_interior_cells_are_the_occupied_cells_with_four_occupied_neighbours_in_nonzeros_order():
+    """``mcl.kernels.depth.interior_cells`` (``_surface_patches``' cells deeper than one cell): the rule written out
+    with shifted masks, off the map counting as occupied (blocks against every edge), in ``np.nonzero``'s row-major
+    order; none on an empty map, every cell on a full one."""
+    from mcl.kernels.depth import interior_cells
+
+    rng = np.random.default_rng(4)
+    for shape in ((1, 1), (1, 7), (6, 1), (40, 53)):
+        for p in (0.0, 0.5, 0.9, 1.0):
+            occ = rng.random(shape) < p
+            if shape == (40, 53):
+                occ[:5, :] = occ[:, -4:] = True  # a block along the top and right edges
+                occ[20:30, 10:25] = True
+            pad = np.pad(occ, 1, constant_values=True)
+            inner = occ & pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:]
+            ys, xs = interior_cells(np.ascontiguousarray(occ, dtype=np.uint8))
+            want = np.nonzero(inner)
+            np.testing.assert_array_equal(ys, want[0])
+            np.testing.assert_array_equal(xs, want[1])
+            if p == 1.0:
+                assert ys.size == occ.size
+            if p == 0.0 and shape != (40, 53):
+                assert ys.size == 0
+
+
 def test_ring_depths_are_the_exact_transform_within_the_radius_and_minus_one_beyond():
     """``mcl.kernels.depth.ring_depths`` (the interior cells' depth, ``_surface_patches``): the squared distance to
     the nearest non-occupied cell, the integer scipy.ndimage's exact transform gives, wherever that cell lies within

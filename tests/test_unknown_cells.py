@@ -15,7 +15,7 @@ from PIL import Image
 
 from mcl.config import PROJECT_ROOT, load_config
 from mcl.maps import OccupancyGrid, load_map
-from mcl.motion import allowed_mask
+from mcl.motion import allowed_mask, allowed_masks
 from mcl.runner import run
 from mcl.simulate import simulate
 
@@ -26,6 +26,10 @@ def test_allowed_mask_takes_unknown_cells_clear_of_walls_only_when_asked():
     g = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
     assert allowed_mask(g, 0.15).tolist() == [[0, 0, 1, 0, 0, 0, 1]]
     assert allowed_mask(g, 0.15, unknown=True).tolist() == [[0, 0, 1, 1, 1, 1, 1]]
+    # both at once (the filter's mask and its fallback), one clearance test: the same masks, the grid's own untouched
+    both = allowed_masks(g, 0.15, (False, True))
+    assert [m.tolist() for m in both] == [[[0, 0, 1, 0, 0, 0, 1]], [[0, 0, 1, 1, 1, 1, 1]]]
+    assert g.free.tolist() == [[False, True, True, False, False, False, True]]
 
 
 def test_a_particle_that_never_lands_on_free_space_stays_on_unknown_floor_with_the_fallback():

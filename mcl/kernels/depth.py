@@ -42,3 +42,29 @@ def ring_depths(occupied, ys, xs, radius, out):
                 done = True
                 break
         out[j] = best if done else -1
+
+
+@njit(cache=True)
+def interior_cells(occupied):
+    """(ys, xs) int64, row-major (``np.nonzero``'s order): the cells of ``occupied`` (H, W) whose four neighbours are
+    occupied too, off the map counting as occupied: the only cells deeper than one cell, whose depth
+    :func:`ring_depths` then finds. Two passes (count, fill) over the map instead of a copy, four masked ANDs and
+    ``np.nonzero`` of a map-sized array (infinite_corridor's 25 M cells: 60 ms to 17 ms)."""
+    h, w = occupied.shape
+    n = 0
+    for y in range(h):
+        for x in range(w):
+            if (occupied[y, x] and (y == 0 or occupied[y - 1, x]) and (y == h - 1 or occupied[y + 1, x])
+                    and (x == 0 or occupied[y, x - 1]) and (x == w - 1 or occupied[y, x + 1])):
+                n += 1
+    ys = np.empty(n, dtype=np.int64)
+    xs = np.empty(n, dtype=np.int64)
+    k = 0
+    for y in range(h):
+        for x in range(w):
+            if (occupied[y, x] and (y == 0 or occupied[y - 1, x]) and (y == h - 1 or occupied[y + 1, x])
+                    and (x == 0 or occupied[y, x - 1]) and (x == w - 1 or occupied[y, x + 1])):
+                ys[k] = y
+                xs[k] = x
+                k += 1
+    return ys, xs
