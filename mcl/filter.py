@@ -129,9 +129,10 @@ class ParticleFilter:
         if cfg.motion.map_rejection:
             # the free cells clear of walls (with map_unknown: free, the unknown ones too); and where a particle that
             # never landed on free space may stay (map_unknown: fallback): an unknown cell clear of walls
-            kinds = (mu == "free",) + ((True,) if mu == "fallback" else ())
-            masks = allowed_masks(grid, cfg.motion.robot_radius, kinds)
-            self.allowed, self._fallback = masks[0], (masks[1] if len(masks) > 1 else None)
+            if mu == "fallback":
+                self.allowed, self._fallback = allowed_masks(grid, cfg.motion.robot_radius, (False, True))
+            else:
+                self.allowed = allowed_mask(grid, cfg.motion.robot_radius, mu == "free")
         self.sensor = make_sensor_model(grid, cfg.sensor)
         # the policies
         self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio)

@@ -180,7 +180,8 @@ class OccupancyGrid:
         # for scipy.ndimage's labelling and import and 1.2 s for a whole-map transform; the same values)
         from mcl.kernels.depth import interior_cells, ring_depths
 
-        ys, xs = interior_cells(byte_mask(occ))  # occupied with its four neighbours occupied (off the map: occupied)
+        occ8 = byte_mask(occ)
+        ys, xs = interior_cells(occ8)  # occupied with its four neighbours occupied (off the map: occupied)
         if ys.size == 0:
             return []
         h, w = occ.shape
@@ -189,7 +190,7 @@ class OccupancyGrid:
         # each such cell's depth by a search in rings out to ``margin`` cells (mcl.kernels.depth): walls a few cells
         # thick resolve at once; a tile with a cell deeper than that takes the transforms below
         ring = np.empty(ys.size, dtype=np.int64)
-        ring_depths(byte_mask(occ), ys, xs, int(margin), ring)
+        ring_depths(occ8, ys, xs, int(margin), ring)
         deep = set(np.unique(tile_of[ring < 0]).tolist())
         order = np.argsort(tile_of, kind="stable")  # per tile, its cells in row-major order (as a mask assigns)
         tiles, starts = np.unique(tile_of[order], return_index=True)

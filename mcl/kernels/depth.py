@@ -51,6 +51,7 @@ def interior_cells(occupied):
     :func:`ring_depths` then finds. Two passes (count, fill) over the map instead of a copy, four masked ANDs and
     ``np.nonzero`` of a map-sized array (infinite_corridor's 25 M cells: 60 ms to 17 ms)."""
     h, w = occupied.shape
+    # the test is written out in both passes: as a helper function (even inline="always") the kernel ran 20x slower
     n = 0
     for y in range(h):
         for x in range(w):
