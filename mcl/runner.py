@@ -34,6 +34,7 @@ import numpy as np
 
 from mcl.config import Config, dump_config
 from mcl.datasets import ScanMap
+from mcl.datasets.carmen import Scan
 from mcl.errors import ConfigError, DataError
 from mcl.estimate import compose, inverse, wrap_angle  # noqa: F401  (compose, inverse: mcl.runner's too)
 
@@ -579,6 +580,8 @@ def _run(
     interrupted = False
     last_odom = None
     last_t = 0.0
+    lasers: set = set()  # the scan sources (a bag's topics; a CARMEN log's one kind) seen to update so far
+    owed: set = set()  # ... that have not updated since the robot last moved (AMCL's lasers_update_ flags)
     odom_to_map = None
     writer = TumWriter(out_dir / "trajectory.tum")
     bag_out = _estimate_bag(cfg, out_dir) if write_bag else None
@@ -593,10 +596,16 @@ def _run(
             for scan, marks in updates:  # scan is marks: an update from a LANDMARK line alone
                 bar.update(1)
                 odom = scan.odom
+                laser = scan.kind if isinstance(scan, Scan) else None  # which laser (None: landmarks, depth)
                 if last_odom is not None:
                     d = math.hypot(odom[0] - last_odom[0], odom[1] - last_odom[1])
                     a = abs(float(wrap_angle(odom[2] - last_odom[2])))
-                    if d < fc.update_min_d and a < fc.update_min_a:
+                    still = d < fc.update_min_d and a < fc.update_min_a
+                    if not still:
+                        owed = set(lasers)
+                    # Each laser updates once after the robot moved, as AMCL's flags do: fused front and rear
+                    # lasers both weigh in (the second, at the first's pose, would otherwise always be gated).
+                    if still and (laser is None or laser in lasers) and laser not in owed:
                         # Update gating: no filter update, but the trajectory still gets this scan's pose, the
                         # last estimate moved by the odometry since that update (one pose per scan).
                         pose = compose(last_mean, compose(inverse(last_odom), odom))
@@ -631,6 +640,9 @@ def _run(
                 if kidnap_filter_at is not None and kidnap is None and scan.t >= kidnap_filter_at[0]:
                     kidnap = _kidnap(pf, truth, scan.t, last_mean, kidnap_filter_at[1])
                 info = pf.step(control, observation, landmarks=marks, planes=planes)
+                if laser is not None:
+                    lasers.add(laser)
+                    owed.discard(laser)
                 if on_update is not None:
                     on_update(scan.t, pf, info, truth.at(scan.t) if truth is not None else None)
                 last_odom, last_t = odom, scan.t

@@ -481,6 +481,25 @@ def test_several_lasers_fused_each_with_its_mounting(scans, tmp_path):
     assert one.scans.topics == ["/rear/scan"] and len(one.scans) == len(scans)
 
 
+def test_fused_lasers_each_update_once_the_robot_has_moved(world, scans, tmp_path):
+    # Update gating per laser, as AMCL's flags: once the robot has moved, each laser updates once. The rear scan,
+    # stamped with the front's, saw no motion since the front's update, and was always gated (it never weighed in).
+    bag = tmp_path / "two.mcap"
+    with BagOut(bag) as b:
+        b.write("/tf_static", "tf2_msgs/msg/TFMessage", scans[0].t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
+            b.transform(scans[0].t, "base_link", "front", (0.0, 0.0, 0.0)),
+            b.transform(scans[0].t, "base_link", "rear", (0.0, 0.0, 0.0))]))
+        for s in scans:
+            _odom(b, s)
+            _laser(b, "/front/scan", s, frame="front")
+            _laser(b, "/rear/scan", s, frame="rear")
+    one, _ = _run(tmp_path, "one", map=world / "map.yaml", bag=bag, **{"topics.scan": "/front/scan"})
+    both, out = _run(tmp_path, "both", map=world / "map.yaml", bag=bag, **{"topics.scan": "all"})
+    assert 10 < one["updates"] < len(scans)  # the gating skips some scans of the one laser
+    assert both["updates"] == 2 * one["updates"]
+    assert len((out / "trajectory.tum").read_text().splitlines()) == 2 * len(scans)  # still one pose per scan
+
+
 def test_among_several_lasers_the_level_fixed_one_is_read(world, scans, tmp_path, capsys):
     # A PR2: /base_scan on a fixed level mount, /tilt_scan on a frame that pitches up and down on /tf (a tilting
     # laser sweeps the floor and over the walls); and a laser fixed looking 30 degrees down at the floor. With no
@@ -651,7 +670,8 @@ def test_pointcloud_is_projected_within_the_height_band(scans, tmp_path):
             data=np.frombuffer(pts.tobytes(), dtype=np.uint8), is_dense=True))
     cfg = load_config(None, ["topics.cloud_beams=8"])
     (got,) = list(open_bag(bag, cfg.topics).scans)
-    assert got.angle_min == -math.pi and got.angle_increment == pytest.approx(math.pi / 4)
+    # each beam at its bin's centre (at the bin's lower edge the headings were half a bin off)
+    assert got.angle_min == pytest.approx(-math.pi + math.pi / 8) and got.angle_increment == pytest.approx(math.pi / 4)
     # bins of 45 degrees from -180: 0 deg -> bin 4, 90 deg -> bin 6, -135 deg -> bin 1
     expect = np.zeros(8)
     expect[4], expect[6], expect[1] = 1.0, 3.0, round(math.sqrt(2.0), 5)

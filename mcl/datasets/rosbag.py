@@ -455,8 +455,9 @@ def snap_pi(v: float) -> float:
 
 
 def cloud_ranges(msg, z_band, beams: int, mirrored: bool = False):
-    """A PointCloud2 as a planar scan: points with z_band[0] <= z <= z_band[1], nearest per bearing bin.
-    ``mirrored``: the cloud's frame is upside down; its y and z are negated first (z_band is then upward)."""
+    """A PointCloud2 as a planar scan: points with z_band[0] <= z <= z_band[1], nearest per bearing bin; beam k
+    points at its bin's centre, -pi + (k + 1/2) * 2 pi / beams (at the bin's edge, every heading would be half a bin
+    off). ``mirrored``: the cloud's frame is upside down; its y and z are negated first (z_band is then upward)."""
     names = {f.name: f for f in msg.fields}
     if not all(n in names for n in "xyz"):
         raise DataError(f"PointCloud2 without x, y, z fields (has {', '.join(names)})")
@@ -487,7 +488,7 @@ def cloud_ranges(msg, z_band, beams: int, mirrored: bool = False):
         o = np.lexsort((r, b))
         first = np.unique(b[o], return_index=True)
         out[first[0]] = r[o][first[1]]
-    return np.round(out, 5), -math.pi, inc, None
+    return np.round(out, 5), -math.pi + 0.5 * inc, inc, None
 
 
 def odometry_at(odometry: np.ndarray, t: float):
