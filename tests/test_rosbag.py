@@ -500,6 +500,34 @@ def test_fused_lasers_each_update_once_the_robot_has_moved(world, scans, tmp_pat
     assert len((out / "trajectory.tum").read_text().splitlines()) == 2 * len(scans)  # still one pose per scan
 
 
+@pytest.mark.parametrize("source", ["tf", "topic"])
+def test_the_mounting_is_on_the_frame_the_odometry_moves(scans, tmp_path, source):
+    # The odometry moves base_footprint (on /tf, or an Odometry whose child_frame_id says so), and the laser hangs
+    # off base_link 0.15 m ahead of it: the laser is 0.25 m ahead of the pose the odometry gives, not 0.1 m (the
+    # base_link -> laser link alone, which the reader took).
+    bag = tmp_path / f"footprint-{source}.mcap"
+    TF = "tf2_msgs/msg/TFMessage"
+    with BagOut(bag) as b:
+        b.write("/tf_static", TF, scans[0].t, b.msg(TF, transforms=[
+            b.transform(scans[0].t, "base_footprint", "base_link", (0.15, 0.0, 0.0)),
+            b.transform(scans[0].t, "base_link", "laser", (0.1, 0.0, 0.0))]))
+        for s in scans:
+            if source == "tf":
+                b.write("/tf", TF, s.t, b.msg(TF, transforms=[b.transform(s.t, "odom", "base_footprint", s.odom)]))
+            else:
+                cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*s.odom), covariance=np.zeros(36))
+                v3 = b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)
+                tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
+                           twist=b.msg("geometry_msgs/msg/Twist", linear=v3, angular=v3), covariance=np.zeros(36))
+                b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg(
+                    "nav_msgs/msg/Odometry", header=b.header(s.t, "odom"), child_frame_id="base_footprint",
+                    pose=cov, twist=tw))
+            _laser(b, "/scan", s, frame="laser")
+    src = open_bag(bag)
+    assert np.allclose(src.scans.offsets["/scan"], (0.25, 0.0, 0.0), rtol=0, atol=1e-9)
+    assert any("mounted as base_footprint -> laser (the frame the odometry moves)" in n for n in src.notes)
+
+
 def test_among_several_lasers_the_level_fixed_one_is_read(world, scans, tmp_path, capsys):
     # A PR2: /base_scan on a fixed level mount, /tilt_scan on a frame that pitches up and down on /tf (a tilting
     # laser sweeps the floor and over the walls); and a laser fixed looking 30 degrees down at the floor. With no

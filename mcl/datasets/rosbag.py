@@ -959,6 +959,15 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     for t in scan_topics:
         f = scan_frames[t]
         pose = (0.0, 0.0, 0.0, 1) if f == base_frame else _static_chain(static, base_frame, f)
+        if odom_child and odom_child != base_frame and pose is not None:
+            # The odometry moves odom_child (an Odometry's child_frame_id, nav2's base_footprint): the laser's
+            # mounting is on that frame, through base_link when it hangs below it (base_footprint -> base_link ->
+            # laser); the base_link chain alone would leave out the link between the two.
+            on_child = (0.0, 0.0, 0.0, 1) if f == odom_child else _static_chain(static, odom_child, f)
+            if on_child is not None and not np.allclose(on_child[:3], pose[:3], rtol=0.0, atol=1e-9):
+                notes.append(f"{path}: {t}: mounted as {odom_child} -> {f} (the frame the odometry moves), not "
+                             f"{base_frame} -> {f}")
+                pose = on_child
         if pose is None and odom_child and odom_child != base_frame:
             # no frames.base -> scan frame chain: the frame the odometry moves, if the scan frame hangs off it
             pose = (0.0, 0.0, 0.0, 1) if f == odom_child else _static_chain(static, odom_child, f)
