@@ -18,7 +18,8 @@ from mcl.cli import main
 from mcl.config import load_config
 from mcl.datasets.bagwrite import BagOut, convert, write_scans
 from mcl.datasets.carmen import read_carmen
-from mcl.datasets.rosbag import bag_info, open_bag
+from mcl.datasets.rosbag import bag_info, odometry_at, open_bag
+from mcl.estimate import compose, inverse
 from mcl.errors import ConfigError
 from mcl.maps import load_map
 from mcl.runner import run
@@ -526,6 +527,40 @@ def test_the_mounting_is_on_the_frame_the_odometry_moves(scans, tmp_path, source
     src = open_bag(bag)
     assert np.allclose(src.scans.offsets["/scan"], (0.25, 0.0, 0.0), rtol=0, atol=1e-9)
     assert any("mounted as base_footprint -> laser (the frame the odometry moves)" in n for n in src.notes)
+
+
+def test_a_gap_in_the_odometry_is_filled_by_matching_the_scans(world, scans, tmp_path):
+    # /odom stops for 4 s while the scans go on (a driver that died and came back). Interpolated, the odometry ran a
+    # straight line across, 0.46 m off the robot's path mid-turn; the scans inside are matched one to the next from
+    # the last scan before the gap, and the odometry after it keeps its own steps.
+    t0 = scans[0].t
+    gone = [2.0 <= s.t - t0 <= 6.0 for s in scans]
+    bag = tmp_path / "gap.mcap"
+    with BagOut(bag) as b:
+        for s, g in zip(scans, gone):
+            if not g:
+                _odom(b, s)
+            _laser(b, "/scan", s, frame="base_link")
+    src = open_bag(bag)
+    assert any("stops while the scans go on, 1 time, for up to 4.4 s" in w and "21 scans of /scan" in w
+               and "laser odometry" in w for w in src.warnings)
+    tt, tp = read_tum(world / "truth.tum")
+    truth = {round(t, 6): tp[:, i] for i, t in enumerate(tt)}
+    kept = np.array([(s.t, *s.odom, 0.0, 0.0) for s, g in zip(scans, gone) if not g])
+    k0 = gone.index(True) - 1  # the last scan before the gap
+    base, base_truth = odometry_at(src.odometry, scans[k0].t)[0], truth[round(scans[k0].t, 6)]
+    filled, straight = [], []
+    for s in [s for s, g in zip(scans, gone) if g]:
+        want = compose(inverse(base_truth), truth[round(s.t, 6)])
+        filled.append(np.hypot(*(compose(inverse(base), odometry_at(src.odometry, s.t)[0]) - want)[:2]))
+        straight.append(np.hypot(*(compose(inverse(scans[k0].odom), odometry_at(kept, s.t)[0]) - want)[:2]))
+    # measured 0.076 m at most (the wheel odometry itself: 0.090 m); the straight line 0.46 m
+    assert max(filled) < 0.12 and max(straight) > 0.3
+    # after the gap, the odometry's own steps
+    after = [s for s in scans if s.t - t0 > 6.2]
+    for s in after[1:]:
+        got = compose(inverse(odometry_at(src.odometry, after[0].t)[0]), odometry_at(src.odometry, s.t)[0])
+        assert np.allclose(got, compose(inverse(after[0].odom), s.odom), rtol=0, atol=1e-9)
 
 
 def test_among_several_lasers_the_level_fixed_one_is_read(world, scans, tmp_path, capsys):

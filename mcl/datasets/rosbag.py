@@ -84,6 +84,9 @@ ODOM_TYPES = (ODOM, POSE, PWCS)
 REORDER_TOLERANCE = 1.0
 # A scan stamped up to this long (s) outside the odometry's time span is paired with the end pose silently (a
 # recording's first and last odometry message come a period or so after or before the laser's).
+ODOM_GAP_MIN = 1.0  # s: a pause in the odometry this long, and ODOM_GAP_PERIODS of its median period, is a gap
+ODOM_GAP_PERIODS = 10
+ODOM_GAP_ANCHOR = 5.0  # s: the scans before and after a gap that anchor its laser odometry lie this close to it
 ODOM_SPAN_SLACK = 0.5
 
 
@@ -999,6 +1002,11 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
                      has_twist=odom_type == ODOM, mirrored=mirrored, unstamped=unstamped,
                      echo=getattr(tp, "echo", "first"))
+    gaps = [] if from_scans else odometry_gaps(odometry, np.array(scan_t, dtype=np.float64))
+    if gaps:  # the odometry stops for a while, the scans go on: the gaps filled by matching the scans
+        mount = offsets[scan_topics[0]] if laser_pose is None else np.asarray(laser_pose, dtype=np.float64)
+        odometry = _fill_gaps(path, scans, scan_topics[0], mount, odometry, gaps, src_name, warnings)
+        scans.odometry = odometry
     if from_scans:
         mount = offsets[scan_topics[0]] if laser_pose is None else np.asarray(laser_pose, dtype=np.float64)
         odometry = _scan_odometry(path, scans, scan_topics[0], mount, warnings, counts, progress)
@@ -1007,6 +1015,80 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps)
+
+
+def odometry_gaps(odometry: np.ndarray, scan_stamps: np.ndarray) -> list[tuple[float, float, int]]:
+    """Where the odometry stops while the scans go on (a driver that died and came back, a topic dropped for a
+    while): (start, end, scans inside) of each pause between two odometry stamps longer than ``ODOM_GAP_MIN`` s and
+    ``ODOM_GAP_PERIODS`` median periods with a scan stamped inside, in time order. Interpolated across it, the
+    odometry would run a straight line from one end to the other."""
+    ot = odometry[:, 0]
+    if ot.size < 3:
+        return []
+    step = np.diff(ot)
+    bound = max(ODOM_GAP_MIN, ODOM_GAP_PERIODS * float(np.median(step)))
+    t = np.sort(np.asarray(scan_stamps, dtype=np.float64))
+    out = []
+    for i in np.flatnonzero(step > bound):
+        a, b = float(ot[i]), float(ot[i + 1])
+        k = int(np.searchsorted(t, b, side="left") - np.searchsorted(t, a, side="right"))
+        if k:
+            out.append((a, b, k))
+    return out
+
+
+def _fill_gaps(path, scans: "BagScans", topic: str, mount, odometry: np.ndarray, gaps: list, src: str,
+               warnings: list) -> np.ndarray:
+    """``odometry`` with each of its ``gaps`` (``odometry_gaps``) filled by laser odometry: the scans of ``topic``
+    inside it matched one to the next (:func:`mcl.laser_odometry.laser_odometry`) from the last scan before it,
+    where the odometry is known, to the first after it; the odometry after the gap is moved rigidly to go on from
+    where the matching ended (the filter only uses its steps). A gap without such scans on both sides stays
+    interpolated, with a warning. One more pass over the bag's scans."""
+    from mcl.estimate import compose, inverse
+    from mcl.laser_odometry import laser_odometry
+
+    near: list[list] = [[] for _ in gaps]  # the scans of topic within ODOM_GAP_ANCHOR s of each gap
+    for s in scans:
+        if s.kind == topic:
+            for g, (a, b, _) in zip(near, gaps):
+                if a - ODOM_GAP_ANCHOR <= s.t <= b + ODOM_GAP_ANCHOR:
+                    g.append(s)
+    odometry = odometry.copy()
+    filled, left, failed = [], [], 0
+    for (a, b, k), group in zip(gaps, near):
+        before = [s for s in group if s.t <= a]
+        inside = [s for s in group if a < s.t < b]
+        after = [s for s in group if s.t >= b]
+        if not before or not after or not inside:
+            left.append((a, b, k))
+            continue
+        chain = [before[-1], *inside, after[0]]
+        rows, bad = laser_odometry(chain, mount)
+        failed += bad
+        start = odometry_at(odometry, chain[0].t)[0]  # the robot's odometry pose at the first scan: the anchor
+        placed = [compose(start, r[1:4]) for r in rows]  # laser_odometry's first pose is the origin
+        # after the gap: the odometry's own poses, moved so that the first scan after it is where matching put it
+        move = compose(placed[-1], inverse(odometry_at(odometry, chain[-1].t)[0]))
+        later = odometry[:, 0] >= b
+        c, sn = math.cos(move[2]), math.sin(move[2])
+        x, y = odometry[later, 1].copy(), odometry[later, 2].copy()
+        odometry[later, 1] = move[0] + c * x - sn * y
+        odometry[later, 2] = move[1] + sn * x + c * y
+        odometry[later, 3] = np.arctan2(np.sin(odometry[later, 3] + move[2]), np.cos(odometry[later, 3] + move[2]))
+        new = np.array([(s.t, *p, 0.0, 0.0) for s, p in zip(inside, placed[1:-1])], dtype=np.float64)
+        odometry = np.concatenate([odometry, new])
+        odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
+        filled.append((a, b, len(inside)))
+    longest = max(gaps, key=lambda g: g[1] - g[0])
+    what = (f"{path}: the odometry ({src}) stops while the scans go on, {len(gaps)} time{'s' if len(gaps) > 1 else ''}"
+            f", for up to {longest[1] - longest[0]:.1f} s ({longest[0]:.3f}..{longest[1]:.3f} s)")
+    if filled:
+        warnings.append(f"{what}: the {sum(g[2] for g in filled)} scans of {topic} in {len(filled)} of them are "
+                        f"placed by laser odometry (scan matching){f', {failed} not matched' if failed else ''}")
+    if left:
+        warnings.append(f"{what}: in {len(left)} of them ({sum(g[2] for g in left)} scans) no scan of {topic} on "
+                        "both sides to match from: the odometry runs a straight line across")
+    return odometry
 
 
 def _scan_odometry(path, scans: "BagScans", topic: str, mount, warnings: list, counts: dict,
