@@ -91,7 +91,7 @@ def _add_run(sub) -> None:
 
 def cmd_run(args) -> int:
     from mcl.config import load_config
-    from mcl.runner import default_out_dir, run
+    from mcl.runner import check_out_dir, default_out_dir, run
 
     config_path = args.config
     if args.config_option is not None:
@@ -126,15 +126,17 @@ def cmd_run(args) -> int:
         raise MclError("--truth and --truth-topic: give one")
     if args.truth_topic:
         overrides.append("truth=null")  # the topic instead of a config's truth file
+    # an option's value that the config rejects names the option (load_config's (option, key=value) pairs)
     for key, value in (("map", args.map), ("log", args.log), ("bag", args.bag), ("truth", args.truth)):
         if value is not None:
-            overrides.append(f"{key}={str(Path(value).resolve())}")
-    for key, value in (("topics.scan", args.scan_topic), ("topics.odom", args.odom_topic),
-                       ("topics.truth", args.truth_topic), ("frames.odom", args.odom_frame),
-                       ("frames.base", args.base_frame)):
+            overrides.append((f"--{key} {value}", f"{key}={str(Path(value).resolve())}"))
+    for key, value, option in (("topics.scan", args.scan_topic, "--scan-topic"),
+                               ("topics.odom", args.odom_topic, "--odom-topic"),
+                               ("topics.truth", args.truth_topic, "--truth-topic"),
+                               ("frames.odom", args.odom_frame, "--odom-frame"),
+                               ("frames.base", args.base_frame, "--base-frame")):
         if value is not None:
-            overrides.append(f"{key}={json.dumps(value)}")
-    # an option's value that the config rejects names the option (load_config's (option, key=value) pairs)
+            overrides.append((f"{option} {json.dumps(value)}", f"{key}={json.dumps(value)}"))
     if args.particles is not None:
         overrides.append((f"--particles {args.particles}", f"filter.particles={args.particles}"))
     if args.seed is not None:
@@ -144,13 +146,14 @@ def cmd_run(args) -> int:
         overrides += [(f"--initial-pose {x!r} {y!r} {th!r}", f"filter.initial_pose=[{x!r}, {y!r}, {th!r}]"),
                       "filter.global_localization=false"]
     if args.global_:
-        overrides.append("filter.global_localization=true")
+        overrides.append(("--global", "filter.global_localization=true"))
     if args.rerun is not None:
-        overrides.append(f"rerun.mode={args.rerun}")
+        overrides.append((f"--rerun {args.rerun}", f"rerun.mode={args.rerun}"))
     cfg = load_config(config_path, overrides + list(args.set))
     if args.threads is not None:
         set_threads(args.threads)
     out = Path(args.out) if args.out else default_out_dir()
+    check_out_dir(out)  # before the data loads: a folder mcl may write in, holding nothing but a run's outputs
     if args.write_bag and cfg.bag is None:
         raise MclError("--write-bag needs a bag input (--bag)")
     summary = run(cfg, out, progress=False if args.no_progress else None,
@@ -231,6 +234,9 @@ def cmd_eval(args) -> int:
         raise MclError(f"--converged-within: must be positive, got {args.converged_within}")
     t_est, p_est = read_tum(args.estimate)
     t_ref, p_ref = read_tum(args.reference)
+    for name, t in ((args.estimate, t_est), (args.reference, t_ref)):
+        if t.size == 0:
+            raise MclError(f"{name}: no poses (an empty trajectory): nothing to score")
     r = evaluate(t_est, p_est, t_ref, p_ref, converged_within=args.converged_within)
     print(json.dumps(r, indent=2) if args.json else format_eval(r))
     return 0
@@ -530,6 +536,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("mcl: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except OSError as e:  # a file mcl could not write (a full disk, a folder made read-only mid-run): one line
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"mcl: error: {where}{e.strerror or e}", file=sys.stderr)
+        return EXIT_ERROR
 
 
 if __name__ == "__main__":

@@ -521,56 +521,68 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
     return cls(**kwargs)
 
 
+class _CrossCheckError(ConfigError):
+    """A check across keys failed; ``keys``: every key it read, the message's own first (load_config names the
+    --set that gave one of them)."""
+
+    def __init__(self, message: str, *others: str):
+        super().__init__(message)
+        self.keys = (message.split(":", 1)[0], *others)
+
+
 def _cross_checks(cfg: Config) -> None:
     if cfg.laser not in LASER_KINDS:
-        raise ConfigError(f"laser: expected one of {', '.join(LASER_KINDS)}, got {cfg.laser!r}")
+        raise _CrossCheckError(f"laser: expected one of {', '.join(LASER_KINDS)}, got {cfg.laser!r}")
     if cfg.log is not None and cfg.bag is not None:
-        raise ConfigError("bag: give a CARMEN log (log) or a ROS bag (bag), not both")
+        raise _CrossCheckError("bag: give a CARMEN log (log) or a ROS bag (bag), not both", "log")
     if cfg.log is not None:
         from mcl.datasets.rosbag import is_bag
 
         if is_bag(cfg.log):
-            raise ConfigError(f"log: {cfg.log} is a ROS bag: give it as bag (--bag on the command line)")
+            raise _CrossCheckError(f"log: {cfg.log} is a ROS bag: give it as bag (--bag on the command line)")
     if not cfg.topics.cloud_z[0] <= cfg.topics.cloud_z[1]:
-        raise ConfigError(f"topics.cloud_z: expected [min, max], got {list(cfg.topics.cloud_z)}")
+        raise _CrossCheckError(f"topics.cloud_z: expected [min, max], got {list(cfg.topics.cloud_z)}")
     if cfg.topics.scan == "" or cfg.topics.odom == "":
-        raise ConfigError("topics.scan: empty topic name")
+        raise _CrossCheckError("topics.scan: empty topic name", "topics.odom")
     s = cfg.sensor
     if s.range_min >= s.range_max:
-        raise ConfigError(f"sensor.range_min: {s.range_min} must be below sensor.range_max ({s.range_max})")
+        raise _CrossCheckError(f"sensor.range_min: {s.range_min} must be below sensor.range_max ({s.range_max})",
+                               "sensor.range_max")
     if s.likelihood_field.z_hit + s.likelihood_field.z_rand <= 0:
-        raise ConfigError("sensor.likelihood_field.z_hit: z_hit + z_rand must be positive")
+        raise _CrossCheckError("sensor.likelihood_field.z_hit: z_hit + z_rand must be positive",
+                               "sensor.likelihood_field.z_rand")
     lm = cfg.landmarks
     if lm.z_det + lm.z_fp <= 0:
-        raise ConfigError("landmarks.z_det: z_det + z_fp must be positive")
+        raise _CrossCheckError("landmarks.z_det: z_det + z_fp must be positive", "landmarks.z_fp")
     if lm.use and lm.map is None:
-        raise ConfigError("landmarks.map: landmarks.use is true but no landmark map is given")
+        raise _CrossCheckError("landmarks.map: landmarks.use is true but no landmark map is given", "landmarks.use")
     pc = cfg.planes
     if pc.z_det + pc.z_fp <= 0:
-        raise ConfigError("planes.z_det: z_det + z_fp must be positive")
+        raise _CrossCheckError("planes.z_det: z_det + z_fp must be positive", "planes.z_fp")
     if pc.use and pc.depth is None:
-        raise ConfigError("planes.depth: planes.use is true but no depth folder is given")
+        raise _CrossCheckError("planes.depth: planes.use is true but no depth folder is given", "planes.use")
     if not s.use and not lm.use and not pc.use:
-        raise ConfigError("sensor.use: false needs landmarks.use: true or planes.use: true (nothing else to correct with)")
+        raise _CrossCheckError("sensor.use: false needs landmarks.use: true or planes.use: true (nothing else to "
+                               "correct with)", "landmarks.use", "planes.use")
     b = s.beam
     total = b.z_hit + b.z_short + b.z_max + b.z_rand
     if abs(total - 1.0) > 1e-6:
-        raise ConfigError(
+        raise _CrossCheckError(
             f"sensor.beam.z_hit: the beam model's mixture weights z_hit + z_short + z_max + z_rand must sum to 1, "
             f"got {b.z_hit:g} + {b.z_short:g} + {b.z_max:g} + {b.z_rand:g} = {total:g} (the defaults: 0.8, 0.1, "
-            f"0.05, 0.05)"
+            f"0.05, 0.05)", "sensor.beam.z_short", "sensor.beam.z_max", "sensor.beam.z_rand"
         )
     if any(v < 0 for v in cfg.filter.initial_std):
-        raise ConfigError("filter.initial_std: standard deviations must be >= 0")
+        raise _CrossCheckError("filter.initial_std: standard deviations must be >= 0")
     if any(not v > 0 for v in cfg.filter.respread_std):
-        raise ConfigError("filter.respread_std: standard deviations must be > 0")
+        raise _CrossCheckError("filter.respread_std: standard deviations must be > 0")
     if any(not v > 0 for v in cfg.filter.recovery_local_std):
-        raise ConfigError("filter.recovery_local_std: standard deviations must be > 0")
+        raise _CrossCheckError("filter.recovery_local_std: standard deviations must be > 0")
     f = cfg.filter
     if f.recovery in (True, "augmented", "auto") and f.recovery_alpha_slow >= f.recovery_alpha_fast:
-        raise ConfigError(
+        raise _CrossCheckError(
             f"filter.recovery_alpha_slow: {f.recovery_alpha_slow} must be below filter.recovery_alpha_fast "
-            f"({f.recovery_alpha_fast})"
+            f"({f.recovery_alpha_fast})", "filter.recovery", "filter.recovery_alpha_fast"
         )
 
 
@@ -596,6 +608,13 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     except yaml.YAMLError:
         value = raw
     return key.split("."), value
+
+
+def _related(a: str, b: str) -> bool:
+    """Whether dotted keys ``a`` and ``b`` are one key or one holds the other (a section, a list's item)."""
+    if len(a) > len(b):
+        a, b = b, a
+    return b == a or (b.startswith(a) and b[len(a)] in ".[")
 
 
 def _apply(data: dict, path: list[str], value: Any) -> None:
@@ -651,46 +670,51 @@ def load_config(path: str | Path | None = None, overrides: list | tuple = ()) ->
                 _build(Config, copy.deepcopy(data), "")
             except ConfigError as e:
                 raise ConfigError(f"{path}: {e}") from None
-    set_by: dict[str, str] = {}  # dotted key -> what gave it its value: "--set text", or the option
+    set_by: dict[str, str] = {}  # dotted key -> what gave it its value: "--set text", or the option; last given last
+
+    def where(*keys: str) -> str:
+        """The prefix of an error about ``keys``: the last --set (or option) that gave one of them, in itself or
+        with its section, else the file (none: the defaults)."""
+        given = next((w for k, w in reversed(set_by.items()) if any(_related(k, c) for c in keys)), None)
+        return f"{given}: " if given is not None else f"{path}: " if path is not None else ""
+
     for item in overrides:
-        where, text = item if isinstance(item, tuple) else (f"--set {_printable(item)}", item)
+        given, text = item if isinstance(item, tuple) else (f"--set {_printable(item)}", item)
         keys, value = parse_override(text)
         try:
             _apply(data, keys, value)
         except ConfigError as e:
-            raise ConfigError(f"{where}: {e}") from None
-        set_by[".".join(keys)] = where
+            raise ConfigError(f"{given}: {e}") from None
+        key = _printable(".".join(keys))  # as an error message spells it
+        set_by.pop(key, None)
+        set_by[key] = given
     for k in PATH_KEYS:
         if isinstance(data.get(k), str):
             try:
                 data[k] = _resolve_path(data[k], base)
             except (RuntimeError, ValueError):  # ~user that does not exist; a NUL byte
-                where = f"{path}: " if path is not None else ""
-                raise ConfigError(f"{where}{k}: not a usable path: {data[k]!r}") from None
+                raise ConfigError(f"{where(k)}{k}: not a usable path: {data[k]!r}") from None
     for sec, key in (("planes", "depth"), ("planes", "map")):
         if isinstance(data.get(sec), dict) and isinstance(data[sec].get(key), str):
             try:
                 data[sec][key] = _resolve_path(data[sec][key], base)
             except (RuntimeError, ValueError):
-                raise ConfigError(f"{path}: {sec}.{key}: not a usable path") from None
+                raise ConfigError(f"{where(f'{sec}.{key}')}{sec}.{key}: not a usable path") from None
     if isinstance(data.get("landmarks"), dict) and isinstance(data["landmarks"].get("map"), str):
         try:
             data["landmarks"]["map"] = _resolve_path(data["landmarks"]["map"], base)
         except (RuntimeError, ValueError):
-            raise ConfigError(f"{path}: landmarks.map: not a usable path") from None
+            raise ConfigError(f"{where('landmarks.map')}landmarks.map: not a usable path") from None
+    # a bad value names where it came from: the --set that gave it (or its section), else the file; a check
+    # across keys the last --set among them
     try:
         cfg = _build(Config, data, "")
     except ConfigError as e:
-        # a bad value names where it came from: the --set that gave it, else the file
-        key = str(e).split(":", 1)[0]
-        where = next((w for k, w in set_by.items() if key == k or key.startswith(k + ".")), None)
-        if where is not None:
-            raise ConfigError(f"{where}: {e}") from None
-        raise ConfigError(f"{path}: {e}" if path is not None else str(e)) from None
+        raise ConfigError(f"{where(str(e).split(':', 1)[0])}{e}") from None
     try:
         _cross_checks(cfg)
     except ConfigError as e:
-        raise ConfigError(f"{path}: {e}" if path is not None else str(e)) from None
+        raise ConfigError(f"{where(*getattr(e, 'keys', ()))}{e}") from None
     return cfg
 
 

@@ -77,6 +77,8 @@ def write_depth_folder(out: Path, world, poses: np.ndarray, times: np.ndarray, r
 
     folder = Path(out) / "depth"
     folder.mkdir(parents=True, exist_ok=True)
+    for old in folder.glob("*.npz"):  # an earlier world's frames in the same folder
+        old.unlink()
     heights = world_heights(world, rng)
     for k in range(poses.shape[0]):
         depth = render(heights, world.origin, world.resolution, poses[k], cam, rng)

@@ -3,15 +3,20 @@
 Grid arrays are indexed ``[iy, ix]`` with row 0 at the *bottom* (world
 y = origin_y): the image flipped vertically. ``ix = floor((x - x0) / res)``.
 
-Pixel semantics follow ROS map_server (``mode`` key):
+Pixel semantics follow ROS 1 map_server (``image_loader.cpp``; ``mode`` key):
 
-* p = (255 - v) / 255, or v / 255 when ``negate``; v is the mean of the
-  colour channels (integer division, as map_server does), alpha excluded.
-* ``trinary`` (default): p > occupied_thresh -> 100, p < free_thresh -> 0,
-  else -1.
-* ``scale``: as trinary, but in-between values become
-  ``int(99 * (p - free) / (occ - free))``; pixels with alpha 0 are -1.
-* ``raw``: occupancy = v when 0 <= v <= 100, else -1.
+* v is the mean of the pixel's channels, a float (SDL_image's layout: grey 1 channel, grey + alpha as RGBA). In
+  ``trinary`` mode an alpha channel is averaged in with the colours (ROS 1 and nav2 alike: opaque grey 205 gives
+  (3 * 205 + 255) / 4 = 217.5, free); in the other modes it is left out.
+* p = (255 - v) / 255, or v / 255 when ``negate``.
+* ``trinary`` (default): p > occupied_thresh -> 100, p < free_thresh -> 0, else -1.
+* ``scale``: as trinary, but in-between values become ``int(1 + 98 * (p - free) / (occ - free))`` (1..99), or -1
+  where alpha is 0 (ROS 1; nav2 gives ``rint(100 * ratio)`` and -1 for any pixel not fully opaque).
+* ``raw``: occupancy = int(v) (truncated, as ROS 1) when v <= 100, else -1; ``negate`` ignored (as nav2; ROS 1
+  negates, and casts 101..255 into the int8 as they are).
+* A palette image is read by its colours (nav2; ROS 1 reads the palette indices). A PGM with maxval < 255 is
+  scaled as SDL_image scales it, v * 255 // maxval; a 16-bit image (PNG, or PGM with maxval > 255) to
+  v * 255 / maxval rounded (ROS 1 keeps a PNG's high byte and refuses such a PGM; nav2 reads both unrounded).
 
 Any problem with a map file raises :class:`DataError` with one line naming
 the file and the YAML key; nothing else escapes :func:`load_map`.
@@ -23,6 +28,7 @@ import io
 import json
 import math
 import os
+import re
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -294,8 +300,23 @@ class OccupancyGrid:
 
 # --- loading ------------------------------------------------------------
 
+# A number in quotes: yaml-cpp (ROS's YAML reader) converts any scalar, so ``resolution: "0.05"`` is 0.05 to ROS.
+_DECIMAL = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
+
+# The finest resolution taken: below it world -> cell indices overflow int64 for ordinary coordinates (1e-20 m:
+# NumPy's "invalid value encountered in cast" and a map of no size)
+_MIN_RESOLUTION = 1e-6
+
+
+def _number(value, label: str) -> float:
+    """``value`` as a finite float (:func:`finite_number`), a number in quotes too."""
+    if isinstance(value, str) and _DECIMAL.fullmatch(value.strip()):
+        value = float(value)
+    return finite_number(value, label, DataError)
+
+
 def _num(doc: dict, key: str, where: str) -> float:
-    return finite_number(doc[key], f"{where}: {key}", DataError)
+    return _number(doc[key], f"{where}: {key}")
 
 
 _MAX_WIDENED = 64  # window widenings in OccupancyGrid._surface_patches before the whole map's transform
@@ -335,9 +356,30 @@ def _printable(s: str) -> str:
     return s if s.isprintable() else repr(s)[1:-1]
 
 
-def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """Return (value (H, W) uint8, alpha (H, W) uint8 | None), image row 0 = top."""
-    from PIL import Image
+# Pillow modes read as another: to grey, RGB or RGBA (a palette: see _read_image)
+_CONVERT = {"1": "L", "La": "LA", "RGBa": "RGBA", "PA": "RGBA", "RGBX": "RGB", "CMYK": "RGB", "YCbCr": "RGB",
+            "LAB": "RGB", "HSV": "RGB"}
+_PNM_NUMBER = re.compile(rb"(?:\s|#[^\r\n]*)*([0-9]{1,9})")  # a PNM header's next number, past comments
+
+
+def _pgm_maxval(data: bytes) -> int | None:
+    """The maxval of a PGM's header (P2, P5); None for any other file."""
+    if data[:2] not in (b"P2", b"P5"):
+        return None
+    pos = 2
+    for _ in range(3):  # width, height, maxval
+        m = _PNM_NUMBER.match(data, pos)
+        if m is None:
+            return None
+        pos = m.end()
+    return int(m.group(1)) or None
+
+
+def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, int, np.ndarray | None]:
+    """Return (colour, n, alpha), image row 0 = top: ``colour`` the (H, W) sum of the pixel's ``n`` colour channels
+    (uint8 for grey, n = 1; uint16 for colour, n = 3, a grey + alpha image as RGBA as SDL_image loads it), ``alpha``
+    the (H, W) uint8 alpha channel or None."""
+    from PIL import Image, UnidentifiedImageError
 
     label = f"{where}: image: {_printable(str(img_path))}"
     try:
@@ -346,6 +388,8 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | No
     except (OSError, ValueError) as e:
         reason = getattr(e, "strerror", None) or type(e).__name__
         raise DataError(f"{label}: cannot read image: {reason}") from None
+    if not data:
+        raise DataError(f"{label}: empty file")
     # Pillow's decompression-bomb guard (a warning above 89 M pixels, an error above 179 M) is for images from the
     # web; a map is the user's own file, and a 500 m building at 5 cm has 100 M cells.
     bomb_limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
@@ -353,13 +397,17 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | No
         with Image.open(io.BytesIO(data)) as im:
             _check_memory(label, *im.size)  # the header's size, before the pixels are decoded
             im.load()
-            mode = im.mode
-            if mode in ("1", "P", "PA", "CMYK", "YCbCr", "LAB", "HSV", "La", "RGBa", "RGBX"):
-                im = im.convert("RGBA" if ("A" in mode or "a" in mode or mode == "P") else "RGB")
-                mode = im.mode
+            fmt, mode = im.format, im.mode
+            if mode == "P":  # by its colours; alpha only where the palette has transparency (PNG tRNS)
+                mode = "RGBA" if "transparency" in im.info else "RGB"
+            mode = _CONVERT.get(mode, mode)
+            if mode != im.mode:
+                im = im.convert(mode)
             arr = np.asarray(im)
     except DataError:
         raise
+    except UnidentifiedImageError:
+        raise DataError(f"{label}: not an image file (PGM, PNG or another format Pillow reads)") from None
     except Exception as e:  # Pillow raises many types on corrupt input; none may escape
         msg = str(e).replace("\n", " ") or type(e).__name__
         raise DataError(f"{label}: truncated or corrupt image ({msg})") from None
@@ -367,23 +415,34 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, np.ndarray | No
         Image.MAX_IMAGE_PIXELS = bomb_limit
     alpha = None
     if arr.ndim == 2:
-        if mode.startswith("I") or mode == "F":
-            # 16-bit / 32-bit greyscale: scale to 0..255 like an 8-bit image.
-            top = 65535.0 if (mode.startswith("I;16") or (arr.size and arr.max() > 255)) else 255.0
-            scaled = np.nan_to_num(arr.astype(np.float64) * (255.0 / top))
-            value = np.clip(np.rint(scaled), 0, 255).astype(np.int32)
-        else:
-            value = arr
-    elif arr.ndim == 3 and arr.shape[2] in (2, 4):
-        value = arr[:, :, :-1].astype(np.int32).sum(axis=2) // (arr.shape[2] - 1)
-        alpha = arr[:, :, -1]
-    elif arr.ndim == 3 and arr.shape[2] >= 1:
-        value = arr.astype(np.int32).sum(axis=2) // arr.shape[2]
+        n = 1
+        # Pillow scales a PGM by its maxval, rounded: to 0..255 (maxval <= 255) or 0..65535 (mode I)
+        maxval = _pgm_maxval(data) if fmt == "PPM" else None
+        if mode == "L":
+            colour = arr
+            if maxval is not None and maxval < 255:  # SDL_image (ROS 1): v * 255 // maxval, truncated
+                v = np.rint(np.arange(256) * (maxval / 255.0))  # the file's values, from Pillow's
+                colour = ((v * 255) // maxval).astype(np.uint8)[arr]
+        else:  # 16 or 32 bits a pixel: to 0..255, rounded
+            raw = arr.astype(np.float64)
+            if fmt == "PPM":
+                top = float(maxval or 65535)
+                raw = np.rint(raw * (top / 65535.0))  # the file's values, from Pillow's
+            elif fmt == "PNG" or mode.startswith("I;16"):
+                top = 65535.0
+            else:  # a format whose range is not known (TIFF, float): a guess from the values
+                top = 65535.0 if (arr.size and arr.max() > 255) else 255.0
+            colour = np.clip(np.rint(np.nan_to_num(raw * (255.0 / top))), 0, 255).astype(np.uint8)
+    elif arr.ndim == 3 and arr.shape[2] == 2:  # grey + alpha: RGBA to SDL_image, three equal colours
+        colour, n, alpha = arr[:, :, 0].astype(np.uint16) * 3, 3, arr[:, :, 1]
+    elif arr.ndim == 3 and arr.shape[2] in (3, 4):
+        colour, n = arr[:, :, :3].sum(axis=2, dtype=np.uint16), 3
+        alpha = arr[:, :, 3] if arr.shape[2] == 4 else None
     else:
         raise DataError(f"{label}: unsupported image layout {arr.shape} (mode {mode})")
-    if value.size == 0:
+    if colour.size == 0:
         raise DataError(f"{label}: empty image")
-    return value.astype(np.uint8, copy=False), alpha  # every branch gives 0..255
+    return colour, n, alpha
 
 
 def load_map(path: str | os.PathLike) -> OccupancyGrid:
@@ -402,19 +461,16 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     resolution = _num(doc, "resolution", where)
     if resolution <= 0:
         raise DataError(f"{where}: resolution: must be positive, got {resolution}")
+    if resolution < _MIN_RESOLUTION:
+        raise DataError(f"{where}: resolution: must be at least {_MIN_RESOLUTION:g} m a cell, got {resolution:g}")
 
     origin = doc["origin"]
     if not isinstance(origin, list) or len(origin) not in (2, 3):
         raise DataError(f"{where}: origin: expected [x, y, yaw], got {short_repr(origin)}")
-    vals = []
-    for v in origin:
-        try:
-            ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(float(v))
-        except OverflowError:  # a YAML integer beyond the float range
-            ok = False
-        if not ok:
-            raise DataError(f"{where}: origin: expected finite numbers [x, y, yaw], got {short_repr(origin)}")
-        vals.append(float(v))
+    try:
+        vals = [_number(v, "origin") for v in origin]
+    except DataError:
+        raise DataError(f"{where}: origin: expected finite numbers [x, y, yaw], got {short_repr(origin)}") from None
     yaw = vals[2] if len(vals) == 3 else 0.0
 
     occ_th = _num(doc, "occupied_thresh", where)
@@ -428,8 +484,10 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     negate = doc.get("negate", 0)
     if isinstance(negate, bool):
         negate = int(negate)
+    elif isinstance(negate, str) and _DECIMAL.fullmatch(negate.strip()):
+        negate = float(negate)
     if not isinstance(negate, (int, float)) or negate not in (0, 1):
-        raise DataError(f"{where}: negate: expected 0 or 1, got {short_repr(negate)}")
+        raise DataError(f"{where}: negate: expected 0 or 1, got {short_repr(doc.get('negate'))}")
 
     mode = doc.get("mode", "trinary")
     if not isinstance(mode, str) or mode not in _MODES:
@@ -439,12 +497,14 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
         img_path = Path(path).parent / image
     except (ValueError, TypeError):
         raise DataError(f"{where}: image: invalid file name {short_repr(image)}") from None
-    value, alpha = _read_image(img_path, where)
+    colour, n, alpha = _read_image(img_path, where)
 
-    occupancy = _classify(value, alpha, mode, bool(negate), occ_th, free_th)
+    occupancy = _classify(colour, n, alpha, mode, bool(negate), occ_th, free_th)
     # Image row 0 is the top; the grid's row 0 is the bottom.
     occupancy = np.ascontiguousarray(occupancy[::-1])
     occupancy, corner = axis_aligned(occupancy, resolution, (vals[0], vals[1]), yaw, label=where)
+    if mode == "scale":  # 1..99 are the pixels between the thresholds: neither free nor occupied (AMCL's reading)
+        return OccupancyGrid(occupancy, resolution, corner, where, 0.99, 0.01)
     return OccupancyGrid(occupancy, resolution, corner, where, occ_th, free_th)
 
 
@@ -487,35 +547,37 @@ def axis_aligned(occupancy: np.ndarray, resolution: float, origin, yaw: float, l
     return out, (left, bottom)
 
 
-def _classify(value: np.ndarray, alpha: np.ndarray | None, mode: str, negate: bool,
+def _classify(colour: np.ndarray, n: int, alpha: np.ndarray | None, mode: str, negate: bool,
               occ_th: float, free_th: float) -> np.ndarray:
-    """Pixel values (0..255) -> int8 occupancy, exactly as ROS map_server.
+    """Pixels (the sum of ``n`` colour channels, alpha) -> int8 occupancy, exactly as ROS 1 map_server.
 
-    8-bit images go through a 256-entry table built by the same rule (a 250 m map's 25 M pixels: one gather
-    instead of float64 arrays of the whole image)."""
-    if value.dtype == np.uint8:
-        out = _classify_values(np.arange(256, dtype=np.uint8), mode, negate, occ_th, free_th)[value]
-    else:
-        out = _classify_values(value, mode, negate, occ_th, free_th)
-    if mode == "scale" and alpha is not None:
-        out[alpha == 0] = -1
+    Through a table with an entry per channel sum (a 250 m map's 25 M pixels: one gather instead of float64 arrays
+    of the whole image)."""
+    sums, k = colour, n
+    if mode == "trinary" and alpha is not None:  # alpha averaged in (ROS 1's and nav2's trinary mode)
+        sums, k = colour + alpha.astype(np.uint16), n + 1
+    out = _classify_values(np.arange(255 * k + 1), k, mode, negate, occ_th, free_th)[sums]
+    if mode == "scale" and alpha is not None:  # ROS 1: in-between and alpha 0 (nav2: any pixel not opaque)
+        out[(alpha == 0) & (out > 0) & (out < 100)] = -1
     return out
 
 
-def _classify_values(value: np.ndarray, mode: str, negate: bool, occ_th: float, free_th: float) -> np.ndarray:
-    """map_server's rule for each pixel value (alpha aside)."""
+def _classify_values(sums: np.ndarray, k: int, mode: str, negate: bool, occ_th: float, free_th: float) -> np.ndarray:
+    """map_server's rule for pixels whose ``k`` averaged channels sum to ``sums`` (scale mode's alpha aside)."""
     if mode == "raw":
-        out = np.where((value >= 0) & (value <= 100), value, -1)
-        return out.astype(np.int8)
-    v = 255 - value if negate else value
+        v = sums // k  # the mean truncated, as ROS 1 casts it
+        return np.where(v <= 100, v, -1).astype(np.int8)
+    v = sums / k  # a double, as ROS 1's color_avg
+    if negate:
+        v = 255.0 - v
     p = (255.0 - v) / 255.0
-    out = np.full(value.shape, -1, dtype=np.int8)
+    out = np.full(sums.shape, -1, dtype=np.int8)
     occ = p > occ_th
     free = p < free_th
     if mode == "scale":
         between = ~(occ | free)
         ratio = (p[between] - free_th) / (occ_th - free_th)
-        out[between] = (99.0 * ratio).astype(np.int8)
+        out[between] = (1.0 + 98.0 * ratio).astype(np.int8)  # ROS 1's 1 + 98 * ratio, truncated (1..99)
     out[occ] = 100
     out[free] = 0
     return out

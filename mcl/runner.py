@@ -35,7 +35,7 @@ import numpy as np
 from mcl.config import Config, dump_config
 from mcl.datasets import ScanMap
 from mcl.datasets.carmen import Scan
-from mcl.errors import ConfigError, DataError
+from mcl.errors import ConfigError, DataError, MclError
 from mcl.estimate import compose, inverse, wrap_angle  # noqa: F401  (compose, inverse: mcl.runner's too)
 
 
@@ -60,6 +60,40 @@ def default_out_dir(root: Path | None = None) -> Path:
         k += 1
         out = root / f"{stamp}-{k}"
     return out
+
+
+# what a run writes into its folder (mcl.runner._run), and the partial files of its line writers
+RUN_OUTPUTS = ("config.yaml", "trajectory.tum", "quality.csv", "summary.json", "recording.rrd", "estimate.bag",
+               "estimate.db3", "estimate.mcap")
+
+
+def check_out_dir(out: Path, flag: str = "--out") -> None:
+    """Before any work: ``out`` must be a folder mcl can create and write in, empty or holding a run's outputs
+    alone (a run again into the same folder replaces them). ConfigError naming ``flag`` otherwise: a file there,
+    a folder holding other files (a user's trajectory.tum is not overwritten), no permission."""
+    from mcl.trajectory import check_writable_folder
+
+    out = Path(out)
+    check_writable_folder(out, f"{flag} {out}")
+    if out.is_dir():
+        names = sorted(p.name for p in out.iterdir())
+        other = [n for n in names if n.removesuffix(".partial") not in RUN_OUTPUTS]
+        if other:
+            more = f", ... ({len(other)} in all)" if len(other) > 4 else ""
+            raise ConfigError(f"{flag} {out}: the folder holds files that are not a run's outputs "
+                              f"({', '.join(other[:4])}{more}): choose a new or empty folder")
+        if names and "config.yaml" not in names:  # a trajectory.tum of the user's own, say
+            raise ConfigError(f"{flag} {out}: the folder holds {', '.join(names)} but no config.yaml: not an "
+                              "mcl run's folder; choose a new or empty folder")
+
+
+def _clear_run_outputs(out_dir: Path) -> None:
+    """A run into a folder that holds an earlier run's outputs: those go first (a recording left from a run with
+    rerun.mode save beside the new run's trajectory would belong to another run)."""
+    for name in RUN_OUTPUTS:
+        for p in (out_dir / name, out_dir / f"{name}.partial"):
+            if p.is_file():
+                p.unlink()
 
 
 # frames of mcl's own code have a file name starting with one of these
@@ -303,6 +337,9 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
     scans = deskew(scans, log, cfg.sensor.sweep_time, echo, timed=cfg.bag is not None)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
+        if not truth.t.size:
+            raise DataError(f"{cfg.truth}: no poses (an empty trajectory): nothing to score the run against "
+                            "(leave out --truth, or set truth: null)")
     elif cfg.bag is not None and log.truth is not None:
         truth = Truth(*log.truth)
     else:
@@ -490,6 +527,9 @@ def _run(
     echo = echo or (lambda msg: print(msg, file=sys.stderr))
     wall0 = time.perf_counter()
     log, grid, scans, marks_all, truth, bag_initial = _open_source(cfg, echo, progress)
+    if not grid.free.any():
+        raise DataError(f"{grid.path}: no free cell (occupied_thresh and free_thresh leave every cell occupied or "
+                        "unknown): nowhere to localize")
     landmark_map = None
     if cfg.landmarks.use:
         from mcl.landmarks import load_landmarks
@@ -515,11 +555,6 @@ def _run(
         if cache_is_cold():
             echo("mcl: compiling kernels (once; cached for later runs)")
 
-    signals.defer()  # outputs from here on: a signal stops the loop only, and everything is closed
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out_dir / "config.yaml", dump_config(cfg))
-
     pf = ParticleFilter(cfg, grid, landmark_map=landmark_map,
                         plane_model=plane_sensor.model if plane_sensor is not None else None)
     if from_bag:  # the bag's /initialpose, covariance included
@@ -536,6 +571,15 @@ def _run(
         pf.init_gaussian(fc.initial_pose, fc.initial_std)
         mode = "tracking"
     seed_from_landmarks = mode == "global" and landmark_map is not None  # at the first known landmark (Table 6.5)
+
+    signals.defer()  # outputs from here on: a signal stops the loop only, and everything is closed
+    out_dir = Path(out_dir)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        _clear_run_outputs(out_dir)
+        atomic_write_text(out_dir / "config.yaml", dump_config(cfg))
+    except OSError as e:
+        raise DataError(f"{out_dir}: cannot write the run's outputs there: {e.strerror or e}") from None
 
     viz = None
     rrd_path = out_dir / "recording.rrd"
@@ -578,6 +622,7 @@ def _run(
     traj_t: list[float] = []
     traj_p: list[np.ndarray] = []
     interrupted = False
+    failure = None  # the exception that stopped the loop, re-raised once the outputs are closed and summarised
     last_odom = None
     last_t = 0.0
     lasers: set = set()  # the scan sources (a bag's topics; a CARMEN log's one kind) seen to update so far
@@ -744,6 +789,8 @@ def _run(
                     stage_totals["viz"] += time.perf_counter() - tv
     except KeyboardInterrupt:
         interrupted = True
+    except Exception as e:  # an input found bad mid-run: the poses so far are kept, the summary says why it stopped
+        failure = e
     finally:
         bar.close()
         writer.close()
@@ -759,6 +806,7 @@ def _run(
     summary: dict = {
         "mode": mode,
         "interrupted": interrupted,
+        **({"error": f"stopped after {counts['updates']} updates: {failure}"} if failure is not None else {}),
         "map": cfg.map,
         "log": cfg.log,
         "bag": cfg.bag,
@@ -814,6 +862,11 @@ def _run(
         except DataError as e:
             summary["eval"] = {"error": str(e)}
     atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    if failure is not None:  # one error line from the caller; the folder holds the poses up to it, and says so
+        if isinstance(failure, MclError):
+            raise type(failure)(f"{failure} (stopped after {counts['updates']} updates; the poses so far and a "
+                                f"summary.json that says so are in {out_dir})") from None
+        raise failure
 
     # The one-paragraph summary.
     ms = summary["ms_per_update"]

@@ -629,13 +629,14 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(seed, (int, np.integer)) and seed >= 0, "seed", f"expected an integer >= 0, got {seed!r}")
     _check(math.isfinite(duration) and 1.0 <= duration <= 3600.0, "duration", f"expected 1..3600 s, got {duration}")
     _check(isinstance(n_beams, (int, np.integer)) and 2 <= n_beams <= 4096, "n_beams", f"expected 2..4096, got {n_beams}")
-    _check(0.0 < fov <= 2 * math.pi, "fov", f"expected 0 < fov <= 2*pi, got {fov}")
+    _check(0.0 < fov <= 2 * math.pi, "fov", f"expected 0 < fov <= 2 pi rad (360 degrees), got {fov:g} rad ({math.degrees(fov):g} degrees)")
     _check(math.isfinite(range_max) and 0.5 <= range_max <= 100.0, "range_max", f"expected 0.5..100 m, got {range_max}")
     _check(range_sigma >= 0 and 0 <= p_short and 0 <= p_max and p_short + p_max <= 1, "range_sigma/p_short/p_max",
            "noise must be >= 0 and p_short + p_max <= 1")
     _check(len(odom_alphas) == 4 and all(a >= 0 for a in odom_alphas), "odom_alphas", "expected four values >= 0")
     _check(0.5 <= odom_scale <= 1.5, "odom_scale", f"expected 0.5..1.5, got {odom_scale}")
-    _check(0.1 <= speed <= 2.0 and 0.1 <= turn_rate <= 3.0, "speed/turn_rate", "out of range")
+    _check(0.1 <= speed <= 2.0, "speed", f"expected 0.1..2 m/s, got {speed}")
+    _check(0.1 <= turn_rate <= 3.0, "turn_rate", f"expected 0.1..3 rad/s, got {turn_rate}")
     _check(isinstance(dynamic_obstacles, (int, np.integer)) and 0 <= dynamic_obstacles <= 200, "dynamic_obstacles",
            f"expected 0..200, got {dynamic_obstacles!r}")
     _check(isinstance(unmapped_furniture, (int, np.integer)) and 0 <= unmapped_furniture <= 500,
@@ -1091,16 +1092,30 @@ def write_log_as_bag(outdir, fmt: str, sweep: float = 0.0) -> Path:
     return bag
 
 
+def _simulate_from_args(args: argparse.Namespace) -> dict:
+    return simulate(args.outdir, kind=args.kind, seed=args.seed, duration=args.duration, range_max=args.range_max,
+                    n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
+                    dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
+                    landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
+                    depth_every=args.depth_every, map_resolution=args.map_resolution,
+                    reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
+                    scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
+                    unknown_floor=args.unknown_floor)
+
+
 def run_from_args(args: argparse.Namespace) -> int:
     """Run ``mcl simulate`` from parsed arguments; prints a one-line summary."""
-    s = simulate(args.outdir, kind=args.kind, seed=args.seed, duration=args.duration, range_max=args.range_max,
-                 n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
-                 dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
-                 landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
-                 depth_every=args.depth_every, map_resolution=args.map_resolution,
-                 reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
-                 scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
-                 unknown_floor=args.unknown_floor)
+    from mcl.trajectory import check_writable_folder
+
+    check_writable_folder(args.outdir, f"OUTDIR {args.outdir}")
+    try:
+        s = _simulate_from_args(args)
+    except ConfigError as e:  # a parameter named as the command line spells it: "simulate: n_beams" -> "--beams"
+        key, _, msg = str(e).removeprefix("simulate: ").partition(": ")
+        option = {"n_beams": "beams"}.get(key, key)
+        if not hasattr(args, option):
+            raise
+        raise ConfigError(f"--{option.replace('_', '-')}: {msg}") from None
     fmt = getattr(args, "format", "clf")
     if fmt != "clf":
         write_log_as_bag(s["outdir"], fmt, sweep=args.scan_sweep)

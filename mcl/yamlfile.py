@@ -16,19 +16,52 @@ from mcl.errors import MclError
 SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
+class _DuplicateKey(yaml.YAMLError):
+    def __init__(self, key, mark):
+        super().__init__(f"duplicate key {key}")
+        self.key, self.mark = key, mark
+
+
+class _Loader(SAFE_LOADER):
+    """SAFE_LOADER that rejects a key given twice in one mapping (PyYAML keeps the last, silently). The check is
+    in flatten_mapping, Python-level even under libyaml, at its first call on a node: flattening rewrites the
+    node's keys in place, and a merge key's (``<<``) keys may then repeat the node's own, which override them."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._checked: set = set()
+
+    def flatten_mapping(self, node):
+        if node in self._checked:
+            return super().flatten_mapping(node)
+        self._checked.add(node)
+        own = [k for k, _ in node.value if k.tag != "tag:yaml.org,2002:merge"]
+        super().flatten_mapping(node)  # first: a `=` key becomes a string here
+        seen = set()
+        for k in own:
+            if isinstance(k, yaml.ScalarNode):
+                key = self.construct_object(k)  # cached: construct_mapping reads it back
+                if key in seen:
+                    raise _DuplicateKey(key, k.start_mark)
+                seen.add(key)
+
+
 def read_yaml(path: str | os.PathLike, error: type[MclError]):
     """The parsed document of a YAML file. Any problem raises ``error`` with one line naming
-    the file (and the line of a syntax error): unreadable, not UTF-8, invalid YAML."""
+    the file (and the line of a syntax error or a duplicate key): unreadable, not UTF-8, invalid YAML, a key given
+    twice in one mapping."""
     name = str(path)
     try:
         with open(path, encoding="utf-8") as f:
             text = f.read()
+    except UnicodeDecodeError:  # before ValueError, its base class
+        raise error(f"{name}: not a UTF-8 text file") from None
     except (OSError, ValueError) as e:  # ValueError: a NUL byte in the path
         raise error(f"{name}: cannot read: {getattr(e, 'strerror', None) or type(e).__name__}") from None
-    except UnicodeDecodeError:
-        raise error(f"{name}: not a UTF-8 text file") from None
     try:
-        return yaml.load(text, Loader=SAFE_LOADER)  # noqa: S506 - a safe loader
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 - a safe loader
+    except _DuplicateKey as e:
+        raise error(f"{name}:{e.mark.line + 1}: duplicate key {_printable(e.key)}") from None
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f":{mark.line + 1}" if mark is not None else ""
@@ -36,6 +69,13 @@ def read_yaml(path: str | os.PathLike, error: type[MclError]):
         raise error(f"{name}{where}: invalid YAML" + (f": {problem}" if problem else "")) from None
     except (RecursionError, MemoryError) as e:  # hostile input: deeply nested or huge documents
         raise error(f"{name}: invalid YAML ({type(e).__name__})") from None
+
+
+def _printable(k) -> str:
+    """A key as it goes into a one-line message: control characters escaped, cut to 40 characters."""
+    s = str(k)
+    s = s if s.isprintable() else repr(s)[1:-1]
+    return s if len(s) <= 40 else s[:37] + "..."
 
 
 def short_repr(v, limit: int = 40) -> str:

@@ -1,5 +1,7 @@
 """Config loading: defaults, overrides, and one clear error per bad key."""
 
+import re
+
 import pytest
 
 from mcl.config import Config, dump_config, load_config
@@ -135,3 +137,78 @@ def test_yaml_off_means_the_off_choice(tmp_path):
     assert load_config(None, ["rerun.mode=off"]).rerun.mode == "off"
     with pytest.raises(ConfigError, match="rerun.mode: expected one of"):
         load_config(None, ["rerun.mode=true"])
+
+
+def test_an_error_a_set_causes_names_the_set(tmp_path):
+    # An unknown section, a check across keys, the beam weights: the --set's doing, not the file's (nor the
+    # default config's, which `mcl run` without a config passes).
+    from mcl.config import PROJECT_ROOT
+
+    base = write(tmp_path, "filter:\n  particles: 2000\nsensor:\n  range_max: 4\n", "base.yaml")
+    for path in (base, PROJECT_ROOT / "configs" / "default.yaml", None):
+        for sets, start in ((["nosuch.key=1"], "--set nosuch.key=1: nosuch: unknown key"),
+                            (["sensor.range_min=100"], "--set sensor.range_min=100: sensor.range_min: 100.0 must be"),
+                            (["sensor.model=beam", "sensor.beam.z_hit=0.9"], "--set sensor.beam.z_hit=0.9: sensor.beam."),
+                            (["sensor={range_min: 100}"], "--set sensor={range_min: 100}: sensor.range_min: "),
+                            (["filter.recovery=auto", "filter.recovery_alpha_fast=0.0001"],
+                             "--set filter.recovery_alpha_fast=0.0001: filter.recovery_alpha_slow: "),
+                            (["planes.depth=~no-such-user-mcl/d"], "--set planes.depth=~no-such-user-mcl/d: planes.depth: ")):
+            with pytest.raises(ConfigError) as e:
+                load_config(path, sets)
+            assert str(e.value).startswith(start), (path, str(e.value))
+    # of two keys a check compares, the one set last
+    with pytest.raises(ConfigError, match=r"^--set sensor.range_max=3: sensor.range_min: 5.0 must be below"):
+        load_config(None, ["sensor.range_max=3", "sensor.range_min=5", "sensor.range_max=3"])
+    # a check the --set has no part in still names the file
+    bad = write(tmp_path, "sensor:\n  range_min: 5\n  range_max: 4\n", "bad.yaml")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(bad))}: sensor.range_min: 5.0 must be below"):
+        load_config(bad, ["filter.particles=10"])
+    assert load_config(bad, ["sensor.range_max=10"]).sensor.range_max == 10
+
+
+def test_a_key_given_twice_is_an_error(tmp_path):
+    # PyYAML keeps the last silently: a second filter block lost the first (initial pose and particles).
+    from mcl.cli import main
+    from mcl.errors import DataError
+    from mcl.maps import load_map
+    from mcl.yamlfile import read_yaml
+
+    p = write(tmp_path, "seed: 2\nfilter:\n  particles: 2000\n  initial_pose: [0, 0, 0]\nfilter:\n"
+                        "  resampling: stratified\n")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(p))}:5: duplicate key filter$"):
+        load_config(p)
+    assert main(["config", "show", str(p)]) == 2
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(p))}:4: duplicate key particles$"):
+        load_config(write(tmp_path, "filter:\n  particles: 1\n  kld: true\n  particles: 2\n"))
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(p))}:1: duplicate key seed$"):
+        load_config(write(tmp_path, "{seed: 1, 'seed': 2}\n"))
+    m = write(tmp_path, "image: map.pgm\nresolution: 0.05\nresolution: 0.5\norigin: [0, 0, 0]\n", "map.yaml")
+    with pytest.raises(DataError, match=rf"^{re.escape(str(m))}:3: duplicate key resolution$"):
+        load_map(m)
+    # a merge key's keys are overridden by the mapping's own, as YAML means
+    merged = write(tmp_path, "a: &f {particles: 10, kld: true}\nb: {<<: *f, particles: 20}\nc: {<<: [*f], kld: false}\n",
+                   "m.yaml")
+    assert read_yaml(merged, ConfigError) == {"a": {"particles": 10, "kld": True}, "b": {"particles": 20, "kld": True},
+                                              "c": {"particles": 10, "kld": False}}
+
+
+def test_the_yaml_loader_stays_libyaml_and_every_shipped_yaml_loads():
+    # libyaml's parser reads a config 35 times faster than PyYAML's own (yamlfile.SAFE_LOADER)
+    import yaml
+
+    from mcl.config import PROJECT_ROOT
+    from mcl.yamlfile import _Loader, read_yaml
+
+    if hasattr(yaml, "CSafeLoader"):
+        assert issubclass(_Loader, yaml.CSafeLoader)
+    files = sorted((PROJECT_ROOT / "configs").glob("*.yaml")) + sorted((PROJECT_ROOT / "suites").glob("*.yaml"))
+    assert files
+    for f in files:
+        assert read_yaml(f, ConfigError) == yaml.safe_load(f.read_text()), f
+
+
+def test_a_yaml_file_not_utf8_says_so(tmp_path):
+    p = tmp_path / "c.yaml"
+    p.write_bytes(b"seed: 1\n# caf\xe9\n")
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(p))}: not a UTF-8 text file$"):
+        load_config(p)

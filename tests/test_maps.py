@@ -50,18 +50,29 @@ PIX = np.array([[0, 254, 205], [100, 128, 255]], dtype=np.uint8)  # image row 0 
 
 def ros_expected(v, mode, negate=False, occ=0.65, free=0.196):
     """Straight transcription of ROS map_server for one grey value."""
+    return ros1_pixel([v], False, mode, negate, occ, free)
+
+
+def ros1_pixel(channels, has_alpha, mode, negate=False, occ_th=0.65, free_th=0.196):
+    """ROS 1 map_server's loop (navigation/map_server/src/image_loader.cpp) for one pixel as SDL_image lays it out
+    (grey: 1 channel; grey + alpha: RGBA; RGB; RGBA). Where mcl departs from it: raw mode is nav2's (no negate,
+    -1 above 100), and an RGB pixel has no alpha (ROS 1 reads its blue byte as the alpha)."""
+    n = len(channels)
+    avg_channels = n if (mode == "trinary" or not has_alpha) else n - 1
+    color_avg = sum(int(c) for c in channels[:avg_channels]) / float(avg_channels)
+    alpha = int(channels[-1]) if has_alpha else 1
     if mode == "raw":
-        return v if 0 <= v <= 100 else -1
+        return int(color_avg) if color_avg <= 100 else -1
     if negate:
-        v = 255 - v
-    p = (255 - v) / 255.0
-    if p > occ:
+        color_avg = 255 - color_avg
+    occ = (255 - color_avg) / 255.0
+    if occ > occ_th:
         return 100
-    if p < free:
+    if occ < free_th:
         return 0
-    if mode == "trinary":
+    if mode == "trinary" or alpha < 1.0:
         return -1
-    return int(99 * (p - free) / (occ - free))
+    return int(1 + 98 * (occ - free_th) / (occ_th - free_th))  # the C++ cast into an unsigned char: truncation
 
 
 @pytest.mark.parametrize("fmt", ["pgm", "p2", "png"])
@@ -92,9 +103,51 @@ def test_scale_value_and_alpha(tmp_path):
     rgba[0, 2, :3] = 0  # black, opaque: occupied
     grid = load_map(write_map(tmp_path, rgba, fmt="png", mode="scale"))
     ratio = ((255 - 128) / 255 - 0.196) / (0.65 - 0.196)
-    assert grid.occupancy[0, 0] == int(99 * ratio) == 65
+    assert grid.occupancy[0, 0] == int(1 + 98 * ratio) == 66  # ROS 1's rule (it was int(99 * ratio) = 65)
     assert grid.occupancy[0, 1] == -1  # alpha 0 -> unknown in scale mode
     assert grid.occupancy[0, 2] == 100
+
+
+def test_scale_mode_keeps_the_in_between_pixels_off_the_free_cells(tmp_path):
+    # ROS 1: 1 + 98 * ratio, so map_saver's unknown grey 205 (just above free_thresh) is 1, not 0 (free); and 1..99
+    # are neither free nor occupied, as AMCL reads them (205 and 200 were free cells before: 0, and 4 < 19.6)
+    grid = load_map(write_map(tmp_path, np.array([[0, 205, 254, 128, 200]], np.uint8), mode="scale"))
+    assert grid.occupancy[0].tolist() == [100, 1, 0, 66, 5]
+    assert grid.free[0].tolist() == [False, False, True, False, False]
+    assert grid.occupied[0].tolist() == [True, False, False, False, False]
+    # alpha 0 makes only an in-between pixel unknown (ROS 1): transparent black and white stay occupied and free
+    rgba = np.array([[[0, 0, 0, 0], [255, 255, 255, 0], [205, 205, 205, 0], [205, 205, 205, 255]]], np.uint8)
+    grid = load_map(write_map(tmp_path, rgba, fmt="png", mode="scale", name="a"))
+    assert grid.occupancy[0].tolist() == [100, 0, -1, 1]
+
+
+def test_trinary_mode_averages_the_alpha_in_as_a_double(tmp_path):
+    # ROS 1 and nav2 average the alpha channel in with the colours in trinary mode, as a double: transparent white
+    # (mean 191.25) is unknown, opaque grey 205 (217.5) free; an RGB mean of 205.33 is free (205 was unknown)
+    rgba = np.array([[[255, 255, 255, 0], [205, 205, 205, 255], [254, 254, 254, 255], [0, 0, 0, 255],
+                      [205, 205, 206, 255]]], np.uint8)
+    assert load_map(write_map(tmp_path, rgba, fmt="png")).occupancy[0].tolist() == [-1, 0, 0, 100, 0]
+    rgb = np.ascontiguousarray(rgba[..., :3])
+    assert load_map(write_map(tmp_path, rgb, fmt="png", name="rgb")).occupancy[0].tolist() == [0, -1, 0, 100, 0]
+    # grey + alpha is RGBA to SDL_image: (3 v + a) / 4; opaque black 63.75 is still occupied, opaque 205 free,
+    # transparent 205 (153.75) unknown (205 alone was unknown every time: the alpha was dropped)
+    la = np.array([[[0, 255], [205, 255], [205, 0], [254, 255]]], np.uint8)
+    assert load_map(write_map(tmp_path, la, fmt="png", name="la")).occupancy[0].tolist() == [100, 0, -1, 0]
+    # in scale and raw modes the alpha is left out
+    assert load_map(write_map(tmp_path, la, fmt="png", name="las", mode="scale")).occupancy[0].tolist() == \
+        [100, 1, -1, 0]
+
+
+def test_a_palette_image_is_read_by_its_colours_with_alpha_only_where_it_has_transparency(tmp_path):
+    grey = np.array([[0, 205, 254]], np.uint8)
+    Image.fromarray(grey).convert("P").save(tmp_path / "p.png")  # no transparency: no alpha to average in
+    y = write_map(tmp_path, grey, fmt="png")
+    y.write_text(y.read_text().replace("m.png", "p.png"))
+    assert load_map(y).occupancy[0].tolist() == [100, -1, 0]
+    im = Image.fromarray(grey).convert("P")
+    im.info["transparency"] = int(np.asarray(im)[0, 2])  # the free pixel's index transparent: alpha 0
+    im.save(tmp_path / "p.png", transparency=im.info["transparency"])
+    assert load_map(y).occupancy[0].tolist() == [100, 0, -1]  # (0+0+0+255)/4 = 63.75; 205 opaque; 254 * 3 / 4
 
 
 def test_colour_channels_are_averaged(tmp_path):
@@ -386,6 +439,67 @@ def test_bad_yaml(tmp_path, text, key):
     assert key in str(e.value) and "\n" not in str(e.value)
 
 
+def test_an_empty_or_non_image_file_is_one_line_naming_it(tmp_path):
+    y = write_map(tmp_path, PIX)
+    (tmp_path / "m.pgm").write_bytes(b"")
+    with pytest.raises(DataError, match=r"m\.yaml: image: .*m\.pgm: empty file$"):
+        load_map(y)
+    (tmp_path / "m.pgm").write_text("image: m.pgm\n")
+    with pytest.raises(DataError, match=r"m\.yaml: image: .*m\.pgm: not an image file") as e:
+        load_map(y)
+    assert "BytesIO" not in str(e.value)  # was "cannot identify image file <_io.BytesIO object at 0x...>"
+
+
+def test_a_resolution_too_fine_to_index_is_refused_by_name_without_numpy_warnings(tmp_path):
+    import warnings
+
+    for res in ("1e-300", "1.0e-20", "9e-7"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(DataError, match=r"m\.yaml: resolution: must be at least 1e-06 m a cell, got "):
+                load_map(write_map(tmp_path, PIX, resolution=res))
+    assert load_map(write_map(tmp_path, PIX, resolution="1e-6")).resolution == 1e-6
+
+
+def test_numbers_in_quotes_are_numbers_as_ros_reads_them(tmp_path):
+    # yaml-cpp converts any scalar: resolution: "0.05" is 0.05 to map_server; it was refused while "5e-2" was not
+    y = write_map(tmp_path, PIX, resolution='"0.05"', occ='"0.65"', free="'0.196'", origin='["1.5", "-2", "0"]',
+                  negate='"1"')
+    g = load_map(y)
+    want = load_map(write_map(tmp_path, PIX, name="plain", resolution=0.05, origin="[1.5, -2, 0]", negate=1))
+    assert (g.resolution, g.origin) == (0.05, (1.5, -2.0))
+    np.testing.assert_array_equal(g.occupancy, want.occupancy)
+    assert load_map(write_map(tmp_path, PIX, resolution='"5e-2"')).resolution == 0.05
+    for key, bad in (("resolution", '"abc"'), ("resolution", '"nan"'), ("occ", '"inf"'), ("free", '"1_0"'),
+                     ("origin", '["1", "x", 0]'), ("negate", '"2"'), ("negate", '"yes"')):
+        with pytest.raises(DataError, match=r"m\.yaml: (resolution|occupied_thresh|free_thresh|origin|negate): "):
+            load_map(write_map(tmp_path, PIX, **{key: bad}))
+
+
+@pytest.mark.parametrize("fmt", ["P5", "P2"])
+def test_a_pgm_is_scaled_by_the_maxval_of_its_header(tmp_path, fmt):
+    # 16 bits: v * 255 / maxval rounded, whatever the pixels' values (a dark image of values <= 255 out of 65535
+    # was taken as 8-bit and came out mixed); maxval < 255: v * 255 // maxval as SDL_image (ROS 1) has it (Pillow
+    # rounds: 50 of 62 is 205.6, unknown to ROS 1, free when rounded to 206)
+    def pgm(maxval, values):
+        y = write_map(tmp_path, PIX, name=f"g{maxval}")
+        v = np.array([values], dtype=">u2" if maxval > 255 else np.uint8)
+        body = (" ".join(map(str, v.ravel())) + "\n").encode() if fmt == "P2" else v.tobytes()
+        (tmp_path / f"g{maxval}.pgm").write_bytes(f"{fmt}\n# c\n{v.shape[1]} 1\n{maxval}\n".encode() + body)
+        return load_map(y).occupancy[0].tolist()
+
+    assert pgm(65535, [0, 200, 254, 255]) == [100, 100, 100, 100]
+    assert pgm(65535, [0, 205 * 257, 254 * 257, 65535]) == [100, -1, 0, 0]
+    assert pgm(1023, [0, 822, 1019, 1023]) == [100, -1, 0, 0]  # 204.9 -> 205, 254.0
+    assert pgm(62, [0, 50, 62, 31]) == [100, -1, 0, -1]
+    assert pgm(255, [0, 205, 254, 50]) == [100, -1, 0, 100]
+    # a 16-bit PNG: v * 255 / 65535 rounded, dark values too
+    Image.fromarray(np.array([[0, 200, 254 * 257, 65535]], dtype=np.uint16)).save(tmp_path / "w.png")
+    y = write_map(tmp_path, PIX, name="w")
+    y.write_text(y.read_text().replace("w.pgm", "w.png"))
+    assert load_map(y).occupancy[0].tolist() == [100, 100, 0, 0]
+
+
 def test_missing_yaml(tmp_path):
     with pytest.raises(DataError, match="nothere.yaml"):
         load_map(tmp_path / "nothere.yaml")
@@ -435,21 +549,28 @@ def test_mask_at_reads_the_cell_of_each_world_point_and_is_false_off_the_map():
 
 @pytest.mark.parametrize("mode", ["trinary", "scale", "raw"])
 @pytest.mark.parametrize("negate", [False, True])
-def test_an_8_bit_map_is_classified_by_its_table_as_pixel_by_pixel(mode, negate):
-    # 8-bit images take a 256-entry table; every value, with thresholds between pixel steps and on them, must
-    # give what map_server's rule gives pixel by pixel (the int32 path), alpha 0 unknown in scale mode.
-    from mcl.maps import _classify, _classify_values
+def test_the_tables_classify_every_pixel_as_ros_1s_loop(tmp_path, mode, negate):
+    # Pixels go through a table with an entry per channel sum; every grey value, and random RGB, RGBA and grey +
+    # alpha pixels (alpha 0, 255 or between), with thresholds between pixel steps and on them, must give what ROS 1's
+    # loop gives pixel by pixel.
+    from mcl.maps import _classify
 
     rng = np.random.default_rng(8)
-    value = np.concatenate([np.arange(256), rng.integers(0, 256, 500)]).astype(np.uint8).reshape(-1, 12)
-    alpha = np.where(rng.random(value.shape) < 0.2, 0, 255).astype(np.uint8)
-    for occ_th, free_th in ((0.65, 0.196), (100 / 255, 50 / 255)):
-        got = _classify(value, alpha, mode, negate, occ_th, free_th)
-        want = _classify_values(value.astype(np.int32), mode, negate, occ_th, free_th)
-        if mode == "scale":
-            want[alpha == 0] = -1
-        assert got.dtype == np.int8
-        np.testing.assert_array_equal(got, want)
+    grey = np.concatenate([np.arange(256), rng.integers(0, 256, 500)]).astype(np.uint8).reshape(-1, 12)
+    rgba = rng.integers(0, 256, (40, 12, 4)).astype(np.uint8)
+    rgba[:, :4, :3] = rgba[:, :4, :1]  # some grey
+    rgba[:, ::3, 3] = rng.choice([0, 255], (40, 4))
+    for occ_th, free_th in ((0.65, 0.196), (100 / 255, 50 / 255), (0.9, 0.0)):
+        cases = [(grey, 1, None, [[[v] for v in row] for row in grey], False),
+                 (rgba[..., :3].sum(axis=2, dtype=np.uint16), 3, None, rgba[..., :3].tolist(), False),
+                 (rgba[..., :3].sum(axis=2, dtype=np.uint16), 3, rgba[..., 3], rgba.tolist(), True),
+                 (rgba[..., 0].astype(np.uint16) * 3, 3, rgba[..., 3],
+                  [[[p[0], p[0], p[0], p[3]] for p in row] for row in rgba.tolist()], True)]
+        for colour, n, alpha, pixels, has_alpha in cases:
+            got = _classify(colour, n, alpha, mode, negate, occ_th, free_th)
+            want = [[ros1_pixel(p, has_alpha, mode, negate, occ_th, free_th) for p in row] for row in pixels]
+            assert got.dtype == np.int8
+            np.testing.assert_array_equal(got, want)
 
 
 def test_the_map_tables_are_built_without_numpys_huge_page_advice_and_the_advice_comes_back():

@@ -850,7 +850,7 @@ def test_a_bag_given_as_the_log_is_read_as_a_bag(world, scans, tmp_path, capsys)
                      "--particles", "300", "--no-progress"]) == 0
         trajs.append((out / "trajectory.tum").read_bytes())
     assert trajs[0] == trajs[1] and len(trajs[0]) > 1000
-    with pytest.raises(ConfigError, match=r"default.yaml: log: .*b\.mcap is a ROS bag: give it as bag"):
+    with pytest.raises(ConfigError, match=r"--set log=.*b\.mcap: log: .*b\.mcap is a ROS bag: give it as bag"):
         load_config(Path(__file__).resolve().parents[1] / "configs" / "default.yaml", [f"log={bag}"])
 
 

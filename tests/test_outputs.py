@@ -1,0 +1,135 @@
+"""Where a run writes: ``--out`` checked before any work, an earlier run's outputs replaced, a user's files never
+overwritten, and a run stopped by a bad input mid-way says so in its folder (mcl.runner.check_out_dir, _run)."""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+
+import pytest
+
+from mcl.cli import main
+from mcl.errors import DataError
+from mcl.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    d = tmp_path_factory.mktemp("world")
+    simulate(d, seed=3, duration=8.0)
+    return d
+
+
+def _run(world, out, *extra):
+    return main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--particles", "300",
+                 "--rerun", "off", "--no-progress", "--out", str(out), *extra])
+
+
+def _error_lines(capsys):
+    return [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("mcl: error:")]
+
+
+def test_an_out_that_is_a_file_is_refused_in_one_line(world, tmp_path, capsys):
+    f = tmp_path / "afile"
+    f.write_text("mine\n")
+    assert _run(world, f) == 2
+    assert _error_lines(capsys) == [f"mcl: error: --out {f}: exists and is not a folder"]
+    assert f.read_text() == "mine\n"
+    assert _run(world, f / "x") == 2  # below a file (as /dev/null/x): no traceback either
+    assert _error_lines(capsys) == [f"mcl: error: --out {f / 'x'}: {f} is not a folder"]
+
+
+def test_an_out_in_a_read_only_folder_is_refused_before_the_run(world, tmp_path, capsys, monkeypatch):
+    import mcl.trajectory
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    if os.geteuid() == 0:  # root may write in it all the same: the check's answer as a user's
+        real = os.access
+        monkeypatch.setattr(mcl.trajectory.os, "access", lambda p, m: False if str(p) == str(ro) else real(p, m))
+    try:
+        assert _run(world, ro / "run") == 2
+        assert _error_lines(capsys) == [f"mcl: error: --out {ro / 'run'}: cannot write in {ro} (permission denied)"]
+        assert main(["simulate", str(ro / "sim"), "--duration", "5"]) == 2
+        assert _error_lines(capsys) == [f"mcl: error: OUTDIR {ro / 'sim'}: cannot write in {ro} (permission denied)"]
+    finally:
+        ro.chmod(stat.S_IRWXU)
+
+
+def test_an_os_error_while_writing_is_one_line(world, tmp_path, capsys, monkeypatch):
+    # a full disk, a folder made read-only mid-run: one line naming the file, no traceback
+    import mcl.runner
+
+    def full(*_a, **_k):
+        raise OSError(28, "No space left on device", str(tmp_path / "disk" / "trajectory.tum.partial"))
+
+    monkeypatch.setattr(mcl.runner, "_clear_run_outputs", full)
+    assert _run(world, tmp_path / "disk") == 2
+    assert _error_lines(capsys) == [f"mcl: error: {tmp_path / 'disk'}: cannot write the run's outputs there: "
+                                    "No space left on device"]
+
+
+def test_a_folder_with_a_users_files_is_refused_and_left_as_it_is(world, tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "trajectory.tum").write_text("my own\n")  # a run's file name, but no mcl run wrote it
+    assert _run(world, out) == 2
+    (line,) = _error_lines(capsys)
+    assert "holds trajectory.tum but no config.yaml" in line
+    (out / "notes.txt").write_text("x\n")
+    assert _run(world, out) == 2
+    (line,) = _error_lines(capsys)
+    assert "holds files that are not a run's outputs (notes.txt)" in line
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "trajectory.tum"]
+    assert (out / "trajectory.tum").read_text() == "my own\n"
+
+
+def test_a_run_again_into_its_folder_replaces_the_earlier_runs_outputs(world, tmp_path):
+    out = tmp_path / "again"
+    assert _run(world, out, "--rerun", "save") == 0
+    assert (out / "recording.rrd").is_file()
+    assert _run(world, out, "--seed", "2") == 0  # --rerun off (after the one above): no recording of its own
+    assert not (out / "recording.rrd").exists()  # run 1's recording does not sit beside run 2's trajectory
+    assert json.loads((out / "summary.json").read_text())["seed"] == 2
+
+
+def test_a_map_without_a_free_cell_is_refused_before_anything_is_written(world, tmp_path, capsys):
+    import yaml
+
+    spec = yaml.safe_load((world / "map.yaml").read_text())
+    spec.update(image=str(world / spec["image"]), free_thresh=0.0, occupied_thresh=1.0)  # every cell unknown
+    m = tmp_path / "map.yaml"
+    m.write_text(yaml.safe_dump(spec))
+    out = tmp_path / "nofree"
+    assert main(["run", "--map", str(m), "--log", str(world / "log.clf"), "--rerun", "off", "--no-progress",
+                 "--out", str(out), "--global"]) == 2
+    (line,) = _error_lines(capsys)
+    assert line.endswith("no free cell (occupied_thresh and free_thresh leave every cell occupied or unknown): "
+                         "nowhere to localize")
+    assert not out.exists()
+
+
+def test_a_bad_input_found_mid_run_keeps_the_poses_and_the_summary_says_why(world, tmp_path, capsys, monkeypatch):
+    from mcl.filter import ParticleFilter
+
+    step, calls = ParticleFilter.step, []
+
+    def failing(self, *a, **k):
+        calls.append(1)
+        if len(calls) == 11:
+            raise DataError("log.clf:99: a bad reading")
+        return step(self, *a, **k)
+
+    monkeypatch.setattr(ParticleFilter, "step", failing)
+    out = tmp_path / "stopped"
+    assert _run(world, out) == 2
+    (line,) = _error_lines(capsys)
+    assert line.startswith("mcl: error: log.clf:99: a bad reading (stopped after 10 updates; the poses so far")
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["error"] == "stopped after 10 updates: log.clf:99: a bad reading"
+    assert summary["updates"] == 10 and not summary["interrupted"]
+    poses = (out / "trajectory.tum").read_text().splitlines()
+    assert len(poses) == summary["updates"] + summary["predicted_poses"] >= 10
+    assert not list(out.glob("*.partial"))
