@@ -126,22 +126,29 @@ def kld_bound(k, epsilon: float, z: float) -> np.ndarray:
 
 
 class BinCounter:
-    """Occupied (x, y, theta) histogram bins over a map's extent, as a dense flag array.
+    """Occupied (x, y, theta) histogram bins over a map's extent, as a dense flag array, or as a hash table when
+    that array would pass ``DENSE_MAX`` bins (its pages are only touched where the cloud is, but a 10 km map's
+    14 GB is more than a machine lends).
 
     ``add(particles)`` returns, for each particle in order, the number of
     distinct bins occupied so far (including earlier batches). ``reset()``
     clears only the bins touched. One serial numba pass each (``mcl.kernels.kld``).
     """
 
-    def __init__(self, origin, size, bin_xy: float, bin_theta: float):
+    DENSE_MAX = 1 << 30  # bins (bytes) of the dense array: a 5.4 km square map at 0.5 m and 10 degrees
+
+    def __init__(self, origin, size, bin_xy: float, bin_theta: float, dense_max: int | None = None):
         self.x0, self.y0 = float(origin[0]), float(origin[1])
         self.bin_xy = float(bin_xy)
         self.bin_theta = float(bin_theta)
         self.nx = max(1, int(math.ceil(size[0] / self.bin_xy)))
         self.ny = max(1, int(math.ceil(size[1] / self.bin_xy)))
         self.nt = max(1, int(math.ceil(2.0 * math.pi / self.bin_theta)))
-        self.flags = np.zeros(self.nx * self.ny * self.nt, dtype=np.bool_)
-        self._touched = np.empty(1024, dtype=np.int64)  # the flagged bins, to clear only those (mcl.kernels.kld)
+        if self.nx * self.ny * self.nt <= (self.DENSE_MAX if dense_max is None else dense_max):
+            self.flags, self.table = np.zeros(self.nx * self.ny * self.nt, dtype=np.bool_), None
+        else:  # open addressing, key + 1 (0: empty); grown to stay at most half full (add)
+            self.flags, self.table, self._shift = None, np.zeros(1 << 16, dtype=np.int64), 64 - 16
+        self._touched = np.empty(1024, dtype=np.int64)  # the flagged bins (table: their slots), to clear only those
         self._n_touched = 0
         self.k = 0
 
@@ -163,8 +170,20 @@ class BinCounter:
             grown[: self._n_touched] = self._touched[: self._n_touched]
             self._touched = grown
         counts = np.empty(m, dtype=np.int64)
-        self._n_touched = mark_bins(p, self.x0, self.y0, self.bin_xy, self.bin_theta, self.nx, self.ny, self.nt,
-                                    self.flags, self._touched, self._n_touched, self.k, counts)
+        if self.table is None:
+            self._n_touched = mark_bins(p, self.x0, self.y0, self.bin_xy, self.bin_theta, self.nx, self.ny,
+                                        self.nt, self.flags, self._touched, self._n_touched, self.k, counts)
+        else:
+            from mcl.kernels.kld import mark_bins_hashed, rehash
+
+            if 2 * (self._n_touched + m) > self.table.size:  # at most half full: short probes
+                bits = max(16, int(2 * (self._n_touched + m) - 1).bit_length())
+                table = np.zeros(1 << bits, dtype=np.int64)
+                rehash(self.table, self._touched, self._n_touched, table, 64 - bits)
+                self.table, self._shift = table, 64 - bits
+            self._n_touched = mark_bins_hashed(p, self.x0, self.y0, self.bin_xy, self.bin_theta, self.nx, self.ny,
+                                               self.nt, self.table, self._shift, self._touched, self._n_touched,
+                                               self.k, counts)
         if m:
             self.k = int(counts[-1])
         return counts
@@ -173,7 +192,7 @@ class BinCounter:
         if self._n_touched:
             from mcl.kernels.kld import clear_bins
 
-            clear_bins(self.flags, self._touched, self._n_touched)
+            clear_bins(self.flags if self.table is None else self.table, self._touched, self._n_touched)
         self._n_touched = 0
         self.k = 0
 

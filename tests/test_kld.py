@@ -68,6 +68,29 @@ def test_bin_counter_counts_distinct_bins_across_batches_and_resets():
     assert bins_occupied(a, 0.5, math.pi / 2) == 3
 
 
+def test_a_map_too_large_for_the_flag_array_counts_bins_in_a_hash_table_alike():
+    # A 10 km map at 0.5 m and 10 degrees would need a 14 GB flag array: the hash table gives the same counts,
+    # batch after batch, across its growth (the first table holds 32,768 bins) and a reset.
+    rng = np.random.default_rng(4)
+    dense = BinCounter((0.0, 0.0), (60.0, 60.0), 0.5, math.radians(10))
+    hashed = BinCounter((0.0, 0.0), (60.0, 60.0), 0.5, math.radians(10), dense_max=0)
+    assert hashed.flags is None and dense.table is None
+    big = BinCounter((0.0, 0.0), (10_000.0, 10_000.0), 0.5, math.radians(10))
+    assert big.flags is None  # not 14 GB
+    for n, spread in ((1000, 0.3), (30_000, 20.0), (50_000, 40.0), (7, 0.0)):
+        p = np.ascontiguousarray(np.vstack([30 + spread * rng.standard_normal(n), 30 + spread * rng.standard_normal(n),
+                                            rng.uniform(-math.pi, math.pi, n)]))
+        assert np.array_equal(hashed.add(p), dense.add(p))  # off-map poses clipped alike, too
+    assert hashed.table.size >= 2 * hashed.k > 2 * 30_000
+    hashed.reset()
+    dense.reset()
+    assert not hashed.table.any() and hashed.k == 0
+    p = np.ascontiguousarray(rng.uniform(0, 60, (3, 500)))
+    assert np.array_equal(hashed.add(p), dense.add(p))
+    fresh = BinCounter((0.0, 0.0), (60.0, 60.0), 0.5, math.radians(10))
+    assert np.array_equal(big.add(p), fresh.add(p))
+
+
 def _cloud(rng, n, spread):
     # centred inside a bin (5.25, 5.25, 5 degrees), so a tight cloud occupies one bin
     p = np.vstack([5.25 + spread * rng.standard_normal(n), 5.25 + spread * rng.standard_normal(n),
