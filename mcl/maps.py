@@ -85,6 +85,7 @@ class OccupancyGrid:
     path: str = "<memory>"
     occupied_thresh: float = 0.65
     free_thresh: float = 0.196
+    notes: tuple[str, ...] = ()  # what loading it did that a user of another tool would not expect (mcl run prints)
 
     @classmethod
     def from_occupancy(cls, occupancy, resolution: float, origin, path: str = "<memory>",
@@ -503,9 +504,13 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     # Image row 0 is the top; the grid's row 0 is the bottom.
     occupancy = np.ascontiguousarray(occupancy[::-1])
     occupancy, corner = axis_aligned(occupancy, resolution, (vals[0], vals[1]), yaw, label=where)
+    notes = ()
+    if yaw != 0.0:
+        notes = (f"{where}: origin yaw {yaw:g} rad: the map is turned about its lower-left corner, as ROS "
+                 "map_server defines the origin (AMCL ignores the yaw)",)
     if mode == "scale":  # 1..99 are the pixels between the thresholds: neither free nor occupied (AMCL's reading)
-        return OccupancyGrid(occupancy, resolution, corner, where, 0.99, 0.01)
-    return OccupancyGrid(occupancy, resolution, corner, where, occ_th, free_th)
+        return OccupancyGrid(occupancy, resolution, corner, where, 0.99, 0.01, notes)
+    return OccupancyGrid(occupancy, resolution, corner, where, occ_th, free_th, notes)
 
 
 def axis_aligned(occupancy: np.ndarray, resolution: float, origin, yaw: float, label: str | None = None):

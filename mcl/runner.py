@@ -331,7 +331,7 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         marks = _landmark_records(log, cfg)
     for w in log.warnings:
         echo(f"mcl: warning: {w}")
-    for note in log.notes:
+    for note in (*log.notes, *grid.notes):
         echo(note)
     scans = _retime(scans, log, cfg.sensor.time_offset, echo)
     scans = deskew(scans, log, cfg.sensor.sweep_time, echo, timed=cfg.bag is not None)

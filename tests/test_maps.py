@@ -374,6 +374,9 @@ def test_a_rotated_origin_puts_each_cell_where_map_server_says(tmp_path, yaw):
     x, y = _world_of_cells(h, w, 0.1, (1.0, 2.0), yaw)
     ix, iy = g.world_to_cell(x, y)
     assert g.contains(ix, iy).all()
+    # a user coming from AMCL (which ignores the yaw) hears of it; mcl run prints the grid's notes
+    assert g.notes == (f"{g.path}: origin yaw {yaw:g} rad: the map is turned about its lower-left corner, as ROS "
+                       "map_server defines the origin (AMCL ignores the yaw)",) and flat.notes == ()
     got = g.occupancy[iy, ix]
     quarter = abs(yaw / (math.pi / 2) - round(yaw / (math.pi / 2))) < 1e-12
     centre = np.zeros((h, w), dtype=bool)
