@@ -73,6 +73,19 @@ def test_every_message_type(tmp_path):
     np.testing.assert_array_equal(raw1.ranges, [5, 4, 3, 2, 1])
 
 
+def test_a_damaged_message_name_is_a_warning_naming_its_line(tmp_path):
+    # FLASR, flaser and bytes that are no name at all are damaged lines, not another sensor's messages: skipped as
+    # before (counted), and one warning names the first; CARMEN's own other messages (a rear ROBOTLASER2, SYNC,
+    # PARAM) are skipped without one.
+    log = read_carmen(write(tmp_path, [FLASER, "SYNC 1 2 3", "ROBOTLASER2 0 0", FLASER.replace("FLASER", "FLASR"),
+                                       FLASER, FLASER.lower(), "\x01\x7fJ 1 2", FLASER]))
+    assert len(log.scans) == 3
+    damaged = [w for w in log.warnings if "looks damaged" in w]
+    assert damaged == [f"{tmp_path / 'log.clf'}:4: 3 lines skipped whose message name looks damaged (the first: "
+                       "'FLASR'; a known one misspelt or not a name at all)"]
+    assert log.skipped["FLASR"] == log.skipped["ROBOTLASER2"] == 1
+
+
 def test_rawlaser_odometry_interpolation(tmp_path):
     lines = [ODOM_A, RAWLASER.format(k=1, t=11), RAWLASER.format(k=1, t=5), RAWLASER.format(k=1, t=20), ODOM_B]
     s_mid, s_before, s_after = read_carmen(write(tmp_path, lines)).scans

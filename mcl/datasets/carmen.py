@@ -48,6 +48,30 @@ from mcl.errors import DataError
 __all__ = ["Scan", "Landmarks", "Log", "read_carmen", "interpolate_odometry", "flaser_angle_increment", "LASER_KINDS"]
 
 LASER_KINDS = ("FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
+_USED = (*LASER_KINDS, "ODOM", "LANDMARK")  # the messages mcl reads
+_OTHERS = ("ROBOTLASER2", "RAWLASER5")  # other CARMEN messages one character off those (a rear laser)
+
+
+def _one_edit(a: str, b: str) -> bool:
+    """Whether ``a`` and ``b`` differ by at most one character inserted, deleted or replaced."""
+    if abs(len(a) - len(b)) > 1:
+        return False
+    if len(a) > len(b):
+        a, b = b, a
+    i = next((k for k, (x, y) in enumerate(zip(a, b)) if x != y), len(a))
+    return a[i + (len(a) == len(b)):] == b[i + 1:]
+
+
+def _damaged(word: str) -> bool:
+    """A message name that is not one (CARMEN's are upper case, digits and _), or one of mcl's messages in another
+    case or one character off (FLASR, flaser): a damaged line, not another sensor's message."""
+    if not all(c.isupper() or c.isdigit() or c in "_-" for c in word):
+        return True
+    return word not in _OTHERS and any(_one_edit(word, k) for k in _USED)
+
+
+def _printable_word(word: str) -> str:
+    return word if word.isprintable() and len(word) <= 40 else repr(word[:40])[1:-1]
 _AUTO_ORDER = ("FLASER", "ROBOTLASER1", "RAWLASER1")
 
 
@@ -361,6 +385,7 @@ def read_carmen(path: str | os.PathLike) -> Log:
     landmarks: list[Landmarks] = []
     skipped: dict[str, int] = {}
     params: dict[str, str] = {}
+    damaged: list[tuple[int, str]] = []  # lines whose keyword looks like a known one damaged (skipped)
     parsers = _PARSERS
     for lineno, raw in enumerate(lines, start=1):
         parts = raw.split()
@@ -381,6 +406,8 @@ def read_carmen(path: str | os.PathLike) -> Log:
                     params[parts[1]] = parts[2]
                 key = "#" if word.startswith("#") else word
                 skipped[key] = skipped.get(key, 0) + 1
+                if key != "#" and _damaged(word):
+                    damaged.append((lineno, word))
                 continue
             scans.append(parser(parts, word, lineno))
         except _Bad as e:
@@ -389,6 +416,11 @@ def read_carmen(path: str | os.PathLike) -> Log:
                 continue
             raise DataError(f"{name}:{lineno}: {e}") from None
 
+    if damaged:
+        lineno, word = damaged[0]
+        warnings.append(f"{name}:{lineno}: {len(damaged)} line{'s' if len(damaged) > 1 else ''} skipped whose "
+                        f"message name looks damaged (the first: {_printable_word(word)!r}; a known one misspelt or "
+                        "not a name at all)")
     if not scans and not landmarks:
         raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4)")
     odometry = np.array(odom_rows, dtype=np.float64).reshape(-1, 6)
