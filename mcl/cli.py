@@ -12,12 +12,13 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import os
 import sys
 import warnings
 from pathlib import Path
 
-from mcl.errors import MclError, MclWarning
+from mcl.errors import DataError, MclError, MclWarning
 
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
@@ -237,7 +238,12 @@ def cmd_eval(args) -> int:
     for name, t in ((args.estimate, t_est), (args.reference, t_ref)):
         if t.size == 0:
             raise MclError(f"{name}: no poses (an empty trajectory): nothing to score")
-    r = evaluate(t_est, p_est, t_ref, p_ref, converged_within=args.converged_within)
+    try:
+        r = evaluate(t_est, p_est, t_ref, p_ref, converged_within=args.converged_within)
+    except DataError:  # no reference pose inside the estimate's span: say which files and which spans
+        raise MclError(f"{args.reference}: no pose lies within the time span of {args.estimate} (reference "
+                       f"{t_ref.min():.3f}..{t_ref.max():.3f} s, estimate {t_est.min():.3f}..{t_est.max():.3f} s): "
+                       "another clock or another dataset?") from None
     print(json.dumps(r, indent=2) if args.json else format_eval(r))
     return 0
 
@@ -348,10 +354,14 @@ def _add_bag(sub) -> None:
 
 def _bag_options(p) -> None:
     p.add_argument("--config", help="config whose topics: and frames: sections apply (default: the defaults)")
-    p.add_argument("--scan-topic", metavar="TOPIC", help="topics.scan")
-    p.add_argument("--odom-topic", metavar="TOPIC", help="topics.odom")
-    p.add_argument("--odom-frame", metavar="FRAME", help="frames.odom")
-    p.add_argument("--base-frame", metavar="FRAME", help="frames.base")
+    p.add_argument("--scan-topic", metavar="TOPIC",
+                   help="LaserScan/PointCloud2 topic, or 'all' to fuse them (topics.scan; default: /scan, else the "
+                   "only one)")
+    p.add_argument("--odom-topic", metavar="TOPIC",
+                   help="nav_msgs/Odometry topic (or a pose topic in the odometry frame), 'tf' for odom -> base on "
+                   "/tf, or 'laser' for the scans' own motion by scan matching (topics.odom)")
+    p.add_argument("--odom-frame", metavar="FRAME", help="odometry frame (frames.odom, default odom)")
+    p.add_argument("--base-frame", metavar="FRAME", help="robot frame (frames.base, default base_link)")
 
 
 def _bag_config(args):
@@ -401,7 +411,7 @@ def _add_convert(sub) -> None:
 def cmd_convert(args) -> int:
     import numpy as np
 
-    from mcl.datasets.bagwrite import convert
+    from mcl.datasets.bagwrite import convert, kind_of_output
 
     cfg = _bag_config(args)
     grid = truth = initial = None
@@ -414,11 +424,28 @@ def cmd_convert(args) -> int:
 
         truth = read_tum(args.truth)
     if args.initial_pose:
+        if not all(math.isfinite(v) for v in args.initial_pose):
+            raise MclError(f"--initial-pose: expected finite X Y THETA, got {' '.join(map(str, args.initial_pose))}")
+        if grid is not None and not grid.contains(*grid.world_to_cell(*args.initial_pose[:2])):
+            raise MclError(f"--initial-pose: ({args.initial_pose[0]:g}, {args.initial_pose[1]:g}) lies outside the "
+                           f"map {args.map}")
         initial = (np.array(args.initial_pose), np.diag([0.01, 0.01, 0.01]))
-    if Path(args.out).exists():
+    out = Path(args.out)
+    if kind_of_output(out) == "clf":
+        given = [o for o, v in (("--map", args.map), ("--truth", args.truth), ("--initial-pose", args.initial_pose))
+                 if v]
+        if given:
+            raise MclError(f"{', '.join(given)}: written into a bag only; a CARMEN log ({out.name}) holds no map, "
+                           "reference or initial pose")
+    if out.exists():
         raise MclError(f"{args.out}: exists already")
-    n = convert(args.src, args.out, topics=cfg.topics, frames=cfg.frames, odom=args.odom, mount=args.mount,
-                grid=grid, initial=initial, truth=truth, echo=lambda m: print(m, file=sys.stderr))
+    if not out.parent.is_dir():  # a mistyped folder is not made
+        raise MclError(f"{args.out}: the folder {out.parent} does not exist")
+    try:
+        n = convert(args.src, args.out, topics=cfg.topics, frames=cfg.frames, odom=args.odom, mount=args.mount,
+                    grid=grid, initial=initial, truth=truth, echo=lambda m: print(m, file=sys.stderr))
+    except OSError as e:  # named by the user's path, not a temp file's
+        raise MclError(f"{args.out}: cannot write: {e.strerror or e}") from None
     print(f"{args.out}: {n} scans")
     return 0
 

@@ -129,7 +129,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", type=int, default=1, help="apply the model this many times in a row (default 1)")
     p.add_argument("--config", help="config whose motion section gives the defaults (noise form, noise, alphas)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override, e.g. motion.noise=triangular")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the samples drawn (default 0)")
     p.add_argument("--out", default="motion.png", help="FILE.png (Pillow) or FILE.rrd (Rerun); default motion.png")
 
 
@@ -146,6 +146,8 @@ def run_from_args(args) -> int:
     cfg = load_config(args.config, list(args.set))
     odom = tuple(args.odom) if args.odom else (0.0, 0.0, 0.0, math.cos(0.25), math.sin(0.25), 0.5)
     vel = tuple(args.velocity) if args.velocity else (1.0, 0.5, 1.0)
+    if not (all(math.isfinite(v) for v in vel) and vel[2] > 0):
+        raise MclError(f"--velocity: expected finite V W and DT > 0 (s), got {' '.join(f'{v:g}' for v in vel)}")
     panels = sample_clouds(args.pose, model=model, odom=odom, velocity=vel, alphas_list=_parse_alphas(args.alphas, model),
                            samples=args.samples, steps=args.steps, motion_cfg=cfg.motion, seed=args.seed)
     pose = np.asarray(args.pose, dtype=np.float64)
