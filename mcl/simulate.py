@@ -575,7 +575,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
-             unknown_floor: int = 0) -> dict:
+             unknown_floor: int = 0, _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -615,7 +615,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     each (``_ground_hits``): a robot pitching on a ramp or braking hard, whose scan then reads a line of returns
     1.5-5 m ahead that moves every scan and is on no map. G = 0 leaves every output byte-identical.
 
-    Returns a summary: scans, duration, path length, start pose, kidnap.
+    Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
+    (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
+    before any run).
     """
     from mcl.kernels.raycast import cast_rays
     from mcl.maps import OccupancyGrid, save_map
@@ -673,6 +675,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     if kidnap_at is not None:
         kidnap_tick = int(round(kidnap_at * odom_rate))
         _check(0 < kidnap_tick < n_ticks - 1, "kidnap_at", f"must lie inside (0, {duration}) s, got {kidnap_at}")
+    if _check_only:
+        return None
 
     seeds = np.random.SeedSequence(int(seed)).spawn(4)
     rng_world, rng_drive, rng_odom, rng_laser = (np.random.default_rng(s) for s in seeds)

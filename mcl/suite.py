@@ -29,7 +29,8 @@ thread each, no recording) with seeds 1..K (or A..B), for the config under test 
 ``results.json`` and ``results.csv`` (one row per run), ``table.csv`` and ``table.txt`` (the median and
 the worst over seeds of each dataset x mode x config) and ``plots/DATASET.png`` (error over time). The
 results are rewritten, atomically, after every run; a run whose ``row.json`` holds the same config
-fingerprint is not run again, so an interrupted evaluation resumes where it stopped.
+fingerprint is not run again, so an interrupted evaluation resumes where it stopped. A run that fails (its log
+unreadable, its truth not overlapping the log) is a row with its ``error``, counted as lost, and the others go on.
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ import math
 import os
 import signal
 import statistics
+import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -133,7 +135,7 @@ def _sim_params() -> dict:
     """The keywords of :func:`mcl.simulate.simulate` a suite may give (its parameters but ``outdir``)."""
     from mcl.simulate import simulate
 
-    return {k: p for k, p in inspect.signature(simulate).parameters.items() if k != "outdir"}
+    return {k: p for k, p in inspect.signature(simulate).parameters.items() if k != "outdir" and k[0] != "_"}
 
 
 def _sim_value(where: str, key: str, value):
@@ -149,6 +151,19 @@ def _sim_value(where: str, key: str, value):
     if not ok(value):
         raise ConfigError(f"{where}{key}: expected {what}{' or null' if optional else ''}, got {value!r}")
     return value
+
+
+def _check_sim(where: str, kw: dict) -> None:
+    """:func:`mcl.simulate.simulate`'s own checks of the keywords ``kw`` (``kind: spaceship``, ``duration: -5``),
+    without making the world; ConfigError naming ``where`` and the key, before anything is written."""
+    from mcl.simulate import simulate
+
+    try:
+        simulate(None, _check_only=True, **kw)
+    except ConfigError as e:  # "simulate: KEY: message"
+        raise ConfigError(f"{where}simulate.{str(e).removeprefix('simulate: ')}") from None
+    except (TypeError, ValueError) as e:  # a keyword simulate declares no type for (odom_alphas: 3)
+        raise ConfigError(f"{where}simulate: {e}") from None
 
 
 def world_overrides(items) -> dict:
@@ -188,12 +203,22 @@ def with_world(suite: Suite, world: dict) -> Suite:
         raise ConfigError(f"--world: {suite.path} generates no world (no dataset has simulate:)")
     datasets = [dataclasses.replace(d, simulate={**d.simulate, **world}) if d.simulate is not None else d
                 for d in suite.datasets]
+    for i, d in enumerate(datasets):
+        if d.simulate is not None:
+            _check_sim(f"{suite.path}: datasets[{i}] ({d.name}) with --world {_world_text(world)}: ", d.simulate)
     return dataclasses.replace(suite, datasets=datasets, world={**suite.world, **world})
+
+
+def _plain_name(value, where: str) -> str:
+    """A suite's or a dataset's name: a folder name under --out (no '/', not hidden). ConfigError otherwise."""
+    if not isinstance(value, str) or not value or "/" in value or value.startswith("."):
+        raise ConfigError(f"{where}: name: expected a plain name (no '/'), got {value!r}")
+    return value
 
 
 def load_suite(path: str | os.PathLike) -> Suite:
     """Read and check a suite file: every key known, every file present, every simulate keyword one of
-    :func:`mcl.simulate.simulate`'s. Errors name the file and the key (ConfigError)."""
+    :func:`mcl.simulate.simulate`'s with a value it accepts. Errors name the file and the key (ConfigError)."""
     from mcl.config import load_config
     from mcl.yamlfile import finite_number, read_yaml
 
@@ -204,6 +229,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
     for k in doc:
         if k not in SUITE_KEYS:
             raise _unknown(f"{path}: ", k, SUITE_KEYS)
+    suite_name = _plain_name(doc["name"], str(path)) if doc.get("name") is not None else path.stem
     base = path.resolve().parent
     root = base / str(doc["root"]) if doc.get("root") is not None else base
     modes = _modes(doc["modes"], f"{path}: modes") if "modes" in doc else ("tracking",)
@@ -220,9 +246,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
         for k in e:
             if k not in DATASET_KEYS:
                 raise _unknown(f"{label}: ", k, DATASET_KEYS)
-        name = e.get("name")
-        if not isinstance(name, str) or not name or "/" in name or name.startswith("."):
-            raise ConfigError(f"{label}: name: expected a plain name (no '/'), got {name!r}")
+        name = _plain_name(e.get("name"), label)
         if name in names:
             raise ConfigError(f"{label}: name: {name!r} appears twice")
         names.add(name)
@@ -252,6 +276,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
                 if k not in sim_keys:
                     raise _unknown(f"{label}: simulate.", k, sim_keys)
                 _sim_value(f"{label}: simulate.", k, kw[k])
+            _check_sim(f"{label}: ", kw)
             for k in ("map", "log", "bag", "truth", "truth_topic", "config"):
                 if k in e:
                     raise ConfigError(f"{label}: {k}: not with simulate (the world gives map, log and truth)")
@@ -304,7 +329,7 @@ def load_suite(path: str | os.PathLike) -> Suite:
                 if not (Path(v).exists() if k == "bag" else Path(v).is_file()):  # a rosbag2 bag may be a folder
                     raise ConfigError(f"{label}: {k}: no such file {v}")
         out.append(d)
-    return Suite(name=str(doc.get("name") or path.stem), path=path, datasets=out)
+    return Suite(name=suite_name, path=path, datasets=out)
 
 
 # ----------------------------------------------------------------------------- synthetic worlds
@@ -329,7 +354,8 @@ def _sim_kwargs(d: Dataset, kidnapped: bool) -> dict:
 
 
 def make_world(outdir: str, kw: dict) -> str:
-    """Generate one synthetic world into ``outdir`` (written beside it, then renamed: never half there)."""
+    """Generate one synthetic world into ``outdir`` (written beside it, then renamed: never half there); an
+    error of simulate names the world's folder."""
     import shutil
     import tempfile
 
@@ -346,6 +372,9 @@ def make_world(outdir: str, kw: dict) -> str:
     try:
         simulate(tmp, **kw)
         os.replace(tmp, out)
+    except (MclError, RuntimeError) as e:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise MclError(f"world {out.name}: {e}") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -364,7 +393,7 @@ class Job:
 
     dataset: str
     mode: str
-    config: str  # label: default (or the --config file's stem) or baseline
+    config: str  # label: default, the --config file's (config_label), or baseline
     seed: int
     cfg: object  # mcl.config.Config
     run_dir: str
@@ -406,7 +435,7 @@ def _bag_truth(suite: Suite, d: Dataset, cache: Path) -> str:
             t, poses = open_bag(bag, cfg.topics, cfg.frames).truth
         except MclError as e:
             raise ConfigError(f"{suite.path}: {d.name}: {e}") from None
-        dest.parent.mkdir(parents=True, exist_ok=True)
+        make_dir(dest.parent, "--cache")
         write_tum(dest, t, poses)
     return str(dest)
 
@@ -419,6 +448,31 @@ def _truth_start(truth: str) -> tuple[float, float, float]:
         raise ConfigError(f"{truth}: empty truth: give initial_pose in the suite")
     i = int(t.argmin())
     return float(p[0, i]), float(p[1, i]), float(p[2, i])
+
+
+def make_dir(path: Path, option: str) -> None:
+    """mkdir -p ``path``; MclError naming the option that gave it when it cannot be made."""
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise MclError(f"{option} {path}: {e.strerror or e}") from None
+
+
+def config_label(config: str | None, sets=(), baseline: bool = True) -> str:
+    """The label (run folders, table) of the config under test: ``default``, else the --config file's stem. A file
+    named like the baseline (``baseline.yaml``) that is not configs/baseline.yaml as shipped is labelled by its
+    folder (``config`` when that is no plain name either), so that it neither replaces nor pairs as the baseline."""
+    from mcl.config import shipped
+
+    if config is None:
+        return "default"
+    path = Path(config)
+    if path.stem != BASELINE or not baseline:
+        return path.stem
+    if not sets and path.resolve() == shipped("configs/baseline.yaml").resolve():
+        return BASELINE  # the baseline itself: run once
+    folder = path.resolve().parent.name
+    return folder if folder and not folder.startswith(".") and folder not in (BASELINE, "default") else "config"
 
 
 def seed_range(text: str) -> range:
@@ -445,7 +499,7 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int | rang
     default_cfg = Path(config) if config else shipped("configs/default.yaml")
     if not default_cfg.is_file():
         raise ConfigError(f"--config: no such file {default_cfg}")
-    label = "default" if config is None else default_cfg.stem
+    label = config_label(config, sets, baseline)
     configs = [(label, default_cfg, list(sets))]
     if baseline and label != BASELINE:
         configs.append((BASELINE, shipped("configs/baseline.yaml"), []))
@@ -592,13 +646,19 @@ def run_job(job: Job) -> dict:
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     if summary["interrupted"]:
         return {**row, "interrupted": True}
-    te, pe = read_tum(out / "trajectory.tum")
-    tr, pr = read_tum(job.cfg.truth)
-    tq, e_pos, _ = position_errors(te, pe, tr, pr)
+    try:
+        te, pe = read_tum(out / "trajectory.tum")
+        tr, pr = read_tum(job.cfg.truth)  # its errors name the file
+    except MclError as e:
+        return {**row, "error": str(e)}
+    try:
+        tq, e_pos, _ = position_errors(te, pe, tr, pr)
+        ate = evaluate(te, pe, tr, pr)
+    except MclError as e:  # a truth that does not overlap the log: this run's error, the others go on
+        return {**row, "error": f"truth {job.cfg.truth}: {e}"}
     kidnap_t = job.kidnap_t if job.kidnap_t is not None else summary.get("kidnap", {}).get("t")
     atomic_write_text(out / "errors.csv", "t,error_m\n" + "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(tq, e_pos)))
     s = score(job.mode, tq, e_pos, lost_m=job.lost_m, kidnap_t=kidnap_t)
-    ate = evaluate(te, pe, tr, pr)
     row.update(s)
     row.update({
         "ate_rmse": ate["ate_rmse"], "ate_max": ate["ate_max"], "lost_m": job.lost_m, "kidnap_t": kidnap_t,
@@ -630,9 +690,9 @@ def _mid_truth(truth: str) -> float:
 
 
 RUN_FIELDS = ("dataset", "mode", "config", "seed", "rmse", "max", "lost", "conv_s", "ok", "ate_rmse", "ate_max",
-              "lost_m", "kidnap_t", "wall_s", "cpu_s", "particles", "updates", "scans", "scored", "run_dir")
+              "lost_m", "kidnap_t", "wall_s", "cpu_s", "particles", "updates", "scans", "scored", "run_dir", "error")
 TABLE_FIELDS = ("dataset", "mode", "config", "runs", "rmse_median", "rmse_worst", "max_median", "max_worst",
-                "lost", "conv_median", "conv_worst", "wall_median", "wall_worst", "cpu_median", "cpu_worst",
+                "lost", "failed", "conv_median", "conv_worst", "wall_median", "wall_worst", "cpu_median", "cpu_worst",
                 "particles_median",
                 "particles_worst")
 
@@ -655,39 +715,52 @@ def _median(values):
     return 0.5 * (lo + hi)
 
 
+def _lost(row: dict) -> bool:
+    return "error" in row or bool(row["lost"])
+
+
 def aggregate(rows: list[dict]) -> list[dict]:
     """The table: one row per dataset x mode x config, the median and the worst over seeds (the worst
-    convergence time of a set where a run never converged is None, 'never'); lost counts the lost runs."""
+    convergence time of a set where a run never converged is None, 'never'); lost counts the lost runs, a failed
+    run (``error``) among them; the figures are over the runs that did not fail (None when every run failed)."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault((r["dataset"], r["mode"], r["config"]), []).append(r)
     table = []
     for (ds, mode, cfg), rs in groups.items():
+        ok = [r for r in rs if "error" not in r]
+
         def col(k):
-            return [r[k] for r in rs]
+            return [r[k] for r in ok]
+
+        def med(k, worst=None):
+            return (worst or statistics.median)(col(k)) if ok else None
 
         table.append({
             "dataset": ds, "mode": mode, "config": cfg, "runs": len(rs),
-            "rmse_median": _median(col("rmse")), "rmse_worst": _worst(col("rmse")),
-            "max_median": _median(col("max")), "max_worst": _worst(col("max")),
-            "lost": sum(bool(r["lost"]) for r in rs),
-            "conv_median": _median(col("conv_s")), "conv_worst": _worst(col("conv_s")),
-            "wall_median": statistics.median(col("wall_s")), "wall_worst": max(col("wall_s")),
-            "cpu_median": _median([r.get("cpu_s") for r in rs]), "cpu_worst": _worst([r.get("cpu_s") for r in rs]),
-            "particles_median": statistics.median(col("particles")), "particles_worst": max(col("particles")),
+            "rmse_median": _median(col("rmse")), "rmse_worst": med("rmse", _worst),
+            "max_median": _median(col("max")), "max_worst": med("max", _worst),
+            "lost": sum(_lost(r) for r in rs), "failed": len(rs) - len(ok),
+            "conv_median": _median(col("conv_s")), "conv_worst": med("conv_s", _worst),
+            "wall_median": med("wall_s"), "wall_worst": med("wall_s", max),
+            "cpu_median": _median([r.get("cpu_s") for r in ok]),
+            "cpu_worst": _worst([r.get("cpu_s") for r in ok]) if ok else None,
+            "particles_median": med("particles"), "particles_worst": med("particles", max),
         })
     return table
 
 
 def totals(rows: list[dict]) -> list[dict]:
-    """Over the whole suite, one row per mode x config: the runs kept (not lost) out of the runs, and the median
-    RMSE over them (the suite's verdict in one line, as the README's corpus table gives it)."""
+    """Over the whole suite, one row per mode x config: the runs kept (not lost; a failed run is lost) out of the
+    runs, the failed ones, and the median RMSE over the others (the suite's verdict in one line, as the README's
+    corpus table gives it)."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault((r["mode"], r["config"]), []).append(r)
     order = {m: i for i, m in enumerate(MODES)}
-    return [{"mode": mode, "config": cfg, "runs": len(rs), "kept": sum(not r["lost"] for r in rs),
-             "rmse_median": _median([r["rmse"] for r in rs])}
+    return [{"mode": mode, "config": cfg, "runs": len(rs), "kept": sum(not _lost(r) for r in rs),
+             "failed": sum("error" in r for r in rs),
+             "rmse_median": _median([r["rmse"] for r in rs if "error" not in r])}
             for (mode, cfg), rs in sorted(groups.items(), key=lambda kv: (order.get(kv[0][0], 99), kv[0][0]))]
 
 
@@ -700,13 +773,22 @@ def format_totals(rows: list[dict]) -> str:
     wm, wc, wk = (max(len(x) for x in col) for col in ([r["mode"] for r in t], [r["config"] for r in t], kept))
     return "\n".join(
         f"{r['mode']:<{wm}}  {r['config']:<{wc}}  {k:>{wk}} kept ({100 * r['kept'] / r['runs']:.0f} %), "
-        f"RMSE median {_f(r['rmse_median'], '.3f', '-')} m" for r, k in zip(t, kept))
+        + (f"{r['failed']} failed, " if r.get("failed") else "")
+        + f"RMSE median {_f(r['rmse_median'], '.3f', '-')} m" for r, k in zip(t, kept))
+
+
+def format_failed(rows: list[dict]) -> str:
+    """The failed runs, a line each (the table and the totals count them as lost)."""
+    return "\n".join(f"failed (counted as lost): {r['dataset']}/{r['mode']}/{r['config']}/seed{r['seed']}: "
+                     f"{r['error']}" for r in rows if "error" in r)
 
 
 def against_baseline(rows: list[dict]) -> list[dict]:
     """For each config under test and mode, its runs paired with the baseline's (the same dataset, mode and seed):
     how many each keeps that the other loses, and the runs the baseline alone keeps (the check that matters when a
-    config adds rules to the plain filter: a rule must not lose what the plain filter keeps)."""
+    config adds rules to the plain filter: a rule must not lose what the plain filter keeps). Failed runs are not
+    paired (``format_failed`` lists them)."""
+    rows = [r for r in rows if "error" not in r]
     base = {(r["dataset"], r["mode"], r["seed"]): r for r in rows if r["config"] == BASELINE}
     groups: dict[tuple, list[tuple[dict, dict]]] = {}
     for r in rows:
@@ -755,15 +837,16 @@ def format_table(table: list[dict]) -> str:
     head = ["dataset", "mode", "config", "RMSE m", "max m", "lost", "conv s", "wall s", "cpu s", "particles"]
     lines = []
     for r in table:
+        never = "-" if r.get("failed") == r["runs"] else "never"  # every run failed: no time at all
         lines.append([
             r["dataset"], r["mode"], r["config"],
             f"{_f(r['rmse_median'], '.3f', '-')} / {_f(r['rmse_worst'], '.3f', '-')}",
             f"{_f(r['max_median'], '.2f', '-')} / {_f(r['max_worst'], '.2f', '-')}",
             f"{r['lost']}/{r['runs']}",
-            f"{_f(r['conv_median'], '.1f')} / {_f(r['conv_worst'], '.1f')}",
-            f"{r['wall_median']:.1f} / {r['wall_worst']:.1f}",
+            f"{_f(r['conv_median'], '.1f', never)} / {_f(r['conv_worst'], '.1f', never)}",
+            f"{_f(r['wall_median'], '.1f', '-')} / {_f(r['wall_worst'], '.1f', '-')}",
             f"{_f(r.get('cpu_median'), '.1f', '-')} / {_f(r.get('cpu_worst'), '.1f', '-')}",
-            f"{r['particles_median']:.0f} / {r['particles_worst']:.0f}",
+            f"{_f(r['particles_median'], '.0f', '-')} / {_f(r['particles_worst'], '.0f', '-')}",
         ])
     sub = ["", "", "", "med / worst", "med / worst", "runs"] + ["med / worst"] * 4
     widths = [max(len(x) for x in col) for col in zip(head, sub, *lines)]
@@ -791,6 +874,7 @@ def write_results(out: Path, suite: Suite, rows: list[dict], planned: int) -> li
               f"{WITHIN_S:g} s of the start / kidnap. conv: s until the error is below {SETTLE_M} m and stays "
               "below lost_m (kidnapped: from the kidnap).")
     doc = {"suite": suite.name, "suite_file": str(suite.path), "planned_runs": planned, "finished_runs": len(rows),
+           "failed_runs": sum("error" in r for r in rows),
            "settle_m": SETTLE_M, "within_s": WITHIN_S, "runs": rows, "table": table, "totals": totals(rows),
            "against_baseline": against_baseline(rows)}
     if suite.world:
@@ -798,14 +882,15 @@ def write_results(out: Path, suite: Suite, rows: list[dict], planned: int) -> li
     atomic_write_text(out / "results.json", json.dumps(doc, indent=1) + "\n")
     atomic_write_text(out / "results.csv", _csv(rows, RUN_FIELDS))
     atomic_write_text(out / "table.csv", _csv(table, TABLE_FIELDS))
-    vs = format_against_baseline(rows)
-    atomic_write_text(out / "table.txt", format_table(table) + "\n" + legend + "\n\n" + format_totals(rows) + "\n"
-                      + (vs + "\n" if vs else ""))
+    vs, failed = format_against_baseline(rows), format_failed(rows)
+    atomic_write_text(out / "table.txt", format_table(table) + "\n" + (failed + "\n" if failed else "") + legend
+                      + "\n\n" + format_totals(rows) + "\n" + (vs + "\n" if vs else ""))
     return table
 
 
 def plot_errors(out: Path, rows: list[dict]) -> list[Path]:
-    """plots/DATASET.png: the position error over time of every run, one panel per mode."""
+    """plots/DATASET.png: the position error over time of every run (but the failed), one panel per mode; the
+    plots of datasets not in ``rows`` (a previous evaluation's, another --only) are removed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -816,6 +901,7 @@ def plot_errors(out: Path, rows: list[dict]) -> list[Path]:
 
     colors = {}
     written = []
+    rows = [r for r in rows if "error" not in r]
     for ds in dict.fromkeys(r["dataset"] for r in rows):
         rs = [r for r in rows if r["dataset"] == ds]
         modes = list(dict.fromkeys(r["mode"] for r in rs))
@@ -845,6 +931,9 @@ def plot_errors(out: Path, rows: list[dict]) -> list[Path]:
         p = out / "plots" / f"{ds}.png"
         atomic_write_bytes(p, buf.getvalue())
         written.append(p)
+    for old in (out / "plots").glob("*.png"):
+        if old not in written:
+            old.unlink(missing_ok=True)
     return written
 
 
@@ -895,10 +984,15 @@ def interrupt_workers() -> None:
             pass
 
 
+def _stderr(msg: str) -> None:
+    print(msg, file=sys.stderr)
+
+
 def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=None, cache=None, modes=None,
-                   only=None, baseline=True, world=None, progress=None, echo=print) -> int:
-    """``mcl eval --suite``: plan, generate the worlds, run what is not finished, write and print the table.
-    Returns the exit status (0, 130 interrupted, 2 when a run failed)."""
+                   only=None, baseline=True, world=None, progress=None, echo=print, warn=_stderr) -> int:
+    """``mcl eval --suite``: plan, generate the worlds, run what is not finished, write and print the table (and
+    ``warn`` the errors). A failed run is a row with its ``error`` (not saved in its folder: a resume runs it
+    again), counted as lost. Returns the exit status (0, 130 interrupted, 2 when a run failed)."""
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
     import multiprocessing
@@ -912,13 +1006,20 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                     only=only, baseline=baseline)
     if not job_list:
         raise ConfigError(f"{suite.path}: no run left (modes {', '.join(modes or ())} not in any selected dataset)")
+    label = job_list[0].config
+    if config is not None and label != Path(config).stem:
+        echo(f"the config under test is labelled {label!r} ({config} is not configs/baseline.yaml, which runs as "
+             f"{BASELINE!r})")
     if suite.world:
         echo(f"every generated world with {_world_text(suite.world)} (--world)")
-    out.mkdir(parents=True, exist_ok=True)
+    if any(j.world is not None for j in job_list):  # the inputs are checked: now the folders
+        make_dir(cache, "--cache")
+    make_dir(out, "--out")
     ctx = multiprocessing.get_context("spawn")  # fresh workers: no numba threads inherited from a fork
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init) if jobs > 1 else None
     results: dict[str, dict] = {}
     errors: list[str] = []
+    cut: list[Job] = []  # the runs of a broken pool
     interrupted = False
     term = TermAsInterrupt().__enter__()
     try:
@@ -932,9 +1033,9 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                         make_world(w, kw)
                 else:
                     list(pool.map(make_world, todo_worlds.keys(), todo_worlds.values()))
-            except (MclError, RuntimeError) as e:
+            except MclError as e:  # make_world's: the world named
                 given = f" (with --world {_world_text(suite.world)})" if suite.world else ""
-                raise MclError(f"{suite.path}: simulate{given}: {e}") from None
+                raise MclError(f"{suite.path}{given}: {e}") from None
         _finish_plan(job_list)
         todo = []
         for j in job_list:
@@ -958,9 +1059,9 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
             if row.get("interrupted"):
                 interrupted = True
                 return
-            if "error" in row:
+            if "error" in row:  # tabled as a lost run, and said on stderr
                 errors.append(f"{job.key}: {row['error']}")
-                return
+                row = {**row, "lost": True, "lost_m": job.lost_m, "run_dir": job.run_dir}
             results[job.key] = row
             save()
             bar.update(1)
@@ -987,12 +1088,9 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                             take(futures[f], row)
                         if dead:
                             # A worker was killed (the kernel's OOM killer, a signal): the pool is unusable and
-                            # every run in flight is lost. Keep the finished rows and say which runs were cut.
-                            dead += [futures[f].key for f in pending]
+                            # every run in flight is cut; their rows are read back once the pool is shut down
+                            cut = [futures[f] for f in done if futures[f].key in dead] + [futures[f] for f in pending]
                             pending = set()
-                            errors.append(f"a worker process died abruptly (killed by the system, e.g. out of memory) "
-                                          f"with {len(dead)} run(s) unfinished, first {dead[0]}; the finished runs "
-                                          f"are saved, run the same command again (with fewer --jobs) to resume")
                 except KeyboardInterrupt:
                     interrupted = True
                     for f in pending:
@@ -1015,19 +1113,37 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                 interrupt_workers()
             pool.shutdown(wait=True, cancel_futures=True)
         term.__exit__()
+    if cut:
+        # A cut run may have written its row.json before the pool broke, and a surviving worker goes on with the
+        # runs queued to it until the shutdown: keep the finished rows and say which runs were cut.
+        unfinished = []
+        for j in sorted(cut, key=lambda j: order[j.key]):
+            row = _finished(j)
+            if row is not None:
+                results[j.key] = row
+            else:
+                unfinished.append(j.key)
+        if unfinished:
+            errors.append(f"a worker process died abruptly (killed by the system, e.g. out of memory) with "
+                          f"{len(unfinished)} run(s) unfinished, first {unfinished[0]}; the finished runs are saved, "
+                          "run the same command again (with fewer --jobs) to resume")
     rows, table = save()
-    if rows:
-        plot_errors(out, rows)
+    plot_errors(out, rows)
     echo(format_table(table))
+    failed = format_failed(rows)
+    if failed:
+        echo(failed)
     if rows:
         echo(format_totals(rows))
         vs = format_against_baseline(rows)
         if vs:
             echo(vs)
+    n_failed = sum("error" in r for r in rows)
     echo(f"lost: tracking max error > lost_m; global / kidnapped: not below {SETTLE_M} m within {WITHIN_S:g} s. "
-         f"{len(rows)} of {len(job_list)} runs; results in {out} (results.json, results.csv, table.csv, plots/)")
+         f"{len(rows)} of {len(job_list)} runs" + (f" ({n_failed} failed)" if n_failed else "")
+         + f"; results in {out} (results.json, results.csv, table.csv, plots/)")
     for e in errors:
-        echo(f"error: {e}")
+        warn(f"error: {e}")
     if interrupted:
         echo("interrupted: the finished runs are saved; run the same command again to resume")
         return 130

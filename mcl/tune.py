@@ -20,9 +20,10 @@ or kidnapped: not converged within ``WITHIN_S``) or fails counts ``LOST_PENALTY`
 more than any run that kept track: it is penalised, not dropped. Per dataset x mode the median over seeds,
 then the mean over the datasets x modes (see :data:`OBJECTIVES`).
 
-Study folder: ``study.json`` (the settings), ``journal.log`` (Optuna's JournalStorage: every ask and tell),
-``trials/NNNNN/runs/...`` (each trial's runs), ``worlds/`` (synthetic worlds), ``trials.csv``,
-``best.yaml``, ``plots/`` (history, importances, Pareto front), ``heldout/`` and ``summary.txt``.
+Study folder: ``study.json`` (the settings, and the suite's and base config's :func:`fingerprint`: --resume
+refuses a changed one), ``journal.log`` (Optuna's JournalStorage: every ask and tell), ``trials/NNNNN/runs/...``
+(each trial's runs), ``worlds/`` (synthetic worlds), ``trials.csv``, ``best.yaml``, ``plots/`` (history,
+importances, Pareto front), ``heldout/`` and ``summary.txt``.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import math
 import os
 import signal
 import statistics
+import sys
 import typing
 import warnings
 from contextlib import contextmanager
@@ -115,13 +117,16 @@ def _leaf_keys(cls, prefix: str = "") -> dict[str, tuple]:
     return out
 
 
-def _flatten(doc: dict, path: Path, prefix: str = "") -> dict[str, dict]:
-    """``{sensor: {likelihood_field: {sigma_hit: {...}}}}`` and ``{sensor.likelihood_field.sigma_hit: {...}}`` alike -> {dotted key: spec}."""
-    out = {}
+def _flatten(doc: dict, path: Path, prefix: str = "", out: dict | None = None) -> dict[str, dict]:
+    """``{sensor: {likelihood_field: {sigma_hit: {...}}}}`` and ``{sensor.likelihood_field.sigma_hit: {...}}`` alike
+    -> {dotted key: spec}; ConfigError for a key given both ways."""
+    out = {} if out is None else out
     for k, v in doc.items():
         key = f"{prefix}{k}"
         if isinstance(v, dict) and v and not any(s in v for s in SPEC_KEYS):  # a section
-            out.update(_flatten(v, path, key + "."))
+            _flatten(v, path, key + ".", out)
+        elif key in out:
+            raise ConfigError(f"{path}: {key}: given twice (nested under its section and dotted)")
         else:
             out[key] = v
     return out
@@ -251,7 +256,9 @@ def parse_objectives(text: str) -> list[str]:
 
 def objective_values(rows: list[dict]) -> dict:
     """A trial's figures from its runs' rows (``mcl.suite.run_job``; a row with ``error`` counts as lost):
-    per dataset x mode the median over seeds, then the mean over the datasets x modes."""
+    per dataset x mode the median over seeds, then the mean over the datasets x modes. ``particles`` and ``wall``
+    are over the runs that did not fail, None when every run of a dataset x mode failed; ``errors`` names the
+    failed runs and why."""
     from mcl.suite import LOST_M
 
     groups: dict[tuple, list[dict]] = {}
@@ -270,13 +277,15 @@ def objective_values(rows: list[dict]) -> dict:
             NEVER_S if lost(r) or r.get("conv_s") is None else r["conv_s"] for r in rs))
         for k, col in (("particles", "particles"), ("wall", "wall_s")):  # runs that failed: no figure
             have = [r[col] for r in rs if r.get(col) is not None]
-            per[k].append(statistics.median(have) if have else math.inf)
+            per[k].append(statistics.median(have) if have else None)
         raw += [r["rmse"] for r in rs if r.get("rmse") is not None]
-    v = {k: float(statistics.fmean(x)) for k, x in per.items()}
+    v = {k: None if None in x else float(statistics.fmean(x)) for k, x in per.items()}
     v["lost"] = v["lost"] + 1e-3 * v["rmse"]
     v["weighted"] = v["rmse"] + v["lost"] + v["convergence"] / 30.0
     v["lost_runs"] = sum(("error" in r or bool(r.get("lost")) or r.get("rmse") is None) for r in rows)
     v["runs"] = len(rows)
+    v["errors"] = [f"{r['dataset']}/{r['mode']}/seed{r['seed']}: {r['error']}" for r in rows if "error" in r]
+    v["failed_runs"] = len(v["errors"])
     v["rmse_median"] = float(statistics.median(raw)) if raw else None  # raw RMSE over the runs, lost ones too
     return v
 
@@ -457,7 +466,7 @@ class Settings:
     config: str | None
     sets: list[str]
     objectives: list[str]
-    seeds: int
+    seeds: int | list[int]  # K: seeds 1..K; [A, B]: seeds A..B (--seeds A-B)
     modes: list[str] | None
     batch: int
     seed: int
@@ -465,6 +474,10 @@ class Settings:
     cache: str
     held_out: list[str] = dataclasses.field(default_factory=list)  # --held-out, besides the suite's held_out: true
     only: list[str] = dataclasses.field(default_factory=list)  # --only: these datasets of the suite (empty: all)
+    fingerprint: dict = dataclasses.field(default_factory=dict)  # the suite's and the base config's: see fingerprint()
+
+    def seed_range(self) -> range:
+        return range(self.seeds[0], self.seeds[1] + 1) if isinstance(self.seeds, list) else range(1, self.seeds + 1)
 
     def params(self) -> list[Param]:
         return [Param(**{**p, "choices": tuple(p["choices"]) if p.get("choices") is not None else None})
@@ -521,8 +534,9 @@ class Tuner:
     def plan(self, params: dict, out: Path, only: list[str], label: str | None = None):
         from mcl.suite import plan
 
-        jobs = plan(self.suite, config=self.s.config, sets=self.s.sets + param_overrides(params), seeds=self.s.seeds,
-                    out=out, cache=Path(self.s.cache), modes=self.modes, only=only, baseline=False)
+        jobs = plan(self.suite, config=self.s.config, sets=self.s.sets + param_overrides(params),
+                    seeds=self.s.seed_range(), out=out, cache=Path(self.s.cache), modes=self.modes, only=only,
+                    baseline=False)
         if label is not None:
             for j in jobs:
                 j.config = label
@@ -553,8 +567,8 @@ class Tuner:
             echo(f"generating {len(worlds)} synthetic world(s) into {self.s.cache}")
             try:
                 executor.map(_make_world, list(worlds.items()))
-            except (MclError, RuntimeError) as e:
-                raise MclError(f"{self.suite.path}: simulate: {e}") from None
+            except MclError as e:  # mcl.suite.make_world's: the world named
+                raise MclError(f"{self.suite.path}: {e}") from None
 
     def evaluate_trials(self, executor, trials: list[tuple[int, dict]]):
         """Yield (figures, None) or (None, the config error) per trial, in order, as each is done."""
@@ -635,18 +649,31 @@ def optimise(tuner: Tuner, *, trials: int, executor, progress=None, echo=print) 
                     if err is not None:
                         live.set_user_attr("error", err)
                         study.tell(live, state=TrialState.FAIL)
-                        echo(f"trial {t.number}: {err}")
+                        tqdm.write(f"trial {t.number}: {err}", file=sys.stderr)
                     else:
                         for k in FIGURES:
                             live.set_user_attr(k, fig[k])
-                        study.tell(live, [fig[o] for o in s.objectives])
+                        values = [fig[o] for o in s.objectives]
+                        missing = [o for o, v in zip(s.objectives, values) if v is None]
+                        if fig["errors"]:  # failed runs count as lost; why, in trials.csv's error column
+                            err = (f"{len(fig['errors'])} run(s) failed: " + "; ".join(fig["errors"][:3])
+                                   + (f"; {len(fig['errors']) - 3} more" if len(fig["errors"]) > 3 else ""))
+                            if missing:  # particles or wall of a dataset x mode whose every run failed
+                                err = f"no {', '.join(missing)} figure: {err}"
+                            live.set_user_attr("error", err)
+                            tqdm.write(f"trial {t.number}: {err}", file=sys.stderr)
+                        if missing:
+                            study.tell(live, state=TrialState.FAIL)
+                        else:
+                            study.tell(live, values)
                 bar.update(1)
                 bar.set_postfix_str(_best_text(study, s))
     finally:
         bar.close()
 
 
-FIGURES = ("rmse", "lost", "convergence", "weighted", "particles", "wall", "lost_runs", "runs", "rmse_median")
+FIGURES = ("rmse", "lost", "convergence", "weighted", "particles", "wall", "lost_runs", "failed_runs", "runs",
+           "rmse_median")
 
 
 def _complete(study):
@@ -783,15 +810,19 @@ def summary_text(tuner: Tuner, study, trial, ho: dict | None) -> str:
     n_done = sum(t.state == TrialState.COMPLETE for t in ts)
     n_fail = sum(t.state == TrialState.FAIL for t in ts)
     modes = ",".join(s.modes) if s.modes else "each dataset's modes"
-    text = (f"Study {tuner.dir}: {n_done} trials done" + (f" ({n_fail} failed: invalid configs)" if n_fail else "")
-            + f" on {len(tuner.tuning)} dataset(s) of suite {tuner.suite.name} ({modes}, seeds 1..{s.seeds}), "
+    seeds = s.seed_range()
+    text = (f"Study {tuner.dir}: {n_done} trials done"
+            + (f" ({n_fail} failed: the error column of trials.csv says why)" if n_fail else "")
+            + f" on {len(tuner.tuning)} dataset(s) of suite {tuner.suite.name} ({modes}, seeds {seeds.start}.."
+            f"{seeds.stop - 1}), "
             f"objective {','.join(s.objectives)}, seed {s.seed}.")
     if trial is None:
         return text + " No trial finished yet."
     ua = trial.user_attrs
     values = ", ".join(f"{o} {v:.4g}" for o, v in zip(s.objectives, trial.values))
     text += (f" Best: trial {trial.number} ({values}; RMSE score {ua['rmse']:.4f} m, {ua['lost_runs']} of "
-             f"{ua['runs']} runs lost) with " + ", ".join(f"{k} = {_short(v)}" for k, v in trial.params.items()) + ".")
+             f"{ua['runs']} runs lost{_failed_text(ua)}) with "
+             + ", ".join(f"{k} = {_short(v)}" for k, v in trial.params.items()) + ".")
     base = next((t for t in ts if t.number == 0 and t.state == TrialState.COMPLETE), None)
     if base is not None and base.params == tuner.base_values() and len(base.params) == len(tuner.params):
         text += f" The base config (trial 0) scored {', '.join(f'{o} {v:.4g}' for o, v in zip(s.objectives, base.values))}."
@@ -800,7 +831,8 @@ def summary_text(tuner: Tuner, study, trial, ho: dict | None) -> str:
     if ho is not None:
         def line(d):
             med = "-" if d["rmse_median"] is None else f"{d['rmse_median']:.4f} m"
-            return f"median RMSE {med}, RMSE score {d['rmse']:.4f} m, {d['lost_runs']} of {d['runs']} runs lost"
+            return (f"median RMSE {med}, RMSE score {d['rmse']:.4f} m, {d['lost_runs']} of {d['runs']} runs "
+                    f"lost{_failed_text(d)}")
 
         text += (f" Held out ({', '.join(ho['datasets'])}; never seen while tuning): best config {line(ho['best'])}; "
                  f"base config {line(ho['base'])}.")
@@ -809,6 +841,11 @@ def summary_text(tuner: Tuner, study, trial, ho: dict | None) -> str:
     else:
         text += " No held-out dataset: the score is on the tuning data itself (see README, 'Tuning a config')."
     return text + " Files: best.yaml, trials.csv, plots/."
+
+
+def _failed_text(figures) -> str:
+    n = figures.get("failed_runs")
+    return f" ({n} failed)" if n else ""
 
 
 def _short(v) -> str:
@@ -861,7 +898,8 @@ def add_arguments(p) -> None:
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="J", help="worker processes (default: the cores)")
     p.add_argument("--batch", type=int, default=4, metavar="B", help="trials asked together and evaluated in parallel "
                    "(a setting of the study: the same --seed gives the same trials whatever --jobs; default 4)")
-    p.add_argument("--seeds", type=int, default=1, metavar="K", help="run seeds 1..K per dataset and mode (default 1)")
+    p.add_argument("--seeds", default="1", metavar="K|A-B", help="run seeds 1..K (or A..B) per dataset and mode "
+                   "(default 1)")
     p.add_argument("--modes", metavar="M,...", help="only these modes: tracking,global,kidnapped")
     p.add_argument("--only", metavar="NAME,...", help="only these datasets of the suite (tuned on and held out)")
     p.add_argument("--held-out", metavar="NAME,...", help="also hold these datasets out (as held_out: true in the "
@@ -881,6 +919,21 @@ def _names(text: str | None) -> list[str]:
     return [n.strip() for n in text.split(",") if n.strip()] if text else []
 
 
+def fingerprint(s: Settings) -> dict:
+    """Hashes of the suite file's text and of the base config as loaded (with its --set): stored in study.json,
+    --resume refuses a study whose suite or base config changed since (its trials would be scored on other data)."""
+    import hashlib
+
+    from mcl.config import PROJECT_ROOT, dump_config, load_config
+
+    try:
+        suite = Path(s.suite).read_bytes()
+    except OSError as e:
+        raise MclError(f"{s.suite}: {e.strerror or e}") from None
+    base = dump_config(load_config(s.config or PROJECT_ROOT / "configs" / "default.yaml", s.sets))
+    return {"suite": hashlib.sha1(suite).hexdigest(), "config": hashlib.sha1(base.encode()).hexdigest()}
+
+
 def _load_settings(study_dir: Path) -> Settings:
     path = study_dir / STATE_FILE
     try:
@@ -894,9 +947,11 @@ def _load_settings(study_dir: Path) -> Settings:
 
 def run_from_args(args) -> int:
     """``mcl tune`` from the parsed command line (mcl.cli)."""
+    from mcl.suite import make_dir, seed_range
     from mcl.trajectory import atomic_write_text
 
-    for name in ("jobs", "batch", "seeds"):
+    seeds = seed_range(args.seeds)
+    for name in ("jobs", "batch"):
         if getattr(args, name) < 1:
             raise MclError(f"--{name}: expected >= 1, got {getattr(args, name)}")
     if args.trials is not None and args.trials < 1:
@@ -913,6 +968,14 @@ def run_from_args(args) -> int:
                            f"{existing}/{STATE_FILE}; not with {', '.join(given)}")
         study_dir = Path(existing)
         s = _load_settings(study_dir)
+        if args.resume and s.fingerprint:
+            now = fingerprint(s)
+            changed = [f"the suite file {s.suite}" if k == "suite" else
+                       f"the base config {s.config or 'configs/default.yaml'}" + (" (with its --set)" if s.sets else "")
+                       for k in ("suite", "config") if s.fingerprint.get(k) != now[k]]
+            if changed:
+                raise MclError(f"--resume {study_dir}: {' and '.join(changed)} changed since the study began (its "
+                               "trials were scored on the old one): restore it, or start a new --study")
         if args.trials is not None:
             s.trials = args.trials
             atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")
@@ -935,14 +998,18 @@ def run_from_args(args) -> int:
                      space=[{"key": p.key, "kind": p.kind, "low": p.low, "high": p.high, "log": p.log, "step": p.step,
                              "choices": list(p.choices) if p.choices is not None else None} for p in params],
                      config=str(Path(args.config).resolve()) if args.config else None, sets=list(args.set),
-                     objectives=objectives, seeds=args.seeds, modes=modes, batch=args.batch, seed=args.seed,
+                     objectives=objectives, modes=modes, batch=args.batch, seed=args.seed,
+                     seeds=seeds.stop - 1 if seeds.start == 1 else [seeds.start, seeds.stop - 1],
                      trials=args.trials if args.trials is not None else 100,
                      cache=str(Path(args.cache).resolve() if args.cache else (study_dir / "worlds").resolve()),
                      held_out=_names(args.held_out), only=_names(args.only))
         tuner = Tuner(study_dir, s)
         if not tuner.plan({}, study_dir / "trials" / "base", tuner.tuning):  # the base config checks too
             raise ConfigError(f"{tuner.suite.path}: no run to tune on (modes {args.modes} not in any tuned dataset)")
-        study_dir.mkdir(parents=True, exist_ok=True)
+        s.fingerprint = fingerprint(s)
+        if any(d.simulate is not None for d in tuner.suite.datasets):
+            make_dir(Path(s.cache), "--cache")
+        make_dir(study_dir, "--study")
         atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")
         _open_study(study_dir, s, create=True)
     tuner = Tuner(study_dir, s)

@@ -198,6 +198,14 @@ def test_bad_suite_files_exit_2_naming_file_and_key(tmp_path, capsys):
          "datasets[0] (s): simulate.seed: expected a whole number, got 1.5"),
         ({"datasets": [{**good, "set": {"filter.particle": 10}}]}, "filter.particle: unknown key"),
         ({"lost_m": -1, "datasets": [good]}, "lost_m: must be positive, got -1"),
+        # the suite's name is checked as a dataset's (it names the default --out, runs/suite-NAME)
+        ({"name": "../../x", "datasets": [good]}, ": name: expected a plain name (no '/'), got '../../x'"),
+        ({"name": ["a"], "datasets": [good]}, ": name: expected a plain name (no '/'), got ['a']"),
+        # a simulate value mcl simulate refuses: caught at load (its own checks, no world made), the dataset named
+        ({"datasets": [{"name": "w", "simulate": {"seed": 7, "kind": "spaceship"}}]},
+         ": datasets[0] (w): simulate.kind: expected one of office,"),
+        ({"datasets": [good, {"name": "w", "simulate": {"seed": 7, "duration": -5}}]},
+         ": datasets[1] (w): simulate.duration: expected 1..3600 s, got -5"),
     ]
     for i, (doc, expected) in enumerate(cases):
         path = _write(tmp_path / f"bad{i}.yaml", doc)
@@ -205,7 +213,14 @@ def test_bad_suite_files_exit_2_naming_file_and_key(tmp_path, capsys):
         err = capsys.readouterr().err
         assert code == 2, (doc, err)
         assert err.count("\n") == 1 and str(path) in err and expected in err, err
-        assert not (tmp_path / f"out{i}" / "results.json").exists()
+        assert not (tmp_path / f"out{i}").exists()  # nothing written
+    # a --cache that cannot be made: one line naming the option, --out not made
+    path = _write(tmp_path / "sim.yaml", {"datasets": [{"name": "w", "simulate": {"seed": 7, "duration": 5}}]})
+    (tmp_path / "file").write_text("")
+    code = main(["eval", "--suite", str(path), "--out", str(tmp_path / "o"), "--cache", str(tmp_path / "file" / "c")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and err.startswith(f"mcl: error: --cache {tmp_path / 'file' / 'c'}: "), err
+    assert not (tmp_path / "o").exists()
 
 
 def test_seeds_k_or_a_range(tmp_path):
@@ -255,6 +270,15 @@ def test_plan_modes_only_and_configs(tmp_path):
                config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", baseline=False)
     assert via[0].cfg.filter.initial_pose == (1.0, 2.0, 0.5) and via[0].cfg.map == str(demo / "map.yaml")
     assert via[0].cfg.filter.particles == load_config(CONFIGS / "default.yaml").filter.particles
+    # a config under test named baseline.yaml is not the baseline: labelled by its folder, the baseline runs too;
+    # configs/baseline.yaml itself is the baseline, run once
+    (tmp_path / "mine").mkdir()
+    shutil.copy(CONFIGS / "default.yaml", tmp_path / "mine" / "baseline.yaml")
+    labels = {(j.config, j.cfg.filter.particles) for j in plan(suite, config=str(tmp_path / "mine" / "baseline.yaml"),
+                                                            sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w")}
+    assert labels == {("mine", load_config(CONFIGS / "default.yaml").filter.particles), ("baseline", 5000)}
+    assert {j.config for j in plan(suite, config=str(CONFIGS / "baseline.yaml"), sets=[], seeds=1, out=tmp_path,
+                                   cache=tmp_path / "w")} == {"baseline"}
     only = plan(suite, config=None, sets=[], seeds=1, out=tmp_path, cache=tmp_path / "w", modes=("global",),
                 only=["b"], baseline=False)
     assert [(j.dataset, j.mode, j.config) for j in only] == [("b", "global", "default")]
@@ -293,7 +317,8 @@ def test_world_sets_simulate_keywords_in_every_generated_world(tmp_path, capsys)
         (path, "scan_rate", "--world: expected KEY=VALUE"),
         (path, "range_max=[1, 2]", "--world: range_max: expected a number, got [1, 2]"),
         (path, "n_beams=10.5", "--world: n_beams: expected a whole number, got 10.5"),
-        (path, "scan_rate=400", "(with --world scan_rate=400): simulate: scan_rate: expected 0.5..100 Hz, got 400"),
+        (path, "scan_rate=400", "datasets[1] (gen) with --world scan_rate=400: simulate.scan_rate: expected 0.5..100 Hz, "
+                                "got 400"),
         (real_only, "scan_rate=20", f"--world: {real_only} generates no world"),
     ]:
         bad = tmp_path / "bad"
@@ -486,10 +511,68 @@ def test_suite_resumes_and_skips_finished_runs(evaluated, tmp_path, capsys):
 
 
 
+def test_failed_runs_are_tabled_as_lost_and_the_others_go_on(evaluated, tmp_path, capsys):
+    # A truth that does not overlap its log (and a log that is no log) used to abort the whole suite with an error
+    # naming no run, or to vanish from every output while the totals read "1/1 kept (100 %)". Now each is its
+    # run's error: on stderr, in results.json / results.csv (error), under the table, counted as lost.
+    from mcl.trajectory import write_tum
+
+    w = evaluated["world"]
+    t, poses = read_tum(w / "truth.tum")
+    write_tum(tmp_path / "late.tum", t + 1000.0, poses)  # the same poses 1000 s after the log
+    files = {"map": str(w / "map.yaml"), "log": str(w / "log.clf")}
+    suite = _write(tmp_path / "s.yaml", {"name": "s", "modes": ["tracking"], "datasets": [
+        {"name": "late", **files, "truth": str(tmp_path / "late.tum")},
+        {"name": "nolog", "map": str(w / "map.yaml"), "log": str(w / "map.yaml"), "truth": str(w / "truth.tum")},
+        {"name": "good", **files, "truth": str(w / "truth.tum")}]})
+    out = tmp_path / "out"
+    code = main(["eval", "--suite", str(suite), "--out", str(out), "--jobs", "1", "--no-baseline", "--no-progress",
+                 "--set", "filter.particles=300"])
+    printed = capsys.readouterr()
+    assert code == 2
+    assert "error:" not in printed.out
+    err = printed.err.splitlines()
+    assert len(err) == 2 and err[0].startswith(f"error: late/tracking/default/seed1: truth {tmp_path / 'late.tum'}: ")
+    assert err[1].startswith("error: nolog/tracking/default/seed1: ") and "no laser messages" in err[1]
+    doc = json.loads((out / "results.json").read_text())
+    by = {r["dataset"]: r for r in doc["runs"]}
+    assert set(by) == {"late", "nolog", "good"} and doc["failed_runs"] == 2
+    assert by["late"]["lost"] and "no reference timestamp" in by["late"]["error"] and "error" not in by["good"]
+    with open(out / "results.csv") as f:
+        assert {r["dataset"]: bool(r["error"]) for r in csv.DictReader(f)} == {"late": True, "nolog": True,
+                                                                                "good": False}
+    assert doc["totals"] == [{"mode": "tracking", "config": "default", "runs": 3, "kept": 1, "failed": 2,
+                              "rmse_median": by["good"]["rmse"]}]
+    table = {r["dataset"]: r for r in doc["table"]}
+    assert (table["late"]["runs"], table["late"]["lost"], table["late"]["failed"], table["late"]["rmse_median"]) == \
+           (1, 1, 1, None)
+    text = (out / "table.txt").read_text()
+    assert "failed (counted as lost): late/tracking/default/seed1: truth " in text
+    assert "tracking  default  1/3 kept (33 %), 2 failed, RMSE median" in text and "1/3 kept" in printed.out
+    assert sorted(p.name for p in (out / "plots").iterdir()) == ["good.png"]
+    # a rerun on the same --out with another --only drops the plots of the datasets no longer tabled
+    assert main(["eval", "--suite", str(suite), "--out", str(out), "--jobs", "1", "--no-baseline", "--no-progress",
+                 "--set", "filter.particles=300", "--only", "late"]) == 2
+    assert not (out / "plots").exists() or not list((out / "plots").iterdir())
+
+
+def test_a_rerun_with_another_only_drops_the_stale_plots(evaluated, tmp_path, capsys):
+    out = tmp_path / "out"
+    shutil.copytree(evaluated["out"], out)
+    assert (out / "plots" / "planted.png").is_file()
+    assert main(["eval", "--suite", str(evaluated["suite"]), "--out", str(out), "--cache",
+                 str(evaluated["tmp"] / "worlds"), "--seeds", "2", "--jobs", "1", "--set", "filter.particles=2000",
+                 "--no-progress", "--only", "good"]) == 0
+    assert "4 of 4 runs already finished" in capsys.readouterr().out  # nothing run again
+    assert sorted(p.name for p in (out / "plots").iterdir()) == ["good.png"]
+
+
 def test_a_killed_worker_is_one_error_line_and_the_finished_runs_are_kept(evaluated, tmp_path, capsys, monkeypatch):
     # The kernel's OOM killer ends a worker with SIGKILL: concurrent.futures then fails every run in flight with
     # BrokenProcessPool, which used to escape as a traceback. A fake pool stands in for one (it runs jobs
-    # in-process, and its first run dies).
+    # in-process): its first run finishes (row.json written) but is reported broken, as a run that ended just
+    # before the pool broke, or that a surviving worker finished after it; its second run dies. Only the second
+    # is unfinished (the first was once reported unfinished too, and left out of results.json).
     import concurrent.futures as cf
     from concurrent.futures.process import BrokenProcessPool
 
@@ -500,7 +583,9 @@ def test_a_killed_worker_is_one_error_line_and_the_finished_runs_are_kept(evalua
         def submit(self, fn, *args):
             f = cf.Future()
             self.calls += 1
-            if self.calls == 1:
+            if self.calls <= 2:
+                if self.calls == 1:
+                    fn(*args)
                 f.set_exception(BrokenProcessPool("A process in the process pool was terminated abruptly"))
             else:
                 f.set_result(fn(*args))
@@ -519,12 +604,14 @@ def test_a_killed_worker_is_one_error_line_and_the_finished_runs_are_kept(evalua
     monkeypatch.setattr(cf, "ProcessPoolExecutor", DyingPool)
     code = main(["eval", "--suite", str(suite), "--out", str(out), "--cache", str(evaluated["tmp"] / "worlds"),
                  "--seeds", "2", "--jobs", "2", "--set", "filter.particles=2000", "--no-progress"])
-    printed = capsys.readouterr().out
+    printed = capsys.readouterr()
     assert code == 2
-    errors = [line for line in printed.splitlines() if line.startswith("error:")]
-    assert len(errors) == 1 and "worker process died" in errors[0] and "good/tracking/default/seed1" in errors[0]
+    assert "error:" not in printed.out
+    errors = printed.err.splitlines()
+    assert len(errors) == 1 and "worker process died" in errors[0] and "1 run(s) unfinished" in errors[0]
+    assert "first planted/tracking/default/seed2" in errors[0]
     rows = _rows(out)
-    assert len(rows) == 7 and ("planted", "default", 2) in {(r["dataset"], r["config"], r["seed"]) for r in rows}
+    assert len(rows) == 7 and ("good", "default", 1) in {(r["dataset"], r["config"], r["seed"]) for r in rows}
 
 # ----------------------------------------------------------------------------- the runner's kidnap hook
 

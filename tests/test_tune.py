@@ -101,6 +101,8 @@ BAD_SPACES = [
     ({"sensor.model": {"low": 0, "high": 1}}, ["sensor.model", "not a number", "choices"]),
     ({"map": {"choices": ["a.yaml"]}}, ["map", "not tunable"]),
     ({"filter.initial_std": {"low": 0.1, "high": 0.2}}, ["filter.initial_std", "not a number"]),
+    ({"filter": {"particles": {"choices": [1000]}}, "filter.particles": {"choices": [2000]}},
+     ["filter.particles", "given twice"]),  # nested and dotted: the last one once won silently
 ]
 
 
@@ -164,6 +166,9 @@ def test_lost_runs_are_penalised_not_dropped():
     assert lost["rmse"] == pytest.approx((0.1 + LOST_PENALTY) / 2) and lost["lost_runs"] == 1
     failed = objective_values([row("a", 0.1, False), {"dataset": "b", "mode": "tracking", "seed": 1, "error": "x"}])
     assert failed["rmse"] == pytest.approx(lost["rmse"]) and failed["lost"] > 0.5
+    # no particle count or wall time for b, whose every run failed: None (empty in trials.csv), not inf
+    assert failed["particles"] is None and failed["wall"] is None
+    assert failed["errors"] == ["b/tracking/seed1: x"] and failed["failed_runs"] == 1
 
 
 # ----------------------------------------------------------------------------- studies
@@ -241,6 +246,42 @@ def test_sigint_then_resume_reaches_the_same_best(serial, files, sig, jobs):
     assert main(["tune", "--resume", str(study), "--jobs", "1", "--no-progress"]) == 0
     _same_trials(serial, study)
     assert {p: p.stat().st_mtime_ns for p in done} == done  # the finished runs were not run again
+
+
+def test_a_failed_run_says_why_and_resume_refuses_a_changed_suite(files, tmp_path, capsys):
+    """--seeds A-B as mcl eval takes it. A run that fails (a log that is no log) counts as lost and trials.csv's
+    error column says why (particles and wall empty: no figure for that dataset; they were inf). --resume refuses
+    a study whose suite file or base config changed since it began (the trials were scored on the old ones)."""
+    from mcl.config import PROJECT_ROOT
+
+    demo = PROJECT_ROOT / "data" / "demo"
+    doc = {**SUITE, "datasets": SUITE["datasets"][:1] + [
+        {"name": "nolog", "map": str(demo / "map.yaml"), "log": str(demo / "map.yaml"), "truth": str(demo / "truth.tum")}]}
+    suite, base, study = tmp_path / "suite.yaml", tmp_path / "base.yaml", tmp_path / "study"
+    suite.write_text(yaml.safe_dump(doc))
+    base.write_text(yaml.safe_dump(BASE))
+    args = ["tune", str(suite), "--space", str(files / "space.yaml"), "--config", str(base), "--study", str(study),
+            "--cache", str(files / "worlds"), "--trials", "1", "--batch", "1", "--jobs", "1", "--no-progress"]
+    assert main(args + ["--seeds", "0"]) == 2
+    assert capsys.readouterr().err.startswith("mcl: error: --seeds 0: ")
+    assert main(args + ["--seeds", "2-2"]) == 0
+    assert "trial 0: 1 run(s) failed: nolog/tracking/seed2: " in capsys.readouterr().err
+    (row,) = _trials(study)
+    assert (row["state"], row["lost_runs"], row["failed_runs"], row["runs"]) == ("complete", "1", "1", "2")
+    assert row["error"].startswith("1 run(s) failed: nolog/tracking/seed2: ") and "no laser messages" in row["error"]
+    assert row["particles"] == row["wall"] == ""
+    assert [p.name for p in study.glob("trials/*/runs/office/tracking/*/*")] == ["seed2"]
+    resume = ["tune", "--resume", str(study), "--trials", "2", "--jobs", "1", "--no-progress"]
+    suite.write_text(yaml.safe_dump(SUITE))  # nolog dropped, office-held added
+    assert main(resume) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"the suite file {suite} changed since the study began" in err
+    suite.write_text(yaml.safe_dump(doc))
+    base.write_text(yaml.safe_dump({**BASE, "filter": {"particles": 200, "kld": False}}))
+    assert main(resume) == 2
+    assert f"the base config {base} changed since the study began" in capsys.readouterr().err
+    assert json.loads((study / "study.json").read_text())["trials"] == 1  # nothing written
+    assert len(_trials(study)) == 1
 
 
 # The study runs in a child process: when Ray's own daemons die (the raylet, the GCS), Ray ends its driver with
