@@ -11,9 +11,28 @@ reference times t_i, t_{i+1} gives one observation of the odometry model:
 and the alphas maximise sum_i log p(x_{i+1} | u_i, x_i) of the closed-form
 odometry density (``mcl.motion.log_motion_model_odometry``'s terms, the book's
 Table 5.5: noise stds from the reference motion, angle differences wrapped).
-The pose-space Jacobian does not depend on the alphas and is left out. The
-optimiser is L-BFGS-B on log-alphas (so they stay positive) with bounds
-[1e-9, 100].
+The pose-space Jacobian does not depend on the alphas and is left out.
+
+The split of a pair's turn into rot1 and rot2 is the direction of its step,
+which the data often do not show: below min_trans the filter's rule sets
+rot1 = 0 (for the odometry and the reference alike), and a step of a few
+centimetres (a turn on the spot whose odometry creeps, a reference that
+jitters, a curved path between distant reference times) points anywhere.
+Such a pair, scored by Table 5.5, has a rot1 residual of up to pi/2 against a
+sigma_rot1 of a few mrad, and that one pair sets the alphas (fr101 gave
+alpha2 = 189, and the filter lost track). So each pair's density is
+
+    (1 - p_turn) * Table 5.5  +  p_turn * p(turn) p(trans) / 2 pi
+
+where the turn-only density compares the total turn rot1 + rot2 (noise
+eps_rot1 + eps_rot2: variance sigma_rot1^2 + sigma_rot2^2, with rot1 = 0 and
+rot2 = the whole turn as below min_trans) and the translation (folded at 0:
+with the direction free, so is the step's sign), and the split is uniform on
+the circle. Pairs below min_trans (either step) take the
+turn-only density alone. p_turn, the share of pairs whose split is not
+observed, is fitted with the alphas (at most 0.5); fr101, belgioioso and
+intel_lab give 0.22-0.30. The optimiser is Nelder-Mead, then L-BFGS-B, on log-alphas (so they
+stay positive) with bounds [1e-9, 100].
 
 What the fitted alphas mean: they describe the odometry error *over the
 reference spacing*. Noise accumulates along the odometry chain, so fitting
@@ -22,20 +41,25 @@ form (the filter, which updates every few scans, wants the alphas at its own
 update spacing). Reference poses that are themselves noisy (SLAM-corrected
 logs jitter by centimetres) inflate the fitted alphas, alpha2 and alpha3 most.
 Pairs where neither the reference nor the odometry moved (less than 1 mm and
-1 mrad) carry no information and are skipped.
+1 mrad) carry no information and are skipped. An alpha above 1 (a turn's or
+a step's noise as large as itself) is implausible: the fit warns.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
 
-from mcl.errors import DataError
+from mcl.errors import ConfigError, DataError, MclWarning
 
 ALPHA_BOUNDS = (1e-9, 100.0)
+P_TURN_MAX = 0.5  # the turn-only share of the pairs (module docstring) is fitted in (0, P_TURN_MAX]
+ALPHA_PLAUSIBLE = 1.0  # fitted alphas above this are warned about
+STAMP_TOL = 1e-3  # s: a reference pose matches a log stamp within this (as calibrate sensor matches scans)
 STILL_TRANS = 1e-3  # m
 STILL_ROT = 1e-3  # rad
 
@@ -48,8 +72,11 @@ def pairs_from_log(log_path, truth_path):
     from the scans' own odometry poses interpolated the same way.
     """
     from mcl.datasets.carmen import interpolate_odometry, read_carmen
+    from mcl.datasets.rosbag import is_bag
     from mcl.trajectory import read_tum
 
+    if is_bag(log_path):
+        raise DataError(bag_message(log_path))
     t, poses = read_tum(truth_path)
     order = np.argsort(t, kind="stable")
     t, poses = t[order], poses[:, order]
@@ -65,8 +92,24 @@ def pairs_from_log(log_path, truth_path):
     t, poses = t[keep], poses[:, keep]
     if t.size < 2:
         raise DataError(f"{truth_path}: fewer than 2 reference poses inside the log's odometry time span")
+    # the reference must be this log's: stamped at its ODOM lines or scans (a truth on another clock can overlap it)
+    stamps = np.unique(np.concatenate([odo[:, 0], [s.t for s in log.scans]]))
+    i = np.clip(np.searchsorted(stamps, t), 1, stamps.size - 1) if stamps.size > 1 else np.zeros(t.size, int)
+    gap = np.minimum(np.abs(stamps[i] - t), np.abs(stamps[np.maximum(i - 1, 0)] - t))
+    matched = int(np.count_nonzero(gap <= STAMP_TOL))
+    if matched < 0.5 * t.size:
+        raise DataError(f"{truth_path}: only {matched} of its {t.size} reference poses inside the odometry's time "
+                        f"span are stamped within 1 ms of an ODOM line or scan of {log_path}: is it this log's truth?")
     odom = interpolate_odometry(odo, t)
     return odom[:, :-1], odom[:, 1:], poses[:, :-1], poses[:, 1:], t[:-1]
+
+
+def bag_message(path) -> str:
+    """The one line for a ROS bag given where a CARMEN log is needed."""
+    from pathlib import Path
+
+    return (f"{path}: a ROS bag; the calibrate commands read CARMEN logs: convert it first with "
+            f"`mcl convert {path} {Path(path).with_suffix('.clf')}`")
 
 
 def _still(a, b):
@@ -78,36 +121,60 @@ def _still(a, b):
 SIGMA_FLOOR = 1e-3  # m or rad: no noise std below this in the fit (logged poses are rounded, see fit_odometry_alphas)
 
 
-def pair_log_likelihood(alphas, odom_prev, odom_now, x_prev, x_now, noise_form="variance", noise="normal",
-                        sigma_floor=SIGMA_FLOOR, min_trans=None):
-    """sum over pairs of log p(x_now | (odom_prev, odom_now), x_prev), Table 5.5 without the Jacobian."""
-    from mcl.motion import SIGMA_MIN, noise_sigmas_array, odometry_deltas_array, odometry_residuals
+def pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_form="variance", noise="normal",
+                         sigma_floor=SIGMA_FLOOR, min_trans=None, p_turn=0.0) -> np.ndarray:
+    """(M,) log p(x_now | (odom_prev, odom_now), x_prev) of each pair: Table 5.5 without the Jacobian, mixed with the
+    turn-only density (weight p_turn; alone below min_trans), see the module docstring."""
+    from mcl.motion import ROT1_MIN_TRANS, SIGMA_MIN, _wrap_np, noise_sigmas_array, odometry_deltas_array, \
+        odometry_residuals
     from mcl.noise import log_density
 
     cfg = SimpleNamespace(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
                           noise_form=noise_form)
-    from mcl.motion import ROT1_MIN_TRANS
-
     mt = ROT1_MIN_TRANS if min_trans is None else float(min_trans)
+    f = max(float(sigma_floor), SIGMA_MIN)
+
+    def log_f(r, sigma):
+        return log_density(noise, r, np.maximum(sigma, f))
+
     r1, tr, r2 = odometry_deltas_array(odom_prev, odom_now, mt)
     h1, ht, h2 = odometry_deltas_array(x_prev, x_now, mt)
+    # turn only: rot1 = 0, rot2 = the whole turn (the filter's rule below min_trans), noise eps_rot1 + eps_rot2;
+    # the step's direction is free, so its sign is too: the translation's density is folded at 0
+    turn = _wrap_np(h1 + h2)
+    t1, tt, t2 = noise_sigmas_array(np.zeros_like(turn), ht, turn, cfg)
+    ll_turn = log_f(_wrap_np(r1 + r2 - turn), np.hypot(t1, t2)) + np.logaddexp(log_f(tr - ht, tt), log_f(tr + ht, tt))
     s1, st, s2 = noise_sigmas_array(h1, ht, h2, cfg)
     d1, dtr, d2 = odometry_residuals(r1, tr, r2, h1, ht, h2)
-    f = max(float(sigma_floor), SIGMA_MIN)
-    ll = (log_density(noise, d1, np.maximum(s1, f))
-          + log_density(noise, dtr, np.maximum(st, f))
-          + log_density(noise, d2, np.maximum(s2, f)))
-    return float(np.sum(ll))
+    ll = log_f(d1, s1) + log_f(dtr, st) + log_f(d2, s2)
+    if p_turn > 0:  # the split uniform on the circle: 1 / 2 pi
+        ll = np.logaddexp(math.log1p(-p_turn) + ll, math.log(p_turn / (2 * math.pi)) + ll_turn)
+    return np.where((tr < mt) | (ht < mt), ll_turn, ll)
+
+
+def pair_log_likelihood(alphas, *pairs, **kw) -> float:
+    """sum over pairs of ``pair_log_likelihoods`` (same arguments)."""
+    return float(np.sum(pair_log_likelihoods(alphas, *pairs, **kw)))
+
+
+def check_min_trans(min_trans) -> None:
+    """min_trans (None: the default) must be a finite number >= 0."""
+    if min_trans is not None and not (math.isfinite(min_trans) and min_trans >= 0):
+        raise ConfigError(f"--min-trans: must be a number >= 0 (m), got {min_trans}")
 
 
 def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance", noise="normal",
-                        x0=(0.05, 0.05, 0.05, 0.05), min_trans=None) -> dict:
+                        x0=(0.05, 0.05, 0.05, 0.05), min_trans=None, p_turn=None, t=None) -> dict:
     """Maximum-likelihood alpha1..alpha4 of the odometry model from matched pairs (see the module docstring).
 
-    Returns {"alphas": [a1..a4], "log_likelihood", "pairs" (used), "skipped" (still), "converged", "message"}.
-    With triangular noise the likelihood is -inf wherever one pair falls
-    outside the support; the fit then starts from alphas large enough to
-    cover every pair.
+    Returns {"alphas": [a1..a4], "p_turn", "log_likelihood", "pairs" (used), "skipped" (still), "converged",
+    "message", "warnings"}. p_turn: None fits it with the alphas, a number fixes it (0: Table 5.5 alone).
+    t (M,): the pairs' times, to name a pair in errors. Warns (``MclWarning``) about alphas above 1.
+
+    With triangular noise (bounded support) the density is zero wherever a
+    residual lies outside the support; a pair no alphas within the bounds
+    cover is an error naming it, and the fit starts from alphas large enough
+    to cover every pair.
 
     The noise stds are floored at ``SIGMA_FLOOR`` (1 mm / 1 mrad): logs print
     poses to about 1e-6 m, so the direction of a 1 cm step is known to only
@@ -115,13 +182,12 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     otherwise make one rounding error outweigh the whole log.
 
     min_trans (default the filter's 1 cm, ``ROT1_MIN_TRANS``): below this
-    translation rot1 = 0 and rot2 carries the turn, for the odometry and the
-    reference alike. With a reference that jitters by centimetres (intel_lab),
-    a reference step of 2-5 cm where the odometry turned on the spot reads as
-    rot1 = +-pi/2 and inflates alpha1/alpha2; raise min_trans above the jitter.
+    translation (odometry or reference) rot1 = 0 and rot2 carries the turn:
+    the pair is scored on its turn and translation only.
     """
     from scipy.optimize import minimize
 
+    check_min_trans(min_trans)
     op, on, xp, xn = (np.asarray(a, dtype=np.float64) for a in (odom_prev, odom_now, x_prev, x_now))
     still = _still(xp, xn) & _still(op, on)
     use = ~still
@@ -130,23 +196,54 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     if m < 4:
         raise DataError(f"calibrate motion: only {m} pairs with motion; need at least 4")
     lo, hi = (math.log(b) for b in ALPHA_BOUNDS)
+    fit_p = p_turn is None
+
+    def unpack(z):  # log-alphas, and p_turn = P_TURN_MAX * logistic(z[4])
+        return np.exp(z[:4]), (P_TURN_MAX / (1.0 + math.exp(-z[4])) if fit_p else float(p_turn))
+
+    def lls(z):
+        a, p = unpack(z)
+        return pair_log_likelihoods(a, op, on, xp, xn, noise_form, noise, min_trans=min_trans, p_turn=p)
 
     def nll(z):
-        v = -pair_log_likelihood(np.exp(z), op, on, xp, xn, noise_form, noise, min_trans=min_trans) / m
-        return v if np.isfinite(v) else 1e300
+        v = -float(np.sum(lls(z))) / m
+        return v if np.isfinite(v) else 1e300  # outside a bounded support: a wall for the optimiser
 
-    z0 = np.log(np.asarray(x0, dtype=np.float64))
+    z0 = np.r_[np.log(np.asarray(x0, dtype=np.float64)), -2.0]
     if noise != "normal":
-        while nll(z0) >= 1e300 and z0.max() < hi:
-            z0 = z0 + math.log(2.0)
+        # the widest supports (every alpha at its bound) must cover every pair, or no alphas do
+        bad = np.flatnonzero(~np.isfinite(lls(np.r_[np.full(4, hi), 12.0])))
+        if bad.size:
+            k = int(bad[0])
+            tk = np.asarray(t, dtype=np.float64)[use][k] if t is not None else None
+            from mcl.motion import ROT1_MIN_TRANS, odometry_deltas_array
+
+            mt = ROT1_MIN_TRANS if min_trans is None else min_trans
+            o = [float(v[0]) for v in odometry_deltas_array(op[:, k], on[:, k], mt)]
+            r = [float(v[0]) for v in odometry_deltas_array(xp[:, k], xn[:, k], mt)]
+            raise DataError(
+                f"calibrate motion: motion.noise={noise} has a bounded support, and no alphas up to "
+                f"{ALPHA_BOUNDS[1]:g} give pair {k}{f' (t = {tk:.3f})' if tk is not None else ''} a nonzero density: "
+                f"odometry (rot1, trans, rot2) = ({o[0]:.4f}, {o[1]:.4f}, {o[2]:.4f}), reference "
+                f"({r[0]:.4f}, {r[1]:.4f}, {r[2]:.4f}) ({bad.size} such pairs); fit with motion.noise=normal")
+        while nll(z0) >= 1e300 and z0[:4].max() < hi:
+            z0[:4] += math.log(2.0)
     # Nelder-Mead first (robust to the flat start), then L-BFGS-B to polish.
-    r0 = minimize(nll, z0, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-10, "maxiter": 4000})
-    r = minimize(nll, r0.x, method="L-BFGS-B", bounds=[(lo, hi)] * 4)
+    r0 = minimize(nll, z0, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-10, "maxiter": 8000})
+    r = minimize(nll, r0.x, method="L-BFGS-B", bounds=[(lo, hi)] * 4 + [(-12.0, 12.0)])
     best = r if r.fun <= r0.fun else r0
-    alphas = np.exp(best.x)
-    return {"alphas": [float(a) for a in alphas], "log_likelihood": float(-best.fun * m), "pairs": int(m),
-            "skipped": int(np.count_nonzero(still)), "converged": bool(r.success or r0.success),
-            "message": str(best.message)}
+    alphas, p = unpack(best.x)
+    notes = []
+    big = [f"alpha{k + 1} = {a:.3g}" for k, a in enumerate(alphas) if a > ALPHA_PLAUSIBLE]
+    if big:
+        notes.append(f"calibrate motion: {', '.join(big)} above {ALPHA_PLAUSIBLE:g} is implausible (a noise as large "
+                     f"as the motion itself): check that the reference is this log's, in step with its odometry")
+    for n in notes:
+        warnings.warn(n, MclWarning, stacklevel=2)
+    return {"alphas": [float(a) for a in alphas], "p_turn": float(p), "log_likelihood": float(-best.fun * m),
+            "pairs": int(m), "skipped": int(np.count_nonzero(still)),
+            "converged": bool((r.success or r0.success) and best.fun < 1e300), "message": str(best.message),
+            "warnings": notes}
 
 
 def format_yaml(result: dict, noise_form: str, noise: str, source: str = "") -> str:
@@ -154,9 +251,11 @@ def format_yaml(result: dict, noise_form: str, noise: str, source: str = "") -> 
     a = result["alphas"]
     head = f"# mcl calibrate motion{': ' + source if source else ''}\n" \
            f"# {result['pairs']} pairs ({result['skipped']} still pairs skipped), " \
-           f"log-likelihood {result['log_likelihood']:.1f}{'' if result['converged'] else ', NOT converged'}\n"
+           f"log-likelihood {result['log_likelihood']:.1f}{'' if result['converged'] else ', NOT converged'}; " \
+           f"turn split not observed in a share p_turn = {result.get('p_turn', 0.0):.3f} of the pairs\n"
     body = "motion:\n" f"  noise_form: {noise_form}\n" f"  noise: {noise}\n" + \
-        "".join(f"  alpha{k + 1}: {a[k]:.6g}\n" for k in range(4))
+        "".join(f"  alpha{k + 1}: {a[k]:.6g}{'  # implausible (> 1)' if a[k] > ALPHA_PLAUSIBLE else ''}\n"
+                for k in range(4))
     return head + body
 
 
@@ -167,8 +266,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", help="config whose motion.noise_form and motion.noise the fit uses (default: the defaults)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override, e.g. motion.noise_form=std")
     p.add_argument("--min-trans", type=float, default=None, metavar="M",
-                   help="below this step (m) rot1 = 0 for odometry and reference (default 0.01, the filter's); "
-                        "raise it above the reference's jitter")
+                   help="below this step (m, >= 0) rot1 = 0 for odometry and reference and the pair is scored on its "
+                        "turn and translation only (default 0.01, the filter's)")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of YAML")
 
 
@@ -177,10 +276,11 @@ def run_from_args(args) -> int:
 
     from mcl.config import load_config
 
+    check_min_trans(args.min_trans)
     cfg = load_config(args.config, list(args.set))
     pairs = pairs_from_log(args.log, args.truth)
     res = fit_odometry_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise,
-                              min_trans=args.min_trans)
+                              min_trans=args.min_trans, t=pairs[4])
     if args.json:
         print(json.dumps(res, indent=2))
     else:

@@ -30,17 +30,26 @@ Likelihood field (``fit_likelihood_field``)
     when z_hit : z_rand = 2 w_hit / c : w_rand range_max / D (c the
     half-normal's truncation mass); the printed z_hit, z_rand are that
     ratio normalised to sum 1 (only the ratio matters to the filter).
+
+Checks (EM fits whatever it is given): a truth of which fewer than half the
+poses inside the scans' span match a scan is refused (another log's, on an
+overlapping clock); when fewer than half the readings lie within ``NEAR`` of
+the map's prediction, or sigma_hit exceeds ``SIGMA_HIT_MAX``, the fit warns
+(another building's map, a truth in another frame); a parameter EM left on
+its bound is flagged (``FitResult.bounds``, a warning and a comment in the
+YAML).
 """
 
 from __future__ import annotations
 
 import math
 import sys
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.errors import DataError
+from mcl.errors import DataError, MclWarning
 
 
 def erf(x):
@@ -51,6 +60,11 @@ def erf(x):
 
 BEAM_KEYS = ("z_hit", "z_short", "z_max", "z_rand", "sigma_hit", "lambda_short")
 _LAMBDA_MIN, _LAMBDA_MAX = 1e-3, 1e3
+_SIGMA_MIN = 1e-6  # m: EM's floor on sigma_hit
+NEAR = 0.2  # m: a reading fits the map when |z - z*| (beam) or d (likelihood field) is below this
+NEAR_MIN = 0.5  # warned below this share of readings that fit (the logs: 0.73-0.92 beam, 0.93-0.99 field; another
+                # building's map: 0.03-0.11)
+SIGMA_HIT_MAX = 0.5  # m: a sigma_hit above this is warned about too (the "hits" scatter; the logs' fits: 0.02-0.06)
 
 
 @dataclass
@@ -65,6 +79,7 @@ class FitResult:
     converged: bool
     extra: dict[str, float] = field(default_factory=dict)  # model-specific figures (e.g. the raw LF weights)
     scans: int = 0
+    bounds: dict[str, str] = field(default_factory=dict)  # parameter -> "lower"/"upper": it landed on its bound
 
 
 # ----------------------------------------------------------------------------- beam model
@@ -96,9 +111,9 @@ def _fit_lambda(r, z, zs, lam0):
         return lam0
     rz = float(np.dot(r, z))
 
-    def g(lam):
-        with np.errstate(over="ignore"):
-            return s / lam - rz - float(np.dot(r, zs / np.expm1(lam * zs)))
+    def g(lam):  # z*/(e^{lam z*} - 1) -> 1/lam as z* -> 0 (a ray cast from inside a wall): no 0/0
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            return s / lam - rz - float(np.dot(r, np.where(zs > 0, zs / np.expm1(lam * zs), 1.0 / lam)))
 
     lo, hi = _LAMBDA_MIN, _LAMBDA_MAX
     if g(lo) <= 0:
@@ -145,7 +160,7 @@ def fit_beam(z, zs, zmax, *, init=None, max_iter=1000, tol=1e-10) -> FitResult:
         w = resp.mean(axis=1)
         rh = resp[0]
         if rh.sum() > 0:
-            sigma = max(math.sqrt(float(np.dot(rh, (z - zs) ** 2)) / float(rh.sum())), 1e-6)
+            sigma = max(math.sqrt(float(np.dot(rh, (z - zs) ** 2)) / float(rh.sum())), _SIGMA_MIN)
         lam = _fit_lambda(resp[1], z, zs, lam)
         if abs(ll - prev) < tol:
             converged = True
@@ -206,7 +221,7 @@ def fit_likelihood_field(d, dmax, *, init=None, max_iter=1000, tol=1e-10) -> tup
         r = jh / tot
         w_hit = float(r.mean())
         if r.sum() > 0:
-            sigma = max(math.sqrt(float(np.dot(r, d * d)) / float(r.sum())), 1e-6)
+            sigma = max(math.sqrt(float(np.dot(r, d * d)) / float(r.sum())), _SIGMA_MIN)
         if abs(ll - prev) < tol:
             converged = True
             break
@@ -239,8 +254,11 @@ def collect(cfg, *, model: str):
     from mcl.sensors import field_distance
     from mcl.trajectory import read_tum
 
+    from mcl.calibrate_motion import bag_message
     from mcl.errors import ConfigError
 
+    if cfg.log is None and cfg.bag is not None:
+        raise DataError(bag_message(cfg.bag))
     for key in ("map", "log", "truth"):
         if getattr(cfg, key) is None:
             raise ConfigError(f"{key}: calibrate sensor needs a {key} (set it in the config or pass --{key})")
@@ -275,6 +293,10 @@ def collect(cfg, *, model: str):
         zmax_list.append(np.full(r.size, zmax))
     if used == 0:
         raise DataError(f"{cfg.truth}: no reference pose matches a scan time of {cfg.log} (within 1 ms)")
+    span = int(np.count_nonzero((truth.t >= scans[0].t - 1e-3) & (truth.t <= scans[-1].t + 1e-3))) if scans else 0
+    if used < 0.5 * span:  # a truth on another clock that overlaps the log's: a few stamps match by chance
+        raise DataError(f"{cfg.truth}: only {used} of its {span} reference poses inside the scans' time span match a "
+                        f"scan time of {cfg.log} (within 1 ms): is it this log's truth?")
     X, Y, A = (np.concatenate(v) for v in (rays_x, rays_y, rays_a))
     z, zmax = np.concatenate(zs_list), np.concatenate(zmax_list)
     if model == "beam":
@@ -305,16 +327,44 @@ def calibrate_sensor(cfg, model: str | None = None) -> FitResult:
         z, zs, zmax, used = collect(cfg, model="beam")
         fit = fit_beam(z, zs, zmax)
         fit.scans = used
-        return fit
-    if model == "likelihood_field":
+        near = float(np.mean(np.abs(z - zs) < NEAR))
+    elif model == "likelihood_field":
         d, _, _, used = collect(cfg, model="likelihood_field")
         dmax = float(s.likelihood_field.likelihood_max_dist)
         w_hit, w_rand, sigma, it, ll, conv = fit_likelihood_field(d, dmax)
         z_hit, z_rand = lf_config_weights(w_hit, w_rand, sigma, dmax, float(s.range_max))
-        return FitResult("likelihood_field", dict(z_hit=z_hit, z_rand=z_rand, sigma_hit=sigma), int(d.size), ll, it,
-                         conv, extra=dict(w_hit=w_hit, w_rand=w_rand, likelihood_max_dist=dmax,
-                                          range_max=float(s.range_max)), scans=used)
-    raise ValueError(f"calibrate sensor: unknown model {model!r}")
+        fit = FitResult("likelihood_field", dict(z_hit=z_hit, z_rand=z_rand, sigma_hit=sigma), int(d.size), ll, it,
+                        conv, extra=dict(w_hit=w_hit, w_rand=w_rand, likelihood_max_dist=dmax,
+                                         range_max=float(s.range_max)), scans=used)
+        near = float(np.mean(d < NEAR))
+    else:
+        raise ValueError(f"calibrate sensor: unknown model {model!r}")
+    _check_fit(fit, near, cfg)
+    return fit
+
+
+def _check_fit(fit: FitResult, near: float, cfg) -> None:
+    """Warn (``MclWarning``) when most readings do not fit the map at the reference poses (share ``near`` within
+    ``NEAR``), and flag (``fit.bounds``, a warning but for lambda_short at its lower bound) a parameter EM left on its bound."""
+    sigma = fit.params["sigma_hit"]
+    if near < NEAR_MIN or sigma > SIGMA_HIT_MAX:
+        warnings.warn(f"calibrate sensor: the readings do not fit the map at the reference poses (only {near:.0%} "
+                      f"within {NEAR:g} m of the map's prediction, sigma_hit {sigma:.3g} m): is {cfg.map} the map of "
+                      f"{cfg.log}, and {cfg.truth} in its frame?", MclWarning, stacklevel=3)
+    if sigma <= _SIGMA_MIN:
+        fit.bounds["sigma_hit"] = "lower"
+    lam = fit.params.get("lambda_short")
+    if lam is not None and lam <= _LAMBDA_MIN:
+        fit.bounds["lambda_short"] = "lower"  # g(0+) = sum r (z*/2 - z) <= 0: short readings past z*/2 on average
+    elif lam is not None and lam >= _LAMBDA_MAX:
+        fit.bounds["lambda_short"] = "upper"
+    for k, side in fit.bounds.items():
+        if k == "lambda_short" and side == "lower":
+            # the short readings lie past z*/2 on average: the exponential flattens to a uniform on [0, z*], a
+            # result (every real log here gives it), not a failed fit: the YAML's comment says so, no warning
+            continue
+        warnings.warn(f"calibrate sensor: {k} landed on its {side} bound {fit.params[k]:g}", MclWarning,
+                      stacklevel=3)
 
 
 def format_yaml(fit: FitResult) -> str:
@@ -331,7 +381,7 @@ def format_yaml(fit: FitResult) -> str:
     lines.append(f"  model: {fit.model}")
     lines.append(f"  {fit.model}:")  # each model has its own block (sensor.likelihood_field, sensor.beam)
     for k, v in fit.params.items():
-        lines.append(f"    {k}: {v:.6g}")
+        lines.append(f"    {k}: {v:.6g}" + (f"  # on its {fit.bounds[k]} bound" if k in fit.bounds else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -352,9 +402,20 @@ def run_from_args(args) -> int:
 
     from mcl.config import load_config
 
+    from mcl.calibrate_motion import bag_message
+    from mcl.datasets.rosbag import is_bag
+    from mcl.errors import ConfigError
+
+    if args.log is not None and is_bag(args.log):
+        raise DataError(bag_message(args.log))
     overrides = [f"{k}={Path(v).resolve()}" for k, v in (("map", args.map), ("log", args.log), ("truth", args.truth))
                  if v is not None]
-    cfg = load_config(args.config, overrides + list(args.set))
+    try:
+        cfg = load_config(args.config, overrides + list(args.set))
+    except ConfigError as e:  # the config's log is a bag: the run's advice (give it as bag) does not apply here
+        if "is a ROS bag" not in str(e):
+            raise
+        raise DataError(bag_message(str(e).split(" is a ROS bag")[0].split("log: ")[-1])) from None
     fit = calibrate_sensor(cfg, args.model)
     sys.stdout.write(format_yaml(fit))
     return 0

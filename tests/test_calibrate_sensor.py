@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import yaml
@@ -16,6 +18,7 @@ from mcl.calibrate_sensor import (
 )
 from mcl.cli import main
 from mcl.config import load_config
+from mcl.errors import DataError, MclWarning
 
 TRUE = dict(z_hit=0.75, z_short=0.12, z_max=0.05, z_rand=0.08, sigma_hit=0.08, lambda_short=0.6)
 
@@ -86,11 +89,16 @@ def test_calibrate_recovers_the_simulator_noise(sim_log):
     # The simulator draws hit readings z* + N(0, 0.05^2) with prob 0.93, short readings with prob 0.05
     # (uniform on [0.05 z*, z*], which the exponential approximates with a small rate), no-return
     # readings with prob 0.02 and no random readings. Issue 3: sigma within 20 %, weights within 0.05.
+    # The uniform short readings lie past z*/2 on average: lambda_short goes to its lower bound, which the YAML
+    # notes (a result, as on every real log here: no warning).
     cfg = load_config(None, [f"map={sim_log / 'map.yaml'}", f"log={sim_log / 'log.clf'}",
                              f"truth={sim_log / 'truth.tum'}"])
-    fit = calibrate_sensor(cfg, "beam")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MclWarning)
+        fit = calibrate_sensor(cfg, "beam")
     p = fit.params
     assert fit.converged and fit.scans == 301
+    assert fit.bounds == {"lambda_short": "lower"} and "lambda_short: 0.001  # on its lower bound" in format_yaml(fit)
     assert p["sigma_hit"] == pytest.approx(0.05, rel=0.20), p
     for k, v in (("z_hit", 0.93), ("z_short", 0.05), ("z_max", 0.02), ("z_rand", 0.0)):
         assert p[k] == pytest.approx(v, abs=0.05), (k, p)
@@ -137,3 +145,65 @@ def test_format_yaml_marks_a_fit_that_did_not_converge():
     zs = rng.uniform(1, 9, 5000)
     fit = fit_beam(sample_beam(rng, zs, 10.0, TRUE), zs, 10.0, max_iter=2)
     assert not fit.converged and "NOT converged" in format_yaml(fit)
+
+
+def _moved_truth(sim_log, path, dt=0.0, dx=0.0, dy=0.0, keep=0, every=1):
+    """The simulated truth (every ``every``-th pose) with its stamps shifted by dt (all but the first ``keep``) and
+    its poses by (dx, dy)."""
+    rows = [ln.split() for ln in (sim_log / "truth.tum").read_text().splitlines()[::every]]
+    path.write_text("".join(f"{float(r[0]) + (dt if i >= keep else 0.0):.6f} {float(r[1]) + dx} {float(r[2]) + dy} "
+                            f"{' '.join(r[3:])}\n" for i, r in enumerate(rows)))
+    return path
+
+
+def test_truth_of_another_log_is_refused(sim_log, tmp_path, capsys):
+    # a truth on an overlapping clock: two of its stamps happen to match scans (the fit used to run on them)
+    truth = _moved_truth(sim_log, tmp_path / "t.tum", dt=0.05, keep=2)
+    code = main(["calibrate", "sensor", "--map", str(sim_log / "map.yaml"), "--log", str(sim_log / "log.clf"),
+                 "--truth", str(truth), "--model", "likelihood_field"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err
+    assert f"{truth}: only 2 of its" in err and str(sim_log / "log.clf") in err
+
+
+@pytest.mark.parametrize("model", ["beam", "likelihood_field"])
+def test_readings_that_do_not_fit_the_map_are_warned_about(sim_log, tmp_path, model):
+    # the reference (1.5, -1) m off the map's frame: 13 % (field) and 2 % (beam) of the readings fit, and the fit
+    # used to print its parameters without a word (every 10th scan: EM is slow on readings that fit nothing)
+    cfg = load_config(None, [f"map={sim_log / 'map.yaml'}", f"log={sim_log / 'log.clf'}",
+                             f"truth={_moved_truth(sim_log, tmp_path / 't.tum', dx=1.5, dy=-1.0, every=10)}"])
+    with pytest.warns(MclWarning, match="the readings do not fit the map at the reference poses"):
+        calibrate_sensor(cfg, model)
+
+
+def test_fit_lambda_ignores_rays_cast_from_inside_a_wall():
+    # z* = 0 (the laser pose in an occupied cell) gave 0/0: a leaked RuntimeWarning, and a NaN that sent the
+    # bisection to the lower bound
+    import warnings
+
+    from mcl.calibrate_sensor import _fit_lambda
+
+    rng = np.random.default_rng(3)
+    zs = rng.uniform(1, 9, 2000)
+    z = -np.log1p(rng.random(2000) * np.expm1(-0.8 * zs)) / 0.8  # short readings, rate 0.8
+    r = np.ones(2000)
+    want = _fit_lambda(r, z, zs, 0.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = _fit_lambda(np.r_[r, 0.0, 0.0], np.r_[z, 0.0, 3.0], np.r_[zs, 0.0, 0.0], 0.5)
+    assert got == pytest.approx(want, rel=1e-9) and want == pytest.approx(0.8, rel=0.1)
+
+
+def test_a_bag_as_log_says_to_convert_it(sim_log, tmp_path, capsys):
+    bag = tmp_path / "x.mcap"
+    bag.write_bytes(b"\x89MCAP0\r\n")
+    args = ["--map", str(sim_log / "map.yaml"), "--truth", str(sim_log / "truth.tum")]
+    assert main(["calibrate", "sensor", "--log", str(bag), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--set" not in err and "read CARMEN logs" in err and f"mcl convert {bag}" in err
+    for key in ("bag", "log"):  # a config naming the bag
+        cfg = tmp_path / f"{key}.yaml"
+        cfg.write_text(f"{key}: {bag}\n")
+        assert main(["calibrate", "sensor", "--config", str(cfg), *args]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "read CARMEN logs" in err and f"mcl convert {bag}" in err, err
