@@ -18,7 +18,7 @@ from mcl.calibrate_sensor import (
 )
 from mcl.cli import main
 from mcl.config import load_config
-from mcl.errors import DataError, MclWarning
+from mcl.errors import MclWarning
 
 TRUE = dict(z_hit=0.75, z_short=0.12, z_max=0.05, z_rand=0.08, sigma_hit=0.08, lambda_short=0.6)
 
