@@ -63,7 +63,7 @@ class FilterConfig:
     update_min_a: float = field(default=0.05, metadata=_rng(0.0))  # rad turned before an update (AMCL)
     # estimate: mean of the heaviest cluster (AMCL's pf_cluster_stats) or of the whole set (mcl.clusters)
     estimate: Literal["cluster", "mean"] = "cluster"
-    cluster_size: float = field(default=0.5, metadata=_rng(0.0, lo_open=True))  # m, histogram cell for clusters
+    cluster_size: float = field(default=0.5, metadata=_rng(1e-3))  # m, histogram cell for clusters (a cell key overflows below a mm)
     cluster_angle: float = field(default=0.5236, metadata=_rng(0.0, 6.2832, lo_open=True))  # rad, its theta cell
     # degenerate input (mcl.filter): an odometry step longer than this is a jump, not motion
     max_odom_step: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
@@ -572,6 +572,9 @@ def _cross_checks(cfg: Config) -> None:
             f"got {b.z_hit:g} + {b.z_short:g} + {b.z_max:g} + {b.z_rand:g} = {total:g} (the defaults: 0.8, 0.1, "
             f"0.05, 0.05)", "sensor.beam.z_short", "sensor.beam.z_max", "sensor.beam.z_rand"
         )
+    if cfg.quality.min_beams > s.max_beams:
+        raise _CrossCheckError(f"quality.min_beams: {cfg.quality.min_beams} is more than sensor.max_beams "
+                               f"({s.max_beams}): no update would have beams enough to judge", "sensor.max_beams")
     if any(v < 0 for v in cfg.filter.initial_std):
         raise _CrossCheckError("filter.initial_std: standard deviations must be >= 0")
     if any(not v > 0 for v in cfg.filter.respread_std):

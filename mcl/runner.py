@@ -286,6 +286,19 @@ def _retime(scans, log, offset: float, echo):
     echo(f"{log.path}: sensor.time_offset {offset:+g} s: each scan paired with the {what} at its stamp "
          f"{'+' if offset > 0 else '-'} {abs(offset):g} s")
     odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
+    if not hasattr(log, "stamps_checked"):  # a CARMEN log (a bag's stamps are checked when it opens)
+        from mcl.datasets.rosbag import ODOM_SPAN_SLACK
+
+        t = np.array([s.t for s in scans]) + offset
+        o0, o1 = float(odometry[0, 0]), float(odometry[-1, 0])
+        inside = (t >= o0 - ODOM_SPAN_SLACK) & (t <= o1 + ODOM_SPAN_SLACK)
+        if not inside.any():
+            raise ConfigError(f"sensor.time_offset: {offset:+g} s moves every scan of {log.path} outside its "
+                              f"odometry's time span ({o0:.3f}..{o1:.3f} s; the scans at {t.min():.3f}..{t.max():.3f} "
+                              "s): the robot would look still")
+        if not inside.all():
+            echo(f"mcl: warning: sensor.time_offset: {int(np.count_nonzero(~inside))} of {t.size} scans of "
+                 f"{log.path} lie outside its odometry's time span: their odometry is held at its end")
     return ScanMap(scans, functools.partial(_retimed, odometry=odometry, offset=float(offset)))
 
 
@@ -557,6 +570,10 @@ def _run(
 
     pf = ParticleFilter(cfg, grid, landmark_map=landmark_map,
                         plane_model=plane_sensor.model if plane_sensor is not None else None)
+    if pf.allowed is not None and not pf.allowed.any():  # map rejection with nowhere to stand
+        widest = float(grid.distance[grid.free].max())
+        raise ConfigError(f"motion.robot_radius: no cell of {grid.path} has {cfg.motion.robot_radius:g} m of "
+                          f"clearance (the widest free space: {widest:.2f} m from the nearest obstacle)")
     if from_bag:  # the bag's /initialpose, covariance included
         mean0, cov0 = bag_initial
         if not np.any(cov0):  # no covariance given: filter.initial_std
@@ -588,7 +605,8 @@ def _run(
 
         # the first scans tell the laser (a bag's scans are a stream: no slicing, and each pass reads the bag)
         beams = max((len(s.ranges) for s in itertools.islice(scans, 1000)), default=0)
-        every = particles_every_within(cfg.rerun.budget_mb, len(updates), beams, cfg.rerun.particles_max,
+        logged = min(cfg.rerun.particles_max, fc.particles)  # the cloud logged: at most the filter's (KLD's maximum)
+        every = particles_every_within(cfg.rerun.budget_mb, len(updates), beams, logged,
                                        cfg.rerun.particles_every, cfg.rerun.scan)
         if every > cfg.rerun.particles_every:
             echo(f"mcl: recording: the particle cloud on one update in {every}, to keep {len(updates)} updates near "

@@ -53,3 +53,28 @@ def test_eval_of_trajectories_on_two_clocks_names_both_and_their_spans(tmp_path,
     assert main(["eval", str(est), str(ref)]) == 2
     assert _one_error(capsys) == (f"mcl: error: {ref}: no pose lies within the time span of {est} (reference "
                                   "1000.000..1004.000 s, estimate 0.000..4.000 s): another clock or another dataset?")
+
+
+@pytest.mark.parametrize("setting,msg", [
+    # every scan moved off the odometry's span: the robot would look still (a bag's stamps were checked, a log's not)
+    ("sensor.time_offset=2000", "sensor.time_offset: +2000 s moves every scan of"),
+    # map rejection with nowhere to stand: failed after a few updates, naming no key
+    ("motion.robot_radius=1e12", "motion.robot_radius: no cell of"),
+    ("quality.min_beams=100", "quality.min_beams: 100 is more than sensor.max_beams (60)"),
+    ("filter.cluster_size=1e-9", "filter.cluster_size: 1e-09 is out of range (must be >= 0.001)"),  # a traceback
+])
+def test_a_setting_no_run_can_use_is_refused_before_the_run(world, tmp_path, capsys, setting, msg):
+    out = tmp_path / "run"
+    assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--particles", "300",
+                 "--rerun", "off", "--no-progress", "--out", str(out), "--set", setting]) == 2
+    assert msg in _one_error(capsys)
+    assert not out.exists()
+
+
+def test_the_recording_budget_counts_the_particles_the_filter_has(world, tmp_path, capsys):
+    # rerun.particles_max above the filter's count: the budget counted particles_max (a cloud on one update in 98
+    # for a 10-million maximum), not the 300 particles logged
+    assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--particles", "300",
+                 "--rerun", "save", "--no-progress", "--out", str(tmp_path / "r"),
+                 "--set", "rerun.particles_max=10000000", "--set", "rerun.budget_mb=1"]) == 0
+    assert "the particle cloud on one update in" not in capsys.readouterr().err
