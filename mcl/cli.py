@@ -144,12 +144,18 @@ def cmd_run(args) -> int:
         overrides.append((f"--seed {args.seed}", f"seed={args.seed}"))
     if args.initial_pose is not None:
         x, y, th = args.initial_pose
-        overrides += [(f"--initial-pose {x!r} {y!r} {th!r}", f"filter.initial_pose=[{x!r}, {y!r}, {th!r}]"),
-                      "filter.global_localization=false"]
+        option = f"--initial-pose {x!r} {y!r} {th!r}"
+        overrides += [(option, f"filter.initial_pose=[{x!r}, {y!r}, {th!r}]"),
+                      (option, "filter.global_localization=false")]
     if args.global_:
         overrides.append(("--global", "filter.global_localization=true"))
     if args.rerun is not None:
         overrides.append((f"--rerun {args.rerun}", f"rerun.mode={args.rerun}"))
+    options = {o[1].split("=", 1)[0]: o[0] for o in overrides if isinstance(o, tuple)}
+    for item in args.set:  # a --set is applied last: it wins over an option that sets the same key, and says so
+        key = item.split("=", 1)[0].strip()
+        if key in options:
+            print(f"mcl: warning: --set {item} overrides {options[key]}", file=sys.stderr)
     cfg = load_config(config_path, overrides + list(args.set))
     if args.threads is not None:
         set_threads(args.threads)

@@ -78,3 +78,12 @@ def test_the_recording_budget_counts_the_particles_the_filter_has(world, tmp_pat
                  "--rerun", "save", "--no-progress", "--out", str(tmp_path / "r"),
                  "--set", "rerun.particles_max=10000000", "--set", "rerun.budget_mb=1"]) == 0
     assert "the particle cloud on one update in" not in capsys.readouterr().err
+
+
+def test_a_set_that_overrides_an_option_says_so(world, tmp_path, capsys):
+    assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--particles", "300",
+                 "--initial-pose", "1", "2", "0", "--rerun", "off", "--no-progress", "--out", str(tmp_path / "r"),
+                 "--set", "filter.particles=200", "--set", "filter.global_localization=true"]) == 0
+    err = capsys.readouterr().err
+    assert "mcl: warning: --set filter.particles=200 overrides --particles 300" in err
+    assert "mcl: warning: --set filter.global_localization=true overrides --initial-pose 1.0 2.0 0.0" in err
