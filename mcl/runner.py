@@ -554,6 +554,10 @@ def _run(
         _check_start_pose(grid, bag_initial[0], f"{cfg.bag}: {cfg.topics.initial_pose}", echo)
     elif not fc.global_localization and fc.initial_pose is not None:
         _check_start_pose(grid, fc.initial_pose, "filter.initial_pose", echo)
+    b = cfg.sensor.beam
+    if cfg.sensor.use and cfg.sensor.model == "beam" and b.z_max == 0 and b.z_rand == 0:
+        echo("mcl: warning: sensor.beam: z_max and z_rand are both 0: a reading the map does not explain (no return, "
+             "a person) has likelihood 0 at every pose, so one such beam leaves every particle at weight 0")
     updates = _updates(scans, marks_all)
     plane_sensor = None
     if cfg.planes.use:

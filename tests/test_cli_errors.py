@@ -87,3 +87,13 @@ def test_a_set_that_overrides_an_option_says_so(world, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "mcl: warning: --set filter.particles=200 overrides --particles 300" in err
     assert "mcl: warning: --set filter.global_localization=true overrides --initial-pose 1.0 2.0 0.0" in err
+
+
+def test_beam_weights_that_leave_no_room_for_unexplained_readings_are_warned_about(world, tmp_path, capsys):
+    # legal (the weights sum to 1) but every no-return reading zeroes every particle: the run crawled through
+    # re-spreads with only "every particle weight is zero" to say why
+    assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--particles", "200",
+                 "--rerun", "off", "--no-progress", "--out", str(tmp_path / "r"), "--set", "sensor.model=beam",
+                 "--set", "sensor.beam.z_hit=0.9", "--set", "sensor.beam.z_short=0.1", "--set", "sensor.beam.z_max=0",
+                 "--set", "sensor.beam.z_rand=0"]) == 0
+    assert "mcl: warning: sensor.beam: z_max and z_rand are both 0" in capsys.readouterr().err
