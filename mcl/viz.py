@@ -132,11 +132,51 @@ def _save_batcher() -> rr.ChunkBatcherConfig:
 _COLUMN_DTYPES = {"colors": np.uint8, "radii": np.float32, "draw_order": np.float32}
 
 
+SPAWN_FLUSH_S = 30.0  # s a spawned viewer has to take the rest of the recording at the end (the .rrd has it all)
+
+
 def has_display() -> bool:
-    """True when a native viewer window can open (always on macOS/Windows)."""
+    """True when a native viewer window can open (always on macOS/Windows): a Wayland socket, or an X server that
+    answers at $DISPLAY. A DISPLAY left set with no server behind it (a stale ssh or container variable) is none:
+    the viewer would die and the recording stream wait on it for good."""
     if not sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
         return True
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    wayland = os.environ.get("WAYLAND_DISPLAY")
+    if wayland:
+        sock = Path(wayland) if os.path.isabs(wayland) else Path(os.environ.get("XDG_RUNTIME_DIR", "/nonexistent")) / wayland
+        if sock.exists():
+            return True
+    display = os.environ.get("DISPLAY")
+    return bool(display) and _x_server_answers(display)
+
+
+def _x_server_answers(display: str) -> bool:
+    """Whether an X server listens at ``display`` (``:N``, ``unix:N``, ``host:N[.S]``): its socket file, or a TCP
+    connection to port 6000 + N within half a second (ssh's forwarded ``localhost:10.0``)."""
+    import socket
+
+    host, _, rest = display.rpartition(":")
+    number = rest.split(".", 1)[0]
+    if not number.isdigit():
+        return False
+    if host in ("", "unix") or host.startswith("/"):  # a local server (XQuartz-style paths too)
+        return Path(f"/tmp/.X11-unix/X{number}").exists() or (host.startswith("/") and Path(display).exists())
+    try:
+        with socket.create_connection((host, 6000 + int(number)), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+def _viewer_executable() -> str | None:
+    """The ``rerun`` viewer: on PATH, else beside this Python (a venv used without being activated)."""
+    import shutil
+
+    found = shutil.which("rerun")
+    if found:
+        return found
+    beside = Path(sys.executable).parent / "rerun"
+    return str(beside) if beside.exists() else None
 
 
 def stat_group(name: str) -> str:
@@ -376,10 +416,13 @@ class RerunLogger:
         if mode == "off":
             return
 
-        if mode == "spawn" and not has_display():
+        viewer = _viewer_executable() if mode == "spawn" else None
+        if mode == "spawn" and (not has_display() or viewer is None):
             self.path = self.path or Path(f"{app_id}.rrd")
+            why = ("no display (no X server answers at DISPLAY, no Wayland socket)" if not has_display()
+                   else "no `rerun` viewer on PATH or beside this Python")
             print(
-                f"mcl: no display (DISPLAY/WAYLAND_DISPLAY unset), cannot spawn the Rerun viewer; "
+                f"mcl: {why}, cannot spawn the Rerun viewer; "
                 f"saving the recording to {self.path} instead (open it with `rerun {self.path}`)",
                 file=sys.stderr,
             )
@@ -395,7 +438,7 @@ class RerunLogger:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             rec.save(self.path)
         elif mode == "spawn":
-            rec.spawn(connect=False)
+            rr.spawn(connect=False, executable_path=viewer, recording=rec)
             sinks: list[Any] = [rr.GrpcSink()]
             if self.path is not None:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -591,7 +634,10 @@ class RerunLogger:
         self._flush_columns(rec)
         if self._blueprint_key is None:
             self._send_blueprint_to(rec)
-        rec.flush()
+        if self.mode == "spawn":  # a viewer that died (closed, its display gone) must not hold the run for good
+            rec.flush(timeout_sec=SPAWN_FLUSH_S)
+        else:
+            rec.flush()
         if self.mode == "serve":
             # Disconnecting would shut the gRPC server down before a viewer could read the
             # buffered data; keep it (and the stream) alive for the rest of the process.

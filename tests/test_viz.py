@@ -328,6 +328,56 @@ def test_spawn_without_display_falls_back_to_save(tmp_path, monkeypatch, capsys)
     assert rows(path, "/stats/ess", "step")[0][0] == 3
 
 
+def test_a_display_variable_with_no_server_behind_it_is_no_display(tmp_path, monkeypatch, capsys):
+    # DISPLAY left set by ssh or a container with no X server: the viewer died and the run hung in the stream's
+    # flush for good (SIGINT and SIGTERM too). No server answers: save, as without a display.
+    import socket
+
+    from mcl.viz import has_display
+
+    monkeypatch.setattr(sys, "platform", "linux")
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setenv("DISPLAY", ":987")  # no /tmp/.X11-unix/X987
+    assert not has_display()
+    with socket.socket() as listener:  # a "remote" server: something listens on 6000 + N
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        port = listener.getsockname()[1]
+        if port > 6000:
+            monkeypatch.setenv("DISPLAY", f"127.0.0.1:{port - 6000}.0")
+            assert has_display()
+    monkeypatch.setenv("DISPLAY", "127.0.0.1:1")  # port 6001: nothing (on this machine) listens
+    if not _listening(6001):
+        assert not has_display()
+    monkeypatch.setenv("DISPLAY", ":987")
+    path = tmp_path / "spawned.rrd"
+    with RerunLogger("spawn", path) as log:
+        assert log.mode == "save"
+        tiny_step(log, 3, 1.0)
+    assert "no display (no X server answers at DISPLAY" in capsys.readouterr().err
+
+
+def test_the_viewer_is_found_beside_this_python_without_an_activated_venv(monkeypatch):
+    # `.venv/bin/mcl run --rerun spawn` with the venv not activated: `rerun` is not on PATH (a traceback before)
+    from pathlib import Path
+
+    from mcl.viz import _viewer_executable
+
+    monkeypatch.setenv("PATH", "/nonexistent")
+    beside = Path(sys.executable).parent / "rerun"
+    assert _viewer_executable() == (str(beside) if beside.exists() else None)
+
+
+def _listening(port: int) -> bool:
+    import socket
+
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+            return True
+    except OSError:
+        return False
+
+
 def test_close_is_idempotent_and_rejects_logging_after(tmp_path):
     log = RerunLogger("save", tmp_path / "c.rrd")
     log.close()
