@@ -15,6 +15,7 @@ import json
 import math
 import os
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -168,6 +169,14 @@ def cmd_run(args) -> int:
                   compile_note=True)
     if args.json:
         print(json.dumps(summary, indent=2))
+    if cfg.rerun.mode == "serve" and not summary["interrupted"] and not summary.get("late_signal"):
+        # the servers live as long as this process: serve the finished recording until the user is done with it
+        print("mcl: the run is over; serving its recording until Ctrl-C", file=sys.stderr)
+        try:
+            while True:
+                time.sleep(3600)
+        except KeyboardInterrupt:
+            pass
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
 
 

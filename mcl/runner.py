@@ -716,7 +716,7 @@ def _run(
                 mean, cov = info.mean, info.cov
                 spread_full = _spread(info.full_cov)
                 last_mean, last_lost, last_spread = mean, info.lost, spread_full
-                with signals.held():  # the pose in the file <=> counted in the summary
+                with signals.held():  # the pose in the file <=> counted in the summary <=> in the recording
                     writer.append(scan.t, mean[0], mean[1], mean[2])
                     quality_out.write_line(_quality_line(scan.t, True, info.fit, info.lost, info.particles,
                                                          spread_full))
@@ -725,90 +725,90 @@ def _run(
                     counts["updates"] += 1
                     if info.fit is not None and info.fit.beams:
                         quality_rows.append((info.fit.match, info.fit.contradiction, info.lost))
-                if bag_out is not None:
-                    bag_out.update(scan.t, mean, cov, odom, pf.particles)
-                counts["resamples"] += int(info.resampled)
-                counts["rejected"] += info.rejected
-                counts["degenerate"] += int(info.degenerate)
-                spread_sum += spread_full
-                spread_max = max(spread_max, spread_full)
-                multimodal += int(info.clusters > 1)
-                skipped_beams += info.skipped_beams
-                tries_sum += info.tries
-                n_used.append(info.particles)
-                injected += info.injected
-                reseeds += int(info.reseeded)
-                stall_reseeds += int(info.reseeded and info.stalled)
-                fault_updates += int(info.faults)
-                for k, v in info.timings.items():
-                    stage_totals[k] += v
-                if viz is not None:
-                    tv = time.perf_counter()
-                    if odom_to_map is None:
-                        odom_to_map = compose(mean, inverse(odom))
-                    ref = truth.at(scan.t) if truth is not None else None
-                    stats = {
-                        "ess": info.ess,
-                        "particles": float(pf.n),  # the set drawn below (a re-seed grows it at its resample)
-                        "inject_p": info.inject_p,
-                        "tries": info.tries,
-                        "spread/full": spread_full,
-                        "spread/estimate": _spread(cov),
-                        "clusters": float(info.clusters),
-                        "skipped_beams": float(info.skipped_beams),
-                        "quality/match": info.quality,
-                        "quality/contradiction": info.fit.contradiction if info.fit is not None else math.nan,
-                        "quality/lost": float(info.lost),
-                        **{f"time_ms/{k}": 1e3 * v for k, v in info.timings.items()},
-                    }
-                    if planes is not None:
-                        stats["planes/found"] = float(len(planes))
-                        stats["planes/walls"] = float(planes.vertical(cfg.planes.vertical_tol).size)
-                    if ref is not None:
-                        stats["error/position"] = float(math.hypot(mean[0] - ref[0], mean[1] - ref[1]))
-                        stats["error/heading"] = abs(float(wrap_angle(mean[2] - ref[2])))
-                    scan_world = None
-                    if pf.sweep_order is not None and sweep_of(scan) is not None:
-                        scan = pf.sweep_order.used(scan)  # the reading the filter uses (mcl.deskew)
-                    endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose,
-                                                sweep_of(scan))
-                                 if not no_scan else np.zeros((2, 0)))
-                    expected_world = None
-                    if cfg.rerun.scan and endpoints.shape[1]:
-                        scan_world = _to_world(mean, endpoints)
-                        # the scan the map predicts at the estimate (the beam model's z*), next to the measured one
-                        expected_world = viz.expected_scan(grid, mean, laser_pose, scan.angles,
-                                                           scan.max_range or cfg.sensor.range_max)
-                    viz.log_step(
-                        counts["updates"] - 1,
-                        scan.t,
-                        particles=pf.particles,
-                        weights=pf.weights,
-                        estimate=mean,
-                        cov=cov,
-                        scan_world=scan_world,
-                        skipped_world=(_to_world(mean, info.skipped_endpoints)
-                                       if cfg.rerun.scan and info.skipped_endpoints is not None else None),
-                        expected_world=expected_world,
-                        odom_pose=compose(odom_to_map, odom),
-                        truth_pose=ref,
-                        stats=stats,
-                    )
-                    if cfg.rerun.lines and not no_scan:
-                        from mcl.features import extract_scan_lines, line_segments_world
-                        from mcl.viz import log_line_features
+                    if bag_out is not None:
+                        bag_out.update(scan.t, mean, cov, odom, pf.particles)
+                    counts["resamples"] += int(info.resampled)
+                    counts["rejected"] += info.rejected
+                    counts["degenerate"] += int(info.degenerate)
+                    spread_sum += spread_full
+                    spread_max = max(spread_max, spread_full)
+                    multimodal += int(info.clusters > 1)
+                    skipped_beams += info.skipped_beams
+                    tries_sum += info.tries
+                    n_used.append(info.particles)
+                    injected += info.injected
+                    reseeds += int(info.reseeded)
+                    stall_reseeds += int(info.reseeded and info.stalled)
+                    fault_updates += int(info.faults)
+                    for k, v in info.timings.items():
+                        stage_totals[k] += v
+                    if viz is not None:
+                        tv = time.perf_counter()
+                        if odom_to_map is None:
+                            odom_to_map = compose(mean, inverse(odom))
+                        ref = truth.at(scan.t) if truth is not None else None
+                        stats = {
+                            "ess": info.ess,
+                            "particles": float(pf.n),  # the set drawn below (a re-seed grows it at its resample)
+                            "inject_p": info.inject_p,
+                            "tries": info.tries,
+                            "spread/full": spread_full,
+                            "spread/estimate": _spread(cov),
+                            "clusters": float(info.clusters),
+                            "skipped_beams": float(info.skipped_beams),
+                            "quality/match": info.quality,
+                            "quality/contradiction": info.fit.contradiction if info.fit is not None else math.nan,
+                            "quality/lost": float(info.lost),
+                            **{f"time_ms/{k}": 1e3 * v for k, v in info.timings.items()},
+                        }
+                        if planes is not None:
+                            stats["planes/found"] = float(len(planes))
+                            stats["planes/walls"] = float(planes.vertical(cfg.planes.vertical_tol).size)
+                        if ref is not None:
+                            stats["error/position"] = float(math.hypot(mean[0] - ref[0], mean[1] - ref[1]))
+                            stats["error/heading"] = abs(float(wrap_angle(mean[2] - ref[2])))
+                        scan_world = None
+                        if pf.sweep_order is not None and sweep_of(scan) is not None:
+                            scan = pf.sweep_order.used(scan)  # the reading the filter uses (mcl.deskew)
+                        endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose,
+                                                    sweep_of(scan))
+                                     if not no_scan else np.zeros((2, 0)))
+                        expected_world = None
+                        if cfg.rerun.scan and endpoints.shape[1]:
+                            scan_world = _to_world(mean, endpoints)
+                            # the scan the map predicts at the estimate (the beam model's z*), next to the measured one
+                            expected_world = viz.expected_scan(grid, mean, laser_pose, scan.angles,
+                                                               scan.max_range or cfg.sensor.range_max)
+                        viz.log_step(
+                            counts["updates"] - 1,
+                            scan.t,
+                            particles=pf.particles,
+                            weights=pf.weights,
+                            estimate=mean,
+                            cov=cov,
+                            scan_world=scan_world,
+                            skipped_world=(_to_world(mean, info.skipped_endpoints)
+                                           if cfg.rerun.scan and info.skipped_endpoints is not None else None),
+                            expected_world=expected_world,
+                            odom_pose=compose(odom_to_map, odom),
+                            truth_pose=ref,
+                            stats=stats,
+                        )
+                        if cfg.rerun.lines and not no_scan:
+                            from mcl.features import extract_scan_lines, line_segments_world
+                            from mcl.viz import log_line_features
 
-                        lines = extract_scan_lines(scan, max_range=scan.max_range or cfg.sensor.range_max)
-                        log_line_features(viz, line_segments_world(lines, mean, laser_pose))
-                    if landmark_map is not None:
-                        from mcl.viz import log_landmark_observations
+                            lines = extract_scan_lines(scan, max_range=scan.max_range or cfg.sensor.range_max)
+                            log_line_features(viz, line_segments_world(lines, mean, laser_pose))
+                        if landmark_map is not None:
+                            from mcl.viz import log_landmark_observations
 
-                        log_landmark_observations(viz, mean, marks, landmark_map)
-                    if planes is not None:
-                        from mcl.viz import log_planes
+                            log_landmark_observations(viz, mean, marks, landmark_map)
+                        if planes is not None:
+                            from mcl.viz import log_planes
 
-                        log_planes(viz, mean, plane_sensor, planes)
-                    stage_totals["viz"] += time.perf_counter() - tv
+                            log_planes(viz, mean, plane_sensor, planes)
+                        stage_totals["viz"] += time.perf_counter() - tv
     except KeyboardInterrupt:
         interrupted = True
     except Exception as e:  # an input found bad mid-run: the poses so far are kept, the summary says why it stopped

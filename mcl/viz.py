@@ -168,6 +168,20 @@ def _x_server_answers(display: str) -> bool:
         return False
 
 
+def _free_port(preferred: int) -> int:
+    """``preferred`` if nothing listens on it here, else a port the system has free."""
+    import socket
+
+    for port in (preferred, 0):
+        with socket.socket() as s:
+            try:
+                s.bind(("0.0.0.0", port))
+            except OSError:
+                continue
+            return int(s.getsockname()[1])
+    raise OSError("no free TCP port for the Rerun server")
+
+
 def _viewer_executable() -> str | None:
     """The ``rerun`` viewer: on PATH, else beside this Python (a venv used without being activated)."""
     import shutil
@@ -445,12 +459,15 @@ class RerunLogger:
                 sinks.append(rr.FileSink(self.path))
             rec.set_sinks(*sinks)
         else:  # serve
-            self.url = rec.serve_grpc()
-            rr.serve_web_viewer(connect_to=self.url, open_browser=False)
+            # Rerun's own ports (9876, 9090) when free, else free ones: a second run or an open viewer holds them,
+            # and the server thread then died at the run's end (a traceback, no summary)
+            grpc_port, web_port = _free_port(9876), _free_port(9090)
+            self.url = rec.serve_grpc(grpc_port=grpc_port)
+            rr.serve_web_viewer(web_port=web_port, connect_to=self.url, open_browser=False)
             print(
                 f"mcl: Rerun gRPC server at {self.url}; web viewer at "
-                f"http://localhost:9090/?url={quote(self.url, safe='')} (native: `rerun {self.url}`); "
-                "both stop when this process exits",
+                f"http://localhost:{web_port}/?url={quote(self.url, safe='')} (native: `rerun {self.url}`); "
+                "both stop when this process exits (mcl run serves on after the run until Ctrl-C)",
                 file=sys.stderr,
             )
         self._rec = rec

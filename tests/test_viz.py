@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import sys
 import types
 from pathlib import Path
@@ -366,6 +367,45 @@ def test_the_viewer_is_found_beside_this_python_without_an_activated_venv(monkey
     monkeypatch.setenv("PATH", "/nonexistent")
     beside = Path(sys.executable).parent / "rerun"
     assert _viewer_executable() == (str(beside) if beside.exists() else None)
+
+
+def test_serve_keeps_serving_after_the_run_on_a_free_port_until_ctrl_c(tmp_path):
+    # The servers died with the process the moment the run ended (nobody could look), and with Rerun's port taken
+    # (a second run, an open viewer) the run ended in a traceback with no summary.
+    import signal
+    import socket
+    import subprocess
+    import time
+
+    from mcl.simulate import simulate
+
+    simulate(tmp_path / "w", seed=3, duration=5.0)
+    with socket.socket() as taken:
+        try:
+            taken.bind(("0.0.0.0", 9876))
+            taken.listen()
+        except OSError:
+            pass  # already held by something else: the case under test all the same
+        env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "mcl", "run", "--map", str(tmp_path / "w" / "map.yaml"), "--log",
+             str(tmp_path / "w" / "log.clf"), "--particles", "300", "--rerun", "serve", "--no-progress", "--out",
+             str(tmp_path / "out")], stderr=subprocess.PIPE, text=True, env=env)
+        err = []
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            err.append(line)
+            if "serving its recording until Ctrl-C" in line or not line:
+                break
+        assert "serving its recording until Ctrl-C" in err[-1], "".join(err)
+        served = next(ln for ln in err if "Rerun gRPC server at" in ln)
+        assert "rerun+http://127.0.0.1:9876" not in served  # the taken port was not used
+        time.sleep(1.0)
+        assert proc.poll() is None  # still serving
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0
+    assert (tmp_path / "out" / "summary.json").is_file()
 
 
 def _listening(port: int) -> bool:
