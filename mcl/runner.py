@@ -287,11 +287,11 @@ def _retime(scans, log, offset: float, echo):
          f"{'+' if offset > 0 else '-'} {abs(offset):g} s")
     odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
     if not hasattr(log, "stamps_checked"):  # a CARMEN log (a bag's stamps are checked when it opens)
-        from mcl.datasets.rosbag import ODOM_SPAN_SLACK
+        from mcl.datasets.rosbag import outside_span
 
         t = np.array([s.t for s in scans]) + offset
-        o0, o1 = float(odometry[0, 0]), float(odometry[-1, 0])
-        inside = (t >= o0 - ODOM_SPAN_SLACK) & (t <= o1 + ODOM_SPAN_SLACK)
+        early, late, (o0, o1) = outside_span(t, odometry[:, 0])
+        inside = ~(early | late)
         if not inside.any():
             raise ConfigError(f"sensor.time_offset: {offset:+g} s moves every scan of {log.path} outside its "
                               f"odometry's time span ({o0:.3f}..{o1:.3f} s; the scans at {t.min():.3f}..{t.max():.3f} "

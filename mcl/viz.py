@@ -143,7 +143,8 @@ def has_display() -> bool:
         return True
     wayland = os.environ.get("WAYLAND_DISPLAY")
     if wayland:
-        sock = Path(wayland) if os.path.isabs(wayland) else Path(os.environ.get("XDG_RUNTIME_DIR", "/nonexistent")) / wayland
+        runtime = Path(os.environ.get("XDG_RUNTIME_DIR", "/nonexistent"))
+        sock = Path(wayland) if os.path.isabs(wayland) else runtime / wayland
         if sock.exists():
             return True
     display = os.environ.get("DISPLAY")
@@ -159,8 +160,8 @@ def _x_server_answers(display: str) -> bool:
     number = rest.split(".", 1)[0]
     if not number.isdigit():
         return False
-    if host in ("", "unix") or host.startswith("/"):  # a local server (XQuartz-style paths too)
-        return Path(f"/tmp/.X11-unix/X{number}").exists() or (host.startswith("/") and Path(display).exists())
+    if host in ("", "unix"):  # a local server: its socket file
+        return Path(f"/tmp/.X11-unix/X{number}").exists()
     try:
         with socket.create_connection((host, 6000 + int(number)), timeout=0.5):
             return True
@@ -431,9 +432,10 @@ class RerunLogger:
             return
 
         viewer = _viewer_executable() if mode == "spawn" else None
-        if mode == "spawn" and (not has_display() or viewer is None):
+        display = mode == "spawn" and has_display()  # once: it may wait half a second on a remote X server
+        if mode == "spawn" and (not display or viewer is None):
             self.path = self.path or Path(f"{app_id}.rrd")
-            why = ("no display (no X server answers at DISPLAY, no Wayland socket)" if not has_display()
+            why = ("no display (no X server answers at DISPLAY, no Wayland socket)" if not display
                    else "no `rerun` viewer on PATH or beside this Python")
             print(
                 f"mcl: {why}, cannot spawn the Rerun viewer; "

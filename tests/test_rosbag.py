@@ -293,13 +293,7 @@ def test_nav2_frames_base_footprint_without_base_link_are_found_with_a_note(scan
                     b.write("/tf", "tf2_msgs/msg/TFMessage", s.t, b.msg("tf2_msgs/msg/TFMessage", transforms=[
                         b.transform(s.t, "odom", "base_footprint", base)]))
                 else:
-                    cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*base), covariance=np.zeros(36))
-                    v3 = b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)
-                    tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
-                               twist=b.msg("geometry_msgs/msg/Twist", linear=v3, angular=v3), covariance=np.zeros(36))
-                    b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg(
-                        "nav_msgs/msg/Odometry", header=b.header(s.t, "odom"), child_frame_id="base_footprint",
-                        pose=cov, twist=tw))
+                    _odom(b, s, child="base_footprint", pose=base)
                 _laser(b, "/scan", s, frame="base_scan")
         src = open_bag(bag)
         assert any("base_footprint" in n for n in src.notes), src.notes
@@ -516,13 +510,7 @@ def test_the_mounting_is_on_the_frame_the_odometry_moves(scans, tmp_path, source
             if source == "tf":
                 b.write("/tf", TF, s.t, b.msg(TF, transforms=[b.transform(s.t, "odom", "base_footprint", s.odom)]))
             else:
-                cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*s.odom), covariance=np.zeros(36))
-                v3 = b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)
-                tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
-                           twist=b.msg("geometry_msgs/msg/Twist", linear=v3, angular=v3), covariance=np.zeros(36))
-                b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg(
-                    "nav_msgs/msg/Odometry", header=b.header(s.t, "odom"), child_frame_id="base_footprint",
-                    pose=cov, twist=tw))
+                _odom(b, s, child="base_footprint")
             _laser(b, "/scan", s, frame="laser")
     src = open_bag(bag)
     assert np.allclose(src.scans.offsets["/scan"], (0.25, 0.0, 0.0), rtol=0, atol=1e-9)
@@ -1141,15 +1129,17 @@ def _explode_after(items, n):
 # ----------------------------------------------------------------------------- helpers writing raw messages
 
 
-def _odom(b: BagOut, s, stamp=None) -> None:
-    cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*s.odom), covariance=np.zeros(36))
+def _odom(b: BagOut, s, stamp=None, child="base_link", pose=None) -> None:
+    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child``, no velocities."""
+    cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*(s.odom if pose is None else pose)),
+                covariance=np.zeros(36))
     v3 = lambda x, z: b.msg("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)  # noqa: E731
     tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
                twist=b.msg("geometry_msgs/msg/Twist", linear=v3(0.0, 0.0), angular=v3(0.0, 0.0)),
                covariance=np.zeros(36))
     h = b.header(s.t if stamp is None else stamp, "odom")
     b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=h,
-                                                        child_frame_id="base_link", pose=cov, twist=tw))
+                                                        child_frame_id=child, pose=cov, twist=tw))
 
 
 def _laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.0, t=None, stamp=None) -> None:

@@ -278,6 +278,13 @@ class _Frames:
     base: str = "base_link"
 
 
+def outside_span(t: np.ndarray, odometry_t: np.ndarray):
+    """(early, late, (o0, o1)): which stamps ``t`` lie more than ``ODOM_SPAN_SLACK`` before or after the
+    odometry's time span o0..o1 (time-sorted ``odometry_t``): their odometry is held at that end."""
+    o0, o1 = float(odometry_t[0]), float(odometry_t[-1])
+    return t < o0 - ODOM_SPAN_SLACK, t > o1 + ODOM_SPAN_SLACK, (o0, o1)
+
+
 @dataclass(eq=False)
 class BagSource:
     """What a bag holds for a run: the scan stream and the small records read in the first pass."""
@@ -306,8 +313,7 @@ class BagSource:
         t = self.scan_stamps + float(offset)
         if t.size == 0:
             return []
-        o0, o1 = float(self.odometry[0, 0]), float(self.odometry[-1, 0])
-        early, late = t < o0 - ODOM_SPAN_SLACK, t > o1 + ODOM_SPAN_SLACK
+        early, late, (o0, o1) = outside_span(t, self.odometry[:, 0])
         shifted = f" (with sensor.time_offset {offset:+g} s)" if offset else ""
         if (early | late).all():
             raise DataError(f"{self.path}: no scan is stamped within the odometry's time span{shifted}: scans "

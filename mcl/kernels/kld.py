@@ -16,6 +16,16 @@ from numba import njit
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2^64 / golden ratio
 
 
+@njit(cache=True, inline="always")
+def _bin_key(px, py, pt, x0, y0, bin_xy, bin_theta, nx, ny, nt):
+    ix = min(max(int(math.floor((px - x0) / bin_xy)), 0), nx - 1)
+    iy = min(max(int(math.floor((py - y0) / bin_xy)), 0), ny - 1)
+    it = int(math.floor((pt + math.pi) / bin_theta)) % nt
+    if it < 0:
+        it += nt
+    return (iy * nx + ix) * nt + it
+
+
 @njit(cache=True)
 def mark_bins(particles, x0, y0, bin_xy, bin_theta, nx, ny, nt, flags, touched, n_touched, k0, counts):
     """counts[i] = k0 + the number of distinct bins among poses 0..i not flagged before; flags them.
@@ -25,14 +35,7 @@ def mark_bins(particles, x0, y0, bin_xy, bin_theta, nx, ny, nt, flags, touched, 
     """
     k = k0
     for i in range(particles.shape[1]):
-        ix = int(math.floor((particles[0, i] - x0) / bin_xy))
-        iy = int(math.floor((particles[1, i] - y0) / bin_xy))
-        ix = min(max(ix, 0), nx - 1)
-        iy = min(max(iy, 0), ny - 1)
-        it = int(math.floor((particles[2, i] + math.pi) / bin_theta)) % nt
-        if it < 0:
-            it += nt
-        key = (iy * nx + ix) * nt + it
+        key = _bin_key(particles[0, i], particles[1, i], particles[2, i], x0, y0, bin_xy, bin_theta, nx, ny, nt)
         if not flags[key]:
             flags[key] = True
             touched[n_touched] = key
@@ -46,16 +49,6 @@ def mark_bins(particles, x0, y0, bin_xy, bin_theta, nx, ny, nt, flags, touched, 
 def clear_bins(flags, touched, n_touched):
     for j in range(n_touched):
         flags[touched[j]] = False
-
-
-@njit(cache=True, inline="always")
-def _bin_key(px, py, pt, x0, y0, bin_xy, bin_theta, nx, ny, nt):
-    ix = min(max(int(math.floor((px - x0) / bin_xy)), 0), nx - 1)
-    iy = min(max(int(math.floor((py - y0) / bin_xy)), 0), ny - 1)
-    it = int(math.floor((pt + math.pi) / bin_theta)) % nt
-    if it < 0:
-        it += nt
-    return (iy * nx + ix) * nt + it
 
 
 @njit(cache=True)
