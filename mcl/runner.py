@@ -503,6 +503,85 @@ def _check_start_pose(grid, pose, where: str, echo) -> None:
              "there")
 
 
+class _UpdateRecording:
+    """One filter update into the Rerun recording (``viz.log_step``): the cloud, the estimate, the scan as used
+    and the scan the map predicts at the estimate, the odometry and the truth, the update's figures as series;
+    line features, landmark observations and depth planes when those are on."""
+
+    def __init__(self, viz, cfg: Config, grid, truth, landmark_map, plane_sensor):
+        self.viz, self.cfg, self.grid, self.truth = viz, cfg, grid, truth
+        self.landmark_map, self.plane_sensor = landmark_map, plane_sensor
+        self.odom_to_map = None  # the odometry frame in the map, fixed at the first update (its trail's anchor)
+
+    def update(self, step: int, scan, no_scan: bool, pf, info, odom, laser_pose, marks, planes) -> None:
+        from mcl.sensors import beam_endpoints, sweep_of
+
+        cfg, viz = self.cfg, self.viz
+        mean, cov = info.mean, info.cov
+        if self.odom_to_map is None:
+            self.odom_to_map = compose(mean, inverse(odom))
+        ref = self.truth.at(scan.t) if self.truth is not None else None
+        stats = {
+            "ess": info.ess,
+            "particles": float(pf.n),  # the set drawn below (a re-seed grows it at its resample)
+            "inject_p": info.inject_p,
+            "tries": info.tries,
+            "spread/full": _spread(info.full_cov),
+            "spread/estimate": _spread(cov),
+            "clusters": float(info.clusters),
+            "skipped_beams": float(info.skipped_beams),
+            "quality/match": info.quality,
+            "quality/contradiction": info.fit.contradiction if info.fit is not None else math.nan,
+            "quality/lost": float(info.lost),
+            **{f"time_ms/{k}": 1e3 * v for k, v in info.timings.items()},
+        }
+        if planes is not None:
+            stats["planes/found"] = float(len(planes))
+            stats["planes/walls"] = float(planes.vertical(cfg.planes.vertical_tol).size)
+        if ref is not None:
+            stats["error/position"] = float(math.hypot(mean[0] - ref[0], mean[1] - ref[1]))
+            stats["error/heading"] = abs(float(wrap_angle(mean[2] - ref[2])))
+        if pf.sweep_order is not None and sweep_of(scan) is not None:
+            scan = pf.sweep_order.used(scan)  # the reading the filter uses (mcl.deskew)
+        endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose, sweep_of(scan))
+                     if not no_scan else np.zeros((2, 0)))
+        scan_world = expected_world = None
+        if cfg.rerun.scan and endpoints.shape[1]:
+            scan_world = _to_world(mean, endpoints)
+            # the scan the map predicts at the estimate (the beam model's z*), next to the measured one
+            expected_world = viz.expected_scan(self.grid, mean, laser_pose, scan.angles,
+                                               scan.max_range or cfg.sensor.range_max)
+        viz.log_step(
+            step,
+            scan.t,
+            particles=pf.particles,
+            weights=pf.weights,
+            estimate=mean,
+            cov=cov,
+            scan_world=scan_world,
+            skipped_world=(_to_world(mean, info.skipped_endpoints)
+                           if cfg.rerun.scan and info.skipped_endpoints is not None else None),
+            expected_world=expected_world,
+            odom_pose=compose(self.odom_to_map, odom),
+            truth_pose=ref,
+            stats=stats,
+        )
+        if cfg.rerun.lines and not no_scan:
+            from mcl.features import extract_scan_lines, line_segments_world
+            from mcl.viz import log_line_features
+
+            lines = extract_scan_lines(scan, max_range=scan.max_range or cfg.sensor.range_max)
+            log_line_features(viz, line_segments_world(lines, mean, laser_pose))
+        if self.landmark_map is not None:
+            from mcl.viz import log_landmark_observations
+
+            log_landmark_observations(viz, mean, marks, self.landmark_map)
+        if planes is not None:
+            from mcl.viz import log_planes
+
+            log_planes(viz, mean, self.plane_sensor, planes)
+
+
 def _run(
     cfg: Config,
     out_dir: Path,
@@ -534,7 +613,6 @@ def _run(
     from mcl.evaluate import evaluate, format_eval
     from mcl.filter import Control, ParticleFilter
     from mcl.motion import velocities_from_odometry
-    from mcl.sensors import beam_endpoints, sweep_of
     from mcl.trajectory import LineWriter, TumWriter, atomic_write_text
 
     echo = echo or (lambda msg: print(msg, file=sys.stderr))
@@ -631,6 +709,7 @@ def _run(
             log_landmark_map(viz, landmark_map)
         if truth is not None:
             viz.log_truth_path(truth.poses)
+    recording = _UpdateRecording(viz, cfg, grid, truth, landmark_map, plane_sensor) if viz is not None else None
 
     stage_totals = {"predict": 0.0, "correct": 0.0, "estimate": 0.0, "resample": 0.0, "viz": 0.0}
     counts = {"updates": 0, "predicted": 0, "resamples": 0, "rejected": 0, "degenerate": 0}
@@ -649,7 +728,6 @@ def _run(
     last_t = 0.0
     lasers: set = set()  # the scan sources (a bag's topics; a CARMEN log's one kind) seen to update so far
     owed: set = set()  # ... that have not updated since the robot last moved (AMCL's lasers_update_ flags)
-    odom_to_map = None
     writer = TumWriter(out_dir / "trajectory.tum")
     bag_out = _estimate_bag(cfg, out_dir) if write_bag else None
     quality_out = LineWriter(out_dir / "quality.csv", header=QUALITY_HEADER)
@@ -742,72 +820,10 @@ def _run(
                     fault_updates += int(info.faults)
                     for k, v in info.timings.items():
                         stage_totals[k] += v
-                    if viz is not None:
+                    if recording is not None:
                         tv = time.perf_counter()
-                        if odom_to_map is None:
-                            odom_to_map = compose(mean, inverse(odom))
-                        ref = truth.at(scan.t) if truth is not None else None
-                        stats = {
-                            "ess": info.ess,
-                            "particles": float(pf.n),  # the set drawn below (a re-seed grows it at its resample)
-                            "inject_p": info.inject_p,
-                            "tries": info.tries,
-                            "spread/full": spread_full,
-                            "spread/estimate": _spread(cov),
-                            "clusters": float(info.clusters),
-                            "skipped_beams": float(info.skipped_beams),
-                            "quality/match": info.quality,
-                            "quality/contradiction": info.fit.contradiction if info.fit is not None else math.nan,
-                            "quality/lost": float(info.lost),
-                            **{f"time_ms/{k}": 1e3 * v for k, v in info.timings.items()},
-                        }
-                        if planes is not None:
-                            stats["planes/found"] = float(len(planes))
-                            stats["planes/walls"] = float(planes.vertical(cfg.planes.vertical_tol).size)
-                        if ref is not None:
-                            stats["error/position"] = float(math.hypot(mean[0] - ref[0], mean[1] - ref[1]))
-                            stats["error/heading"] = abs(float(wrap_angle(mean[2] - ref[2])))
-                        scan_world = None
-                        if pf.sweep_order is not None and sweep_of(scan) is not None:
-                            scan = pf.sweep_order.used(scan)  # the reading the filter uses (mcl.deskew)
-                        endpoints = (beam_endpoints(scan.ranges, scan.angles, scan.max_range, cfg.sensor, laser_pose,
-                                                    sweep_of(scan))
-                                     if not no_scan else np.zeros((2, 0)))
-                        expected_world = None
-                        if cfg.rerun.scan and endpoints.shape[1]:
-                            scan_world = _to_world(mean, endpoints)
-                            # the scan the map predicts at the estimate (the beam model's z*), next to the measured one
-                            expected_world = viz.expected_scan(grid, mean, laser_pose, scan.angles,
-                                                               scan.max_range or cfg.sensor.range_max)
-                        viz.log_step(
-                            counts["updates"] - 1,
-                            scan.t,
-                            particles=pf.particles,
-                            weights=pf.weights,
-                            estimate=mean,
-                            cov=cov,
-                            scan_world=scan_world,
-                            skipped_world=(_to_world(mean, info.skipped_endpoints)
-                                           if cfg.rerun.scan and info.skipped_endpoints is not None else None),
-                            expected_world=expected_world,
-                            odom_pose=compose(odom_to_map, odom),
-                            truth_pose=ref,
-                            stats=stats,
-                        )
-                        if cfg.rerun.lines and not no_scan:
-                            from mcl.features import extract_scan_lines, line_segments_world
-                            from mcl.viz import log_line_features
-
-                            lines = extract_scan_lines(scan, max_range=scan.max_range or cfg.sensor.range_max)
-                            log_line_features(viz, line_segments_world(lines, mean, laser_pose))
-                        if landmark_map is not None:
-                            from mcl.viz import log_landmark_observations
-
-                            log_landmark_observations(viz, mean, marks, landmark_map)
-                        if planes is not None:
-                            from mcl.viz import log_planes
-
-                            log_planes(viz, mean, plane_sensor, planes)
+                        recording.update(counts["updates"] - 1, scan, no_scan, pf, info, odom, laser_pose, marks,
+                                         planes)
                         stage_totals["viz"] += time.perf_counter() - tv
     except KeyboardInterrupt:
         interrupted = True
