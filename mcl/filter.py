@@ -654,7 +654,7 @@ class ParticleFilter:
             return observation, None, False
         kept, skipped = self.unmapped.select(
             observation, candidates, pose, lambda: self._unmapped_shifts(pose), whole=blind,
-            distance=far if blind else None)
+            distance=self.unmapped.blind_distance(observation, pose, self.last_estimate.cov, far) if blind else None)
         if skipped is None:
             return observation, None, False
         if blind:

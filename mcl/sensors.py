@@ -421,6 +421,7 @@ class UnmappedObjects:
     BLIND_MARGIN = 1.0  # m: "in view" reaches this far beyond the laser's range
     BLIND_DISTANCE = 1.0  # m: blind, an endpoint is skipped only this far from every mapped obstacle: a few readings
     # of a wall at the laser's limit, seen from an estimate a few decimetres off, are all the scan says (large-06)
+    BLIND_SIGMAS = 3.0  # or this many std of the endpoint's offset across its ray, when larger (blind_distance)
 
     def candidates(self, scan, width: float | None = None) -> np.ndarray | None:
         """(K,) bool over the beams ``beam_endpoints`` keeps for ``scan``: those in a segment narrower than
@@ -453,7 +454,36 @@ class UnmappedObjects:
         th = float(pose[2])
         return far_runs(self.dist, self.origin[0], self.origin[1], self.resolution, float(pose[0]), float(pose[1]),
                         math.cos(th), math.sin(th), np.ascontiguousarray(observation, dtype=np.float64), idx,
-                        _NO_SHIFTS, _NO_SHIFTS, np.float32(distance), far) > 0
+                        _NO_SHIFTS, _NO_SHIFTS, np.full(idx.size, distance, dtype=np.float32), far) > 0
+
+    def blind_distance(self, observation, pose, cov, least: float) -> np.ndarray:
+        """(K,) float32: how far from every mapped obstacle each endpoint of ``observation`` (robot frame, (2, K)),
+        seen from ``pose``, must lie to be skipped on a blind update: ``least`` m, or ``BLIND_SIGMAS`` times
+        the std of the endpoint's offset *across* its ray that the estimate's covariance ``cov`` (3x3: x, y,
+        theta) gives, when that is larger.
+
+        Dead reckoning over a stretch with no return makes the cloud's heading uncertain, and a rotation moves a
+        far endpoint across its ray by range x angle: with 0.2 rad of heading std, the wall 12 m away that ends a
+        blind stretch reads 2-4 m off the map from the estimate, and skipping it left the filter on dead reckoning
+        for good (suites/sparse-hall.yaml hall-sweep-fast-911, seeds 1-3: max 2.01-2.05 m, with this margin
+        0.28-0.29 m).
+        Along its ray an offset is not excused: a return short of a mapped obstacle is what an object the map lacks
+        makes (the beam model's z_short), a person in front of a pillar.
+
+        For an endpoint e (range r = |e| from the robot's centre), d(world endpoint) = (dx, dy) + r n dtheta with n
+        the unit normal to the ray in the world frame, so the offset across the ray is n.(dx, dy) + r dtheta, of
+        variance n' S_xy n + 2 r n.S_xtheta + r^2 S_thetatheta."""
+        e = np.asarray(observation, dtype=np.float64)
+        r = np.hypot(e[0], e[1])
+        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        # the ray's direction in the world frame, (c ex - s ey, s ex + c ey) / r, turned by 90 degrees
+        with np.errstate(invalid="ignore", divide="ignore"):
+            nx = np.nan_to_num(-(s * e[0] + c * e[1]) / r)
+            ny = np.nan_to_num((c * e[0] - s * e[1]) / r)
+        cov = np.asarray(cov, dtype=np.float64)
+        var = (nx * nx * cov[0, 0] + 2.0 * nx * ny * cov[0, 1] + ny * ny * cov[1, 1]
+               + 2.0 * r * (nx * cov[0, 2] + ny * cov[1, 2]) + r * r * cov[2, 2])
+        return np.maximum(self.BLIND_SIGMAS * np.sqrt(np.maximum(var, 0.0)), least).astype(np.float32)
 
     def blind(self, pose, laser_pose, scan, blocked, min_beams: int) -> bool:
         """Whether the map shows the laser fewer than ``min_beams`` obstacles from ``pose``: of ``scan``'s scored
@@ -470,12 +500,13 @@ class UnmappedObjects:
         cast_rays_serial(at, angles, blocked, self.origin[0], self.origin[1], self.resolution, reach, out)
         return int(np.count_nonzero(out[0] < reach - self.resolution)) < min_beams
 
-    def select(self, observation, candidates, pose, shifts=None, whole: bool = False, distance: float | None = None):
+    def select(self, observation, candidates, pose, shifts=None, whole: bool = False, distance=None):
         """(the observation to score, the skipped robot-frame endpoints (2, k) or None) for the robot-frame
-        endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``. With
-        ``shifts`` ((M, 2) world-frame offsets of ``pose``, or a function returning them or None, called only
-        when a candidate is far), a run of neighbouring candidates is kept whole when one shifted pose puts every
-        endpoint of it within ``unmapped_distance`` of the map."""
+        endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``: a candidate
+        is skipped when farther than ``distance`` (m, or (K,) one per endpoint; default ``unmapped_distance``)
+        from every mapped obstacle. With ``shifts`` ((M, 2) world-frame offsets of ``pose``, or a function
+        returning them or None, called only when a candidate is far), a run of neighbouring candidates is kept
+        whole when one shifted pose puts every endpoint of it within that distance of the map."""
         if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
             return observation, None
         idx = np.flatnonzero(candidates)
@@ -486,7 +517,9 @@ class UnmappedObjects:
         # candidates is the map's when one shift puts all of it on mapped obstacles (mcl.kernels.field.far_runs)
         args = (self.dist, self.origin[0], self.origin[1], self.resolution, float(pose[0]), float(pose[1]),
                 math.cos(th), math.sin(th), e, idx)
-        d = np.float32(self.cfg.unmapped_distance if distance is None else distance)  # in float32, as the field
+        # in float32, as the field; one per endpoint
+        d = (np.full(e.shape[1], self.cfg.unmapped_distance if distance is None else distance, dtype=np.float32)
+             if distance is None or np.ndim(distance) == 0 else np.ascontiguousarray(distance, dtype=np.float32))
         n_far = far_runs(*args, _NO_SHIFTS, _NO_SHIFTS, d, far)
         if n_far and callable(shifts):
             shifts = shifts()  # computed only when a candidate is far from the map

@@ -114,7 +114,9 @@ def test_suite_lost_m_is_every_datasets_default(tmp_path):
 
 
 @pytest.mark.parametrize("name, worlds", [("synthetic", 43), ("heldout", 42), ("heldout2", 26), ("heldout3", 12),
-                                         ("ground-hits", 15), ("smoke", None)])
+                                         ("heldout4", 12), ("ground-hits", 15), ("fast-laser", 12),
+                                         ("sparse-laser", 4), ("sparse-hall", 6),
+                                         ("stale-map", 8), ("unknown-floor", 12), ("smoke", None)])
 def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(name, worlds):
     # load_suite checks every key and every simulate keyword (a typo stops `mcl eval` before any run); a world seed
     # used twice in a suite would count one world twice, and across the corpora it would leak a world the
@@ -129,7 +131,8 @@ def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(nam
     assert len(seeds) == len(sims)
     if name.startswith("heldout"):
         for other in {"heldout": ["synthetic"], "heldout2": ["synthetic", "heldout"],
-                      "heldout3": ["synthetic", "heldout", "heldout2", "ground-hits"]}[name]:
+                      "heldout3": ["synthetic", "heldout", "heldout2", "ground-hits"],
+                      "heldout4": ["synthetic", "heldout", "heldout2", "heldout3", "ground-hits"]}[name]:
             taken = {(d.simulate.get("kind", "office"), d.simulate["seed"])
                      for d in load_suite(PROJECT_ROOT / "suites" / f"{other}.yaml").datasets}
             assert not taken & seeds, other

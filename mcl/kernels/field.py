@@ -34,15 +34,15 @@ def field_at(dist, ox, oy, res, x, y, c, s, e, out):
 def far_runs(dist, ox, oy, res, x, y, c, s, e, idx, sx, sy, dmax, far):
     """The candidates of ``UnmappedObjects.select`` far from the map; returns how many.
 
-    far[j] = the field at endpoint e[:, idx[j]] seen from the pose exceeds ``dmax`` (off the map: not far).
-    With shifts (sx, sy of length M > 0: world-frame offsets of the pose), a run of consecutive indices in
-    ``idx`` with a far member is cleared when one shift puts every endpoint of the run within ``dmax`` of the
-    map (or off it)."""
+    far[j] = the field at endpoint e[:, k], k = idx[j], seen from the pose exceeds ``dmax[k]`` (off the map: not
+    far; ``dmax`` holds a distance per endpoint). With shifts (sx, sy of length M > 0: world-frame offsets of the
+    pose), a run of consecutive indices in ``idx`` with a far member is cleared when one shift puts every endpoint
+    k of the run within ``dmax[k]`` of the map (or off it)."""
     n = idx.shape[0]
     count = 0
     for j in range(n):
         k = idx[j]
-        far[j] = _at(dist, x + c * e[0, k] - s * e[1, k] - ox, y + s * e[0, k] + c * e[1, k] - oy, res) > dmax
+        far[j] = _at(dist, x + c * e[0, k] - s * e[1, k] - ox, y + s * e[0, k] + c * e[1, k] - oy, res) > dmax[k]
     j = 0
     while j < n:
         last = j
@@ -58,7 +58,7 @@ def far_runs(dist, ox, oy, res, x, y, c, s, e, idx, sx, sy, dmax, far):
                     k = idx[q]
                     wx = x + c * e[0, k] - s * e[1, k] - ox + sx[m]
                     wy = y + s * e[0, k] + c * e[1, k] - oy + sy[m]
-                    if _at(dist, wx, wy, res) > dmax:
+                    if _at(dist, wx, wy, res) > dmax[k]:
                         fits = False
                         break
                 if fits:
