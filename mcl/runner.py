@@ -503,6 +503,31 @@ def _check_start_pose(grid, pose, where: str, echo) -> None:
              "there")
 
 
+def _check_range_window(scans, sensor, echo, first: int = 200) -> None:
+    """A warning when ``sensor.range_min`` / ``range_max`` leave (almost) none of the first scans' returns to score
+    (a range_max in feet, a range_min above a short laser's reach): the run would only predict, silently. A return
+    is a finite reading above 0 and under the scan's own no-return value; scans with none (open floor) say nothing
+    either way. Under 1 % scored counts as none: a log's stray readings of a few centimetres are no laser."""
+    from mcl.sensors import valid_returns
+
+    lo, hi, returns, scored, beyond = math.inf, -math.inf, 0, 0, 0
+    for s in itertools.islice(scans, first):  # a bag's scans are a stream: the first ones only, as for the recording
+        r = np.asarray(getattr(s, "ranges", ()), dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            ret = r[np.isfinite(r) & (r > 0.0) & ((r < float(s.max_range)) if s.max_range is not None else True)]
+        if ret.size:
+            lo, hi = min(lo, float(ret.min())), max(hi, float(ret.max()))
+            returns += ret.size
+            scored += int(np.count_nonzero(valid_returns(ret, None, sensor)))
+            beyond += int(np.count_nonzero(ret >= sensor.range_max))
+    if returns == 0 or scored >= 0.01 * returns:
+        return
+    key = "sensor.range_max" if 2 * beyond >= returns - scored else "sensor.range_min"  # what cut most of them
+    echo(f"mcl: warning: {key} ({sensor.range_min:g}..{sensor.range_max:g} m) leaves {scored} of the first scans' "
+         f"{returns} returns to score (they lie at {lo:.2f}..{hi:.2f} m): the laser weighs (almost) nothing and the "
+         "filter predicts")
+
+
 class _UpdateRecording:
     """One filter update into the Rerun recording (``viz.log_step``): the cloud, the estimate, the scan as used
     and the scan the map predicts at the estimate, the odometry and the truth, the update's figures as series;
@@ -636,6 +661,8 @@ def _run(
     if cfg.sensor.use and cfg.sensor.model == "beam" and b.z_max == 0 and b.z_rand == 0:
         echo("mcl: warning: sensor.beam: z_max and z_rand are both 0: a reading the map does not explain (no return, "
              "a person) has likelihood 0 at every pose, so one such beam leaves every particle at weight 0")
+    if cfg.sensor.use:
+        _check_range_window(scans, cfg.sensor, echo)
     updates = _updates(scans, marks_all)
     plane_sensor = None
     if cfg.planes.use:
