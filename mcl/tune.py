@@ -968,14 +968,17 @@ def run_from_args(args) -> int:
                            f"{existing}/{STATE_FILE}; not with {', '.join(given)}")
         study_dir = Path(existing)
         s = _load_settings(study_dir)
-        if args.resume and s.fingerprint:
-            now = fingerprint(s)
+        if s.fingerprint:
+            now = fingerprint(s)  # the suite gone: one error line naming it (--report reads it too)
             changed = [f"the suite file {s.suite}" if k == "suite" else
                        f"the base config {s.config or 'configs/default.yaml'}" + (" (with its --set)" if s.sets else "")
                        for k in ("suite", "config") if s.fingerprint.get(k) != now[k]]
-            if changed:
+            if changed and args.resume:
                 raise MclError(f"--resume {study_dir}: {' and '.join(changed)} changed since the study began (its "
                                "trials were scored on the old one): restore it, or start a new --study")
+            if changed:  # --report writes what the trials measured, on the files as they were
+                print(f"mcl: warning: --report {study_dir}: {' and '.join(changed)} changed since the study began: "
+                      "the report is of the trials as they were scored, on the old one", file=sys.stderr)
         if args.trials is not None:
             s.trials = args.trials
             atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")

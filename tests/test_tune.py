@@ -282,6 +282,10 @@ def test_a_failed_run_says_why_and_resume_refuses_a_changed_suite(files, tmp_pat
     assert f"the base config {base} changed since the study began" in capsys.readouterr().err
     assert json.loads((study / "study.json").read_text())["trials"] == 1  # nothing written
     assert len(_trials(study)) == 1
+    # --report writes what the trials measured: it goes on, and says that the base config changed
+    assert main(["tune", "--report", str(study)]) == 0
+    err = capsys.readouterr().err
+    assert f"mcl: warning: --report {study}: the base config {base} changed since the study began" in err, err
 
 
 # The study runs in a child process: when Ray's own daemons die (the raylet, the GCS), Ray ends its driver with
