@@ -503,15 +503,26 @@ def _check_start_pose(grid, pose, where: str, echo) -> None:
              "there")
 
 
-def _check_range_window(scans, sensor, echo, first: int = 200) -> None:
-    """A warning when ``sensor.range_min`` / ``range_max`` leave (almost) none of the first scans' returns to score
-    (a range_max in feet, a range_min above a short laser's reach): the run would only predict, silently. A return
-    is a finite reading above 0 and under the scan's own no-return value; scans with none (open floor) say nothing
-    either way. Under 1 % scored counts as none: a log's stray readings of a few centimetres are no laser."""
+MOUNT_WARN_M = 3.0  # m: a laser mounted farther than this from the robot's centre is a frame mistake, not a robot
+
+
+def _check_first_scans(scans, sensor, echo, first: int = 200) -> None:
+    """Warnings from the first ``first`` scans, before the run (a bag's scans are a stream: the first ones only,
+    as for the recording), for settings that would leave the filter silently blind or wrong:
+
+    - ``sensor.range_min`` / ``range_max`` leave (almost) none of their returns to score (a range_max in feet, a
+      range_min above a short laser's reach): the run would only predict. A return is a finite reading above 0
+      and under the scan's own no-return value; scans with none (open floor) say nothing either way. Under 1 %
+      scored counts as none: a log's stray readings of a few centimetres are no laser.
+    - the laser mounted more than ``MOUNT_WARN_M`` from the robot's centre (``sensor.laser_pose``, or the
+      log's / bag's own mounting): a tf chain through the wrong frame, a pose given in the map frame."""
     from mcl.sensors import valid_returns
 
-    lo, hi, returns, scored, beyond = math.inf, -math.inf, 0, 0, 0
-    for s in itertools.islice(scans, first):  # a bag's scans are a stream: the first ones only, as for the recording
+    lo, hi, returns, scored, beyond, mount = math.inf, -math.inf, 0, 0, 0, None
+    for s in itertools.islice(scans, first):
+        offset = sensor.laser_pose if sensor.laser_pose is not None else getattr(s, "laser_offset", None)
+        if offset is not None and mount is None and math.hypot(float(offset[0]), float(offset[1])) > MOUNT_WARN_M:
+            mount = offset
         r = np.asarray(getattr(s, "ranges", ()), dtype=np.float64)
         with np.errstate(invalid="ignore"):
             ret = r[np.isfinite(r) & (r > 0.0) & ((r < float(s.max_range)) if s.max_range is not None else True)]
@@ -520,6 +531,11 @@ def _check_range_window(scans, sensor, echo, first: int = 200) -> None:
             returns += ret.size
             scored += int(np.count_nonzero(valid_returns(ret, None, sensor)))
             beyond += int(np.count_nonzero(ret >= sensor.range_max))
+    if mount is not None:
+        where = "sensor.laser_pose" if sensor.laser_pose is not None else "the log's laser mounting"
+        echo(f"mcl: warning: {where} puts the laser {math.hypot(float(mount[0]), float(mount[1])):.2f} m from the "
+             f"robot's centre ({float(mount[0]):.3f}, {float(mount[1]):.3f}): a robot's laser sits within a metre or "
+             "two; check the frames (a tf chain through the wrong frame, a pose in the map frame)")
     if returns == 0 or scored >= 0.01 * returns:
         return
     key = "sensor.range_max" if 2 * beyond >= returns - scored else "sensor.range_min"  # what cut most of them
@@ -662,7 +678,7 @@ def _run(
         echo("mcl: warning: sensor.beam: z_max and z_rand are both 0: a reading the map does not explain (no return, "
              "a person) has likelihood 0 at every pose, so one such beam leaves every particle at weight 0")
     if cfg.sensor.use:
-        _check_range_window(scans, cfg.sensor, echo)
+        _check_first_scans(scans, cfg.sensor, echo)
     updates = _updates(scans, marks_all)
     plane_sensor = None
     if cfg.planes.use:

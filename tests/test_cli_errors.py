@@ -108,14 +108,14 @@ def test_a_range_window_that_leaves_the_laser_nothing_to_score_warns_naming_the_
     import numpy as np
 
     from mcl.config import SensorConfig
-    from mcl.runner import _check_range_window
+    from mcl.runner import _check_first_scans
 
     r = np.array([2.6, 0.04, 5.0, 3.1, 4.9])
     scans = [SimpleNamespace(ranges=r, max_range=5.0)] + [SimpleNamespace(ranges=r[[0, 2, 3, 4]], max_range=5.0)] * 60
 
     def said(**keys):
         out = []
-        _check_range_window(scans, SensorConfig(**keys), out.append)
+        _check_first_scans(scans, SensorConfig(**keys), out.append)
         return out
 
     assert said() == []
@@ -126,5 +126,31 @@ def test_a_range_window_that_leaves_the_laser_nothing_to_score_warns_naming_the_
     assert line.startswith("mcl: warning: sensor.range_min (40..80 m) leaves 0 of"), line
     empty = [SimpleNamespace(ranges=np.full(5, 5.0), max_range=5.0)] * 10
     out = []
-    _check_range_window(empty, SensorConfig(range_max=0.05), out.append)
+    _check_first_scans(empty, SensorConfig(range_max=0.05), out.append)
     assert out == []
+
+
+
+def test_a_laser_mounted_metres_from_the_robot_warns_naming_where_the_mounting_came_from():
+    # a mounting from a tf chain through the wrong frame, or a pose typed in the map frame, put every endpoint
+    # metres off: 3 m from the robot's centre is no robot's laser (real logs: 0 m; bags: 0.1-0.3 m)
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from mcl.config import SensorConfig
+    from mcl.runner import _check_first_scans
+
+    r = np.full(5, 2.0)
+    near = [SimpleNamespace(ranges=r, max_range=5.0, laser_offset=np.array([0.25, 0.0, 0.0]))] * 3
+    far = near + [SimpleNamespace(ranges=r, max_range=5.0, laser_offset=np.array([12.0, -5.0, 0.0]))]
+    out = []
+    _check_first_scans(near, SensorConfig(), out.append)
+    assert out == []
+    _check_first_scans(far, SensorConfig(), out.append)
+    assert out == ["mcl: warning: the log's laser mounting puts the laser 13.00 m from the robot's centre (12.000, "
+                   "-5.000): a robot's laser sits within a metre or two; check the frames (a tf chain through the "
+                   "wrong frame, a pose in the map frame)"], out
+    out.clear()
+    _check_first_scans(near, SensorConfig(laser_pose=(0.0, 4.0, 0.0)), out.append)
+    assert len(out) == 1 and out[0].startswith("mcl: warning: sensor.laser_pose puts the laser 4.00 m"), out
