@@ -34,6 +34,7 @@ handles that), and a global reinitialisation throws away a good track.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -55,7 +56,8 @@ from mcl.motion import allowed_mask, allowed_masks, make_motion_model
 from mcl.parallel import choose
 from mcl.quality import Fit, ScanQuality
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
-from mcl.sensors import BeamSkipping, UnmappedObjects, make_sensor_model, sweep_of
+from mcl.sensors import (BeamSkipping, UnmappedObjects, _evenly_spaced, make_sensor_model, no_return_range,
+                         sweep_of, valid_returns)
 
 __all__ = ["Control", "StepInfo", "ParticleFilter", "EVENT_KINDS"]
 
@@ -177,6 +179,7 @@ class ParticleFilter:
         self.last_estimate: ClusterEstimate | None = None
         self._observation = None  # the last scan's observation (the recovery sampler may use it)
         self._scan_observation = None  # this update's full observation, before beam skipping (for the quality)
+        self._prepared_scan = None  # the scan last prepared (prepare)
         self._laser_pose = np.zeros(3)  # of the scan last prepared (beam skipping and the quality walk from there)
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
         # a protected re-seed while it runs (filter.reseed_odds; its track mask selects the kept track), else None
@@ -324,6 +327,7 @@ class ParticleFilter:
         if not self.guard.usable_scan(scan):
             return None
         self._laser_pose = np.asarray(laser_pose, dtype=np.float64)
+        self._prepared_scan = scan  # the quality signal's missing test reads its readings (_with_missing)
         self._sweep_candidates = None
         if self.sweep_order is not None and sweep_of(scan) is not None:
             # a deskewed scan (mcl.deskew): as read until the beams' timing is decided, three readings weighed
@@ -921,6 +925,18 @@ class ParticleFilter:
         return (self.cfg.filter.recovery_trial and inj is not None and inj.size == self.n and not inj.all()
                 and not self.search.tempering and bool(getattr(self.recovery, "spreading", False)))
 
+    def _with_missing(self, fit):
+        """``fit`` with ``predicted`` / ``missing`` (``ScanQuality.missing``) over the scan's scored directions from
+        the estimate: whether a low match with nothing through a wall is occlusion or a wrong place."""
+        scan = self._prepared_scan
+        idx = _evenly_spaced(len(scan.angles), int(self.cfg.sensor.max_beams))
+        r = np.asarray(scan.ranges, dtype=np.float64)[idx]
+        returned = valid_returns(r, getattr(scan, "max_range", None), self.cfg.sensor)
+        reach = no_return_range(self.cfg.sensor.range_max, getattr(scan, "max_range", None))
+        predicted, missing = self.quality.missing(self.last_estimate.mean, self._laser_pose,
+                                                  np.asarray(scan.angles, dtype=np.float64)[idx], returned, r, reach)
+        return dataclasses.replace(fit, predicted=predicted, missing=missing)
+
     def assess(self, info: StepInfo) -> None:
         """Lay this update's scan on the map at the estimate (mcl.quality): the quality signal and the lost
         belief, which the recovery policy reads."""
@@ -928,6 +944,8 @@ class ParticleFilter:
         fit = None
         if obs is not None:
             fit = self.quality.fit(self.last_estimate.mean, self.sensor.endpoints(obs), self._laser_pose[:2])
+            if self.quality.occluded_call(fit) and self._prepared_scan is not None:
+                fit = self._with_missing(fit)
         info.fit = fit
         info.lost = self.quality.update(fit)
         # a protected re-seed's search settles by the odds (protect), not by the track's cluster

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcl.kernels.field import field_at
-from mcl.kernels.raycast import segments_blocked
+from mcl.kernels.raycast import cast_rays_serial, segments_blocked
 from mcl.maps import byte_mask
 
 
@@ -89,6 +89,9 @@ class Fit:
     contradiction: float  # fraction that went through a mapped obstacle and end away from one (nan: no beam)
     deep: float | None = None  # fraction that went through one and end farther than quality.occluded_depth from
     #                            every mapped obstacle (ScanQuality.fit measures it; None: taken as contradiction)
+    predicted: int | None = None  # of the scan's scored directions, those where the map shows an obstacle within
+    #                               the laser's reach from the pose (ScanQuality.missing; None: not measured)
+    missing: int | None = None  # ... of them, those whose reading shows no return or ends past it
 
     @property
     def deep_through(self) -> float:
@@ -145,6 +148,31 @@ class ScanQuality:
         return Fit(k, float(np.count_nonzero(matched)) / k, float(np.count_nonzero(through)) / k,
                    float(np.count_nonzero(deep)) / k)
 
+    def occluded_call(self, fit: Fit | None) -> bool:
+        """Whether :meth:`bad` would call ``fit`` bad for its match alone (enough beams, none through a wall, the
+        match under ``occluded_below``) and ``occluded_missing`` is on: then :meth:`missing` tells occlusion from a
+        wrong place."""
+        return (self.cfg.occluded_missing >= 0.0 and fit is not None and fit.beams >= self.cfg.min_beams
+                and fit.contradiction == 0.0 and fit.match < min(self.cfg.lost_below, self.cfg.occluded_below))
+
+    def missing(self, pose, laser_pose, angles, returned, ranges, reach: float) -> tuple[int, int]:
+        """(predicted, missing) over the directions ``angles`` (laser frame) of one scan, seen from the laser at
+        ``laser_pose`` (robot frame) on ``pose``: the directions where the map shows an obstacle within ``reach``,
+        and of those the ones whose reading (``ranges``, ``returned``: with a return) shows none or ends more
+        than ``quality.distance`` past it. People hide what the map shows, they do not remove it: at the true
+        pose among people nearly every predicted obstacle is read, or read short; at a wrong place the map's
+        obstacles are where the laser saw none."""
+        x, y, th = (float(v) for v in pose[:3])
+        c, s = math.cos(th), math.sin(th)
+        lx, ly, lth = (float(v) for v in laser_pose[:3])
+        at = np.array([[x + c * lx - s * ly], [y + s * lx + c * ly], [th + lth]])
+        z = np.empty((1, angles.size))
+        cast_rays_serial(at, np.ascontiguousarray(angles, dtype=np.float64), self.blocked, self.origin[0],
+                         self.origin[1], self.resolution, float(reach), z)
+        predicted = z[0] < float(reach) - self.resolution
+        gone = predicted & (~returned | (ranges > z[0] + self.cfg.distance))
+        return int(np.count_nonzero(predicted)), int(np.count_nonzero(gone))
+
     def bad(self, fit: Fit, near_misses: bool = False) -> bool:
         """Whether one update's fit says the estimate is wrong (no beam: no evidence either way, not bad).
 
@@ -153,7 +181,10 @@ class ScanQuality:
         and furniture the map lacks do, and nothing it saw contradicts the place. Beams through a wall that end
         within ``occluded_depth`` of a mapped obstacle (``Fit.deep``) are near misses here, not contradictions;
         ``contradiction_above`` still counts them. With ``near_misses`` False (the default) every beam through a
-        wall counts; :meth:`update` passes True only when its gates allow (``_creeping``)."""
+        wall counts; :meth:`update` passes True only when its gates allow (``_creeping``). Below ``occluded_below``
+        too, such a scan is no evidence when ``Fit.predicted`` / ``missing`` (:meth:`missing`, measured by the
+        filter when :meth:`occluded_call`) say that what the map shows the laser is there or hidden: at most
+        ``occluded_missing`` of it missing, or fewer than ``min_beams`` obstacles shown."""
         if fit.beams < self.cfg.min_beams:
             return False
         c = self.cfg.contradiction_above
@@ -161,7 +192,14 @@ class ScanQuality:
         if (fit.deep_through if near_misses else fit.contradiction) == 0.0:
             # no reading ended deep past a wall: the rest end short of the map, or just past a wall (the near misses
             # of an estimate a little off, occluded_depth), and only the match counts
-            return fit.match < min(below, self.cfg.occluded_below) or (c > 0.0 and fit.contradiction >= c)
+            occluded = min(below, self.cfg.occluded_below)
+            if (fit.match < occluded and fit.predicted is not None and (
+                    fit.predicted < self.cfg.min_beams or fit.missing <= self.cfg.occluded_missing * fit.predicted)):
+                # what the map shows the laser from the pose is there (matched) or hidden behind something nearer
+                # (people); the unmatched rest lies on open floor: the low match is the people's, not the place's.
+                # Where the map shows the laser fewer than min_beams obstacles, there is nothing to judge by
+                return c > 0.0 and fit.contradiction >= c
+            return fit.match < occluded or (c > 0.0 and fit.contradiction >= c)
         return fit.score < below or (c > 0.0 and fit.contradiction >= c)
 
     def refutes(self, fit: Fit | None) -> bool:

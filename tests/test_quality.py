@@ -38,7 +38,7 @@ def _scan_from(pose, grid, n=90):
 
 T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
 QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5, doubt_margin=0.0, doubt_updates=50,
-                       contradiction_above=0.0, lost_at_once_below=-2.0, occluded_below=1.0,
+                       contradiction_above=0.0, lost_at_once_below=-2.0, occluded_below=1.0, occluded_missing=-1.0,
                        occluded_depth=0.0, occluded_prior=2.0, collapse_from=2.0)
 
 
@@ -348,3 +348,71 @@ def test_near_misses_are_exempt_only_once_the_fit_has_sunk_with_occluded_prior()
     settled = ScanQuality(_box_grid(), cfg)
     settled.reset(lost=True)
     assert _feed(settled, sinking + [Fit(60, 0.59, 0.0)] * cfg.doubt_updates + [near] * 10)[-1] is False
+
+
+def test_missing_counts_what_the_map_shows_the_laser_that_the_scan_does_not_read():
+    # From (2, 5) facing the east wall (7.95 m away) in the box room: the directions whose ray meets a wall within
+    # the 9 m reach are predicted; a reading at the wall or short of it (a person) is no absence, a direction with
+    # no return or a reading past the wall is
+    from mcl.quality import ScanQuality
+
+    q = ScanQuality(_box_grid(), QCFG)
+    angles = np.linspace(-0.3, 0.3, 7)
+    pose, laser = (2.0, 5.0, 0.0), (0.0, 0.0, 0.0)
+    wall = 7.95 / np.cos(angles)  # the inner face of the east wall, x = 9.95
+    returned = np.ones(7, dtype=bool)
+    assert q.missing(pose, laser, angles, returned, wall, 9.0) == (7, 0)
+    people = wall.copy()
+    people[[1, 3, 5]] = 2.0
+    assert q.missing(pose, laser, angles, returned, people, 9.0) == (7, 0)
+    gone = returned.copy()
+    gone[[0, 6]] = False
+    past = wall.copy()
+    past[3] += 1.0
+    assert q.missing(pose, laser, angles, gone, past, 9.0) == (7, 3)
+    assert q.missing(pose, laser, angles, returned, wall, 7.0) == (0, 0)  # the wall beyond a 7 m reach: none
+    # the laser mounted 1 m ahead, turned round: it looks west at the wall 3 m behind the robot's centre
+    assert q.missing(pose, (1.0, 0.0, np.pi), angles, returned, 3.0 / np.cos(angles) - 0.05, 9.0) == (7, 0)
+
+
+def test_an_occluded_scan_is_no_evidence_while_what_the_map_shows_is_there():
+    # A sparse hall full of people (suites/sparse-hall.yaml hall-fast-people-916): at the true pose 2-6 of a
+    # scan's 6-17 returns match a pillar, 1-3 end short of one (a person in front) and the rest lie on open floor:
+    # match 0.29-0.40, nothing through a wall, under occluded_below, and the lost call that followed handed the
+    # track to a place 12 m off. Of the 5-8 directions where the map shows the laser a pillar, 0-1 read nothing
+    # there; at a wrong place the pillars the map shows are where the laser saw none.
+    cfg = SimpleNamespace(**{**vars(QCFG), "occluded_below": 0.4, "occluded_missing": 0.2})
+    q = ScanQuality(_box_grid(), cfg)
+    people = Fit(13, 0.33, 0.0)
+    assert q.occluded_call(people) and not q.occluded_call(Fit(13, 0.45, 0.0))
+    off = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(cfg), "occluded_missing": -1.0}))
+    assert not off.occluded_call(people)  # off: never measured, the match alone
+    assert not q.occluded_call(Fit(13, 0.3, 1 / 13)) and not q.occluded_call(Fit(4, 0.0, 0.0))
+    assert q.bad(people) is True  # not measured: the match alone, as before
+    assert q.bad(Fit(13, 0.33, 0.0, predicted=7, missing=1)) is False  # 1 of 7 missing: occlusion
+    assert q.bad(Fit(13, 0.33, 0.0, predicted=7, missing=2)) is True  # 2 of 7 (over 0.2): a wrong place
+    assert q.bad(Fit(13, 0.33, 0.0, predicted=4, missing=3)) is False  # the map shows under min_beams: no evidence
+    assert q.bad(Fit(13, 0.2, 0.0, predicted=10, missing=0)) is False  # however low the match
+    assert _feed(q, [Fit(13, 0.95, 0.0)] * 5 + [Fit(13, 0.33, 0.0, predicted=7, missing=1)] * 10) == [False] * 15
+
+
+def test_people_in_a_sparse_hall_do_not_make_a_correct_track_lost(tmp_path):
+    # The first 8 s of suites/sparse-hall.yaml hall-fast-people-916 (a 12 m laser at 1.5 m/s in a hall of sparse
+    # pillars, 8 people): people make most of a scan's returns, the match falls to 0.29-0.40 at the true pose with
+    # nothing through a wall. Called lost on that alone, the default re-seeded at 1.5 s and jumped to a place where
+    # the people line up with pillars: 3 lost episodes, max 18 m, RMSE 7.7 m (the whole 60 s world: 30.8 m against
+    # the plain filter's 0.36 m). What the map shows the laser is there or hidden behind people (ScanQuality.
+    # missing): no lost call, max 0.13 m.
+    from mcl.config import load_config
+    from mcl.runner import run
+    from mcl.simulate import simulate
+
+    data = tmp_path / "hall"
+    sim = simulate(data, kind="hall", seed=916, duration=8.0, scan_rate=10.0, speed=1.5, dynamic_obstacles=8)
+    x, y, th = sim["start_pose"]
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={data / 'map.yaml'}", f"log={data / 'log.clf'}", f"truth={data / 'truth.tum'}", "rerun.mode=off",
+        "filter.global_localization=false", f"filter.initial_pose=[{x}, {y}, {th}]", "seed=1"])
+    s = run(cfg, tmp_path / "run", progress=False, echo=lambda m: None)
+    assert s["quality"]["lost_episodes"] == 0 and s["reseeds"] == 0, s["quality"]
+    assert s["eval"]["ate_max"] < 0.3, s["eval"]

@@ -869,7 +869,8 @@ def test_people_crowding_the_robot_do_not_make_a_correct_track_lost_and_hijacked
     # matches 0.82 with 18 % of the beams through walls), on every seed. quality.occluded_below (0.4) reads a scan
     # that contradicts nothing as an occlusion: the track is never called lost and ends within 0.16 m. (The
     # protected re-seed, filter.reseed_odds, also keeps this track by itself: the place 55 m away fits the crowded
-    # scans worse by the quality score, so its likelihood never counts; the control turns both off.)
+    # scans worse by the quality score, so its likelihood never counts; so does quality.occluded_missing: the
+    # walls the map shows are there or behind people. The control turns all three off.)
     from mcl.simulate import simulate
 
     data = tmp_path_factory.mktemp("crowd")
@@ -877,7 +878,8 @@ def test_people_crowding_the_robot_do_not_make_a_correct_track_lost_and_hijacked
     s = _track(data, sim, tmp_path / "default")
     assert s["eval"]["ate_max"] < 0.5, s["eval"]
     assert s["quality"]["lost_updates"] == 0, s["quality"]
-    before = _track(data, sim, tmp_path / "before", "quality.occluded_below=1.0", "filter.reseed_odds=0")
+    before = _track(data, sim, tmp_path / "before", "quality.occluded_below=1.0", "quality.occluded_missing=-1",
+                    "filter.reseed_odds=0")
     assert before["eval"]["ate_max"] > 5.0, before["eval"]
     assert before["quality"]["lost_updates"] > 0, before["quality"]
 
@@ -1217,15 +1219,19 @@ def test_two_seconds_of_ground_hits_do_not_hand_a_correct_track_to_spread_poses(
     # hall no pose fits those scans, so the filter is called lost and lost recovery spreads poses around the
     # estimate. Mixed into the set, spread poses where the line met a wall took the track (20.6 m off);
     # protected (filter.recovery_protect, the default), they must out-score the track on scans that fit the map where
-    # they are, which these do not: 0.23 m (the baseline, with no recovery: 0.26 m).
+    # they are, which these do not: 0.23 m (the baseline, with no recovery: 0.26 m). Since quality.occluded_missing
+    # (thirty-eighth session) those scans are no lost call at all: the walls the map shows are there, the ground's
+    # returns lie on open floor; the protection is measured with it off.
     from mcl.simulate import simulate
 
     data = tmp_path_factory.mktemp("ground")
     sim = simulate(data, kind="hall", seed=0, duration=45.0, ground_hits=1)
-    s = _track(data, sim, tmp_path / "protected")  # the default
-    assert s["quality"]["lost_updates"] > 0, s["quality"]  # the scans do make it lost: the protection is what held
-    assert s["eval"]["ate_max"] < 0.5, s["eval"]
-    mixed = _track(data, sim, tmp_path / "mixed", "filter.recovery_protect=false")
+    s = _track(data, sim, tmp_path / "default")
+    assert s["quality"]["lost_updates"] == 0 and s["eval"]["ate_max"] < 0.5, (s["quality"], s["eval"])
+    p = _track(data, sim, tmp_path / "protected", "quality.occluded_missing=-1")
+    assert p["quality"]["lost_updates"] > 0, p["quality"]  # the scans do make it lost: the protection is what held
+    assert p["eval"]["ate_max"] < 0.5, p["eval"]
+    mixed = _track(data, sim, tmp_path / "mixed", "quality.occluded_missing=-1", "filter.recovery_protect=false")
     assert mixed["eval"]["ate_max"] > 2.0, mixed["eval"]
 
 
