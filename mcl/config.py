@@ -340,9 +340,10 @@ class QualityConfig:
     # a scan with no beam through a mapped wall is bad only below this (when lower than lost_below): readings short
     # of the map are what people and furniture the map lacks give; 1.0: no such rule
     occluded_below: float = field(default=1.0, metadata=_rng(-2.0, 1.0))
-    # ... and below it too, such a scan is no evidence while at most this share of the obstacles the map shows the
-    # laser from the estimate (its scored directions cast to its reach) read nothing there or past them, or the map
-    # shows it fewer than min_beams: people hide what the map shows, a wrong place lacks it (< 0: off)
+    # ... and below it too, such a scan is no evidence in a sparse view (the map shows the laser obstacles in at most
+    # half its scored directions, cast from the estimate to its reach) while at most this share of them read nothing
+    # there or past them, or when the map shows it fewer than min_beams: people hide what the map shows, a wrong
+    # place lacks it (< 0: off)
     occluded_missing: float = field(default=-1.0, metadata=_rng(-1.0, 1.0))
     # ... and so is a scan whose beams through walls all end within this of a mapped obstacle (m; 0: none is
     # exempt): near misses, as an estimate a few decimetres off makes them; only its match counts then

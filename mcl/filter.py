@@ -935,7 +935,7 @@ class ParticleFilter:
         reach = no_return_range(self.cfg.sensor.range_max, getattr(scan, "max_range", None))
         predicted, missing = self.quality.missing(self.last_estimate.mean, self._laser_pose,
                                                   np.asarray(scan.angles, dtype=np.float64)[idx], returned, r, reach)
-        return dataclasses.replace(fit, predicted=predicted, missing=missing)
+        return dataclasses.replace(fit, predicted=predicted, missing=missing, directions=int(idx.size))
 
     def assess(self, info: StepInfo) -> None:
         """Lay this update's scan on the map at the estimate (mcl.quality): the quality signal and the lost

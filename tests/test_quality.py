@@ -389,11 +389,17 @@ def test_an_occluded_scan_is_no_evidence_while_what_the_map_shows_is_there():
     assert not off.occluded_call(people)  # off: never measured, the match alone
     assert not q.occluded_call(Fit(13, 0.3, 1 / 13)) and not q.occluded_call(Fit(4, 0.0, 0.0))
     assert q.bad(people) is True  # not measured: the match alone, as before
-    assert q.bad(Fit(13, 0.33, 0.0, predicted=7, missing=1)) is False  # 1 of 7 missing: occlusion
-    assert q.bad(Fit(13, 0.33, 0.0, predicted=7, missing=2)) is True  # 2 of 7 (over 0.2): a wrong place
-    assert q.bad(Fit(13, 0.33, 0.0, predicted=4, missing=3)) is False  # the map shows under min_beams: no evidence
-    assert q.bad(Fit(13, 0.2, 0.0, predicted=10, missing=0)) is False  # however low the match
-    assert _feed(q, [Fit(13, 0.95, 0.0)] * 5 + [Fit(13, 0.33, 0.0, predicted=7, missing=1)] * 10) == [False] * 15
+    sparse = dict(directions=60)  # of the 60 scored directions, the map shows an obstacle in `predicted`
+    assert q.bad(Fit(13, 0.33, 0.0, predicted=7, missing=1, **sparse)) is False  # 1 of 7 missing: occlusion
+    assert q.bad(Fit(13, 0.33, 0.0, predicted=7, missing=2, **sparse)) is True  # 2 of 7 (over 0.2): a wrong place
+    assert q.bad(Fit(13, 0.33, 0.0, predicted=4, missing=3, **sparse)) is False  # under min_beams shown: no evidence
+    assert q.bad(Fit(13, 0.2, 0.0, predicted=10, missing=0, **sparse)) is False  # however low the match
+    # a dense view is no occlusion: the demo's robot kidnapped into a smaller room reads every wall the map shows
+    # from the old estimate short (44 of 60 directions, none missing, match 0.13-0.21): a wrong place, lost as before
+    assert q.bad(Fit(60, 0.15, 0.0, predicted=44, missing=0, **sparse)) is True
+    assert q.bad(Fit(60, 0.15, 0.0, predicted=30, missing=0, **sparse)) is False  # half: still sparse
+    occluded = Fit(13, 0.33, 0.0, predicted=7, missing=1, **sparse)
+    assert _feed(q, [Fit(13, 0.95, 0.0)] * 5 + [occluded] * 10) == [False] * 15
 
 
 def test_people_in_a_sparse_hall_do_not_make_a_correct_track_lost(tmp_path):

@@ -869,8 +869,8 @@ def test_people_crowding_the_robot_do_not_make_a_correct_track_lost_and_hijacked
     # matches 0.82 with 18 % of the beams through walls), on every seed. quality.occluded_below (0.4) reads a scan
     # that contradicts nothing as an occlusion: the track is never called lost and ends within 0.16 m. (The
     # protected re-seed, filter.reseed_odds, also keeps this track by itself: the place 55 m away fits the crowded
-    # scans worse by the quality score, so its likelihood never counts; so does quality.occluded_missing: the
-    # walls the map shows are there or behind people. The control turns all three off.)
+    # scans worse by the quality score, so its likelihood never counts. The control turns off both, and
+    # quality.occluded_missing, which reads a sparse view's low match as occlusion, too.)
     from mcl.simulate import simulate
 
     data = tmp_path_factory.mktemp("crowd")
