@@ -56,8 +56,8 @@ from mcl.motion import allowed_mask, allowed_masks, make_motion_model
 from mcl.parallel import choose
 from mcl.quality import Fit, ScanQuality
 from mcl.resampling import effective_sample_size, normalize_log_weights, resample
-from mcl.sensors import (BeamSkipping, UnmappedObjects, _evenly_spaced, make_sensor_model, no_return_range,
-                         sweep_of, valid_returns)
+from mcl.sensors import (BeamSkipping, UnmappedObjects, make_sensor_model, scored_view, sweep_of,
+                         valid_returns)
 
 __all__ = ["Control", "StepInfo", "ParticleFilter", "EVENT_KINDS"]
 
@@ -929,10 +929,9 @@ class ParticleFilter:
         """``fit`` with ``predicted`` / ``missing`` (``ScanQuality.missing``) over the scan's scored directions from
         the estimate: whether a low match with nothing through a wall is occlusion or a wrong place."""
         scan = self._prepared_scan
-        idx = _evenly_spaced(len(scan.angles), int(self.cfg.sensor.max_beams))
+        idx, reach = scored_view(scan, self.cfg.sensor)
         r = np.asarray(scan.ranges, dtype=np.float64)[idx]
         returned = valid_returns(r, getattr(scan, "max_range", None), self.cfg.sensor)
-        reach = no_return_range(self.cfg.sensor.range_max, getattr(scan, "max_range", None))
         predicted, missing = self.quality.missing(self.last_estimate.mean, self._laser_pose,
                                                   np.asarray(scan.angles, dtype=np.float64)[idx], returned, r, reach)
         return dataclasses.replace(fit, predicted=predicted, missing=missing, directions=int(idx.size))

@@ -61,8 +61,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcl.kernels.field import field_at
-from mcl.kernels.raycast import cast_rays_serial, segments_blocked
+from mcl.kernels.raycast import segments_blocked
 from mcl.maps import byte_mask
+from mcl.sensors import cast_from_laser
 
 
 DOUBT_HISTORY = 50  # held updates whose median score is the track's score before a lost episode
@@ -163,16 +164,24 @@ class ScanQuality:
         than ``quality.distance`` past it. People hide what the map shows, they do not remove it: at the true
         pose among people nearly every predicted obstacle is read, or read short; at a wrong place the map's
         obstacles are where the laser saw none."""
-        x, y, th = (float(v) for v in pose[:3])
-        c, s = math.cos(th), math.sin(th)
-        lx, ly, lth = (float(v) for v in laser_pose[:3])
-        at = np.array([[x + c * lx - s * ly], [y + s * lx + c * ly], [th + lth]])
-        z = np.empty((1, angles.size))
-        cast_rays_serial(at, np.ascontiguousarray(angles, dtype=np.float64), self.blocked, self.origin[0],
-                         self.origin[1], self.resolution, float(reach), z)
-        predicted = z[0] < float(reach) - self.resolution
-        gone = predicted & (~returned | (ranges > z[0] + self.cfg.distance))
+        z = cast_from_laser(self.blocked, self.origin, self.resolution, pose, laser_pose, angles, reach)
+        predicted = z < float(reach) - self.resolution
+        gone = predicted & (~returned | (ranges > z + self.cfg.distance))
         return int(np.count_nonzero(predicted)), int(np.count_nonzero(gone))
+
+    def _view_explains(self, fit: Fit) -> bool:
+        """Whether ``Fit.predicted`` / ``missing`` (measured: :meth:`occluded_call`) explain a low match as people:
+        in a sparse view (the map shows obstacles in at most half the directions) what it shows is there
+        (matched) or hidden behind something nearer, at most ``occluded_missing`` of it missing, and the unmatched
+        rest lies on open floor; or the map shows the laser fewer than ``min_beams`` obstacles, nothing to judge
+        by. In a dense view a match this low is a wrong place: a robot kidnapped into a smaller room reads every
+        wall short (the demo: 44 of 60 directions shown, none missing, match 0.13-0.21)."""
+        if fit.predicted is None:
+            return False
+        if fit.predicted < self.cfg.min_beams:
+            return True
+        return (fit.directions is not None and 2 * fit.predicted <= fit.directions
+                and fit.missing <= self.cfg.occluded_missing * fit.predicted)
 
     def bad(self, fit: Fit, near_misses: bool = False) -> bool:
         """Whether one update's fit says the estimate is wrong (no beam: no evidence either way, not bad).
@@ -194,18 +203,7 @@ class ScanQuality:
             # no reading ended deep past a wall: the rest end short of the map, or just past a wall (the near misses
             # of an estimate a little off, occluded_depth), and only the match counts
             occluded = min(below, self.cfg.occluded_below)
-            if (fit.match < occluded and fit.predicted is not None and (
-                    fit.predicted < self.cfg.min_beams
-                    or (fit.directions is not None and 2 * fit.predicted <= fit.directions
-                        and fit.missing <= self.cfg.occluded_missing * fit.predicted))):
-                # a sparse view (the map shows obstacles in at most half the directions): what it shows is there
-                # (matched) or hidden behind something nearer (people), and the unmatched rest lies on open floor:
-                # the low match is the people's, not the place's. Where the map shows the laser fewer than
-                # min_beams obstacles, there is nothing to judge by. In a dense view a match this low is a wrong
-                # place: a robot kidnapped into a smaller room reads every wall short (the demo: 44 of 60
-                # directions shown, none missing, match 0.13-0.21)
-                return c > 0.0 and fit.contradiction >= c
-            return fit.match < occluded or (c > 0.0 and fit.contradiction >= c)
+            return (fit.match < occluded and not self._view_explains(fit)) or (c > 0.0 and fit.contradiction >= c)
         return fit.score < below or (c > 0.0 and fit.contradiction >= c)
 
     def refutes(self, fit: Fit | None) -> bool:

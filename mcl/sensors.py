@@ -63,6 +63,23 @@ def beam_selection(ranges, angles, max_range, cfg) -> np.ndarray:
     return sel[valid_returns(r[sel], max_range, cfg)]
 
 
+def scored_view(scan, cfg) -> tuple[np.ndarray, float]:
+    """(the indices of the beams a model scores, with or without a return: AMCL's ``max_beams`` evenly spaced; the
+    laser's reach in m: ``no_return_range``) of ``scan``."""
+    return _evenly_spaced(len(scan.angles), int(cfg.max_beams)), no_return_range(
+        cfg.range_max, getattr(scan, "max_range", None))
+
+
+def cast_from_laser(blocked, origin, resolution: float, pose, laser_pose, angles, reach: float) -> np.ndarray:
+    """(A,) the ranges the map gives along ``angles`` (laser frame) from the laser at ``laser_pose`` (robot frame)
+    on ``pose``, cast through ``blocked`` up to ``reach`` (``reach``: nothing met): the scan the map predicts."""
+    at = compose(np.asarray(pose, dtype=np.float64), np.asarray(laser_pose, dtype=np.float64))[:, None]
+    out = np.empty((1, len(angles)))
+    cast_rays_serial(at, np.ascontiguousarray(angles, dtype=np.float64), blocked, float(origin[0]), float(origin[1]),
+                     float(resolution), float(reach), out)
+    return out[0]
+
+
 @functools.lru_cache(maxsize=64)
 def _evenly_spaced(b: int, max_beams: int) -> np.ndarray:
     """(K,) int64, read-only: round(linspace(0, b - 1, max_beams)) without repeats, or every beam when b <= max_beams.
@@ -440,9 +457,8 @@ class UnmappedObjects:
     def view(self, scan):
         """(the directions of the beams a model scores, with or without a return: (A,) rad; the laser's reach in m)
         of ``scan``, for :meth:`blind`."""
-        a = np.asarray(scan.angles, dtype=np.float64).ravel()
-        reach = no_return_range(self.cfg.range_max, getattr(scan, "max_range", None))
-        return np.ascontiguousarray(a[_evenly_spaced(a.size, int(self.cfg.max_beams))]), reach
+        idx, reach = scored_view(scan, self.cfg)
+        return np.ascontiguousarray(np.asarray(scan.angles, dtype=np.float64).ravel()[idx]), reach
 
     def any_far(self, observation, pose, distance: float) -> bool:
         """Whether some endpoint of ``observation`` (robot frame, (2, K)), seen from ``pose``, lies farther than
@@ -494,11 +510,9 @@ class UnmappedObjects:
         if scan is None:
             return False
         angles, reach = self.view(scan)
-        at = compose(np.asarray(pose, dtype=np.float64), np.asarray(laser_pose, dtype=np.float64))[:, None]
-        out = np.empty((1, angles.size))
         reach += self.BLIND_MARGIN
-        cast_rays_serial(at, angles, blocked, self.origin[0], self.origin[1], self.resolution, reach, out)
-        return int(np.count_nonzero(out[0] < reach - self.resolution)) < min_beams
+        z = cast_from_laser(blocked, self.origin, self.resolution, pose, laser_pose, angles, reach)
+        return int(np.count_nonzero(z < reach - self.resolution)) < min_beams
 
     def select(self, observation, candidates, pose, shifts=None, whole: bool = False, distance=None):
         """(the observation to score, the skipped robot-frame endpoints (2, k) or None) for the robot-frame
@@ -517,9 +531,8 @@ class UnmappedObjects:
         # candidates is the map's when one shift puts all of it on mapped obstacles (mcl.kernels.field.far_runs)
         args = (self.dist, self.origin[0], self.origin[1], self.resolution, float(pose[0]), float(pose[1]),
                 math.cos(th), math.sin(th), e, idx)
-        # in float32, as the field; one per endpoint
-        d = (np.full(e.shape[1], self.cfg.unmapped_distance if distance is None else distance, dtype=np.float32)
-             if distance is None or np.ndim(distance) == 0 else np.ascontiguousarray(distance, dtype=np.float32))
+        d = np.asarray(self.cfg.unmapped_distance if distance is None else distance, dtype=np.float32)
+        d = np.ascontiguousarray(np.broadcast_to(d, e.shape[1]))  # one per endpoint, in float32 as the field
         n_far = far_runs(*args, _NO_SHIFTS, _NO_SHIFTS, d, far)
         if n_far and callable(shifts):
             shifts = shifts()  # computed only when a candidate is far from the map
