@@ -669,21 +669,17 @@ class RerunLogger:
         """(2, E) world endpoints of the beams at ``angles`` (laser frame) cast on ``grid`` from the laser at
         ``pose``: the scan the beam model expects (z*, Prob. Rob. 6.3) if the estimate were right. Rays that
         hit nothing within ``range_max`` are left out."""
-        from mcl.kernels.raycast import cast_rays_serial
+        from mcl.estimate import compose
+        from mcl.sensors import cast_from_laser
 
         if getattr(self, "_blocked_of", None) is not grid:
             self._blocked_of = grid
             self._blocked = np.ascontiguousarray(grid.occupied, dtype=np.bool_)
-        e, lp = np.asarray(pose, dtype=np.float64), np.asarray(laser_pose, dtype=np.float64)
-        c, s = math.cos(e[2]), math.sin(e[2])
-        lx, ly = e[0] + c * lp[0] - s * lp[1], e[1] + s * lp[0] + c * lp[1]
-        a = np.ascontiguousarray(angles, dtype=np.float64)
-        z = np.empty((1, a.size))
-        cast_rays_serial(np.array([[lx], [ly], [e[2] + lp[2]]]), a, self._blocked, float(grid.origin[0]),
-                         float(grid.origin[1]), float(grid.resolution), float(range_max), z)
-        keep = z[0] < range_max
-        ang = e[2] + lp[2] + a[keep]
-        return np.vstack([lx + z[0, keep] * np.cos(ang), ly + z[0, keep] * np.sin(ang)])
+        at = compose(np.asarray(pose, dtype=np.float64), np.asarray(laser_pose, dtype=np.float64))
+        z = cast_from_laser(self._blocked, grid.origin, grid.resolution, pose, laser_pose, angles, range_max)
+        keep = z < range_max
+        ang = at[2] + np.asarray(angles, dtype=np.float64)[keep]
+        return np.vstack([at[0] + z[keep] * np.cos(ang), at[1] + z[keep] * np.sin(ang)])
 
     # -- helpers -----------------------------------------------------------------------
     def _live(self) -> rr.RecordingStream | None:
