@@ -186,6 +186,16 @@ class LikelihoodFieldConfig:
     interior_tolerance: float | None = field(default=None, metadata=_rng(0.0))  # m
     # the same choice while the laser is tempered (a global search, or lost recovery spreading poses)
     search_interior: Literal["zero", "depth"] = "zero"
+    # negative information: the probability that a beam meeting a mapped obstacle within the laser's reach reads no
+    # return (a dropout); each no-return beam whose ray meets one from a pose scores log(no_return_miss) there. 0: off
+    # (AMCL's and the book's field leave no-return readings out)
+    no_return_miss: float = field(default=0.0, metadata=_rng(0.0, 1.0))
+    # the reach of that test, as a fraction of the laser's no-return range (the far end of a laser's range is where a
+    # dark or slanted surface first fails to return)
+    no_return_reach: float = field(default=0.9, metadata=_rng(0.0, 1.0, lo_open=True))
+    # ... only on scans where at least this share of the scored beams read no return (a sparse view: there the few
+    # returns leave the pose loose and the no-returns hold it; elsewhere the returns do, and the rays cost time)
+    no_return_share: float = field(default=0.5, metadata=_rng(0.0, 1.0))
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -30,7 +30,8 @@ import math
 import numpy as np
 
 from mcl.kernels.field import far_runs
-from mcl.kernels.likelihood import beam_explained_weight, likelihood_field_loglik, likelihood_field_loglik_serial
+from mcl.kernels.likelihood import (beam_explained_weight, free_ray_loglik, free_ray_loglik_serial,
+                                   likelihood_field_loglik, likelihood_field_loglik_serial)
 from mcl.kernels.raycast import cast_rays_serial, segments_blocked
 from mcl.kernels.segments import small_segments
 from mcl.estimate import compose
@@ -132,6 +133,47 @@ def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0), s
         x, y = out[0].copy(), out[1].copy()
         out[0] = vx * tau + c * x - s * y
         out[1] = vy * tau + s * x + c * y
+    return out
+
+
+class Endpoints(np.ndarray):
+    """(2, K) robot-frame endpoints (``beam_endpoints``) that also carry the scan's no-return beams: ``free`` (4, R),
+    each one's laser position and unit direction in the robot frame (``no_return_rays``), and ``reach`` (m). A
+    view or a selection of the endpoints keeps them (beams left out of a scan are beams with a return)."""
+
+    def __new__(cls, endpoints, free, reach: float):
+        obj = np.asarray(endpoints).view(cls)
+        obj.free = free
+        obj.reach = float(reach)
+        return obj
+
+    def __array_finalize__(self, obj):
+        self.free = getattr(obj, "free", None)
+        self.reach = getattr(obj, "reach", 0.0)
+
+
+def no_return_rays(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0), sweep=None) -> np.ndarray:
+    """(4, R): the laser's position (x, y) and the unit direction (ux, uy) in the robot frame of each beam among
+    the scored ones (``scored_view``: evenly spaced over all beams) that read no return (at or past the laser's
+    no-return range, or +inf); ``sweep`` as ``beam_endpoints``' (each ray moved into the robot frame at the
+    stamp)."""
+    r = np.asarray(ranges, dtype=np.float64).ravel()
+    a = np.asarray(angles, dtype=np.float64).ravel()
+    sel = _evenly_spaced(r.size, int(cfg.max_beams))
+    reach = no_return_range(cfg.range_max, max_range)
+    with np.errstate(invalid="ignore"):
+        none = r[sel] >= reach  # +inf too; NaN (invalid) is not a no-return
+    lx, ly, lth = (float(v) for v in laser_pose)
+    ang = a[sel][none] + lth
+    out = np.empty((4, ang.size))
+    out[0], out[1] = lx, ly
+    if sweep is not None:
+        tau, (vx, vy, w) = sweep
+        tau = np.asarray(tau, dtype=np.float64)[sel][none]
+        c, s = np.cos(w * tau), np.sin(w * tau)
+        out[0], out[1] = vx * tau + c * lx - s * ly, vy * tau + s * lx + c * ly
+        ang = ang + w * tau
+    out[2], out[3] = np.cos(ang), np.sin(ang)
     return out
 
 
@@ -243,10 +285,19 @@ class LikelihoodField:
         self._grid = grid  # beam skipping (float32 distances, the occupied mask) and the search table, on first use
         self.dist = None
         self.blocked = None
+        self.no_return_miss = float(getattr(cfg, "no_return_miss", 0.0))
 
     def prepare(self, scan, laser_pose) -> np.ndarray:
-        """The observation this model scores, made once per scan: robot-frame beam endpoints (2, K)."""
-        return beam_endpoints(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose, sweep_of(scan))
+        """The observation this model scores, made once per scan: robot-frame beam endpoints (2, K); with
+        ``no_return_miss``, an ``Endpoints`` that carries the no-return beams too."""
+        e = beam_endpoints(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose, sweep_of(scan))
+        if self.no_return_miss > 0.0:
+            free = no_return_rays(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose, sweep_of(scan))
+            if free.shape[1] and free.shape[1] >= float(self.cfg.no_return_share) * len(
+                    _evenly_spaced(len(scan.angles), int(self.cfg.max_beams))):
+                reach = float(self.cfg.no_return_reach) * no_return_range(self.cfg.range_max, scan.max_range)
+                e = Endpoints(e, free, reach)
+        return e
 
     @staticmethod
     def endpoints(observation) -> np.ndarray:
@@ -308,6 +359,13 @@ class LikelihoodField:
         kernel = choose(likelihood_field_loglik, likelihood_field_loglik_serial, p.shape[1] * e_cells.shape[1])
         table = self.search_table() if searching else self.table
         kernel(p, e_cells, table, self.origin[0], self.origin[1], self.inv_res, self.offmap, self.exponent, out)
+        free = getattr(endpoints, "free", None)
+        if free is not None and free.shape[1] and self.no_return_miss > 0.0:
+            if self.dist is None:
+                self.dist = np.ascontiguousarray(self._grid.distance, dtype=np.float32)
+            kernel = choose(free_ray_loglik, free_ray_loglik_serial, p.shape[1] * free.shape[1] * 8)
+            kernel(p, free, self.dist, self.origin[0], self.origin[1], self.inv_res, float(endpoints.reach),
+                   math.log(self.no_return_miss), self.exponent, out)
         return out
 
     def beam_support(self, particles, weights, endpoints) -> np.ndarray:

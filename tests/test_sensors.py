@@ -344,3 +344,95 @@ def test_a_scan_published_clockwise_scores_as_the_same_scan_counter_clockwise(mo
     fa = pf.quality.fit(truth.poses[:, i], pf.sensor.endpoints(ccw_obs), at[:2])
     fb = pf.quality.fit(truth.poses[:, i], pf.sensor.endpoints(cw_obs), at[:2])
     assert (fa.beams, fa.match, fa.contradiction) == (fb.beams, fb.match, fb.contradiction) and fa.beams > 40
+
+
+# ---------------------------------------------------------------- no-return readings (negative information)
+
+def corridor_grid():
+    """A corridor 30 m long and 2 m wide (0.05 m cells, walls at y = +-1.0 m, an end wall at x = 30 m)."""
+    occ = np.zeros((44, 620), dtype=np.int8)
+    occ[1, :601] = occ[42, :601] = 100
+    occ[1:43, 0] = occ[1:43, 600] = 100
+    return OccupancyGrid.from_occupancy(occ, 0.05, (0.0, -1.075))
+
+
+def corridor_scan():
+    """Facing down the corridor from its axis: three beams straight ahead read no return (12 m, the laser's
+    maximum), the beams 30-90 degrees to either side return from the side walls; the rest invalid."""
+    angles = np.deg2rad(np.array([-90.0, -60.0, -30.0, -2.0, 0.0, 2.0, 30.0, 60.0, 90.0, 10.0]))
+    ranges = np.array([1.0, 1.0 / math.sin(math.radians(60.0)), 2.0, 12.0, 12.0, 12.0, 2.0,
+                       1.0 / math.sin(math.radians(60.0)), 1.0, np.nan])
+    return SimpleNamespace(ranges=ranges, angles=angles, max_range=12.0)
+
+
+@pytest.mark.parametrize("share", [0.0, 0.3])
+def test_no_returns_tell_apart_places_the_returns_cannot(share):
+    # At x = 10 m the end wall is 20 m ahead, out of the laser's 12 m; at x = 22 m it is 8 m ahead. The side walls'
+    # returns fit both places alike, so the likelihood field cannot tell them apart; the three no-returns straight
+    # ahead say the end wall is not within reach (0.9 x 12 m): log(no_return_miss) each at x = 22 m.
+    g = corridor_grid()
+    p = np.array([[10.0, 22.0], [0.0, 0.0], [0.0, 0.0]])
+    off = LikelihoodField(g, sensor_cfg(range_max=80.0, no_return_miss=0.0, no_return_reach=0.9,
+                                        no_return_share=share))
+    plain = off.log_likelihood(p, off.prepare(corridor_scan(), (0.0, 0.0, 0.0)))
+    assert plain[0] == pytest.approx(plain[1], abs=1e-9)
+    on = LikelihoodField(g, sensor_cfg(range_max=80.0, no_return_miss=0.1, no_return_reach=0.9,
+                                       no_return_share=share))
+    obs = on.prepare(corridor_scan(), (0.0, 0.0, 0.0))
+    assert obs.free.shape == (4, 3) and obs.reach == pytest.approx(10.8)
+    ll = on.log_likelihood(p, obs)
+    assert ll[0] == pytest.approx(plain[0], abs=1e-9)  # nothing within reach ahead: the same score
+    assert ll[1] - ll[0] == pytest.approx(3 * math.log(0.1), abs=1e-9)
+    # a wall 11 m ahead is beyond the reach (10.8 m): no evidence
+    assert on.log_likelihood(np.array([[19.0], [0.0], [0.0]]), obs)[0] == pytest.approx(plain[0], abs=1e-9)
+    # the selection of endpoints (unmapped objects, beam skipping) keeps the no-return rays
+    assert obs[:, :2].free is obs.free
+
+
+def test_no_returns_are_scored_only_in_a_sparse_view():
+    # 3 no-returns of the 10 scored beams: under no_return_share 0.5 the scan is scored by its returns alone
+    on = LikelihoodField(corridor_grid(), sensor_cfg(range_max=80.0, no_return_miss=0.1, no_return_reach=0.9,
+                                                     no_return_share=0.5))
+    obs = on.prepare(corridor_scan(), (0.0, 0.0, 0.0))
+    assert getattr(obs, "free", None) is None
+    p = np.array([[10.0, 22.0], [0.0, 0.0], [0.0, 0.0]])
+    ll = on.log_likelihood(p, obs)
+    assert ll[0] == pytest.approx(ll[1], abs=1e-9)
+
+
+def test_no_return_rays_follow_the_laser_mounting_and_the_sweep():
+    from mcl.sensors import no_return_rays
+
+    cfg = sensor_cfg(range_max=80.0)
+    rays = no_return_rays(np.array([1.0, 12.0, np.inf, np.nan]), np.array([-0.5, 0.0, 0.5, 1.0]), 12.0, cfg,
+                          (0.2, 0.1, 0.3))
+    np.testing.assert_allclose(rays, [[0.2, 0.2], [0.1, 0.1], [math.cos(0.3), math.cos(0.8)],
+                                      [math.sin(0.3), math.sin(0.8)]], atol=1e-12)
+    # a sweep: beam j taken tau_j s after the stamp while the robot moved at (vx, vy, omega)
+    tau = np.array([0.0, 0.05, 0.1, 0.15])
+    rays = no_return_rays(np.array([1.0, 12.0, np.inf, np.nan]), np.array([-0.5, 0.0, 0.5, 1.0]), 12.0, cfg,
+                          (0.0, 0.0, 0.0), (tau, (1.0, 0.0, 2.0)))
+    np.testing.assert_allclose(rays, [[0.05, 0.1], [0.0, 0.0], [math.cos(0.1), math.cos(0.7)],
+                                      [math.sin(0.1), math.sin(0.7)]], atol=1e-12)
+
+
+def test_no_return_kernel_gives_the_same_with_one_and_two_threads():
+    from mcl.kernels.likelihood import free_ray_loglik, free_ray_loglik_serial
+
+    g = corridor_grid()
+    dist = np.ascontiguousarray(g.distance, dtype=np.float32)
+    rng = np.random.default_rng(5)
+    n = 20_000
+    p = np.stack([rng.uniform(0.5, 29.5, n), rng.uniform(-0.9, 0.9, n), rng.uniform(-np.pi, np.pi, n)])
+    ang = np.linspace(-1.5, 1.5, 31)
+    rays = np.ascontiguousarray(np.stack([np.full(31, 0.1), np.zeros(31), np.cos(ang), np.sin(ang)]))
+    a, b = np.zeros(n), np.zeros(n)
+    free_ray_loglik_serial(p, rays, dist, g.origin[0], g.origin[1], 1.0 / g.resolution, 10.8, -2.0, 1.0, a)
+    saved = numba.get_num_threads()
+    try:
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        free_ray_loglik(p, rays, dist, g.origin[0], g.origin[1], 1.0 / g.resolution, 10.8, -2.0, 1.0, b)
+    finally:
+        numba.set_num_threads(saved)
+    assert np.array_equal(a, b)
+    assert a.min() < -2.0 * 20 and a.max() <= 0.0  # most rays meet a wall within 10.8 m of a 2 m corridor

@@ -205,3 +205,47 @@ def refine_poses(particles, endpoints_cells, dist, ox, oy, inv_res, max_d, iters
 
 
 refine_poses_serial = serial_twin(refine_poses)
+
+
+@njit(cache=True, parallel=True)
+def free_ray_loglik(particles, rays, dist, ox, oy, inv_res, reach, log_miss, scale, out):
+    """out[i] += scale * log_miss * (the number of no-return rays that meet a mapped obstacle within ``reach`` m
+    seen from particle i): the negative information of readings with no return, which the likelihood field
+    (Prob. Rob. Table 6.3) leaves out.
+
+    rays: (4, R) float64, per ray the laser's position (x, y, m) and the beam's unit direction (ux, uy), in the
+    robot frame. dist: (H, W) float32 metres from each cell to the nearest occupied cell (``OccupancyGrid.
+    distance``). Each ray is marched by sphere tracing on ``dist``: from a point ``d`` m from every obstacle the
+    ray can advance ``d`` less a cell without meeting one, so open space is crossed in a few long steps. A point
+    within one cell of an obstacle is a meeting; a ray that leaves the map meets nothing.
+    """
+    n = particles.shape[1]
+    r = rays.shape[1]
+    h_cells = dist.shape[0]
+    w_cells = dist.shape[1]
+    res = 1.0 / inv_res
+    for i in prange(n):
+        th = particles[2, i]
+        c = math.cos(th)
+        s = math.sin(th)
+        met = 0
+        for j in range(r):
+            sx = particles[0, i] + c * rays[0, j] - s * rays[1, j]
+            sy = particles[1, i] + s * rays[0, j] + c * rays[1, j]
+            dx = c * rays[2, j] - s * rays[3, j]
+            dy = s * rays[2, j] + c * rays[3, j]
+            t = 0.0
+            while t < reach:
+                fx = (sx + t * dx - ox) * inv_res
+                fy = (sy + t * dy - oy) * inv_res
+                if not (fx >= 0.0 and fx < w_cells and fy >= 0.0 and fy < h_cells):
+                    break
+                d = dist[int(fy), int(fx)]
+                if d <= res:
+                    met += 1
+                    break
+                t += max(d - res, 0.5 * res)
+        out[i] += scale * log_miss * met
+
+
+free_ray_loglik_serial = serial_twin(free_ray_loglik)
