@@ -114,7 +114,7 @@ def test_suite_lost_m_is_every_datasets_default(tmp_path):
 
 
 @pytest.mark.parametrize("name, worlds", [("synthetic", 43), ("heldout", 42), ("heldout2", 26), ("heldout3", 12),
-                                         ("heldout4", 12), ("ground-hits", 15), ("fast-laser", 12),
+                                         ("heldout4", 12), ("heldout5", 12), ("ground-hits", 15), ("fast-laser", 12),
                                          ("sparse-laser", 4), ("sparse-hall", 6),
                                          ("stale-map", 8), ("unknown-floor", 12), ("smoke", None)])
 def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(name, worlds):
@@ -132,7 +132,9 @@ def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(nam
     if name.startswith("heldout"):
         for other in {"heldout": ["synthetic"], "heldout2": ["synthetic", "heldout"],
                       "heldout3": ["synthetic", "heldout", "heldout2", "ground-hits"],
-                      "heldout4": ["synthetic", "heldout", "heldout2", "heldout3", "ground-hits"]}[name]:
+                      "heldout4": ["synthetic", "heldout", "heldout2", "heldout3", "ground-hits"],
+                      "heldout5": ["synthetic", "heldout", "heldout2", "heldout3", "heldout4", "ground-hits",
+                                   "fast-laser", "sparse-laser", "sparse-hall", "stale-map", "unknown-floor"]}[name]:
             taken = {(d.simulate.get("kind", "office"), d.simulate["seed"])
                      for d in load_suite(PROJECT_ROOT / "suites" / f"{other}.yaml").datasets}
             assert not taken & seeds, other
