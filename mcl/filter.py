@@ -587,7 +587,7 @@ class ParticleFilter:
         unknown, beams = None, None  # the beams skipped on unknown cells; the scan's beams left ((K,) bool, None: all)
         if self.cfg.sensor.unmapped_unknown:
             on = self._on_unknown(observation, pose)
-            rest = np.ascontiguousarray(observation[:, ~on]) if on.any() else None
+            rest = np.require(observation[:, ~on], requirements="C") if on.any() else None
             # skipped when the rest fits the map at the estimate (or nothing is left): at a wrong place the rest does
             # not, and the whole scan stays in the quality signal's view to call it lost
             if rest is not None and (rest.shape[1] == 0 or self.quality.fit(pose, rest, self._laser_pose[:2]).score

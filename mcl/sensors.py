@@ -457,7 +457,7 @@ class BeamSkipping:
         skip = self.sensor.skip_mask(particles, weights, observation, pose=pose, laser_xy=laser_xy)
         if not skip.any():
             return observation, None
-        return np.ascontiguousarray(observation[:, ~skip]), observation[:, skip]
+        return np.require(observation[:, ~skip], requirements="C"), observation[:, skip]
 
 
 class UnmappedObjects:
@@ -601,7 +601,7 @@ class UnmappedObjects:
             return observation, None
         skip = np.zeros(observation.shape[1], dtype=bool)
         skip[idx[far]] = True
-        return np.ascontiguousarray(observation[:, ~skip]), observation[:, skip]
+        return np.require(observation[:, ~skip], requirements="C"), observation[:, skip]
 
 
 _NO_SHIFTS = np.zeros(0)

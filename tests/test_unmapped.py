@@ -189,6 +189,12 @@ def test_the_beams_on_a_person_are_skipped_and_the_mapped_pillar_and_walls_are_k
     pillar = np.hypot(obs[0] + pose[0] - 12.25, obs[1] + pose[1] - 1.0) < 0.4
     assert pillar.any() and cand[pillar].any()
     assert not np.isin(obs[:, pillar].T.tolist(), skipped.T.tolist()).all(axis=1).any()
+    # an observation that carries the scan's no-return rays (sensor.likelihood_field.no_return_miss) keeps them
+    from mcl.sensors import Endpoints
+
+    free = np.zeros((4, 2))
+    kept, _ = u.select(Endpoints(obs, free, 9.0), cand, pose)
+    assert kept.free is free and kept.reach == 9.0 and kept.flags["C_CONTIGUOUS"]
 
 
 def test_nothing_is_skipped_without_people_and_nothing_when_half_the_scan_would_go():
