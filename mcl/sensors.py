@@ -126,14 +126,19 @@ def beam_endpoints(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0), s
     out[0] = lx + r * np.cos(ang)
     out[1] = ly + r * np.sin(ang)
     if sweep is not None:
-        tau, (vx, vy, w) = sweep
-        tau = np.asarray(tau, dtype=np.float64)[sel]
-        # the robot at beam j's time, seen from the robot at the stamp: (vx tau, vy tau, omega tau) to first order
-        c, s = np.cos(w * tau), np.sin(w * tau)
-        x, y = out[0].copy(), out[1].copy()
-        out[0] = vx * tau + c * x - s * y
-        out[1] = vy * tau + s * x + c * y
+        tau, twist = sweep
+        out[0], out[1], _ = _at_stamp(out[0], out[1], np.asarray(tau, dtype=np.float64)[sel], twist)
     return out
+
+
+def _at_stamp(x, y, tau, twist):
+    """(x, y, turn): the points (x, y) of the robot frame at tau s after a scan's stamp, in the robot frame at the
+    stamp, and the turn between the two frames, while the robot moves at twist = (vx, vy, omega) in its own frame:
+    the robot at tau seen from the robot at the stamp is (vx tau, vy tau, omega tau) to first order."""
+    vx, vy, w = twist
+    turn = w * tau
+    c, s = np.cos(turn), np.sin(turn)
+    return vx * tau + c * x - s * y, vy * tau + s * x + c * y, turn
 
 
 class Endpoints(np.ndarray):
@@ -168,11 +173,9 @@ def no_return_rays(ranges, angles, max_range, cfg, laser_pose=(0.0, 0.0, 0.0), s
     out = np.empty((4, ang.size))
     out[0], out[1] = lx, ly
     if sweep is not None:
-        tau, (vx, vy, w) = sweep
-        tau = np.asarray(tau, dtype=np.float64)[sel][none]
-        c, s = np.cos(w * tau), np.sin(w * tau)
-        out[0], out[1] = vx * tau + c * lx - s * ly, vy * tau + s * lx + c * ly
-        ang = ang + w * tau
+        tau, twist = sweep
+        out[0], out[1], turn = _at_stamp(lx, ly, np.asarray(tau, dtype=np.float64)[sel][none], twist)
+        ang = ang + turn
     out[2], out[3] = np.cos(ang), np.sin(ang)
     return out
 
@@ -290,13 +293,13 @@ class LikelihoodField:
     def prepare(self, scan, laser_pose) -> np.ndarray:
         """The observation this model scores, made once per scan: robot-frame beam endpoints (2, K); with
         ``no_return_miss``, an ``Endpoints`` that carries the no-return beams too."""
-        e = beam_endpoints(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose, sweep_of(scan))
+        sweep = sweep_of(scan)
+        e = beam_endpoints(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose, sweep)
         if self.no_return_miss > 0.0:
-            free = no_return_rays(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose, sweep_of(scan))
-            if free.shape[1] and free.shape[1] >= float(self.cfg.no_return_share) * len(
-                    _evenly_spaced(len(scan.angles), int(self.cfg.max_beams))):
-                reach = float(self.cfg.no_return_reach) * no_return_range(self.cfg.range_max, scan.max_range)
-                e = Endpoints(e, free, reach)
+            free = no_return_rays(scan.ranges, scan.angles, scan.max_range, self.cfg, laser_pose, sweep)
+            scored, limit = scored_view(scan, self.cfg)
+            if free.shape[1] and free.shape[1] >= float(self.cfg.no_return_share) * scored.size:
+                e = Endpoints(e, free, float(self.cfg.no_return_reach) * limit)
         return e
 
     @staticmethod
