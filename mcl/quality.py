@@ -151,11 +151,18 @@ class ScanQuality:
                    float(np.count_nonzero(deep)) / k)
 
     def occluded_call(self, fit: Fit | None) -> bool:
-        """Whether :meth:`bad` would call ``fit`` bad for its match alone (enough beams, none through a wall, the
-        match under ``occluded_below``) and ``occluded_missing`` is on: then :meth:`missing` tells occlusion from a
-        wrong place."""
+        """Whether :meth:`update` would call ``fit`` bad for its match alone (:meth:`_match_alone`, with the near
+        misses exempt as :meth:`update` exempts them now) and ``occluded_missing`` is on: then :meth:`missing`
+        tells occlusion from a wrong place. Asked before :meth:`update` folds ``fit`` in."""
         return (self.cfg.occluded_missing >= 0.0 and fit is not None and fit.beams >= self.cfg.min_beams
-                and fit.contradiction == 0.0 and fit.match < min(self.cfg.lost_below, self.cfg.occluded_below))
+                and self._match_alone(fit, self._creeping())
+                and fit.match < min(self.cfg.lost_below, self.cfg.occluded_below))
+
+    def _match_alone(self, fit: Fit, near_misses: bool) -> bool:
+        """No reading ended past a wall (with ``near_misses``, none deeper than ``occluded_depth``): the rest end
+        short of the map, or just past a wall (the near misses of an estimate a little off), and only the match
+        counts in :meth:`bad`."""
+        return (fit.deep_through if near_misses else fit.contradiction) == 0.0
 
     def missing(self, pose, laser_pose, angles, returned, ranges, reach: float) -> tuple[int, int]:
         """(predicted, missing) over the directions ``angles`` (laser frame) of one scan, seen from the laser at
@@ -199,9 +206,7 @@ class ScanQuality:
             return False
         c = self.cfg.contradiction_above
         below = self.cfg.lost_below
-        if (fit.deep_through if near_misses else fit.contradiction) == 0.0:
-            # no reading ended deep past a wall: the rest end short of the map, or just past a wall (the near misses
-            # of an estimate a little off, occluded_depth), and only the match counts
+        if self._match_alone(fit, near_misses):
             occluded = min(below, self.cfg.occluded_below)
             return (fit.match < occluded and not self._view_explains(fit)) or (c > 0.0 and fit.contradiction >= c)
         return fit.score < below or (c > 0.0 and fit.contradiction >= c)
