@@ -38,6 +38,10 @@ gives a pose): the reference's advantage over the estimate, summed over those sc
   along it explains the scans alike and the error is the odometry's drift since the last feature.
 * **miss**: the scans favoured the reference and the filter did not follow.
 
+Printed with it: how far the odometry alone is off at the scan where the estimate was farthest, started at the
+reference on the last scan the estimate was within ``FIX_M`` of it (``dead_reckoning``). An estimate no farther off
+than that has done what a filter can with no scan to pin it: followed the odometry from its last fix.
+
 Usage::
 
     .venv/bin/python scripts/ambiguity.py DIR [--only NAME,...]
@@ -72,6 +76,7 @@ _REFINE = np.array(np.meshgrid(np.linspace(-0.1, 0.1, 5), np.linspace(-0.1, 0.1,
                                indexing="ij")).reshape(3, -1)  # the first round's offsets (x, y, theta)
 JUMP_M = 0.5  # m: the estimate's offset from the reference changing this much from one scan to the next is a jump
 LL_SAME = 3.0  # tracking: nats of evidence for the reference, over the whole excursion, below which it is ambiguous
+FIX_M = 0.1  # tracking: the estimate this near the reference is a fix that dead reckoning is started from
 
 
 def _at(t_ref: np.ndarray, t: float) -> int | None:
@@ -148,16 +153,35 @@ def classify(run_dir: Path, row: dict, cache: dict) -> dict | None:
             "kind": "ambiguous" if share >= 0.5 and m_est >= m_ref - SAME else "miss"}
 
 
+def dead_reckoning(fix_pose, fix_odom, odom) -> np.ndarray:
+    """(3,) the pose that the odometry alone gives at ``odom`` (x, y, theta in its frame), started from the
+    reference ``fix_pose`` where the odometry read ``fix_odom``: fix_pose (+) (fix_odom^-1 (+) odom)."""
+    dx, dy = odom[0] - fix_odom[0], odom[1] - fix_odom[1]
+    c, s = np.cos(fix_odom[2]), np.sin(fix_odom[2])
+    lx, ly = c * dx + s * dy, -s * dx + c * dy  # the motion in the odometry's frame at the fix
+    c, s = np.cos(fix_pose[2]), np.sin(fix_pose[2])
+    th = fix_pose[2] + (odom[2] - fix_odom[2])
+    return np.array([fix_pose[0] + c * lx - s * ly, fix_pose[1] + s * lx + c * ly, np.arctan2(np.sin(th), np.cos(th))])
+
+
 def classify_tracking(run_dir: Path, row: dict, cache: dict) -> dict | None:
     """The laser log-likelihood at the reference against the estimate, over the scans of a lost tracking run
-    whose error exceeds its ``lost_m`` (None: no such scan has a reference)."""
+    whose error exceeds its ``lost_m`` (None: no such scan has a reference).
+
+    Also, for those scans, dead reckoning's own error: the odometry alone, started at the reference on the last scan
+    the estimate was within ``FIX_M`` of it. An estimate as far off as dead reckoning has drifted since its last fix
+    followed the odometry, as a filter must where no scan pins the pose (``dead_reckoning_at_worst``: at the scan
+    where the estimate was farthest off; None: no fix before it, or a log with no odometry)."""
     pf, scans, tt, tp, te, pe = _run(run_dir, cache)
-    gain, off = [], []
+    gain, off, drift = [], [], []
+    fix = None  # (reference pose, odometry) at the last scan the estimate was within FIX_M
     for s in scans:
         i, j = _at(tt, s.t), _at(te, s.t)
         if i is None or j is None:
             continue
         err = float(np.hypot(*(pe[:2, j] - tp[:2, i])))
+        if err <= FIX_M and s.odom is not None:
+            fix = (tp[:, i].copy(), np.asarray(s.odom, dtype=np.float64))
         if err <= row["lost_m"]:
             continue
         laser = s.laser_offset if s.laser_offset is not None else np.zeros(3)
@@ -167,11 +191,14 @@ def classify_tracking(run_dir: Path, row: dict, cache: dict) -> dict | None:
         ll = pf.sensor.log_likelihood(np.column_stack([tp[:, i], pe[:, j]]), obs)
         gain.append(float(ll[0] - ll[1]))
         off.append(err)
+        dr = None if fix is None or s.odom is None else dead_reckoning(*fix, np.asarray(s.odom, dtype=np.float64))
+        drift.append(None if dr is None else float(np.hypot(*(dr[:2] - tp[:2, i]))))
     if not gain:
         return None
     total = float(np.sum(gain))
-    return {"scans": len(gain), "gain": total, "per_scan_max": float(np.max(gain)), "max_err": float(np.max(off)),
-            "kind": "ambiguous" if total < LL_SAME else "miss"}
+    worst = int(np.argmax(off))
+    return {"scans": len(gain), "gain": total, "per_scan_max": float(np.max(gain)), "max_err": float(off[worst]),
+            "dead_reckoning_at_worst": drift[worst], "kind": "ambiguous" if total < LL_SAME else "miss"}
 
 
 def main(argv=None) -> int:
@@ -207,7 +234,10 @@ def main(argv=None) -> int:
         if tracking:
             print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: {c['kind']:9s} "
                   f"{c['scans']:4d} scans more than {row['lost_m']:g} m off (max {c['max_err']:.2f} m), the scans "
-                  f"favour the reference by {c['gain']:.1f} nats in all (at most {c['per_scan_max']:.1f} in one)")
+                  f"favour the reference by {c['gain']:.1f} nats in all (at most {c['per_scan_max']:.1f} in one)"
+                  + ("" if c["dead_reckoning_at_worst"] is None else
+                     f"; there, the odometry alone from the last fix within {FIX_M:g} m is "
+                     f"{c['dead_reckoning_at_worst']:.2f} m off"))
             continue
         print(f"{row['dataset']:26s} {row['mode']:9s} {row['config']:9s} seed {row['seed']}: {c['kind']:9s} "
               f"{c['scans']:4d} scans, median score reference {c['reference']:.3f} estimate {c['estimate']:.3f}, "
