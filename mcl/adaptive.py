@@ -986,3 +986,49 @@ def make_recovery(fc, global_start: bool, lost_after: int = 3, search: GlobalSea
                             reseed=fc.recovery_reseed, probation=fc.recovery_probation, search=search,
                             global_after_s=fc.recovery_global_after_s, stall=stall, wait=fc.recovery_wait)
     return None
+
+
+class OdometryScale:
+    """``motion.scale_window``: an online estimate ``k`` of the odometry's translation scale (a wheel radius set a few
+    per cent off, worn tyres), by which the motion model then stretches every odometry step.
+
+    After the correction of a held track, the shift the scan gave the cloud's mean along the direction of travel
+    (``shift``) is what the scaled step missed: the robot went k d + shift where the odometry read d. So the scale
+    the scans saw is the distance-weighted mean of (k d + shift) / d over recent travel (forgetting over ``window``
+    metres), pulled towards 1 by ``prior`` metres of travel at scale 1 and held within 1 +- ``limit``. Along a
+    featureless corridor the scans shift nothing along it and ``k`` holds; where the odometry keeps falling short,
+    the scans keep pulling the cloud forward and ``k`` grows until they need not. A step the filter does not trust
+    (lost, searching, on probation, a protected re-seed, an odometry-fault window) is not counted.
+    """
+
+    def __init__(self, window: float, prior: float, limit: float):
+        self.window = float(window)
+        self.prior = float(prior)
+        self.limit = float(limit)
+        self.reset()
+
+    def reset(self) -> None:
+        self.k = 1.0
+        self._seen = 0.0  # sum of (k d + shift), forgetting over the window
+        self._travel = 0.0  # sum of d, forgetting likewise
+
+    def scaled(self, control):
+        """``control`` (``mcl.filter.Control``) with its translation times ``k``: the odometry pair's step in x, y
+        (the rotations as read) and the velocity v."""
+        if self.k == 1.0:
+            return control
+        prev, now = np.asarray(control.odom_prev, dtype=np.float64), np.asarray(control.odom_now, dtype=np.float64)
+        stretched = now.copy()
+        stretched[:2] = prev[:2] + self.k * (now[:2] - prev[:2])
+        return dataclasses.replace(control, odom_now=stretched, v=self.k * float(control.v))
+
+    def observe(self, shift: float, d: float, k_used: float) -> None:
+        """One trusted update: the scan's shift of the mean (m) along the direction of an odometry step of ``d`` m
+        (unscaled) that the motion model stretched by ``k_used``."""
+        if not (d > 0.0 and math.isfinite(shift)):
+            return
+        keep = math.exp(-d / self.window)
+        self._seen = keep * self._seen + k_used * d + shift
+        self._travel = keep * self._travel + d
+        k = (self._seen + self.prior) / (self._travel + self.prior)
+        self.k = min(max(k, 1.0 - self.limit), 1.0 + self.limit)

@@ -170,6 +170,10 @@ class MotionConfig:
     fault_turn_max: float = field(default=0.0, metadata=_rng(0.0))  # rad/s: cap on p_k's heading std per s (0: none)
     fault_shift_max: float = field(default=1.5, metadata=_rng(0.0))  # m/s: cap on p_k's translation std per s (0: none)
     fault_widen_after: int = field(default=5, metadata=_rng(0, 1_000_000))  # a window's first lost updates with the caps
+    # online odometry scale (mcl.adaptive.OdometryScale): metres of travel its estimate forgets over; 0: off
+    scale_window: float = field(default=0.0, metadata=_rng(0.0))
+    scale_prior: float = field(default=10.0, metadata=_rng(0.0))  # metres of travel at scale 1 it starts from
+    scale_limit: float = field(default=0.15, metadata=_rng(0.0, 0.9))  # the scale stays within 1 +- this
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -41,7 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, ProbationChallenge, ProtectedReseed, StallCheck,
+from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, OdometryScale, ProbationChallenge, ProtectedReseed,
+                          StallCheck,
                           draw_injected, kld_resample, make_recovery, measurement_count)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
@@ -151,6 +152,11 @@ class ParticleFilter:
         self.challenge = (ProbationChallenge(fc.probation_fit, self.search, fc.probation_margin)
                           if fc.probation_fit > 0.0 and fc.reseed_odds > 0.0 else None)
         self._odom = None  # this update's odometry pose (x, y, theta), None without motion (the stall test)
+        # the odometry's translation scale learnt online (motion.scale_window); this update's step for it
+        mc = cfg.motion
+        self.odom_scale = (OdometryScale(mc.scale_window, mc.scale_prior, mc.scale_limit)
+                           if mc.scale_window > 0.0 else None)
+        self._scale_step = None  # (direction of travel on the map (2,), odometry step m, scale used)
         self.recovery = self._make_recovery(True)  # set again by init_gaussian / init_global
         self._fresh = None  # (N,) bool: uniform poses of a global start or re-seed not yet scored (global_oversample)
         self._match_mask = None  # cells the search's scan matching may move a particle into (search_refine)
@@ -357,6 +363,7 @@ class ParticleFilter:
 
         self.predict(control, info)
         info.particles = self.n
+        prior = self._mean_xy(self.logw) if self._scale_step is not None else None
         t_predict = lap()
         self.correct(observation, info)
         self.correct_landmarks(landmarks, info)
@@ -367,6 +374,8 @@ class ParticleFilter:
         t_normalize = lap()
         self.estimate(info)
         self.assess(info)
+        if prior is not None:
+            self._learn_scale(prior, info)
         info.events = self.guard.take_step_events()
         t_estimate = lap()
         self.resample(info)
@@ -389,6 +398,7 @@ class ParticleFilter:
         self._delta = None
         self._dt = float(control.dt) if control is not None else 0.0  # log time since the last update (recovery)
         self._odom = None
+        self._scale_step = None
         if control is not None:
             control, self._delta = self.guard.check_control(control)
             if self._delta is None:  # a jump: not motion to trust (no odometry pose for the stall test either)
@@ -397,18 +407,62 @@ class ParticleFilter:
                     self._kld_draw(None, info)
                 self._hedge_jump(control, info)
                 return
+        moved = control
+        if self.odom_scale is not None and control is not None:
+            moved = self.odom_scale.scaled(control)
+            self._scale_step = self._travel(control)
         if self.kld is not None and self.kld.pending is not None:
-            new, ok, tries, lw = self._kld_draw(control, info)
+            new, ok, tries, lw = self._kld_draw(moved, info)
             if control is None:
                 return
         elif control is None:
             return
         else:
-            new, ok, tries, lw = self._move(self.particles, control)
+            new, ok, tries, lw = self._move(self.particles, moved)
         self._odom = control.odom_now
         self.particles = new
         info.tries = float(tries)
         self._weigh_motion(self.logw, ok, lw, info)
+
+    def _travel(self, control: Control):
+        """(direction of travel on the map (2,), odometry step in m, the scale it is stretched by) of an odometry
+        step, for ``OdometryScale``: the step in the odometry's frame at its start, turned by the last estimate's
+        heading. None without an estimate or without translation."""
+        if self.last_estimate is None:
+            return None
+        prev, now = np.asarray(control.odom_prev, dtype=np.float64), np.asarray(control.odom_now, dtype=np.float64)
+        dx, dy = now[0] - prev[0], now[1] - prev[1]
+        d = math.hypot(dx, dy)
+        if not d > 1e-4:
+            return None
+        c, s = math.cos(prev[2]), math.sin(prev[2])
+        lx, ly = c * dx + s * dy, -s * dx + c * dy  # the step in the robot's frame at its start
+        th = float(self.last_estimate.mean[2])
+        c, s = math.cos(th), math.sin(th)
+        return np.array([c * lx - s * ly, s * lx + c * ly]) / d, d, self.odom_scale.k
+
+    def _mean_xy(self, logw: np.ndarray) -> np.ndarray | None:
+        """The set's weighted mean position (2,) under log-weights ``logw`` (None: no finite weight)."""
+        top = float(np.max(logw)) if logw.size else -np.inf
+        if not math.isfinite(top):
+            return None
+        w = np.exp(logw - top)
+        return (self.particles[:2] @ w) / float(w.sum())
+
+    def _learn_scale(self, prior: np.ndarray, info: StepInfo) -> None:
+        """Feed ``OdometryScale`` this update's shift of the mean along the direction of travel (the correction's
+        doing: ``prior`` is the mean after the prediction), on a track the filter trusts: not lost, scored, no
+        search, no probation, no protected re-seed, no odometry-fault window open."""
+        fit = info.fit
+        trusted = (not info.lost and fit is not None and fit.beams >= self.cfg.quality.min_beams
+                   and not self.search.tempering and not self.search.holding and self.protected is None
+                   and not getattr(self.recovery, "on_probation", False)
+                   and (self.faults is None or self.faults.since_lost is None))
+        post = self._mean_xy(self.logw) if trusted else None
+        if post is None:
+            return
+        direction, d, k = self._scale_step
+        self.odom_scale.observe(float((post - prior) @ direction), d, k)
 
     @staticmethod
     def _weigh_motion(logw: np.ndarray, ok, lw, info: StepInfo) -> None:
