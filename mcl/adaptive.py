@@ -995,7 +995,7 @@ class OdometryScale:
     After the correction of a held track, the shift the scan gave the cloud's mean along the direction of travel
     (``shift``) is what the scaled step missed: the robot went k d + shift where the odometry read d. So the scale
     the scans saw is the distance-weighted mean of (k d + shift) / d over recent travel (forgetting over ``window``
-    metres), pulled towards 1 by ``prior`` metres of travel at scale 1 and held within 1 +- ``limit``. Along a
+    metres), starting from ``prior`` metres of travel at scale 1 (forgotten as the rest) and held within 1 +- ``limit``. Along a
     featureless corridor the scans shift nothing along it and ``k`` holds; where the odometry keeps falling short,
     the scans keep pulling the cloud forward and ``k`` grows until they need not. A step the filter does not trust
     (lost, searching, on probation, a protected re-seed, an odometry-fault window) is not counted.
@@ -1009,8 +1009,9 @@ class OdometryScale:
 
     def reset(self) -> None:
         self.k = 1.0
-        self._seen = 0.0  # sum of (k d + shift), forgetting over the window
-        self._travel = 0.0  # sum of d, forgetting likewise
+        # the prior's metres at scale 1, then each step's (k d + shift) and d, all forgotten over the window's travel
+        self._seen = self.prior
+        self._travel = self.prior
 
     def scaled(self, control):
         """``control`` (``mcl.filter.Control``) with its translation times ``k``: the odometry pair's step in x, y
@@ -1030,5 +1031,5 @@ class OdometryScale:
         keep = math.exp(-d / self.window)
         self._seen = keep * self._seen + k_used * d + shift
         self._travel = keep * self._travel + d
-        k = (self._seen + self.prior) / (self._travel + self.prior)
-        self.k = min(max(k, 1.0 - self.limit), 1.0 + self.limit)
+        if self._travel > 0.0:
+            self.k = min(max(self._seen / self._travel, 1.0 - self.limit), 1.0 + self.limit)

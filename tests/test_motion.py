@@ -290,3 +290,33 @@ def test_same_result_with_one_and_two_threads():
         numba.set_num_threads(saved)
     (a0, ok0, t0, b0), (a1, ok1, t1, b1) = results
     assert np.array_equal(a0, a1) and np.array_equal(ok0, ok1) and t0 == t1 and np.array_equal(b0, b1)
+
+
+def test_the_odometry_scale_learns_what_the_scans_keep_adding():
+    # motion.scale_window: the odometry reads 5 % short (the robot goes 1.05 d); a scan that pins the pose shifts the
+    # cloud by what the scaled step missed, (1.05 - k) d, so the scale the scans see is 1.05 and k goes there. Along a
+    # featureless stretch (no shift) k holds; it never leaves 1 +- scale_limit.
+    from mcl.adaptive import OdometryScale
+    from mcl.filter import Control
+
+    s = OdometryScale(window=50.0, prior=10.0, limit=0.15)
+    for _ in range(1000):  # 100 m in 0.1 m steps
+        s.observe((1.05 - s.k) * 0.1, 0.1, s.k)
+    assert s.k == pytest.approx(1.05, abs=0.002)  # the prior's 10 m at scale 1 forgotten over the 50 m window
+    held = s.k
+    for _ in range(500):
+        s.observe(0.0, 0.1, s.k)  # a featureless corridor: the scans shift nothing along it
+    assert s.k == pytest.approx(held, abs=1e-9)
+    young = OdometryScale(window=50.0, prior=10.0, limit=0.15)
+    for _ in range(50):  # 5 m: the prior still weighs twice the travel
+        young.observe((1.05 - young.k) * 0.1, 0.1, young.k)
+    assert 1.0 < young.k < 1.03
+    capped = OdometryScale(window=50.0, prior=10.0, limit=0.15)
+    for _ in range(2000):
+        capped.observe((1.4 - capped.k) * 0.1, 0.1, capped.k)
+    assert capped.k == pytest.approx(1.15)
+    # the motion model gets the step stretched in x, y (not the rotations) and v
+    s.k = 1.1
+    c = s.scaled(Control(np.array([1.0, 2.0, 0.3]), np.array([2.0, 4.0, 0.5]), dt=0.2, v=1.0, w=0.1))
+    assert c.odom_prev.tolist() == [1.0, 2.0, 0.3] and c.odom_now == pytest.approx([2.1, 4.2, 0.5])
+    assert c.v == pytest.approx(1.1) and c.w == 0.1 and c.dt == 0.2
