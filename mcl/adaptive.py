@@ -627,19 +627,12 @@ class ProbationChallenge:
     must out-score it by ``reseed_odds``. A wrong place on a big map fits 0.65-0.75 for many seconds without ever
     staying lost for ``recovery_global_after`` updates (large-03: held 98 m off for 40 s); a right one with people or
     clutter around fits as low, and keeps itself in the protected search.
-
-    With ``margin`` > 0 the bar is also relative: a place fitting under the score of the track held before the search
-    began (``held``: that track's median, ``mcl.quality.ScanQuality.held_before``) less ``margin`` is challenged too
-    (``filter.probation_margin``). After a kidnap the place a search settles on can fit 0.87-0.94 where the track
-    fitted 0.98 (a look-alike stretch of a large building), well above any absolute bar a cluttered right place
-    would pass.
     """
 
     WINDOW = 10  # updates in a row whose median score is judged
 
-    def __init__(self, fit: float, search: GlobalSearch, margin: float = 0.0):
+    def __init__(self, fit: float, search: GlobalSearch):
         self.fit = float(fit)
-        self.margin = float(margin)
         self.search = search
         self.reset()
 
@@ -648,9 +641,9 @@ class ProbationChallenge:
         self.scores: deque | None = None  # the place's last scores on probation (None: no place, or challenged)
         self.due = False
 
-    def observe(self, fit, on_probation: bool, held: float | None = None) -> None:
-        """This update's scan fit at the estimate (``mcl.quality.Fit`` or None), whether the place a search found
-        is on probation (``LostRecovery.on_probation``) and the held track's median score before it (None: none)."""
+    def observe(self, fit, on_probation: bool) -> None:
+        """This update's scan fit at the estimate (``mcl.quality.Fit`` or None) and whether the place a search found
+        is on probation (``LostRecovery.on_probation``)."""
         if self.starts != self.search.starts:  # a search since: the place it finds is judged afresh
             self.starts = self.search.starts
             self.scores = deque(maxlen=self.WINDOW)
@@ -658,10 +651,7 @@ class ProbationChallenge:
             return
         if fit is not None and fit.beams and math.isfinite(fit.score):
             self.scores.append(fit.score)
-        bar = self.fit
-        if self.margin > 0.0 and held is not None:
-            bar = max(bar, held - self.margin)
-        if len(self.scores) == self.WINDOW and float(np.median(self.scores)) < bar:
+        if len(self.scores) == self.WINDOW and float(np.median(self.scores)) < self.fit:
             self.due = True
             self.scores = None  # challenged once
 

@@ -113,8 +113,6 @@ class FilterConfig:
     # a place a search found is challenged once (a protected re-seed) when the median quality score of
     # ProbationChallenge.WINDOW updates in a row on probation is below this; 0: off
     probation_fit: float = field(default=0.0, metadata=_rng(0.0, 1.0))
-    # ... or below the median score of the track held before the search began less this; 0: off
-    probation_margin: float = field(default=0.0, metadata=_rng(0.0, 1.0))
     global_density: float = field(default=0.0, metadata=_rng(0.0, 1e6))  # uniform candidates per m2 of free space
     search_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # laser log-lik x this while searching
     lost_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # ... while lost (lost recovery)

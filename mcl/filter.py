@@ -149,7 +149,7 @@ class ParticleFilter:
                       if fc.stall_ratio > 0.0 else None)
         # a place a search found that fits poorly on probation is challenged once (filter.probation_fit), only where
         # a re-seed runs protected (reseed_odds > 0; and lost recovery with recovery_reseed, checked as it runs)
-        self.challenge = (ProbationChallenge(fc.probation_fit, self.search, fc.probation_margin)
+        self.challenge = (ProbationChallenge(fc.probation_fit, self.search)
                           if fc.probation_fit > 0.0 and fc.reseed_odds > 0.0 else None)
         self._odom = None  # this update's odometry pose (x, y, theta), None without motion (the stall test)
         # the odometry's translation scale learnt online (motion.scale_window); this update's step for it
@@ -1013,7 +1013,7 @@ class ParticleFilter:
             self.stall.observe(self._dt, self.last_estimate.mean, self.last_estimate.cov, self._odom)
             info.stalled = self.stall.stalled
         if self.challenge is not None and self.protected is None and getattr(self.recovery, "reseed", False):
-            self.challenge.observe(fit, self.recovery.on_probation, self.quality.held_before)
+            self.challenge.observe(fit, self.recovery.on_probation)
 
     def resample(self, info: StepInfo) -> None:
         """Resample when ESS / N < resample_threshold (the scheme named in filter.resampling).

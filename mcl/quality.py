@@ -223,11 +223,6 @@ class ScanQuality:
         c = self.cfg.contradiction_above
         return (c > 0.0 and fit.contradiction >= c) or fit.match < self.cfg.occlusion_match
 
-    @property
-    def held_before(self) -> float | None:
-        """The held track's median score when the last lost episode began (None: no such track, or too short)."""
-        return self._before
-
     def _doubting(self) -> bool:
         """Within ``doubt_updates`` updates from the start of a lost episode, with a score from before it (bounded
         from the start, not the end: a correct track that fits worse than before, in a cluttered place, is not

@@ -1332,26 +1332,27 @@ def test_a_global_reseed_due_during_a_protected_spread_keeps_the_leading_side_as
     assert old.shape[1] == 4000 and np.isin(old[0], kept[0]).all()  # the track side, resampled
 
 
-def test_the_probation_challenge_judges_a_place_by_the_bar_or_by_the_track_held_before():
-    # filter.probation_fit: 10 updates in a row on probation at a median score under the bar -> one challenge.
-    # filter.probation_margin: the bar is also the held track's median before the search less the margin (a kidnapped
-    # robot's search settling on a look-alike that fits 0.9 where the track fitted 0.98); None held: the bar alone.
+def test_the_probation_challenge_judges_a_place_by_its_median_over_ten_scans():
+    # filter.probation_fit: 10 updates in a row on probation at a median score under the bar -> one challenge (a
+    # protected re-seed); over it, or fewer than 10 scores, none; once challenged, not again.
     from types import SimpleNamespace
 
     from mcl.adaptive import GlobalSearch, ProbationChallenge
 
-    def run(margin, held, score, n=10):
+    def run(scores):
         search = GlobalSearch()
         search.start()
         search.observe(False)  # the search settles: the place it found is on probation
-        c = ProbationChallenge(0.7, search, margin)
-        for _ in range(n):
-            c.observe(SimpleNamespace(beams=50, score=score), True, held)
-        return c.due
+        c = ProbationChallenge(0.7, search)
+        dues = []
+        for score in scores:
+            c.observe(SimpleNamespace(beams=50, score=score), True)
+            dues.append(c.due)
+            c.due = False  # the filter takes the challenge (ParticleFilter.resample)
+        return dues
 
-    assert run(0.0, None, 0.65) and not run(0.0, None, 0.75)  # the absolute bar
-    assert not run(0.0, 0.98, 0.9)  # no margin: 0.9 passes whatever the track fitted
-    assert run(0.06, 0.98, 0.9) and not run(0.06, 0.98, 0.93)  # under 0.92 is challenged, over it not
-    assert not run(0.06, None, 0.9)  # no held track (a global start): the bar alone
-    assert not run(0.06, 0.98, 0.9, n=9)  # fewer than WINDOW scores: not yet
-    assert run(0.06, 0.70, 0.65)  # the absolute bar still holds under a low held track
+    assert run([0.65] * 10)[-1] and not any(run([0.65] * 9))
+    assert not any(run([0.75] * 20))
+    # the median, not the mean: four scans at -1 among six at 0.9 leave the place unchallenged
+    assert not any(run([0.9, -1.0] * 4 + [0.9, 0.9]))
+    assert run([0.5] * 30) == [False] * 9 + [True] + [False] * 20  # at the 10th scan, and once only
