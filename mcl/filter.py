@@ -78,6 +78,9 @@ class Control:
     w: float = 0.0
 
 
+SCALE_PIN = 0.8  # motion.scale_window: a correction that leaves this much of the spread along the travel pins nothing
+
+
 @dataclass
 class StepInfo:
     """What one filter update did, for the logs and the summary."""
@@ -363,7 +366,7 @@ class ParticleFilter:
 
         self.predict(control, info)
         info.particles = self.n
-        prior = self._mean_xy(self.logw) if self._scale_step is not None else None
+        prior = self._along(self.logw) if self._scale_step is not None else None
         t_predict = lap()
         self.correct(observation, info)
         self.correct_landmarks(landmarks, info)
@@ -441,28 +444,35 @@ class ParticleFilter:
         c, s = math.cos(th), math.sin(th)
         return np.array([c * lx - s * ly, s * lx + c * ly]) / d, d, self.odom_scale.k
 
-    def _mean_xy(self, logw: np.ndarray) -> np.ndarray | None:
-        """The set's weighted mean position (2,) under log-weights ``logw`` (None: no finite weight)."""
+    def _along(self, logw: np.ndarray) -> tuple[float, float] | None:
+        """The set's weighted mean and variance (m, m2) along this update's direction of travel (``_scale_step``)
+        under log-weights ``logw`` (None: no finite weight)."""
         top = float(np.max(logw)) if logw.size else -np.inf
         if not math.isfinite(top):
             return None
         w = np.exp(logw - top)
-        return (self.particles[:2] @ w) / float(w.sum())
+        w /= float(w.sum())
+        a = self._scale_step[0] @ self.particles[:2]
+        mean = float(a @ w)
+        return mean, float(((a - mean) ** 2) @ w)
 
-    def _learn_scale(self, prior: np.ndarray, info: StepInfo) -> None:
+    def _learn_scale(self, prior: tuple[float, float], info: StepInfo) -> None:
         """Feed ``OdometryScale`` this update's shift of the mean along the direction of travel (the correction's
-        doing: ``prior`` is the mean after the prediction), on a track the filter trusts: not lost, scored, no
-        search, no probation, no protected re-seed, no odometry-fault window open."""
+        doing: ``prior`` is the mean and variance along it after the prediction), on a track the filter trusts (not
+        lost, scored, no search, no probation, no protected re-seed, no odometry-fault window) and only where the
+        scan pinned the pose along the direction of travel: the correction shrank the cloud's spread along it below
+        ``SCALE_PIN`` of the prediction's. Along a featureless corridor it does not, and the few centimetres the
+        mean moves there are resampling's noise, not the odometry's error."""
         fit = info.fit
         trusted = (not info.lost and fit is not None and fit.beams >= self.cfg.quality.min_beams
                    and not self.search.tempering and not self.search.holding and self.protected is None
                    and not getattr(self.recovery, "on_probation", False)
                    and (self.faults is None or self.faults.since_lost is None))
-        post = self._mean_xy(self.logw) if trusted else None
-        if post is None:
+        post = self._along(self.logw) if trusted else None
+        if post is None or not post[1] < SCALE_PIN * prior[1]:
             return
-        direction, d, k = self._scale_step
-        self.odom_scale.observe(float((post - prior) @ direction), d, k)
+        _, d, k = self._scale_step
+        self.odom_scale.observe(post[0] - prior[0], d, k)
 
     @staticmethod
     def _weigh_motion(logw: np.ndarray, ok, lw, info: StepInfo) -> None:
