@@ -407,7 +407,7 @@ def test_a_robot_that_backs_up_is_tracked(tmp_path, model):
 def test_the_online_odometry_scale_finds_a_wheel_five_per_cent_off(tmp_path):
     # motion.scale_window on an office world whose odometry reads every step 5 % short (mcl simulate odom_scale 0.95;
     # features in every view, so the scans pin the pose along the direction of travel): the learnt scale is the
-    # truth's 1 / 0.95 = 1.053 within 0.015 (measured 1.054 over the 40 m drive; a sign error goes the other way,
+    # truth's 1 / 0.95 = 1.053 within 0.015 (measured 1.052 over the 40 m drive; a sign error goes the other way,
     # to 0.95 or the 0.85 floor), reported in summary.json; off, the key is absent.
     from mcl.simulate import simulate
 
