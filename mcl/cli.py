@@ -177,7 +177,29 @@ def cmd_run(args) -> int:
                 time.sleep(3600)
         except KeyboardInterrupt:
             pass
+        # the servers stop as the process exits, in rerun's own shutdown, which once held a Ctrl-C'd process for
+        # over 30 s (a CI run); the outputs are written: the process ends within EXIT_GRACE_S whatever they do
+        exit_within(EXIT_GRACE_S, 0)
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
+
+
+EXIT_GRACE_S = 10.0
+
+
+def exit_within(seconds: float, code: int) -> None:
+    """End the process with ``code`` after ``seconds`` if it has not ended by then (a daemon timer: the normal exit,
+    atexit handlers included, runs first and ends it sooner)."""
+    import threading
+
+    def force() -> None:
+        with contextlib.suppress(Exception):
+            sys.stdout.flush()
+            sys.stderr.flush()
+        os._exit(code)
+
+    timer = threading.Timer(seconds, force)
+    timer.daemon = True
+    timer.start()
 
 
 def set_threads(n: int) -> None:

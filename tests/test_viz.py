@@ -543,3 +543,19 @@ def test_a_run_past_its_recording_budget_logs_the_cloud_on_fewer_updates(tmp_pat
     assert 0.8 * logged * viz.CLOUD_POINT_BYTES <= clouds <= logged * viz.CLOUD_POINT_BYTES, clouds
     s1, _ = go("unbounded", "rerun.budget_mb=0")
     assert s1["recording_particles_every"] == 1 and not any("budget" in m for m in said), said
+
+
+def test_a_served_run_ends_within_the_grace_after_ctrl_c_whatever_shutdown_does(tmp_path):
+    # After Ctrl-C, `mcl run --rerun serve` leaves the servers to rerun's shutdown at exit, which once held the
+    # process for over 30 s (CI). exit_within arms a timer that ends the process with the code given if the normal
+    # exit (atexit handlers included) has not by then: here an atexit handler that would sleep 60 s.
+    import subprocess
+    import time
+
+    script = ("import atexit, time\n"
+              "from mcl.cli import exit_within\n"
+              "atexit.register(time.sleep, 60)\n"
+              "exit_within(1.0, 0)\n")
+    start = time.monotonic()
+    done = subprocess.run([sys.executable, "-c", script], timeout=30)
+    assert done.returncode == 0 and time.monotonic() - start < 20  # the handler alone would take 60 s
