@@ -14,6 +14,7 @@ import contextlib
 import json
 import math
 import os
+import signal
 import sys
 import time
 import warnings
@@ -171,35 +172,18 @@ def cmd_run(args) -> int:
         print(json.dumps(summary, indent=2))
     if cfg.rerun.mode == "serve" and not summary["interrupted"] and not summary.get("late_signal"):
         # the servers live as long as this process: serve the finished recording until the user is done with it
+        # Ctrl-C ends the wait even when the process was started with SIGINT ignored (a background job of a
+        # non-interactive shell inherits that, and Python then installs no handler of its own)
+        with contextlib.suppress(ValueError):  # not the main thread: the inherited handling stays
+            signal.signal(signal.SIGINT, signal.default_int_handler)
         print("mcl: the run is over; serving its recording until Ctrl-C", file=sys.stderr)
         try:
             while True:
                 time.sleep(3600)
         except KeyboardInterrupt:
             pass
-        # the servers stop as the process exits, in rerun's own shutdown, which once held a Ctrl-C'd process for
-        # over 30 s (a CI run); the outputs are written: the process ends within EXIT_GRACE_S whatever they do
-        exit_within(EXIT_GRACE_S, 0)
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
 
-
-EXIT_GRACE_S = 10.0
-
-
-def exit_within(seconds: float, code: int) -> None:
-    """End the process with ``code`` after ``seconds`` if it has not ended by then (a daemon timer: the normal exit,
-    atexit handlers included, runs first and ends it sooner)."""
-    import threading
-
-    def force() -> None:
-        with contextlib.suppress(Exception):
-            sys.stdout.flush()
-            sys.stderr.flush()
-        os._exit(code)
-
-    timer = threading.Timer(seconds, force)
-    timer.daemon = True
-    timer.start()
 
 
 def set_threads(n: int) -> None:

@@ -387,10 +387,13 @@ def test_serve_keeps_serving_after_the_run_on_a_free_port_until_ctrl_c(tmp_path)
         except OSError:
             pass  # already held by something else: the case under test all the same
         env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+        # started with SIGINT ignored, as a background job of a non-interactive shell is (a CI script's `cmd &`):
+        # Python then installs no Ctrl-C handler, and the served run waited for ever
         proc = subprocess.Popen(
             [sys.executable, "-m", "mcl", "run", "--map", str(tmp_path / "w" / "map.yaml"), "--log",
              str(tmp_path / "w" / "log.clf"), "--particles", "300", "--rerun", "serve", "--no-progress", "--out",
-             str(tmp_path / "out")], stderr=subprocess.PIPE, text=True, env=env)
+             str(tmp_path / "out")], stderr=subprocess.PIPE, text=True, env=env,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
         err = []
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:
@@ -544,18 +547,3 @@ def test_a_run_past_its_recording_budget_logs_the_cloud_on_fewer_updates(tmp_pat
     s1, _ = go("unbounded", "rerun.budget_mb=0")
     assert s1["recording_particles_every"] == 1 and not any("budget" in m for m in said), said
 
-
-def test_a_served_run_ends_within_the_grace_after_ctrl_c_whatever_shutdown_does(tmp_path):
-    # After Ctrl-C, `mcl run --rerun serve` leaves the servers to rerun's shutdown at exit, which once held the
-    # process for over 30 s (CI). exit_within arms a timer that ends the process with the code given if the normal
-    # exit (atexit handlers included) has not by then: here an atexit handler that would sleep 60 s.
-    import subprocess
-    import time
-
-    script = ("import atexit, time\n"
-              "from mcl.cli import exit_within\n"
-              "atexit.register(time.sleep, 60)\n"
-              "exit_within(1.0, 0)\n")
-    start = time.monotonic()
-    done = subprocess.run([sys.executable, "-c", script], timeout=30)
-    assert done.returncode == 0 and time.monotonic() - start < 20  # the handler alone would take 60 s
