@@ -805,12 +805,18 @@ class FaultWindow:
                 if self.since_lost > self.window:
                     self.since_lost = None
 
+    @property
+    def open(self) -> bool:
+        """The window is open: the motion model is the fault mixture (from a lost call until ``window`` updates
+        after the last lost one)."""
+        return self.since_lost is not None
+
     def proposal(self, dt: float):
         """The ``FaultProposal`` for the next motion update, which spans ``dt`` s of the log, or None (the plain
         motion model): for the window's first ``fault_widen_after`` lost updates with its stds capped at
         ``fault_shift_max`` and ``fault_turn_max`` times ``dt`` (a slip accrues with time: a sparse log's update
         may hold a larger one), at full width after."""
-        if self.since_lost is None:
+        if not self.open:
             return None
         if self.lost_run > self.widen_after or dt <= 0.0:
             return self.wide
@@ -985,10 +991,11 @@ class OdometryScale:
     After the correction of a held track, the shift the scan gave the cloud's mean along the direction of travel
     (``shift``) is what the scaled step missed: the robot went k d + shift where the odometry read d. So the scale
     the scans saw is the distance-weighted mean of (k d + shift) / d over recent travel (forgetting over ``window``
-    metres), starting from ``prior`` metres of travel at scale 1 (forgotten as the rest) and held within 1 +- ``limit``. Along a
-    featureless corridor the scans shift nothing along it and ``k`` holds; where the odometry keeps falling short,
-    the scans keep pulling the cloud forward and ``k`` grows until they need not. A step the filter does not trust
-    (lost, searching, on probation, a protected re-seed, an odometry-fault window) is not counted.
+    metres), starting from ``prior`` metres of travel at scale 1 (forgotten as the rest) and held within
+    1 +- ``limit``. Along a featureless corridor the scans shift nothing along it and ``k`` holds; where the odometry
+    keeps falling short, the scans keep pulling the cloud forward and ``k`` grows until they need not (the filter
+    feeds only updates whose scan pinned the pose along the travel: ``mcl.filter.SCALE_PIN``). A step the filter
+    does not trust (lost, searching, on probation, a protected re-seed, an odometry-fault window) is not counted.
     """
 
     def __init__(self, window: float, prior: float, limit: float):

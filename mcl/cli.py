@@ -185,7 +185,6 @@ def cmd_run(args) -> int:
     return EXIT_INTERRUPTED if summary["interrupted"] else 0
 
 
-
 def set_threads(n: int) -> None:
     """numba's thread count for parallel kernels (MclError naming --threads when out of range)."""
     import numba

@@ -42,13 +42,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, OdometryScale, ProbationChallenge, ProtectedReseed,
-                          StallCheck,
-                          draw_injected, kld_resample, make_recovery, measurement_count)
+                          StallCheck, draw_injected, kld_resample, make_recovery, measurement_count)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.deskew import SweepOrder
-from mcl.estimate import estimate, wrap_angle
+from mcl.estimate import compose, estimate, inverse, wrap_angle
 from mcl.kernels.likelihood import refine_poses, refine_poses_serial
 from mcl.kernels.raycast import segments_blocked
 from mcl.landmarks import LandmarkModel, sample_poses_from_landmark
@@ -433,16 +432,13 @@ class ParticleFilter:
         heading. None without an estimate or without translation."""
         if self.last_estimate is None:
             return None
-        prev, now = np.asarray(control.odom_prev, dtype=np.float64), np.asarray(control.odom_now, dtype=np.float64)
-        dx, dy = now[0] - prev[0], now[1] - prev[1]
-        d = math.hypot(dx, dy)
+        prev = np.asarray(control.odom_prev, dtype=np.float64)
+        step = compose(inverse(prev), np.asarray(control.odom_now, dtype=np.float64))  # in the robot's frame at its start
+        d = math.hypot(step[0], step[1])
         if not d > 1e-4:
             return None
-        c, s = math.cos(prev[2]), math.sin(prev[2])
-        lx, ly = c * dx + s * dy, -s * dx + c * dy  # the step in the robot's frame at its start
-        th = float(self.last_estimate.mean[2])
-        c, s = math.cos(th), math.sin(th)
-        return np.array([c * lx - s * ly, s * lx + c * ly]) / d, d, self.odom_scale.k
+        on_map = compose(np.array([0.0, 0.0, float(self.last_estimate.mean[2])]), step)
+        return on_map[:2] / d, d, self.odom_scale.k
 
     def _along(self, logw: np.ndarray) -> tuple[float, float] | None:
         """The set's weighted mean and variance (m, m2) along this update's direction of travel (``_scale_step``)
@@ -467,7 +463,7 @@ class ParticleFilter:
         trusted = (not info.lost and fit is not None and fit.beams >= self.cfg.quality.min_beams
                    and not self.search.tempering and not self.search.holding and self.protected is None
                    and not getattr(self.recovery, "on_probation", False)
-                   and (self.faults is None or self.faults.since_lost is None))
+                   and (self.faults is None or not self.faults.open))
         post = self._along(self.logw) if trusted else None
         if post is None or not post[1] < SCALE_PIN * prior[1]:
             return

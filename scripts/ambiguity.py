@@ -64,6 +64,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from mcl.config import load_config  # noqa: E402
 from mcl.errors import MclError  # noqa: E402
+from mcl.estimate import compose, inverse  # noqa: E402
 from mcl.filter import ParticleFilter  # noqa: E402
 from mcl.runner import _open_source  # noqa: E402  (the scans a run uses, from a CARMEN log or a bag)
 from mcl.suite import WITHIN_S  # noqa: E402
@@ -156,12 +157,7 @@ def classify(run_dir: Path, row: dict, cache: dict) -> dict | None:
 def dead_reckoning(fix_pose, fix_odom, odom) -> np.ndarray:
     """(3,) the pose that the odometry alone gives at ``odom`` (x, y, theta in its frame), started from the
     reference ``fix_pose`` where the odometry read ``fix_odom``: fix_pose (+) (fix_odom^-1 (+) odom)."""
-    dx, dy = odom[0] - fix_odom[0], odom[1] - fix_odom[1]
-    c, s = np.cos(fix_odom[2]), np.sin(fix_odom[2])
-    lx, ly = c * dx + s * dy, -s * dx + c * dy  # the motion in the odometry's frame at the fix
-    c, s = np.cos(fix_pose[2]), np.sin(fix_pose[2])
-    th = fix_pose[2] + (odom[2] - fix_odom[2])
-    return np.array([fix_pose[0] + c * lx - s * ly, fix_pose[1] + s * lx + c * ly, np.arctan2(np.sin(th), np.cos(th))])
+    return compose(fix_pose, compose(inverse(fix_odom), odom))
 
 
 def classify_tracking(run_dir: Path, row: dict, cache: dict) -> dict | None:

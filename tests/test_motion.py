@@ -308,9 +308,13 @@ def test_the_odometry_scale_learns_what_the_scans_keep_adding():
         s.observe(0.0, 0.1, s.k)  # a featureless corridor: the scans shift nothing along it
     assert s.k == pytest.approx(held, abs=1e-9)
     young = OdometryScale(window=50.0, prior=10.0, limit=0.15)
-    for _ in range(50):  # 5 m: the prior still weighs twice the travel
+    bare = OdometryScale(window=50.0, prior=0.0, limit=0.15)
+    for _ in range(50):  # 5 m: the prior's 10 m (9.05 m left after forgetting) still weigh nearly twice the travel
         young.observe((1.05 - young.k) * 0.1, 0.1, young.k)
-    assert 1.0 < young.k < 1.03
+        bare.observe((1.05 - bare.k) * 0.1, 0.1, bare.k)
+    # 1.0172 (computed; a prior left out gives 1.05, one never forgotten 1.0167, a sign error under 1)
+    assert young.k == pytest.approx(1.0172, abs=0.0003)
+    assert bare.k == pytest.approx(1.05)  # no prior: the scans' scale from the first step
     capped = OdometryScale(window=50.0, prior=10.0, limit=0.15)
     for _ in range(2000):
         capped.observe((1.4 - capped.k) * 0.1, 0.1, capped.k)
