@@ -181,6 +181,31 @@ def test_map_is_static_image_placed_in_world(run_every1):
     np.testing.assert_allclose(static["Transform3D:scale"][0], [RES, -RES, 1.0], atol=1e-6)
 
 
+def test_the_likelihood_layer_is_the_whole_field_pooled_made_in_bands():
+    # The recording's likelihood-field layer takes the field in bands of rows (distance plus the interior: depth
+    # patches laid on a copy of each band), pooled k x k: the same values as the whole field pooled, for any band
+    # height (997 cells: bands of 2 of the demo map's 440-cell rows, or of one pooled row at k = 3), without the whole
+    # field's copy that ``surface_distance`` keeps in the grid (576 MB on a 600 m map at 5 cm).
+    from mcl.config import load_config
+    from mcl.maps import load_map
+    from mcl.sensors import field_distance
+
+    root = Path(__file__).resolve().parents[1]
+    for interior in ("depth", "zero"):
+        cfg = load_config(root / "configs" / "default.yaml", [f"sensor.likelihood_field.interior={interior}"]).sensor
+        grid = load_map(root / "data" / "demo" / "map.yaml")
+        for k in (1, 3):
+            for cells in (1 << 22, 997):
+                bands = list(viz._field_bands(grid, cfg, k, cells))
+                assert (len(bands) > 1) == (cells == 997)
+                assert "_surface_cache" not in grid.__dict__
+                whole = viz._pool(np.asarray(field_distance(load_map(root / "data" / "demo" / "map.yaml"), cfg)),
+                                  k, np.min, np.inf)
+                assert np.array_equal(np.concatenate(bands), whole)
+        if interior == "depth":  # the demo's thick walls: the patches change 315 cells, so the test sees them
+            assert (np.asarray(field_distance(grid, cfg)) != np.asarray(grid.distance)).sum() > 100
+
+
 def test_a_map_larger_than_a_texture_is_drawn_at_k_cells_per_pixel(tmp_path, monkeypatch):
     # A viewer draws the map as one GPU texture (at most MAP_IMAGE_MAX_SIDE pixels a side): a larger grid is pooled
     # k x k, a block occupied if any of its cells is, else free if any is, and placed with k times the cell size.
