@@ -190,6 +190,10 @@ class LikelihoodFieldConfig:
     interior_tolerance: float | None = field(default=None, metadata=_rng(0.0))  # m
     # the same choice while the laser is tempered (a global search, or lost recovery spreading poses)
     search_interior: Literal["zero", "depth"] = "zero"
+    # where a wall's surface lies in its cells: centre (a SLAM map marks the cell its returns fall in: d from cell
+    # centres) or face (a map drawn from a floor plan or CAD, or by mcl simulate: the surface is the cells' edge, d to
+    # the faces on both sides; interior_tolerance null is 0 there)
+    surface: Literal["centre", "face"] = "centre"
     # negative information: the probability that a beam meeting a mapped obstacle within the laser's reach reads no
     # return (a dropout); each no-return beam whose ray meets one from a pose scores log(no_return_miss) there. 0: off
     # (AMCL's and the book's field leave no-return readings out)

@@ -232,8 +232,36 @@ def field_distance(grid, cfg, interior: str | None = None) -> np.ndarray:
     ``interior`` (the search field passes ``search_interior``)."""
     from mcl.config import sensor_model_view
 
-    tolerance = _depth_tolerance(sensor_model_view(cfg, "likelihood_field"), interior, grid)
+    view = sensor_model_view(cfg, "likelihood_field")
+    tolerance = _depth_tolerance(view, interior, grid)
+    if getattr(view, "surface", "centre") == "face":
+        return _face_distance(grid, tolerance)
     return grid.distance if tolerance is None else grid.surface_distance(tolerance)
+
+
+def _face_distance(grid, tolerance: float | None) -> np.ndarray:
+    """``surface: face``: the d of each cell measured to the occupied cells' faces (a new float32 array). Off the
+    obstacles a cell centre's distance to the nearest occupied cell centre less half a cell (exact to a wall's
+    face in line with the grid); on an occupied cell 0 (``tolerance`` None: ``interior: zero``) or its depth, from
+    its centre to the nearest face, less ``tolerance``: half a cell on a wall's face cell, as its free neighbour.
+    A laser reading to a wall's surface then scores the same a little short of it as a little past it; with d from
+    the cell centres (``centre``) a pose whose readings sink into the walls ahead fits best, and on maps whose
+    surfaces are the cells' edges (floor plans, ``mcl simulate``) the estimate sits half a cell or more ahead
+    (4.5 cm at 5 cm: docs/measurements.md, "Forty-first session")."""
+    half = 0.5 * float(grid.resolution)
+    occupied = np.asarray(grid.occupied)
+    if tolerance is None:
+        d = np.array(grid.distance, dtype=np.float32)
+        d[occupied] = 0.0
+    else:
+        # interior: depth less one cell (0 on a face), made afresh rather than from surface_distance's cached copy
+        patched = getattr(grid, "_patched", None)
+        d = (patched(grid.surface_patches(0.0)) if patched is not None
+             else np.array(grid.surface_distance(0.0), dtype=np.float32))
+        d[occupied] = np.maximum(d[occupied] + np.float32(half - tolerance), 0.0)
+    free = ~occupied
+    d[free] = np.maximum(d[free] - np.float32(half), 0.0)
+    return d
 
 
 DEPTH_TOLERANCE = 0.05  # m: ``interior_tolerance: null`` is this or one cell of the map, whichever is more
@@ -251,6 +279,8 @@ def _depth_tolerance(cfg, interior: str | None, grid=None) -> float | None:
         return None
     tolerance = getattr(cfg, "interior_tolerance", 0.0)
     if tolerance is None:
+        if getattr(cfg, "surface", "centre") == "face":  # a floor plan's walls are as thick as drawn
+            return 0.0
         return max(DEPTH_TOLERANCE, float(getattr(grid, "resolution", 0.0)))
     return float(tolerance)
 
@@ -311,7 +341,8 @@ class LikelihoodField:
         # interior: depth on an OccupancyGrid: the table of ``distance``, then the tiles where the depth field differs
         # (``surface_patches``) rewritten, instead of a copy of the whole map to build it from (the same values)
         tolerance = _depth_tolerance(self.cfg, interior, grid)
-        patches = getattr(grid, "surface_patches", None) if tolerance is not None else None
+        face = getattr(self.cfg, "surface", "centre") == "face"  # a field of its own (``_face_distance``)
+        patches = getattr(grid, "surface_patches", None) if tolerance is not None and not face else None
         d = grid.distance if patches is not None else field_distance(grid, self.cfg, interior)
         # in row blocks that stay in cache: the same values, 2.7 s -> 0.5 s on a 100 M-cell map, no float64 copy;
         # a cell at likelihood_max_dist or farther has the value there (the model clamps d), so the exponentials run

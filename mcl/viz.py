@@ -340,9 +340,11 @@ def _field_bands(grid: Any, sensor_cfg: Any, k: int, cells: int = 1 << 22):
     from mcl.config import sensor_model_view
     from mcl.sensors import _depth_tolerance, field_distance
 
-    tolerance = _depth_tolerance(sensor_model_view(sensor_cfg, "likelihood_field"), None, grid)
+    view = sensor_model_view(sensor_cfg, "likelihood_field")
+    tolerance = _depth_tolerance(view, None, grid)
     patches = getattr(grid, "surface_patches", None) if tolerance is not None else None
-    if tolerance is not None and patches is None:  # a grid without patches (tests' stand-ins): the field whole
+    if (tolerance is not None and patches is None) or getattr(view, "surface", "centre") == "face":
+        # a grid without patches (tests' stand-ins), or ``surface: face``'s own field: the field whole
         yield _pool(np.asarray(field_distance(grid, sensor_cfg)), k, np.min, np.inf)
         return
     dist = np.asarray(grid.distance)
