@@ -138,7 +138,8 @@ def test_space_file_forms():
     assert ps["sensor.max_beams"].contains(60) and not ps["sensor.max_beams"].contains(45)
     from mcl.config import PROJECT_ROOT
 
-    assert len(load_space(PROJECT_ROOT / "suites" / "tune-space.yaml")) == 6  # the README's example checks
+    space = {q.key: q for q in load_space(PROJECT_ROOT / "suites" / "tune-space.yaml")}  # the README's example checks
+    assert len(space) == 7 and space["sensor.likelihood_field.surface"].choices == ("centre", "face")
 
 
 def test_bad_objective_held_out_and_missing_ray(files, tmp_path, capsys, monkeypatch):
