@@ -443,11 +443,9 @@ class ParticleFilter:
     def _along(self, logw: np.ndarray) -> tuple[float, float] | None:
         """The set's weighted mean and variance (m, m2) along this update's direction of travel (``_scale_step``)
         under log-weights ``logw`` (None: no finite weight)."""
-        top = float(np.max(logw)) if logw.size else -np.inf
-        if not math.isfinite(top):
+        w, log_norm = normalize_log_weights(logw)
+        if not math.isfinite(log_norm):
             return None
-        w = np.exp(logw - top)
-        w /= float(w.sum())
         a = self._scale_step[0] @ self.particles[:2]
         mean = float(a @ w)
         return mean, float(((a - mean) ** 2) @ w)

@@ -338,12 +338,12 @@ def _field_bands(grid: Any, sensor_cfg: Any, k: int, cells: int = 1 << 22):
     (``grid.surface_patches``) laid on a copy of each band of about ``cells`` cells, instead of a copy of the whole
     field (kept in the grid's cache: 576 MB on a 600 m map at 5 cm)."""
     from mcl.config import sensor_model_view
-    from mcl.sensors import _depth_tolerance, field_distance
+    from mcl.sensors import _depth_tolerance, field_distance, surface_at_faces
 
     view = sensor_model_view(sensor_cfg, "likelihood_field")
     tolerance = _depth_tolerance(view, None, grid)
     patches = getattr(grid, "surface_patches", None) if tolerance is not None else None
-    if (tolerance is not None and patches is None) or getattr(view, "surface", "centre") == "face":
+    if (tolerance is not None and patches is None) or surface_at_faces(view):
         # a grid without patches (tests' stand-ins), or ``surface: face``'s own field: the field whole
         yield _pool(np.asarray(field_distance(grid, sensor_cfg)), k, np.min, np.inf)
         return
