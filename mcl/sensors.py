@@ -228,45 +228,71 @@ def field_distance(grid, cfg, interior: str | None = None) -> np.ndarray:
     """The d the likelihood field scores, per cell: ``grid.distance`` (``interior: zero``: 0 on every occupied
     cell, AMCL's field and the book's as printed) or ``grid.surface_distance(interior_tolerance)`` (``interior:
     depth``: on an occupied cell its depth less the tolerance, as a map draws its walls a cell or so thicker than
-    the surface the laser sees). ``cfg``: a SensorConfig or a flat namespace; ``interior`` overrides its
-    ``interior`` (the search field passes ``search_interior``)."""
+    the surface the laser sees); with ``surface: face`` a new array measured to the cells' faces (``field_rows``).
+    ``cfg``: a SensorConfig or a flat namespace; ``interior`` overrides its ``interior`` (the search field passes
+    ``search_interior``)."""
+    from mcl.config import sensor_model_view
+
+    view = sensor_model_view(cfg, "likelihood_field")
+    if surface_at_faces(view):
+        rows, patches = field_rows(grid, view, interior)
+        d = np.empty(np.shape(grid.distance), dtype=np.float32)
+        step = max(1, (1 << 20) // max(d.shape[1], 1))
+        for r in range(0, d.shape[0], step):
+            d[r:r + step] = rows(r, r + step)
+        for y0, y1, x0, x1, mine, metres in patches:
+            d[y0:y1, x0:x1][mine] = metres
+        return d
+    tolerance = _depth_tolerance(view, interior, grid)
+    return grid.distance if tolerance is None else grid.surface_distance(tolerance)
+
+
+def field_rows(grid, cfg, interior: str | None = None):
+    """``field_distance`` without a copy of the whole map: ``(rows, patches)``. ``rows(r0, r1)`` gives the field's
+    rows r0:r1 (float32, a view of ``grid.distance`` or a new array) before ``patches`` are laid on them:
+    (y0, y1, x0, x1, mine, metres) per tile, ``mine`` the tile's bool mask of cells set to ``metres`` (the cells
+    deeper than one cell under ``interior: depth``, ``grid.surface_patches``). The likelihood field's tables and
+    the recording's field layer are made from these (a 144 M-cell map: 576 MB per whole copy). A grid without
+    ``surface_patches`` (tests' stand-ins) gives rows of its ``surface_distance`` and no patches."""
     from mcl.config import sensor_model_view
 
     view = sensor_model_view(cfg, "likelihood_field")
     tolerance = _depth_tolerance(view, interior, grid)
+    surface_patches = getattr(grid, "surface_patches", None)
+    dist = grid.distance
     if surface_at_faces(view):
-        return _face_distance(grid, tolerance)
-    return grid.distance if tolerance is None else grid.surface_distance(tolerance)
+        # d to the faces: on a free cell half a cell less than from its centre to the nearest occupied centre
+        # (exact to a wall's face in line with the grid); on an occupied cell 0 (interior: zero) or its depth from
+        # its centre to the nearest face less the tolerance: surface_distance(0), 0 on a face cell, plus half a cell
+        half = np.float32(0.5 * float(grid.resolution))
+        lift = None if tolerance is None else np.float32(0.5 * float(grid.resolution) - tolerance)
+        if lift is not None and surface_patches is None:
+            dist = grid.surface_distance(0.0)
+        occupied = grid.occupied
+
+        def face_rows(r0: int, r1: int) -> np.ndarray:
+            base = dist[r0:r1]
+            d = np.maximum(base - half, np.float32(0.0))
+            occ = occupied[r0:r1]
+            d[occ] = 0.0 if lift is None else np.maximum(base[occ] + lift, np.float32(0.0))
+            return d
+
+        patches = ([] if lift is None or surface_patches is None else
+                   [(y0, y1, x0, x1, mine, np.maximum(metres + lift, np.float32(0.0)))
+                    for y0, y1, x0, x1, mine, metres in surface_patches(0.0)])
+        return face_rows, patches
+    if tolerance is not None and surface_patches is None:
+        dist, patches = grid.surface_distance(tolerance), []
+    else:
+        patches = [] if tolerance is None else surface_patches(tolerance)
+    return (lambda r0, r1: dist[r0:r1]), patches
 
 
 def surface_at_faces(cfg) -> bool:
-    """``surface: face`` in the likelihood field's view ``cfg`` (a flat namespace without the key: centre)."""
+    """``surface: face`` in the likelihood field's view ``cfg`` (a flat namespace without the key: centre).
+    On such maps ``centre`` puts the estimate half a cell or more ahead: a pose whose readings sink into the walls
+    ahead fits best (4.5 cm at 5 cm: docs/measurements.md, "Forty-first session")."""
     return getattr(cfg, "surface", "centre") == "face"
-
-
-def _face_distance(grid, tolerance: float | None) -> np.ndarray:
-    """``surface: face``: the d of each cell measured to the occupied cells' faces (a new float32 array). Off the
-    obstacles a cell centre's distance to the nearest occupied cell centre less half a cell (exact to a wall's
-    face in line with the grid); on an occupied cell 0 (``tolerance`` None: ``interior: zero``) or its depth, from
-    its centre to the nearest face, less ``tolerance``: half a cell on a wall's face cell, as its free neighbour.
-    A laser reading to a wall's surface then scores the same a little short of it as a little past it; with d from
-    the cell centres (``centre``) a pose whose readings sink into the walls ahead fits best, and on maps whose
-    surfaces are the cells' edges (floor plans, ``mcl simulate``) the estimate sits half a cell or more ahead
-    (4.5 cm at 5 cm: docs/measurements.md, "Forty-first session")."""
-    half = 0.5 * float(grid.resolution)
-    occupied = np.asarray(grid.occupied)
-    if tolerance is None:
-        d = np.array(grid.distance, dtype=np.float32)
-        d[occupied] = 0.0
-    else:
-        # interior: depth less one cell (0 on a face), made afresh rather than from surface_distance's cached copy
-        patched = getattr(grid, "_patched", None)
-        d = (patched(grid.surface_patches(0.0)) if patched is not None
-             else np.array(grid.surface_distance(0.0), dtype=np.float32))
-        d[occupied] = np.maximum(d[occupied] + np.float32(half - tolerance), 0.0)
-    free = ~occupied
-    d[free] = np.maximum(d[free] - np.float32(half), 0.0)
-    return d
 
 
 DEPTH_TOLERANCE = 0.05  # m: ``interior_tolerance: null`` is this or one cell of the map, whichever is more
@@ -343,31 +369,27 @@ class LikelihoodField:
         return observation
 
     def _make_table(self, grid, interior: str | None) -> np.ndarray:
-        # interior: depth on an OccupancyGrid: the table of ``distance``, then the tiles where the depth field differs
-        # (``surface_patches``) rewritten, instead of a copy of the whole map to build it from (the same values)
-        tolerance = _depth_tolerance(self.cfg, interior, grid)
-        # ``surface: face`` has a field of its own (``_face_distance``)
-        patches = (getattr(grid, "surface_patches", None) if tolerance is not None and not surface_at_faces(self.cfg)
-                   else None)
-        d = grid.distance if patches is not None else field_distance(grid, self.cfg, interior)
+        # from the field's rows and patches (``field_rows``): ``interior: depth`` is ``distance`` with the tiles where
+        # the depth field differs rewritten, ``surface: face`` each block shifted by half a cell, and no copy of the
+        # whole map is made to build the table from (the same values)
+        rows, patches = field_rows(grid, self.cfg, interior)
         # in row blocks that stay in cache: the same values, 2.7 s -> 0.5 s on a 100 M-cell map, no float64 copy;
         # a cell at likelihood_max_dist or farther has the value there (the model clamps d), so the exponentials run
         # only on the cells nearer a wall (a building in a 500 m map of unknown cells: 3.0 s -> 0.5 s)
-        table = np.empty(d.shape, dtype=np.float32)
+        table = np.empty(np.shape(grid.distance), dtype=np.float32)
         far_d = float(self.cfg.likelihood_max_dist)
         far = np.float32(point_log_likelihood(far_d, self.cfg))
-        step = max(1, (1 << 15) // max(d.shape[1], 1))
-        for r in range(0, d.shape[0], step):
-            block, out = d[r:r + step], table[r:r + step]
+        step = max(1, (1 << 15) // max(table.shape[1], 1))
+        for r in range(0, table.shape[0], step):
+            block, out = rows(r, r + step), table[r:r + step]
             near = block < far_d
             if near.all():
                 out[:] = point_log_likelihood(block, self.cfg)
             else:
                 out[:] = far
                 out[near] = point_log_likelihood(block[near], self.cfg)
-        if patches is not None:
-            for y0, y1, x0, x1, mine, metres in patches(tolerance):
-                table[y0:y1, x0:x1][mine] = point_log_likelihood(metres, self.cfg)
+        for y0, y1, x0, x1, mine, metres in patches:
+            table[y0:y1, x0:x1][mine] = point_log_likelihood(metres, self.cfg)
         return table
 
     def search_table(self) -> np.ndarray:

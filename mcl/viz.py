@@ -334,26 +334,20 @@ def _pool(a: np.ndarray, k: int, reduce, pad) -> np.ndarray:
 
 def _field_bands(grid: Any, sensor_cfg: Any, k: int, cells: int = 1 << 22):
     """The d the likelihood field scores (``mcl.sensors.field_distance``) in bands of rows, bottom first, each pooled
-    by ``_pool(..., k, np.min, np.inf)``: ``grid.distance`` with the ``interior: depth`` patches
-    (``grid.surface_patches``) laid on a copy of each band of about ``cells`` cells, instead of a copy of the whole
-    field (kept in the grid's cache: 576 MB on a 600 m map at 5 cm)."""
-    from mcl.config import sensor_model_view
-    from mcl.sensors import _depth_tolerance, field_distance, surface_at_faces
+    by ``_pool(..., k, np.min, np.inf)``: the field's rows (``mcl.sensors.field_rows``: ``grid.distance``, or with
+    ``surface: face`` shifted to the faces) with the ``interior: depth`` patches laid on a copy of each band of
+    about ``cells`` cells, instead of a copy of the whole field (576 MB on a 600 m map at 5 cm)."""
+    from mcl.sensors import field_rows
 
-    view = sensor_model_view(sensor_cfg, "likelihood_field")
-    tolerance = _depth_tolerance(view, None, grid)
-    patches = getattr(grid, "surface_patches", None) if tolerance is not None else None
-    if (tolerance is not None and patches is None) or surface_at_faces(view):
-        # a grid without patches (tests' stand-ins), or ``surface: face``'s own field: the field whole
-        yield _pool(np.asarray(field_distance(grid, sensor_cfg)), k, np.min, np.inf)
-        return
-    dist = np.asarray(grid.distance)
-    h, w = dist.shape
-    patches = sorted(patches(tolerance), key=lambda p: p[0]) if patches is not None else []
-    rows = k * max(1, cells // max(w * k, 1))  # a whole number of pooled rows per band
-    for r0 in range(0, h, rows):
-        r1 = min(r0 + rows, h)
-        d = np.array(dist[r0:r1], dtype=np.float32)
+    rows, patches = field_rows(grid, sensor_cfg)
+    h, w = np.shape(grid.distance)
+    patches = sorted(patches, key=lambda p: p[0])
+    step = k * max(1, cells // max(w * k, 1))  # a whole number of pooled rows per band
+    for r0 in range(0, h, step):
+        r1 = min(r0 + step, h)
+        d = rows(r0, r1)
+        if patches:
+            d = np.array(d, dtype=np.float32)
         for y0, y1, x0, x1, mine, metres in patches:
             if y0 >= r1:
                 break

@@ -185,14 +185,15 @@ def test_the_likelihood_layer_is_the_whole_field_pooled_made_in_bands():
     # The recording's likelihood-field layer takes the field in bands of rows (distance plus the interior: depth
     # patches laid on a copy of each band), pooled k x k: the same values as the whole field pooled, for any band
     # height (997 cells: bands of 2 of the demo map's 440-cell rows, or of one pooled row at k = 3), without the whole
-    # field's copy that ``surface_distance`` keeps in the grid (576 MB on a 600 m map at 5 cm).
+    # field's copy that ``surface_distance`` keeps in the grid (576 MB on a 600 m map at 5 cm); surface: face too.
     from mcl.config import load_config
     from mcl.maps import load_map
     from mcl.sensors import field_distance
 
     root = Path(__file__).resolve().parents[1]
-    for interior in ("depth", "zero"):
-        cfg = load_config(root / "configs" / "default.yaml", [f"sensor.likelihood_field.interior={interior}"]).sensor
+    for interior, surface in (("depth", "centre"), ("zero", "centre"), ("depth", "face"), ("zero", "face")):
+        cfg = load_config(root / "configs" / "default.yaml", [f"sensor.likelihood_field.interior={interior}",
+                                                              f"sensor.likelihood_field.surface={surface}"]).sensor
         grid = load_map(root / "data" / "demo" / "map.yaml")
         for k in (1, 3):
             for cells in (1 << 22, 997):
