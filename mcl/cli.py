@@ -165,9 +165,14 @@ def cmd_run(args) -> int:
     check_out_dir(out)  # before the data loads: a folder mcl may write in, holding nothing but a run's outputs
     if args.write_bag and cfg.bag is None:
         raise MclError("--write-bag needs a bag input (--bag)")
-    summary = run(cfg, out, progress=False if args.no_progress else None,
-                  initial_pose_override=args.initial_pose is not None or args.global_, write_bag=args.write_bag,
-                  compile_note=True)
+    start_keys = ("filter.initial_pose", "filter.global_localization")
+    start_given = (args.initial_pose is not None or args.global_
+                   or any(item.split("=", 1)[0].strip() in start_keys for item in args.set))
+    if cfg.filter.global_localization and cfg.filter.initial_pose is not None:
+        print(f"mcl: note: filter.global_localization is true, so filter.initial_pose "
+              f"{list(cfg.filter.initial_pose)} is not used (--initial-pose X Y THETA tracks from a pose)", file=sys.stderr)
+    summary = run(cfg, out, progress=False if args.no_progress else None, initial_pose_override=start_given,
+                  write_bag=args.write_bag, compile_note=True)
     if args.json:
         print(json.dumps(summary, indent=2))
     if cfg.rerun.mode == "serve" and not summary["interrupted"] and not summary.get("late_signal"):

@@ -638,6 +638,10 @@ def _run(
 ) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
+    The start: a bag's ``topics.initial_pose`` (its first message) unless ``initial_pose_override`` (the command
+    line's --initial-pose or --global, a --set of filter.initial_pose or filter.global_localization, a suite's run)
+    or the config tracks from its own ``filter.initial_pose`` (``global_localization: false``); then the config's.
+
     ``kidnap_filter_at=(t, d)``: at the first update at or after time t, the particles are replaced by a cloud
     (filter.initial_std) around a free pose at least d metres from the truth there (from the estimate without
     truth), drawn with the filter's generator: a kidnapping test on a real log (``mcl eval --suite``).
@@ -668,7 +672,12 @@ def _run(
 
         landmark_map = load_landmarks(cfg.landmarks.map)
     fc = cfg.filter
-    from_bag = bag_initial is not None and not initial_pose_override
+    own_start = not fc.global_localization and fc.initial_pose is not None  # the config tracks from its own pose
+    from_bag = bag_initial is not None and not initial_pose_override and not own_start
+    if bag_initial is not None and not from_bag:
+        echo(f"{cfg.bag}: {cfg.topics.initial_pose} not used: "
+             + ("tracking from filter.initial_pose" if own_start else "global localization")
+             + (" as the command line says" if initial_pose_override else " as the config says"))
     if from_bag:
         _check_start_pose(grid, bag_initial[0], f"{cfg.bag}: {cfg.topics.initial_pose}", echo)
     elif not fc.global_localization and fc.initial_pose is not None:

@@ -637,7 +637,7 @@ def run_job(job: Job) -> dict:
     try:
         with warnings.catch_warnings(record=True) as caught:  # the log's warnings go into the row
             warnings.simplefilter("always")
-            summary = run(job.cfg, out, progress=False, echo=lambda msg: None,
+            summary = run(job.cfg, out, progress=False, echo=lambda msg: None, initial_pose_override=True,  # the mode's start
                           kidnap_filter_at=(_mid_truth(job.cfg.truth), KIDNAP_M) if job.kidnap_filter else None)
     except KeyboardInterrupt:
         return {**row, "interrupted": True}

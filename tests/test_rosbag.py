@@ -794,11 +794,33 @@ def test_a_bag_map_with_a_rotated_origin_is_turned_onto_the_axes(world, scans, t
                     "geometry_msgs/msg/Twist", linear=b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0),
                     angular=b.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)), covariance=np.zeros(36))))
             _laser(b, "/scan", s)
-    got = open_bag(bag).grid
+    src = open_bag(bag)
+    got = src.grid
+    assert any(f"/map: origin yaw {math.pi / 2:g} rad: the map is turned about its first cell" in n for n in src.notes)
     # a quarter turn counter-clockwise: cell (row i, column j) goes to (j, h - 1 - i); the corner to (1 - h res, 2)
     np.testing.assert_array_equal(got.occupancy, np.rot90(grid.occupancy, -1))
     assert got.occupancy[3, h - 1 - 5] == grid.occupancy[5, 3]
     assert got.origin == pytest.approx((1.0 - h * grid.resolution, 2.0), abs=1e-9)
+
+
+def test_an_initial_pose_in_another_frame_than_the_maps_is_not_used(world, scans, tmp_path):
+    # RViz publishes /initialpose in its Fixed Frame, often odom before localization runs: such a pose is no place on
+    # the map, and was taken as one (the filter started wherever the odometry's origin lies). As AMCL: not used, a
+    # warning naming the frame. In "map", or with no frame (a hand-made message), it is used; with a /map in the bag,
+    # that map's frame is the map frame.
+    grid = load_map(world / "map.yaml")
+    start = (5.0, 5.0, 0.0)
+    for frame, grid_in_bag, used in (("odom", None, False), ("/base_link", None, False), ("map", None, True),
+                                     ("/map", None, True), ("", None, True), ("world", grid, False)):
+        bag = tmp_path / f"i{len(frame)}{grid_in_bag is not None}.mcap"
+        write_scans(bag, scans, grid=grid_in_bag, initial=(start, np.eye(3) * 0.01), initial_frame=frame)
+        src = open_bag(bag)
+        assert (src.initial_pose is not None) == used, frame
+        said = [w for w in src.warnings if "/initialpose" in w]
+        if used:
+            assert not said and np.allclose(src.initial_pose[0], start)
+        else:
+            assert len(said) == 1 and f"in frame {frame.lstrip('/')!r}, not the map's ('map'): not used" in said[0]
 
 
 def test_initial_pose_covariance_shapes_the_particles(world):
@@ -824,6 +846,50 @@ def test_command_line_initial_pose_overrides_the_bags(world, scans, tmp_path, ca
     import json
 
     assert json.loads((out / "summary.json").read_text())["mode"] == "global"
+
+
+def test_a_configured_start_overrides_the_bags_initial_pose_and_a_suite_gives_its_own(world, scans, tmp_path, capsys):
+    # A bag's /initialpose (here 1 m off the truth's start) starts the run unless the start is configured: a --set of
+    # filter.global_localization or filter.initial_pose, a config that tracks from its own filter.initial_pose, or a
+    # suite's mode. Each was overridden by the bag (the suite's global rows were tracking runs from /initialpose).
+    import json
+
+    truth = read_tum(world / "truth.tum")
+    start = [float(v) for v in truth[1][:, 0]]
+    bag = tmp_path / "init.mcap"
+    write_scans(bag, scans, initial=((start[0] + 1.0, start[1], start[2]), np.eye(3) * 0.0001), truth=truth)
+    base = ["run", "--map", str(world / "map.yaml"), "--bag", str(bag), "--rerun", "off", "--particles", "300",
+            "--no-progress", "--seed", "2"]
+
+    def first_x(out):
+        return float((out / "trajectory.tum").read_text().split()[1])
+
+    assert main([*base, "--out", str(tmp_path / "bag")]) == 0  # the bag's pose: tracking from 1 m off
+    assert "tracking from /initialpose" in capsys.readouterr().err and first_x(tmp_path / "bag") > start[0] + 0.7
+    assert main([*base, "--out", str(tmp_path / "g"), "--set", "filter.global_localization=true"]) == 0
+    assert json.loads((tmp_path / "g" / "summary.json").read_text())["mode"] == "global"
+    assert "/initialpose not used: global localization as the command line says" in capsys.readouterr().err
+    own = tmp_path / "own.yaml"
+    own.write_text(f"filter:\n  global_localization: false\n  initial_pose: [{start[0]!r}, {start[1]!r}, {start[2]!r}]\n")
+    assert main([*base, "--config", str(own), "--out", str(tmp_path / "own")]) == 0
+    assert "/initialpose not used: tracking from filter.initial_pose as the config says" in capsys.readouterr().err
+    assert abs(first_x(tmp_path / "own") - start[0]) < 0.3  # the config's pose (initial_std 0.1 m)
+    # --set filter.initial_pose alone leaves global_localization true (the default): a note says the pose is unused
+    assert main([*base, "--out", str(tmp_path / "p"), "--set", f"filter.initial_pose=[{start[0]!r}, 0, 0]"]) == 0
+    err = capsys.readouterr().err
+    assert "filter.global_localization is true, so filter.initial_pose" in err and "is not used" in err
+    assert json.loads((tmp_path / "p" / "summary.json").read_text())["mode"] == "global"
+    # a suite's global mode on the bag is a global run
+    import yaml
+
+    suite = tmp_path / "s.yaml"
+    suite.write_text(yaml.safe_dump({"name": "s", "modes": ["global", "tracking"], "datasets": [
+        {"name": "b", "bag": str(bag), "map": str(world / "map.yaml"), "truth": str(world / "truth.tum")}]}))
+    assert main(["eval", "--suite", str(suite), "--out", str(tmp_path / "ev"), "--jobs", "1", "--no-baseline",
+                 "--no-progress", "--set", "filter.particles=300"]) == 0
+    runs = tmp_path / "ev" / "runs" / "b"
+    assert json.loads((runs / "global" / "default" / "seed1" / "summary.json").read_text())["mode"] == "global"
+    assert abs(first_x(runs / "tracking" / "default" / "seed1") - start[0]) < 0.3  # the truth's start, not the bag's
 
 
 def test_a_bag_given_as_the_log_is_read_as_a_bag(world, scans, tmp_path, capsys):

@@ -178,14 +178,14 @@ def _inverse(a):
     return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
 
 
-def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initial=None, truth=None,
-                truth_topic: str = "/ground_truth", kind: str | None = None, sweep: float = 0.0) -> int:
+def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initial=None, initial_frame: str = "map",
+                truth=None, truth_topic: str = "/ground_truth", kind: str | None = None, sweep: float = 0.0) -> int:
     """Write ``scans`` (Scan records) as a bag (see the module doc); returns the number of scans written.
 
     odom: ``topic`` (/odom), ``tf`` (odom -> base_link on /tf) or ``both``. mount: (x, y, theta) of the laser in
     a new base frame: the odometry is then that of base = robot ∘ laser_offset ∘ mount⁻¹ (same laser poses, a
     laser off the base's centre). grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for
-    /initialpose; truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``. Each LaserScan's
+    /initialpose (in ``initial_frame``); truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``. Each LaserScan's
     time_increment is the scan's own beam time step (``Scan.beam_dt``, when its first beam is at the stamp), else
     ``sweep`` / (beams - 1): s from the first beam to the last (0: none).
     """
@@ -203,7 +203,8 @@ def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initi
                     mean, cov = initial
                     pw = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*mean), covariance=b.cov36(cov))
                     b.write("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", s.t,
-                            b.msg("geometry_msgs/msg/PoseWithCovarianceStamped", header=b.header(s.t, "map"), pose=pw))
+                            b.msg("geometry_msgs/msg/PoseWithCovarianceStamped", header=b.header(s.t, initial_frame),
+                                  pose=pw))
                 off0 = (0.0, 0.0, 0.0) if s.laser_offset is None else tuple(float(v) for v in s.laser_offset)
                 mnt = off0 if mount is None else tuple(float(v) for v in mount)
                 b.write("/tf_static", "tf2_msgs/msg/TFMessage", static_t,

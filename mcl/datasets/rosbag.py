@@ -811,6 +811,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     scan_rec: list[float] = []  # each scan's record time, and its topic (for a topic whose stamps are all 0)
     scan_of: list[str] = []
     grid = initial = map_msg = None
+    init_frame = ""
     n_maps = 0
     truth_rows: list[tuple] = []
     other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
@@ -875,6 +876,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
             map_msg, n_maps = msg, n_maps + 1
         if topic == init_topic and initial is None:
             initial = (np.array(_pose_msg(msg)), _cov3(msg.pose.covariance))
+            init_frame = _frame(msg.header.frame_id)
         if topic == truth_topic:
             truth_rows.append((stamp_seconds(msg.header.stamp), *_pose_msg(msg), rec))
 
@@ -884,8 +886,19 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
                             "(truncated or corrupt?)")
     warnings: list[str] = []
     notes: list[str] = []
+    map_frame = _frame(map_msg.header.frame_id) if map_msg is not None and map_msg.header.frame_id else "map"
+    if initial is not None and init_frame not in ("", map_frame):
+        # a pose in the odometry's or the robot's frame is not a place on the map (RViz sends its Fixed Frame's): as
+        # AMCL, not used
+        warnings.append(f"{path}: {init_topic}: the initial pose is in frame {init_frame!r}, not the map's "
+                        f"({map_frame!r}): not used (give the start with --initial-pose)")
+        initial = None
     if map_msg is not None:
         grid = _grid_from_msg(path, map_topic, map_msg)
+        yaw = yaw_of(map_msg.info.origin.orientation)
+        if yaw != 0.0:  # as a map yaml's origin yaw says (mcl.maps.load_map)
+            notes.append(f"{path}: {map_topic}: origin yaw {yaw:g} rad: the map is turned about its first cell, as "
+                         "map_server defines the origin (AMCL ignores the yaw)")
         if n_maps > 1:
             notes.append(f"{path}: {map_topic}: {n_maps} maps (one being built?); the last, "
                          f"{map_msg.info.width} x {map_msg.info.height} cells, is used")
