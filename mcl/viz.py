@@ -49,6 +49,7 @@ import rerun.blueprint as rrb
 __all__ = ["RerunLogger", "MODES", "has_display", "stat_group"]
 
 MODES = ("save", "spawn", "serve", "off")
+_SERVED: list = []  # the served recordings (``serve``): their gRPC servers live as long as the process
 
 # Map colours (grey levels): free light, occupied black, unknown mid grey.
 _FREE, _OCCUPIED, _UNKNOWN = 235, 0, 150
@@ -439,7 +440,6 @@ class RerunLogger:
         self.log_scan = bool(log_scan)
         self.heading_length = float(heading_length)
         self.url: str | None = None
-        self._served: rr.RecordingStream | None = None
         self._rec: rr.RecordingStream | None = None
         self._closed = False
         self._calls = 0
@@ -685,9 +685,9 @@ class RerunLogger:
         else:
             rec.flush()
         if self.mode == "serve":
-            # Disconnecting would shut the gRPC server down before a viewer could read the
-            # buffered data; keep it (and the stream) alive for the rest of the process.
-            self._served = rec
+            # Disconnecting, or dropping the stream with this logger when the run returns, shuts the gRPC server
+            # down before a viewer could read the buffered data: keep the stream for the rest of the process.
+            _SERVED.append(rec)
             return
         rec.disconnect()
 

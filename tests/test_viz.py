@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import sys
 import types
 from pathlib import Path
@@ -432,6 +433,10 @@ def test_serve_keeps_serving_after_the_run_on_a_free_port_until_ctrl_c(tmp_path)
         assert "rerun+http://127.0.0.1:9876" not in served  # the taken port was not used
         time.sleep(1.0)
         assert proc.poll() is None  # still serving
+        # the data server too: it closed when the run returned (the stream dropped with its logger), so the web
+        # viewer, still up, had nothing to show
+        port = int(re.search(r"rerun\+http://[^:]+:(\d+)", served).group(1))
+        assert _listening(port), served
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0
     assert (tmp_path / "out" / "summary.json").is_file()
