@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import textwrap
 
 import numpy as np
 
@@ -50,7 +51,7 @@ def sample_clouds(pose, *, model: str, odom=None, velocity=None, alphas_list=((N
                 p, _, _ = m.sample(p, velocity[0], velocity[1], velocity[2], rng)
             clouds.append(p)
         a = [getattr(cfg, f"alpha{k}") for k in range(1, 5 if model == "odometry" else 7)]
-        out.append(("alphas " + ", ".join(f"{x:g}" for x in a), clouds))
+        out.append(("alphas: " + ", ".join(f"{x:g}" for x in a), clouds))
     return out
 
 
@@ -69,10 +70,12 @@ def render_png(path, pose, panels, title: str = "") -> None:
     mid = (lo + hi) / 2
     scale = (PANEL - 2 * MARGIN) / span
     w = len(panels) * PANEL
-    img = Image.new("RGB", (w, PANEL + 30), "white")
+    # the title in lines that fit the panels' width (it ran off the right edge of one panel)
+    lines = textwrap.wrap(title, width=max(20, (w - 16) // 6)) if title else []
+    img = Image.new("RGB", (w, PANEL + 16 + 14 * max(len(lines), 1)), "white")
     d = ImageDraw.Draw(img)
-    if title:
-        d.text((8, PANEL + 10), title, fill=(0, 0, 0))
+    for i, line in enumerate(lines):
+        d.text((8, PANEL + 8 + 14 * i), line, fill=(0, 0, 0))
 
     def to_px(x, y, k):
         return (k * PANEL + PANEL / 2 + (x - mid[0]) * scale, PANEL / 2 - (y - mid[1]) * scale)
@@ -145,13 +148,17 @@ def run_from_args(args) -> int:
         raise MclError("--samples must be 1..1e7 and --steps 1..1000")
     cfg = load_config(args.config, list(args.set))
     odom = tuple(args.odom) if args.odom else (0.0, 0.0, 0.0, math.cos(0.25), math.sin(0.25), 0.5)
+    for option, values in (("--pose", args.pose), ("--odom", odom)):
+        if not all(math.isfinite(v) for v in values):
+            raise MclError(f"{option}: expected finite numbers, got {' '.join(f'{v:g}' for v in values)}")
     vel = tuple(args.velocity) if args.velocity else (1.0, 0.5, 1.0)
     if not (all(math.isfinite(v) for v in vel) and vel[2] > 0):
         raise MclError(f"--velocity: expected finite V W and DT > 0 (s), got {' '.join(f'{v:g}' for v in vel)}")
     panels = sample_clouds(args.pose, model=model, odom=odom, velocity=vel, alphas_list=_parse_alphas(args.alphas, model),
                            samples=args.samples, steps=args.steps, motion_cfg=cfg.motion, seed=args.seed)
     pose = np.asarray(args.pose, dtype=np.float64)
-    control = f"odom {odom}" if model == "odometry" else f"v={vel[0]:g} w={vel[1]:g} dt={vel[2]:g}"
+    control = (f"odom ({', '.join(f'{v:.4g}' for v in odom[:3])}) -> ({', '.join(f'{v:.4g}' for v in odom[3:])})"
+               if model == "odometry" else f"v={vel[0]:g} w={vel[1]:g} dt={vel[2]:g}")
     title = f"{model} model, {control}, noise {cfg.motion.noise} ({cfg.motion.noise_form}), {args.samples} samples x {args.steps}"
     out = str(args.out)
     if out.endswith(".rrd"):

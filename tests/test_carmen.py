@@ -181,6 +181,16 @@ def test_non_utf8(tmp_path):
     assert len(log.scans) == 1 and "cut.clf:3" in log.warnings[0]
 
 
+def test_a_byte_order_mark_is_no_part_of_the_first_record(tmp_path):
+    # A log saved by a Windows editor starts with U+FEFF: its first record was not recognised ("\ufeffODOM")
+    plain = read_carmen(write(tmp_path, [ODOM_A, FLASER, FLASER], name="plain.clf"))
+    p = tmp_path / "bom.clf"
+    p.write_bytes(b"\xef\xbb\xbf" + (tmp_path / "plain.clf").read_bytes())
+    log = read_carmen(p)
+    assert len(log.scans) == len(plain.scans) == 2 and log.warnings == plain.warnings
+    assert all(np.array_equal(a.odom, b.odom) for a, b in zip(log.laser_stream(), plain.laser_stream()))
+
+
 @pytest.mark.parametrize("content,msg", [("", "empty"), ("\n\n  \n", "empty"),
                                          (ODOM_A + "\nPARAM a b c 0\n", "no laser")])
 def test_empty_or_no_laser(tmp_path, content, msg):

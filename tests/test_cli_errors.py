@@ -44,6 +44,17 @@ def test_explore_velocity_needs_a_positive_dt(tmp_path, capsys, dt):
     assert not (tmp_path / "m.png").exists()
 
 
+@pytest.mark.parametrize("args,msg", [
+    (["--pose", "0", "0", "inf"], "--pose: expected finite numbers, got 0 0 inf"),  # was a traceback (math.cos)
+    (["--pose", "nan", "0", "0"], "--pose: expected finite numbers, got nan 0 0"),  # was an empty panel
+    (["--odom", "0", "0", "0", "nan", "0", "0"], "--odom: expected finite numbers, got 0 0 0 nan 0 0"),
+])
+def test_explore_motion_needs_a_finite_pose_and_odometry(tmp_path, capsys, args, msg):
+    assert main(["explore", "motion", *args, "--out", str(tmp_path / "m.png")]) == 2
+    assert msg in _one_error(capsys)
+    assert not (tmp_path / "m.png").exists()
+
+
 def test_eval_of_trajectories_on_two_clocks_names_both_and_their_spans(tmp_path, capsys):
     import numpy as np
 

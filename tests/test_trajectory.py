@@ -34,6 +34,12 @@ def test_read_skips_comments_and_blank_lines_and_wraps_yaw(tmp_path):
     t, poses = read_tum(p)
     np.testing.assert_array_equal(t, [1.0, 2.5])
     np.testing.assert_allclose(poses, [[1, 3], [2, 4], [math.pi, 3.0]], atol=1e-12)
+    # a byte-order mark (a file saved by a Windows editor) is read past: it was "TUM: non-numeric field"
+    b = tmp_path / "bom.tum"
+    b.write_bytes(b"\xef\xbb\xbf" + p.read_bytes().split(b"\n", 2)[2])
+    t2, poses2 = read_tum(b)
+    np.testing.assert_array_equal(t2, t)
+    np.testing.assert_array_equal(poses2, poses)
 
 
 @pytest.mark.parametrize("bad", ["1 2 3 0 0 0 0", "1 2 x 0 0 0 0 1", "nan 2 3 0 0 0 0 1", "1 2 3 0 0 0 0 0"])

@@ -363,14 +363,14 @@ def read_carmen(path: str | os.PathLike) -> Log:
         raise DataError(f"{name}: empty file")
     ends_with_newline = data.endswith(b"\n")
     try:
-        text = data.decode("utf-8")
+        text = data.decode("utf-8-sig")  # a byte-order mark (Windows editors) is no record
     except UnicodeDecodeError as e:
         last_start = data.rfind(b"\n") + 1
         if ends_with_newline or e.start < last_start:
             line = data.count(b"\n", 0, e.start) + 1
             raise DataError(f"{name}:{line}: not UTF-8 text") from None
         # A truncated last line may end inside a multi-byte character: drop it.
-        text = data[:last_start].decode("utf-8")  # e.start is the first bad byte
+        text = data[:last_start].decode("utf-8-sig")  # e.start is the first bad byte
         line = data.count(b"\n") + 1
         warnings.append(f"{name}:{line}: truncated last line skipped (not UTF-8)")
         ends_with_newline = True
