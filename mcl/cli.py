@@ -260,9 +260,10 @@ def cmd_eval(args) -> int:
         raise MclError(f"--converged-within: must be positive, got {args.converged_within}")
     t_est, p_est = read_tum(args.estimate)
     t_ref, p_ref = read_tum(args.reference)
-    for name, t in ((args.estimate, t_est), (args.reference, t_ref)):
+    for name, t, p in ((args.estimate, t_est, p_est), (args.reference, t_ref, p_ref)):
         if t.size == 0:
             raise MclError(f"{name}: no poses (an empty trajectory): nothing to score")
+        _warn_times(name, t, p)
     try:
         r = evaluate(t_est, p_est, t_ref, p_ref, converged_within=args.converged_within)
     except DataError:  # no reference pose inside the estimate's span: say which files and which spans
@@ -271,6 +272,24 @@ def cmd_eval(args) -> int:
                        "another clock or another dataset?") from None
     print(json.dumps(r, indent=2) if args.json else format_eval(r))
     return 0
+
+
+def _warn_times(name, t, poses) -> None:
+    """A warning line for a trajectory whose times go back (scored sorted) or repeat with another position (which
+    of the two is scored is not defined): a file joined from two runs, or a writer's bug."""
+    import numpy as np
+
+    back = int(np.count_nonzero(np.diff(t) < 0))
+    order = np.argsort(t, kind="stable")
+    ts, ps = t[order], poses[:2, order]
+    same = np.flatnonzero(np.diff(ts) == 0)
+    clash = same[np.hypot(*(ps[:, same + 1] - ps[:, same])) > 1e-6]
+    if back:
+        print(f"mcl: warning: {name}: the time goes back {back} time(s): the poses are scored in time order",
+              file=sys.stderr)
+    if clash.size:
+        print(f"mcl: warning: {name}: {clash.size} time(s) given twice with other positions (the first at "
+              f"t = {ts[clash[0]]:.6f} s): which is scored is not defined", file=sys.stderr)
 
 
 def _command(sub, name: str, module, help: str, description: str, epilog: str | None = None) -> None:
@@ -468,7 +487,8 @@ def cmd_convert(args) -> int:
         raise MclError(f"{args.out}: the folder {out.parent} does not exist")
     try:
         n = convert(args.src, args.out, topics=cfg.topics, frames=cfg.frames, odom=args.odom, mount=args.mount,
-                    grid=grid, initial=initial, truth=truth, echo=lambda m: print(m, file=sys.stderr))
+                    grid=grid, initial=initial, truth=truth, echo=lambda m: print(m, file=sys.stderr),
+                    truth_name=str(args.truth))
     except OSError as e:  # named by the user's path, not a temp file's
         raise MclError(f"{args.out}: cannot write: {e.strerror or e}") from None
     print(f"{args.out}: {n} scans")

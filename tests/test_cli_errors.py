@@ -27,13 +27,19 @@ def _one_error(capsys) -> str:
     ([], "missing/x.mcap", "the folder {tmp}/missing does not exist"),  # a mistyped folder is not made
     (["--map", "{world}/map.yaml"], "x.clf", "--map: written into a bag only; a CARMEN log (x.clf) holds no map"),
     (["--initial-pose", "nan", "0", "0"], "x.mcap", "--initial-pose: expected finite X Y THETA, got nan 0.0 0.0"),
+    # a reference on another clock was written without a word (the run then said "not scored")
+    (["--truth", "{world}/late.tum"], "x.mcap", "{world}/late.tum: no pose lies within the scans' time span"),
     (["--map", "{world}/map.yaml", "--initial-pose", "1000", "1000", "0"], "x.mcap",
      "--initial-pose: (1000, 1000) lies outside the map"),
 ])
 def test_convert_checks_its_output_and_its_extra_inputs_first(world, tmp_path, capsys, extra, out, msg):
+    from mcl.trajectory import read_tum
+
+    t, p = read_tum(world / "truth.tum")
+    write_tum(world / "late.tum", t + 1.7e9, p)
     extra = [e.format(world=world) for e in extra]
     assert main(["convert", str(world / "log.clf"), str(tmp_path / out), *extra]) == 2
-    assert msg.format(tmp=tmp_path) in _one_error(capsys)
+    assert msg.format(tmp=tmp_path, world=world) in _one_error(capsys)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -64,6 +70,23 @@ def test_eval_of_trajectories_on_two_clocks_names_both_and_their_spans(tmp_path,
     assert main(["eval", str(est), str(ref)]) == 2
     assert _one_error(capsys) == (f"mcl: error: {ref}: no pose lies within the time span of {est} (reference "
                                   "1000.000..1004.000 s, estimate 0.000..4.000 s): another clock or another dataset?")
+
+
+def test_eval_warns_of_times_that_go_back_or_repeat_with_another_position(tmp_path, capsys):
+    # two poses at t = 1 (x 1 and x 5) and a time going back were scored silently (one of the two chosen)
+    import numpy as np
+
+    ref = tmp_path / "ref.tum"
+    write_tum(ref, np.arange(5.0), np.zeros((3, 5)))
+    est = tmp_path / "est.tum"
+    est.write_text("0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n1 5 0 0 0 0 0 1\n3 0 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n4 0 0 0 0 0 0 1\n")
+    assert main(["eval", str(est), str(ref)]) == 0
+    err = capsys.readouterr().err
+    assert f"mcl: warning: {est}: the time goes back 1 time(s)" in err
+    assert f"mcl: warning: {est}: 1 time(s) given twice with other positions (the first at t = 1.000000 s)" in err
+    assert str(ref) not in err  # a clean file: no line
+    write_tum(est, np.arange(5.0), np.zeros((3, 5)))
+    assert main(["eval", str(est), str(ref)]) == 0 and "warning" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("setting,msg", [

@@ -271,8 +271,9 @@ def _clf_line_of(s) -> str:
 
 
 def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=None, grid=None, initial=None,
-            truth=None, laser: str = "auto", echo=print, sweep: float = 0.0) -> int:
-    """``mcl convert``: a bag to a CARMEN log, a CARMEN log (or a bag) to a bag. Returns the scans written."""
+            truth=None, laser: str = "auto", echo=print, sweep: float = 0.0, truth_name: str = "truth") -> int:
+    """``mcl convert``: a bag to a CARMEN log, a CARMEN log (or a bag) to a bag. Returns the scans written.
+    A ``truth`` given with a CARMEN log (named ``truth_name`` in an error) must have a pose within its scans' span."""
     from mcl.trajectory import LineWriter
 
     src, out = Path(src), Path(out)
@@ -288,8 +289,6 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=No
             grid = source.grid
         if initial is None and source.initial_pose is not None:
             initial = source.initial_pose
-        if truth is None and source.truth is not None:
-            truth = source.truth
     else:
         from mcl.datasets.carmen import read_carmen
 
@@ -297,6 +296,13 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=No
         for w in log.warnings:
             echo(f"mcl: warning: {w}")
         scans = log.laser_stream(laser)
+    if truth is not None and isinstance(scans, list) and scans and len(truth[0]):  # a log's scans (a bag's: mcl run)
+        t0, t1 = scans[0].t, scans[-1].t
+        if not np.any((truth[0] >= t0) & (truth[0] <= t1)):  # written, it would score nothing: another clock
+            raise DataError(f"{truth_name}: no pose lies within the scans' time span ({t0:.3f}..{t1:.3f} s; the "
+                            f"reference {truth[0].min():.3f}..{truth[0].max():.3f} s): another clock or another log?")
+    if is_bag(src) and truth is None and source.truth is not None:
+        truth = source.truth
     if out_kind != "clf":
         return write_scans(out, scans, odom=odom, mount=mount, grid=grid, initial=initial, truth=truth,
                            kind=out_kind, sweep=sweep)
