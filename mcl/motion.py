@@ -371,7 +371,7 @@ def _odometry_pair(u):
 
 
 def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "odometry",
-                              jacobian: bool = True, min_trans: float = ROT1_MIN_TRANS,
+                              jacobian: bool = True, min_trans: float = 0.0,
                               fault: FaultProposal | None = None) -> np.ndarray:
     """log p(x_new | u, x_prev) of the odometry model (Prob. Rob. Table 5.5, motion_model_odometry), (N,).
 
@@ -390,7 +390,12 @@ def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "odome
     tests/test_motion_density.py). ``sigma_from="hypothesis", jacobian=False``
     is Table 5.5 literally. jacobian: see the section comment. fault: the
     odometry-fault mixture (1 - prob) p + prob p_k (``fault.share`` is the
-    sampler's business and plays no part here).
+    sampler's business and plays no part here). min_trans: the rule rot1 = 0
+    below it for the hypotheses' deltas (default 0: a hypothesis lies where it
+    lies; the reading's deltas keep the filter's 1 cm rule, as the sampler
+    does). With the rule on them too, every pose within 1 cm of x_prev had
+    rot1_hat 0 whatever its direction: a turn on the spot gave a pose 5 mm to
+    the side the density of one 5 mm ahead, where the sampler never goes.
     """
     rot1, trans, rot2 = odometry_deltas(*_odometry_pair(u))
     h1, ht, h2 = odometry_deltas_array(x_prev, x_new, min_trans)
