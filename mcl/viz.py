@@ -84,6 +84,10 @@ _STAT_GROUPS = (
     ("other", "Other"),
 )
 _MAIN_GROUPS = ("error", "quality", "ess", "timings")  # shown stacked; the others in tabs under them
+# Each panel's series in these colours, in the order they first appear (Tableau 10): the viewer's own picks gave
+# two series of one panel near-identical hues (position and heading both magenta)
+_SERIES_COLOURS = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
+                   (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207))
 
 # Particle radii (UI points) by weight_scale: below _RADII_AT[0], up to _RADII_AT[1], above.
 _RADII = np.array([1.0, 2.0, 3.5], dtype=np.float32)
@@ -95,10 +99,11 @@ _HIST_DECADES, _HIST_BINS = 6.0, 24
 ABOUT = """\
 # What this recording shows
 
-**World** (left): the map (grey), the particles (coloured, sized and made opaque by weight: yellow, large and
-opaque = heavy; faint purple = light), the estimate (magenta: point, heading, 2-sigma ellipse), the scan laid at
-the estimate (red), where the beams would end if the estimate were right (cyan, `world/scan/expected`), beams beam
-skipping ignored (yellow), the true pose and path (green) and dead-reckoned odometry (orange).
+**World** (left): the map (grey), the particles (coloured, sized and faded by weight: yellow and large = heavy;
+pale purple, small = light), the estimate (magenta: point, heading, 2-sigma ellipse), the scan laid at the estimate
+(red), where the beams would end if the estimate were right (cyan, `world/scan/expected`), beams beam skipping
+ignored (blue), the true pose and path (green; broken where the robot was carried off) and dead-reckoned odometry
+(orange). The view opens on the map's known cells.
 Layer `world/likelihood_field` (hidden: tick it in the blueprint tree) is the sensor model's likelihood field,
 p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off with `sensor.likelihood_field.sigma_hit`.
 
@@ -111,7 +116,10 @@ one scan can put hundreds of decades between poses): one bar at 0 = every partic
 resampled); most particles far left and a few at 0 = the scan singled out a few poses.
 **Time per update**: milliseconds per filter stage. A stage's first real run compiles or loads its numba kernels
 (often over a second): that value is at `warmup/time_ms/*`, left out of the plot so the scale
-reads. Later peaks are real: a global search or a recovery weighs 20,000 particles instead of a few thousand.
+reads. Later peaks are real: a global search or a recovery weighs up to `filter.particles` (100,000 by
+default) instead of a few thousand.
+**Spread**, **Map rejection tries**, **Other** (tabs): the particles' spread (m) over the whole set and the
+estimate's cluster; the mean draws per particle of the map-based motion model; the rest (counts and shares).
 """
 
 _DRAW_ORDER = {"map": -100.0, "trail": 5.0, "particles": 10.0, "scan": 20.0, "truth": 30.0, "estimate": 40.0}
@@ -255,17 +263,21 @@ def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float
     return counts.astype(np.float64), centres, span / _HIST_BINS
 
 
-def weight_colors(weights: np.ndarray, alpha: bool = False) -> np.ndarray:
+def weight_colors(weights: np.ndarray, faded: bool = False) -> np.ndarray:
     """(N, 3) uint8 viridis colours of linear weights on a log scale relative to the heaviest.
 
-    ``alpha``: (N, 4) with the opacity growing with the weight too (60 for the lightest, 255 the heaviest)."""
+    ``faded``: the lighter the weight the more the colour is mixed with the map's free grey (a quarter of the
+    colour for the lightest, all of it for the heaviest), so the light particles recede and the heavy ones stand
+    out. Rerun (0.41) draws points with an alpha below 255 darker, not see-through: the lightest, at alpha 60, were
+    near-black specks that read as obstacles on the map."""
     u = weight_scale(weights)
     pos = u * (len(_VIRIDIS) - 1)
     i0 = np.minimum(pos.astype(np.intp), len(_VIRIDIS) - 2)
     f = (pos - i0)[:, None]
     rgb = _VIRIDIS[i0] * (1.0 - f) + _VIRIDIS[i0 + 1] * f
-    if alpha:
-        rgb = np.concatenate([rgb, 60.0 + 195.0 * u[:, None]], axis=1)
+    if faded:
+        a = (60.0 + 195.0 * u[:, None]) / 255.0
+        rgb = rgb * a + float(_FREE) * (1.0 - a)
     return np.rint(rgb).astype(np.uint8)
 
 
@@ -446,6 +458,7 @@ class RerunLogger:
         self._skipped_shown = False  # world/scan/skipped holds points (a step without must clear them)
         self._time_kind: str | None = None
         self._stat_names: list[str] = []
+        self._bounds = None  # the world view's frame, from the map (log_map)
         self._warm: set[str] = set()
         self._hist_width: float | None = None  # timings whose warm-up (first real run) is over
         self._blueprint_key: tuple[str, ...] | None = None
@@ -518,7 +531,8 @@ class RerunLogger:
         rec.log(
             "world/scan/skipped",
             rr.Points2D.from_fields(
-                radii=rr.Radius.ui_points(3.0), colors=[250, 200, 40], draw_order=_DRAW_ORDER["scan"] + 0.5
+                # blue: yellow is the heaviest particles', orange the odometry's
+                radii=rr.Radius.ui_points(3.0), colors=[0, 90, 255], draw_order=_DRAW_ORDER["scan"] + 0.5
             ),
             static=True,
         )
@@ -557,6 +571,7 @@ class RerunLogger:
         img[occupied] = _OCCUPIED
         img = np.ascontiguousarray(img[::-1])  # grid row 0 is the bottom; image row 0 is the top
         _log_grid_image(rec, "world/map", grid, img, "L", _DRAW_ORDER["map"], k)
+        self._bounds = known_bounds(grid)  # the world view's frame (build_blueprint)
 
     def log_likelihood_field(self, grid: Any, sensor_cfg: Any) -> None:
         """Static image of the likelihood field (Prob. Rob. Table 6.3): p(endpoint | map) of an endpoint in each
@@ -595,11 +610,16 @@ class RerunLogger:
         if rec is None:
             return
         p = np.asarray(poses, dtype=np.float64)
+        # broken where the robot jumps (a kidnap): one line across the map through its walls read as a path
+        step = np.hypot(*np.diff(p[:2], axis=1)) if p.shape[1] > 1 else np.zeros(0)
+        jump = max(1.0, 10.0 * float(np.median(step))) if step.size else np.inf
+        cuts = np.flatnonzero(step > jump) + 1
+        strips = [np.ascontiguousarray(q[:2].T, dtype=np.float32) for q in np.split(p, cuts, axis=1)]
         rec.log(
             "world/truth",
             rr.LineStrips2D(
-                [np.ascontiguousarray(p[:2].T, dtype=np.float32)],
-                colors=[40, 170, 40, 160],
+                strips,
+                colors=[40, 170, 40],  # opaque: Rerun draws an alpha below 255 darker, not see-through
                 radii=rr.Radius.ui_points(1.0),
                 draw_order=_DRAW_ORDER["trail"],
             ),
@@ -626,7 +646,7 @@ class RerunLogger:
     ) -> None:
         """Log one filter step. ``weights`` are normalized linear weights (N,).
 
-        ``skipped_world`` (2, S): the endpoints beam skipping ignored, drawn in yellow over the scan; a step
+        ``skipped_world`` (2, S): the endpoints beam skipping ignored, drawn in blue over the scan; a step
         without any clears the previous step's (only once skipping has shown something, to keep recordings small).
         ``expected_world`` (2, E): where the beams would end if the estimate were right (see ``expected_scan``).
         The histogram of the weights (all N) is logged with the particles.
@@ -735,15 +755,17 @@ class RerunLogger:
         xy[:, 0] = p[0, idx]
         xy[:, 1] = p[1, idx]
         w = np.asarray(weights)[idx]
-        # Size and opacity by weight too: among thousands of points of similar colour the heavy ones still stand out.
+        # Size and fading by weight too: among thousands of points of similar colour the heavy ones still stand out.
         # Three sizes (1, 2, 3.5 UI points: below 1.5 decades under the heaviest, within it, within 0.3 decades):
         # few distinct values keep the recording small (they compress), and still read at a glance.
         radii = rr.Radius.ui_points(_RADII[np.searchsorted(_RADII_AT, weight_scale(w))])
-        rec.log("world/particles", rr.Points2D(xy, colors=weight_colors(w, alpha=True), radii=radii))
+        rec.log("world/particles", rr.Points2D(xy, colors=weight_colors(w, faded=True), radii=radii))
         counts, centres, width = weight_histogram(weights)
         if width != self._hist_width:  # the bins only when they change (the viewer takes the latest): ~2 ms saved
             self._hist_width = width
-            chart = rr.BarChart(counts.astype(np.float32), abscissa=centres, widths=np.full(centres.size, width),
+            # a bar spans [abscissa, abscissa + width] in the viewer: the bins' left edges, not their centres
+            chart = rr.BarChart(counts.astype(np.float32), abscissa=centres - 0.5 * width,
+                                widths=np.full(centres.size, width),
                                 color=[92, 200, 99])
         else:
             chart = rr.BarChart(counts.astype(np.float32))
@@ -786,6 +808,10 @@ class RerunLogger:
             if value is None:
                 continue
             if name not in self._stat_names:  # its panel from the start, even while its values go to warmup/
+                group = stat_group(name)
+                i = sum(stat_group(n) == group for n in self._stat_names)  # its place in its panel
+                rec.log(f"stats/{name}", rr.SeriesLines(colors=[_SERIES_COLOURS[i % len(_SERIES_COLOURS)]],
+                                                        names=[name]), static=True)
                 self._stat_names.append(name)
             if stat_group(name) == "timings" and name not in self._warm:
                 # A stage's first run (the filter times only stages that ran: no prediction at the first update)
@@ -830,11 +856,28 @@ class RerunLogger:
 
     def _send_blueprint_to(self, rec: rr.RecordingStream) -> None:
         self._blueprint_key = tuple(self._stat_names)
-        rec.send_blueprint(build_blueprint(self._stat_names))
+        rec.send_blueprint(build_blueprint(self._stat_names, self._bounds))
 
 
-def build_blueprint(stat_names: list[str] | tuple[str, ...] = ()) -> rrb.Blueprint:
-    """World view large on the left; one time-series view per stats group on the right."""
+def known_bounds(grid: Any, margin: float = 0.05) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """((x0, x1), (y0, y1)) world metres around the map's known cells (free or occupied), ``margin`` of the larger
+    side added all round; None when no cell is known. A map's wide unknown margin is left out of the view."""
+    known = ~np.asarray(grid.unknown)
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if rows.size == 0:
+        return None
+    res = float(grid.resolution)
+    x0, y0 = (float(v) for v in grid.origin[:2])
+    xs = (x0 + cols[0] * res, x0 + (cols[-1] + 1) * res)
+    ys = (y0 + rows[0] * res, y0 + (rows[-1] + 1) * res)
+    pad = margin * max(xs[1] - xs[0], ys[1] - ys[0])
+    return (xs[0] - pad, xs[1] + pad), (ys[0] - pad, ys[1] + pad)
+
+
+def build_blueprint(stat_names: list[str] | tuple[str, ...] = (), bounds=None) -> rrb.Blueprint:
+    """World view large on the left; one time-series view per stats group on the right. ``bounds`` ((x0, x1),
+    (y0, y1)) in world metres (``known_bounds``): the world view opens on them and keeps them while the time runs
+    (fitted to what each step draws, the map jumped and zoomed at every step)."""
     trail_range = [
         rrb.VisibleTimeRange(
             timeline, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.cursor_relative()
@@ -846,6 +889,9 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = ()) -> rrb.Bluepri
         origin="/",
         contents=["+ /world/**"],
         background=[30, 30, 30],
+        # y flipped on `world` (drawn y up): the view's y is minus the world's
+        visual_bounds=(None if bounds is None else
+                       rrb.VisualBounds2D(x_range=list(bounds[0]), y_range=[-bounds[1][1], -bounds[1][0]])),
         overrides={
             "world/truth/trail": rrb.VisibleTimeRanges(trail_range),
             "world/odometry/trail": rrb.VisibleTimeRanges(trail_range),

@@ -79,9 +79,33 @@ def test_weight_histogram_counts_every_particle_at_every_step(recording):
         assert c.size == _HIST_BINS and c.sum() == n[k], (k, c.sum(), n[k])
     # step 0: particles uniform over the map, the first scan tells them apart: the weights spread over the
     # bins (not all in the top one, as equal weights would be), over more than the 6-decade minimum span
-    _, centres = _rows(chunks, "/weights/histogram", "BarChart:abscissa")
+    _, lefts = _rows(chunks, "/weights/histogram", "BarChart:abscissa")
+    _, widths = _rows(chunks, "/weights/histogram", "BarChart:widths")
     assert counts[0][-1] < 0.5 * n[0] and np.count_nonzero(counts[0]) >= 5, counts[0]
-    assert np.asarray(centres[0][0]["buffer"], dtype=np.float64).min() < -6.0
+    left = np.asarray(lefts[0][0]["buffer"], dtype=np.float64)
+    assert left.min() < -6.0
+    # a bar spans [abscissa, abscissa + width] in the viewer: the top bin ends at log10(w / w_max) = 0, not past it
+    assert abs(left[-1] + float(np.ravel(widths[0])[-1])) < 1e-6, (left[-1], widths[0])
+
+
+def test_each_panels_series_have_colours_of_their_own(recording):
+    # The viewer's own picks gave two series of one panel near-identical hues (the error panel's position and heading
+    # both magenta, quality's lost and match both tan): each series is given a colour, distinct within its panel
+    from mcl.viz import stat_group
+
+    _, chunks = recording
+    paths = sorted({str(c.entity_path) for c in chunks if str(c.entity_path).startswith("/stats/")})
+    assert len(paths) >= 8
+    by_group: dict = {}
+    for path in paths:
+        _, colors = _rows(chunks, path, "SeriesLines:colors", static=True)
+        _, names = _rows(chunks, path, "SeriesLines:names", static=True)
+        name = path[len("/stats/"):]
+        assert len(colors) == 1 and names == [[name]], (path, colors, names)
+        by_group.setdefault(stat_group(name), []).append(colors[0][0])
+    assert len(by_group["error"]) >= 2 and len(by_group["quality"]) >= 2
+    for group, colours in by_group.items():
+        assert len(set(colours)) == len(colours), (group, colours)
 
 
 def test_weight_histogram_bins():
@@ -95,15 +119,20 @@ def test_weight_histogram_bins():
     assert c[-1] == 10  # equal weights: all in the top bin
 
 
-def test_particles_are_sized_and_made_opaque_by_weight(recording):
+def test_particles_are_sized_and_faded_by_weight(recording):
+    # Rerun (0.41) draws a point with alpha below 255 darker, not see-through: the lightest particles (alpha 60) were
+    # near-black specks like obstacles on the map. Every colour is opaque; the lighter, the nearer the free grey.
     _, chunks = recording
     _, radii = _rows(chunks, "/world/particles", "Points2D:radii")
     _, colors = _rows(chunks, "/world/particles", "Points2D:colors")
     r = -np.asarray(radii[0], dtype=np.float64)  # UI points are stored negative
-    alpha = np.asarray(colors[0], dtype=np.uint32) & 0xFF  # RGBA packed in a u32
+    packed = np.asarray(colors[0], dtype=np.uint32)  # RGBA packed in a u32
+    assert np.all(packed & 0xFF == 255)
+    rgb = np.stack([(packed >> s) & 0xFF for s in (24, 16, 8)], axis=1).astype(int)
+    grey = np.abs(rgb - 235).max(axis=1)  # how far from the map's free grey (the lightest: a quarter of the colour)
     assert np.all(r > 0) and len(np.unique(r)) >= 2
-    assert r[np.argmax(alpha)] > r[np.argmin(alpha)]  # heavier: larger and more opaque
-    assert alpha.min() < 128 < alpha.max()
+    assert r[np.argmin(grey)] < r[np.argmax(grey)]  # the faded ones are the light, small ones
+    assert rgb[np.argmin(grey)].min() > 150 and grey.max() > 150, (rgb[np.argmin(grey)], grey.max())
 
 
 def test_likelihood_field_layer_is_the_sensor_models(recording):

@@ -452,6 +452,39 @@ def _listening(port: int) -> bool:
         return False
 
 
+def test_the_world_view_opens_on_the_maps_known_cells():
+    # Without bounds the view fitted whatever each step drew (the ellipse, the particles, the scan): the map jumped
+    # and zoomed at every step. The blueprint frames the known cells (a map's wide unknown margin left out), 5 % of
+    # the larger side around; y is minus the world's in the view (the flip on `world`).
+    occ = np.full((40, 60), -1, dtype=np.int8)
+    occ[10:20, 5:25] = 0  # known cells: rows 10-19, columns 5-24
+    occ[10, 5:25] = 100
+    from mcl.maps import OccupancyGrid
+
+    (x0, x1), (y0, y1) = viz.known_bounds(OccupancyGrid.from_occupancy(occ, RES, ORIGIN))
+    pad = 0.05 * 2.0  # the larger side: 20 cells = 2 m
+    assert (x0, x1) == pytest.approx((ORIGIN[0] + 0.5 - pad, ORIGIN[0] + 2.5 + pad))
+    assert (y0, y1) == pytest.approx((ORIGIN[1] + 1.0 - pad, ORIGIN[1] + 2.0 + pad))
+    view = viz.build_blueprint(["ess"], ((x0, x1), (y0, y1))).root_container.contents[0]
+    got = view.properties["VisualBounds2D"].range.as_arrow_array().to_pylist()[0]
+    assert got["x_range"] == pytest.approx([x0, x1]) and got["y_range"] == pytest.approx([-y1, -y0])
+    assert viz.known_bounds(OccupancyGrid.from_occupancy(np.full((5, 5), -1, dtype=np.int8), RES, ORIGIN)) is None
+
+
+def test_the_true_path_is_broken_where_the_robot_jumps(tmp_path):
+    # A kidnap carried the robot 12 m: one line through the walls read as a path. The strip is cut at a step over
+    # 10 median steps (and 1 m); a path without jumps stays one strip.
+    path = tmp_path / "t.rrd"
+    x = np.concatenate([np.linspace(0, 2, 30), 12.0 + np.linspace(0, 2, 30)])
+    with RerunLogger("save", path) as log:
+        log.log_truth_path(np.stack([x, np.zeros(60), np.zeros(60)]))
+    strips = rows(path, "/world/truth", None)[0][1]["LineStrips2D:strips"]
+    assert [len(s) for s in strips] == [30, 30]
+    with RerunLogger("save", path) as log:
+        log.log_truth_path(np.stack([np.linspace(0, 2, 50), np.zeros(50), np.zeros(50)]))
+    assert [len(s) for s in rows(path, "/world/truth", None)[0][1]["LineStrips2D:strips"]] == [50]
+
+
 def test_close_is_idempotent_and_rejects_logging_after(tmp_path):
     log = RerunLogger("save", tmp_path / "c.rrd")
     log.close()
@@ -521,7 +554,7 @@ def test_skipped_beams_are_drawn_over_the_scan_and_cleared_when_none(tmp_path):
     assert [(t, len(c["Points2D:positions"])) for t, c in r] == [(1, 3), (2, 1), (3, 0)]
     assert r[0][1]["Points2D:positions"][2] == pytest.approx([3.0, 0.5])
     style = rows(path, "/world/scan/skipped", None)
-    assert style and style[0][1]["Points2D:colors"] == [0xFAC828FF]
+    assert style and style[0][1]["Points2D:colors"] == [0x005AFFFF]  # blue: not the heaviest particles' yellow
 
 
 def test_particles_every_within_a_budget():
