@@ -201,6 +201,11 @@ def sample_beam(rng, zs, zmax, params):
 def fit_likelihood_field(d, dmax, *, init=None, max_iter=1000, tol=1e-10) -> tuple[float, float, float, int, float, bool]:
     """EM for q(d) = w_hit * truncated half-normal(d; sigma, [0, dmax]) + w_rand / dmax.
 
+    The M-step's sigma maximises sum_i r_i log(truncated half-normal(d_i; sigma)), which depends on the data through
+    R = sum r_i and S = sum r_i d_i^2 only: -R log sigma - S / (2 sigma^2) - R log erf(dmax / (sigma sqrt 2)), a
+    bounded scalar search. The untruncated sqrt(S / R) is that maximum only when sigma << dmax; at sigma = dmax / 2
+    it came out 0.72 for a true 1.0 (and w_hit 0.59 for 0.9).
+
     Returns (w_hit, w_rand, sigma, iterations, mean log-likelihood, converged).
     """
     d = np.minimum(np.asarray(d, dtype=np.float64), dmax)
@@ -221,12 +226,28 @@ def fit_likelihood_field(d, dmax, *, init=None, max_iter=1000, tol=1e-10) -> tup
         r = jh / tot
         w_hit = float(r.mean())
         if r.sum() > 0:
-            sigma = max(math.sqrt(float(np.dot(r, d * d)) / float(r.sum())), _SIGMA_MIN)
+            sigma = _truncated_sigma(float(r.sum()), float(np.dot(r, d * d)), dmax)
         if abs(ll - prev) < tol:
             converged = True
             break
         prev = ll
     return w_hit, 1.0 - w_hit, sigma, it, ll, converged
+
+
+def _truncated_sigma(rsum: float, sq: float, dmax: float) -> float:
+    """The sigma maximising -R log sigma - S / (2 sigma^2) - R log erf(dmax / (sigma sqrt 2)) (``fit_likelihood_field``'s
+    M-step), at least _SIGMA_MIN; up to 100 dmax (the truncated half-normal is then uniform over [0, dmax])."""
+    from scipy.optimize import minimize_scalar
+
+    plain = max(math.sqrt(sq / rsum), _SIGMA_MIN)
+    if plain < 0.2 * dmax:  # erf(5 / sqrt 2) = 1 - 6e-7: the truncation moves sigma by less than 1e-6 of it
+        return plain
+
+    def neg(sigma: float) -> float:
+        return rsum * math.log(sigma) + sq / (2.0 * sigma * sigma) + rsum * math.log(erf(dmax / (sigma * math.sqrt(2.0))))
+
+    res = minimize_scalar(neg, bounds=(_SIGMA_MIN, 100.0 * dmax), method="bounded", options={"xatol": 1e-9 * dmax})
+    return float(res.x) if neg(float(res.x)) <= neg(plain) else plain
 
 
 def lf_config_weights(w_hit, w_rand, sigma, dmax, range_max):

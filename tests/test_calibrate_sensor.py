@@ -61,6 +61,21 @@ def test_em_recovers_the_likelihood_field_mixture():
     assert sigma == pytest.approx(0.12, rel=0.05)
 
 
+def test_em_recovers_a_wide_likelihood_field_mixture_despite_the_truncation():
+    # sigma 1.0 against dmax 2: half the half-normal lies past dmax, clipped there. The M-step's untruncated sigma
+    # (sqrt(S / R)) was not the maximum: it fitted 0.72 and w_hit 0.59. The exact M-step: within 5 % and 0.02 (100,000
+    # draws: the sampling error is about 1 %).
+    rng = np.random.default_rng(5)
+    m = 100_000
+    hit = rng.random(m) < 0.9
+    half = np.abs(rng.normal(0.0, 1.0, 4 * m))
+    half = half[half <= 2.0][:m]  # the truncated half-normal on [0, 2]
+    d = np.where(hit, half, rng.uniform(0.0, 2.0, m))
+    w_hit, _, sigma, _, _, conv = fit_likelihood_field(d, 2.0, max_iter=5000)  # EM is slow here: 1,919 iterations
+    assert conv
+    assert sigma == pytest.approx(1.0, rel=0.05) and w_hit == pytest.approx(0.9, abs=0.02), (sigma, w_hit)
+
+
 def test_likelihood_field_config_weights_reproduce_the_fitted_shape():
     # the filter's z_hit N(d;0,s^2) + z_rand/range_max must be proportional to the fitted q(d)
     from scipy import stats
