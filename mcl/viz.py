@@ -925,6 +925,8 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = (), bounds=None) -
     right = rrb.Vertical(*main, rrb.Tabs(about, *rest, active_tab=0))
     return rrb.Blueprint(
         rrb.Horizontal(world, right, column_shares=[3, 2]),
+        # the step timeline: every panel spans the whole run (on `time` the plots opened on a window of it)
+        rrb.TimePanel(timeline="step"),
         collapse_panels=False,
     )
 

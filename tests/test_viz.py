@@ -469,6 +469,8 @@ def test_the_world_view_opens_on_the_maps_known_cells():
     got = view.properties["VisualBounds2D"].range.as_arrow_array().to_pylist()[0]
     assert got["x_range"] == pytest.approx([x0, x1]) and got["y_range"] == pytest.approx([-y1, -y0])
     assert viz.known_bounds(OccupancyGrid.from_occupancy(np.full((5, 5), -1, dtype=np.int8), RES, ORIGIN)) is None
+    # the time panel on the step timeline: on `time` the panels opened on a window of the run
+    assert viz.build_blueprint(["ess"]).time_panel.timeline == "step"
 
 
 def test_the_true_path_is_broken_where_the_robot_jumps(tmp_path):
