@@ -211,7 +211,7 @@ def _add_eval(sub) -> None:
     )
     p.add_argument("estimate", nargs="?", help="estimated trajectory (TUM), e.g. runs/x/trajectory.tum")
     p.add_argument("reference", nargs="?", help="reference trajectory (TUM)")
-    p.add_argument("--converged-within", type=float, default=0.3, metavar="M", help="error bound (m) for the convergence time (default 0.3)")
+    p.add_argument("--converged-within", type=float, metavar="M", help="error bound (m) for the convergence time (default 0.3)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     _add_suite_options(p)
     p.set_defaults(func=cmd_eval)
@@ -251,11 +251,17 @@ def cmd_eval(args) -> int:
     if args.suite is not None:
         if args.estimate is not None:
             raise MclError("eval: --suite takes no ESTIMATE REFERENCE")
+        given = [o for o, v in (("--json", args.json), ("--converged-within", args.converged_within is not None)) if v]
+        if given:  # a suite's table, CSV and JSON files are its outputs; its convergence is lost_m's (README)
+            raise MclError(f"eval: {', '.join(given)}: for ESTIMATE REFERENCE, not with --suite (its results are in "
+                           "results.json and results.csv)")
         from mcl.suite import run_from_args
 
         return run_from_args(args)
     if args.estimate is None or args.reference is None:
         raise MclError("eval: expected ESTIMATE REFERENCE (two TUM files) or --suite SUITE.yaml")
+    if args.converged_within is None:
+        args.converged_within = 0.3
     if not args.converged_within > 0:
         raise MclError(f"--converged-within: must be positive, got {args.converged_within}")
     t_est, p_est = read_tum(args.estimate)

@@ -892,19 +892,19 @@ def add_arguments(p) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key of the base config (repeatable)")
     p.add_argument("--trials", type=int, metavar="N", help="trials in the study, those done before a --resume "
                    "included (default 100)")
-    p.add_argument("--objective", default="rmse", metavar="NAME[,NAME]",
+    p.add_argument("--objective", metavar="NAME[,NAME]",
                    help="what to minimise: " + "; ".join(f"{k}: {v}" for k, v in OBJECTIVES.items())
                    + ". Two or more (e.g. rmse,particles): a Pareto front (default rmse)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="J", help="worker processes (default: the cores)")
-    p.add_argument("--batch", type=int, default=4, metavar="B", help="trials asked together and evaluated in parallel "
+    p.add_argument("--batch", type=int, metavar="B", help="trials asked together and evaluated in parallel "
                    "(a setting of the study: the same --seed gives the same trials whatever --jobs; default 4)")
-    p.add_argument("--seeds", default="1", metavar="K|A-B", help="run seeds 1..K (or A..B) per dataset and mode "
+    p.add_argument("--seeds", metavar="K|A-B", help="run seeds 1..K (or A..B) per dataset and mode "
                    "(default 1)")
     p.add_argument("--modes", metavar="M,...", help="only these modes: tracking,global,kidnapped")
     p.add_argument("--only", metavar="NAME,...", help="only these datasets of the suite (tuned on and held out)")
     p.add_argument("--held-out", metavar="NAME,...", help="also hold these datasets out (as held_out: true in the "
                    "suite): never tuned on; the best and the base config are scored on them at the end")
-    p.add_argument("--seed", type=int, default=0, help="the sampler's seed (default 0)")
+    p.add_argument("--seed", type=int, help="the sampler's seed (default 0)")
     p.add_argument("--study", metavar="DIR", help="study folder (default runs/tune-SUITE)")
     p.add_argument("--cache", help="folder of the generated synthetic worlds (default STUDY/worlds)")
     p.add_argument("--ray", metavar="auto|ADDRESS", help="run the trials' runs as Ray tasks: auto (the cluster of "
@@ -950,9 +950,8 @@ def run_from_args(args) -> int:
     from mcl.suite import make_dir, seed_range
     from mcl.trajectory import atomic_write_text
 
-    seeds = seed_range(args.seeds)
     for name in ("jobs", "batch"):
-        if getattr(args, name) < 1:
+        if getattr(args, name) is not None and getattr(args, name) < 1:
             raise MclError(f"--{name}: expected >= 1, got {getattr(args, name)}")
     if args.trials is not None and args.trials < 1:
         raise MclError(f"--trials: expected >= 1, got {args.trials}")
@@ -962,7 +961,9 @@ def run_from_args(args) -> int:
         given = [o for o, v in (("SUITE", args.suite), ("--space", args.space), ("--config", args.config),
                                 ("--set", args.set), ("--modes", args.modes), ("--study", args.study),
                                 ("--held-out", args.held_out), ("--only", args.only),
-                                ("--cache", args.cache)) if v]
+                                ("--cache", args.cache), ("--objective", args.objective),
+                                ("--batch", args.batch is not None), ("--seeds", args.seeds),
+                                ("--seed", args.seed is not None)) if v]
         if given:
             raise MclError(f"{'--resume' if args.resume else '--report'}: the study's settings are in "
                            f"{existing}/{STATE_FILE}; not with {', '.join(given)}")
@@ -987,9 +988,15 @@ def run_from_args(args) -> int:
             raise MclError("tune: expected SUITE.yaml --space SPACE.yaml (or --resume / --report DIR)")
         from mcl.suite import _modes, load_suite
 
+        seeds = seed_range(args.seeds or "1")
         params = load_space(args.space)
-        objectives = parse_objectives(args.objective)
+        objectives = parse_objectives(args.objective or "rmse")
         suite = load_suite(args.suite)
+        for d in suite.datasets:  # a trial's value would replace the dataset's own without a word
+            both = sorted({p.key for p in params} & set(d.set))
+            if both:
+                raise ConfigError(f"{args.space}: {both[0]}: not tunable on {suite.path}: its dataset {d.name} sets it "
+                                  "(set:), and a trial's value would replace that")
         modes = list(_modes([m.strip() for m in args.modes.split(",") if m.strip()], "--modes")) if args.modes else None
         study_dir = Path(args.study) if args.study else Path.cwd() / "runs" / f"tune-{suite.name}"
         if (study_dir / STATE_FILE).exists():
@@ -1001,7 +1008,8 @@ def run_from_args(args) -> int:
                      space=[{"key": p.key, "kind": p.kind, "low": p.low, "high": p.high, "log": p.log, "step": p.step,
                              "choices": list(p.choices) if p.choices is not None else None} for p in params],
                      config=str(Path(args.config).resolve()) if args.config else None, sets=list(args.set),
-                     objectives=objectives, modes=modes, batch=args.batch, seed=args.seed,
+                     objectives=objectives, modes=modes, batch=args.batch or 4,
+                     seed=args.seed if args.seed is not None else 0,
                      seeds=seeds.stop - 1 if seeds.start == 1 else [seeds.start, seeds.stop - 1],
                      trials=args.trials if args.trials is not None else 100,
                      cache=str(Path(args.cache).resolve() if args.cache else (study_dir / "worlds").resolve()),

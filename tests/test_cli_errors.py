@@ -89,6 +89,14 @@ def test_eval_warns_of_times_that_go_back_or_repeat_with_another_position(tmp_pa
     assert main(["eval", str(est), str(ref)]) == 0 and "warning" not in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("option", [["--json"], ["--converged-within", "0.01"]])
+def test_eval_suite_refuses_the_options_of_a_single_trajectory(tmp_path, capsys, option):
+    # both were ignored without a word with --suite (the plain table printed, the convergence unchanged)
+    assert main(["eval", "--suite", str(tmp_path / "s.yaml"), *option, "--out", str(tmp_path / "o")]) == 2
+    assert f"eval: {option[0]}: for ESTIMATE REFERENCE, not with --suite" in _one_error(capsys)
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("setting,msg", [
     # every scan moved off the odometry's span: the robot would look still (a bag's stamps were checked, a log's not)
     ("sensor.time_offset=2000", "sensor.time_offset: +2000 s moves every scan of"),

@@ -120,6 +120,20 @@ def test_space_errors_exit_2_naming_the_key(files, tmp_path, capsys, space, word
     assert not study.exists()  # nothing half-written
 
 
+def test_a_key_a_dataset_sets_is_not_tunable_on_that_suite(files, tmp_path, capsys):
+    # A dataset's set: gave sigma_hit 0.3; a study tuning sigma_hit replaced it in every trial without a word (and
+    # trial 0, "the base config", was not what mcl eval --suite runs)
+    suite = dict(SUITE, datasets=[dict(SUITE["datasets"][0], set={"sensor.likelihood_field.sigma_hit": 0.3})])
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(suite))
+    study = tmp_path / "study"
+    rc = main(["tune", str(tmp_path / "s.yaml"), "--space", str(files / "space.yaml"), "--study", str(study),
+               "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.count("\n") == 0, err
+    assert "sensor.likelihood_field.sigma_hit: not tunable on" in err and "its dataset office sets it (set:)" in err
+    assert not study.exists()
+
+
 def test_space_file_forms():
     """Dotted and nested keys alike; a float range, an int range with a step, choices."""
     import tempfile
@@ -218,6 +232,13 @@ def test_resume_after_k_trials_reaches_the_same_best(serial, files, capsys):
     assert "trial" in capsys.readouterr().out
     # a new study in a study folder is refused
     assert main(_args(files, study, "--trials", "1")) == 2
+    # a setting of the study given again with --resume is refused in one line (--objective, --batch, --seeds and
+    # --seed were ignored without a word: they had defaults, so giving them could not be told apart)
+    capsys.readouterr()
+    for option in (["--objective", "lost"], ["--batch", "2"], ["--seeds", "2"], ["--seed", "3"]):
+        assert main(["tune", "--resume", str(study), *option, "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert f"the study's settings are in {study}/study.json; not with {option[0]}" in err, err
 
 
 @pytest.mark.parametrize("sig, jobs", [("SIGINT", "1"), ("SIGTERM", "2")])
