@@ -28,8 +28,9 @@ thread each, no recording) with seeds 1..K (or A..B), for the config under test 
 (``runs/DATASET/MODE/CONFIG/seedK``, with the runner's outputs, ``errors.csv`` and ``row.json``),
 ``results.json`` and ``results.csv`` (one row per run), ``table.csv`` and ``table.txt`` (the median and
 the worst over seeds of each dataset x mode x config) and ``plots/DATASET.png`` (error over time). The
-results are rewritten, atomically, after every run; a run whose ``row.json`` holds the same config
-fingerprint is not run again, so an interrupted evaluation resumes where it stopped. A run that fails (its log
+results are rewritten, atomically, after every run; a run whose ``row.json`` holds the same fingerprint (its
+config, and the size and time of each data file it reads) is not run again, so an interrupted evaluation resumes
+where it stopped. A run that fails (its log
 unreadable, its truth not overlapping the log) is a row with its ``error``, counted as lost, and the others go on.
 """
 
@@ -559,6 +560,7 @@ def _finish_plan(jobs: list[Job]) -> None:
 
     from mcl.config import dump_config
 
+    stamps: dict = {}
     for j in jobs:
         if j.world is not None:
             sim = yaml.safe_load(Path(j.world[0], "sim.yaml").read_text())
@@ -568,7 +570,36 @@ def _finish_plan(jobs: list[Job]) -> None:
             if j.mode == "kidnapped":
                 j.kidnap_t = float(sim["kidnap"]["t"])
         text = dump_config(j.cfg) + f"\nmode: {j.mode}\nlost_m: {j.lost_m}\nkidnap: {j.kidnap_t} {j.kidnap_filter}\n"
+        text += _data_stamp(j.cfg, stamps)
         j.fingerprint = hashlib.sha1(text.encode()).hexdigest()
+
+
+def _data_stamp(cfg, memo: dict) -> str:
+    """The size and modification time of each file a run reads (the map and the image it names, the log or bag,
+    the truth) and mcl's version, for the fingerprint: a truth corrected or a map redrawn in place runs again (its
+    old row was kept, scored on the old file). ``memo``: path -> line, shared by the jobs."""
+    import yaml
+
+    from mcl import __version__
+
+    paths = [p for p in (cfg.map, cfg.log, cfg.bag, cfg.truth) if p]
+    if cfg.map:
+        try:  # the map's image, as the yaml names it
+            image = (yaml.safe_load(Path(cfg.map).read_text()) or {}).get("image")
+            if isinstance(image, str):
+                paths.append(str(Path(cfg.map).parent / image))
+        except (OSError, yaml.YAMLError, AttributeError):
+            pass
+    lines = [f"mcl {__version__}"]
+    for p in paths:
+        if p not in memo:
+            files = sorted(Path(p).iterdir()) if Path(p).is_dir() else [Path(p)]  # a rosbag2 folder: its files
+            try:
+                memo[p] = " ".join(f"{f.name} {f.stat().st_size} {f.stat().st_mtime_ns}" for f in files)
+            except OSError:
+                memo[p] = "missing"
+        lines.append(f"{p}: {memo[p]}")
+    return "\n".join(lines) + "\n"
 
 
 # ----------------------------------------------------------------------------- scoring

@@ -507,6 +507,20 @@ def test_suite_resumes_and_skips_finished_runs(evaluated, tmp_path, capsys):
     assert "7 of 8 runs already finished" in capsys.readouterr().out
     assert removed.exists() and len(_rows(out)) == 8
     assert all(p.stat().st_mtime_ns == m for p, m in before.items() if p != removed)  # not run again
+    # a data file changed in place (a truth corrected, a map redrawn): its runs again (they were kept, scored on the
+    # old file); its modification time put back after
+    import os
+
+    one = args[:7] + ["--seeds", "1", "--jobs", "1", "--set", "filter.particles=2000", "--no-progress", "--only",
+                       "good", "--no-baseline"]
+    truth = next((evaluated["tmp"] / "worlds").glob("good-*/truth.tum"))
+    st = truth.stat()
+    try:
+        os.utime(truth, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+        assert main(one) == 0
+        assert "already finished" not in capsys.readouterr().out
+    finally:
+        os.utime(truth, ns=(st.st_atime_ns, st.st_mtime_ns))
     # a changed config is a different run: nothing is skipped for it
     assert main(args[:-3] + ["--set", "filter.particles=1500", "--no-progress", "--no-baseline", "--only", "good",
                              "--seeds", "1"]) == 0
