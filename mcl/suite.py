@@ -983,11 +983,15 @@ def _finished(job: Job) -> dict | None:
 class TermAsInterrupt:
     """While an evaluation (or a ``mcl tune`` study) runs, SIGTERM to its process (``kill PID``, ``timeout``)
     stops it as Ctrl-C does: the finished rows kept, exit status 130. (Without this the process died at once and
-    its pool's workers ran on, orphaned, each to the end of its run.)"""
+    its pool's workers ran on, orphaned, each to the end of its run.) So does SIGINT in a process started with it
+    ignored (a background job of a script: ``mcl eval ... &`` then ``kill -INT``), which Python would not see."""
 
     def __enter__(self):
+        self._old_int = None
         try:
             self._old = signal.signal(signal.SIGTERM, self._handler)
+            if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+                self._old_int = signal.signal(signal.SIGINT, signal.default_int_handler)
         except ValueError:  # not the main thread: the default handling stays
             self._old = None
         return self
@@ -999,6 +1003,8 @@ class TermAsInterrupt:
     def __exit__(self, *exc) -> None:
         if self._old is not None:
             signal.signal(signal.SIGTERM, self._old)
+        if self._old_int is not None:
+            signal.signal(signal.SIGINT, self._old_int)
 
 
 def interrupt_workers() -> None:
