@@ -212,7 +212,10 @@ def with_world(suite: Suite, world: dict) -> Suite:
 
 def _plain_name(value, where: str) -> str:
     """A suite's or a dataset's name: a folder name under --out (no '/', not hidden). ConfigError otherwise."""
-    if not isinstance(value, str) or not value or "/" in value or value.startswith("."):
+    if not isinstance(value, str):  # YAML reads `name: 101` as a number
+        hint = f' (quote it: name: "{value}")' if isinstance(value, (int, float)) else ""
+        raise ConfigError(f"{where}: name: expected text, got {type(value).__name__} {value!r}{hint}")
+    if not value or "/" in value or value.startswith("."):
         raise ConfigError(f"{where}: name: expected a plain name (no '/'), got {value!r}")
     return value
 
@@ -1043,6 +1046,9 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
                     only=only, baseline=baseline)
     if not job_list:
         raise ConfigError(f"{suite.path}: no run left (modes {', '.join(modes or ())} not in any selected dataset)")
+    missing = [m for m in (modes or ()) if all(j.mode != m for j in job_list)]
+    if missing:  # asked for, and run nowhere: said rather than dropped
+        echo(f"--modes: {', '.join(missing)}: in no selected dataset of {suite.path}: not run")
     label = job_list[0].config
     if config is not None and label != Path(config).stem:
         echo(f"the config under test is labelled {label!r} ({config} is not configs/baseline.yaml, which runs as "

@@ -205,7 +205,8 @@ def test_bad_suite_files_exit_2_naming_file_and_key(tmp_path, capsys):
         ({"lost_m": -1, "datasets": [good]}, "lost_m: must be positive, got -1"),
         # the suite's name is checked as a dataset's (it names the default --out, runs/suite-NAME)
         ({"name": "../../x", "datasets": [good]}, ": name: expected a plain name (no '/'), got '../../x'"),
-        ({"name": ["a"], "datasets": [good]}, ": name: expected a plain name (no '/'), got ['a']"),
+        ({"name": ["a"], "datasets": [good]}, ": name: expected text, got list ['a']"),
+        ({"name": 123, "datasets": [good]}, ': name: expected text, got int 123 (quote it: name: "123")'),
         # a simulate value mcl simulate refuses: caught at load (its own checks, no world made), the dataset named
         ({"datasets": [{"name": "w", "simulate": {"seed": 7, "kind": "spaceship"}}]},
          ": datasets[0] (w): simulate.kind: expected one of office,"),
@@ -528,6 +529,18 @@ def test_suite_resumes_and_skips_finished_runs(evaluated, tmp_path, capsys):
     assert "already finished" not in printed
     assert json.loads((out / "runs/good/tracking/default/seed1/row.json").read_text())["particles"] <= 1500
 
+
+
+def test_a_mode_in_no_dataset_is_said_not_dropped(evaluated, tmp_path, capsys):
+    # --modes tracking,kidnapped on a tracking-only suite ran the tracking runs and dropped kidnapped without a word
+    out = tmp_path / "out"
+    shutil.copytree(evaluated["out"], out)
+    assert main(["eval", "--suite", str(evaluated["suite"]), "--out", str(out), "--cache",
+                 str(evaluated["tmp"] / "worlds"), "--seeds", "2", "--jobs", "1", "--modes", "tracking,kidnapped",
+                 "--set", "filter.particles=2000", "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert f"--modes: kidnapped: in no selected dataset of {evaluated['suite']}: not run" in printed
+    assert "8 of 8 runs already finished" in printed
 
 
 def test_failed_runs_are_tabled_as_lost_and_the_others_go_on(evaluated, tmp_path, capsys):
