@@ -643,6 +643,35 @@ def _related(a: str, b: str) -> bool:
     return b == a or (b.startswith(a) and b[len(a)] in ".[")
 
 
+# the data a config names, relative to its own folder: never taken from default.yaml (its demo's files)
+DATA_KEYS = (*PATH_KEYS, "laser", "landmarks.map", "planes.depth", "planes.map")
+
+
+def _over_defaults(loaded: dict, path: Path) -> dict:
+    """A config file's keys laid over ``configs/default.yaml``'s (the documented, corpus-chosen defaults), so that
+    a key the file does not give takes the value default.yaml shows, not the code's plain one (a file with a map
+    and a log alone ran a fixed 5,000 particles, no recovery); the data keys (``DATA_KEYS``) are the file's own.
+    default.yaml itself, and a file that is not a mapping, as they are."""
+    default = shipped("configs/default.yaml")
+    if not isinstance(loaded, dict) or not default.exists() or path.resolve() == default.resolve():
+        return loaded
+    base = read_yaml(default, ConfigError) or {}
+    for key in DATA_KEYS:
+        *sections, leaf = key.split(".")
+        node = base
+        for sec in sections:
+            node = node.get(sec) if isinstance(node, dict) else None
+        if isinstance(node, dict):
+            node.pop(leaf, None)
+
+    def merge(into: dict, over: dict) -> dict:
+        for k, v in over.items():
+            into[k] = merge(into[k], v) if isinstance(v, dict) and isinstance(into.get(k), dict) else v
+        return into
+
+    return merge(base, loaded)
+
+
 def _apply(data: dict, path: list[str], value: Any) -> None:
     node = data
     for i, part in enumerate(path[:-1]):
@@ -689,7 +718,7 @@ def load_config(path: str | Path | None = None, overrides: list | tuple = ()) ->
             loaded = {}
         if not isinstance(loaded, dict):
             raise ConfigError(f"{path}: expected a mapping of sections at the top level")
-        data = loaded
+        data = _over_defaults(loaded, path)
         if overrides:
             # The file on its own first: a bad value in it is an error even when an override replaces it.
             try:

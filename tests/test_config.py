@@ -35,6 +35,26 @@ def test_default_yaml_lists_every_key():
             assert set(data[section]) == set(value), section
 
 
+def test_a_config_file_takes_default_yamls_values_for_the_keys_it_does_not_give(tmp_path):
+    # A file with a map, a log and one key ran the code's plain values for the rest (a fixed 5,000 particles, no
+    # recovery, kld off), though default.yaml and the dataset configs said missing keys take default.yaml's. Now
+    # they do, but for the data keys (default.yaml's demo files are no part of another config).
+    from mcl.config import PROJECT_ROOT
+
+    default = load_config(PROJECT_ROOT / "configs" / "default.yaml")
+    assert default.filter.particles != Config().filter.particles and default.filter.recovery != Config().filter.recovery
+    p = write(tmp_path, "map: m.yaml\nlog: l.clf\nsensor:\n  likelihood_field:\n    sigma_hit: 0.3\n")
+    cfg = load_config(p)
+    assert cfg.sensor.likelihood_field.sigma_hit == 0.3
+    assert cfg.map == str(tmp_path / "m.yaml") and cfg.truth is None  # its own data; not the demo's truth
+    same = dump_config(cfg).replace(str(tmp_path / "m.yaml"), "M").replace(str(tmp_path / "l.clf"), "L")
+    mine = load_config(PROJECT_ROOT / "configs" / "default.yaml", ["map=M", "log=L", "truth=null",
+                                                                   "sensor.likelihood_field.sigma_hit=0.3"])
+    assert same == dump_config(mine).replace(mine.map, "M").replace(mine.log, "L")
+    # a pose alone tracks from it (default.yaml: global_localization false, a null pose is global)
+    assert load_config(write(tmp_path, "filter:\n  initial_pose: [1, 2, 0]\n", "p.yaml")).filter.global_localization is False
+
+
 def test_overrides_parse_yaml_values(tmp_path):
     cfg = load_config(None, ["sensor.likelihood_field.sigma_hit=0.2", "filter.particles=123",
                              "filter.initial_pose=[1, 2, 0.5]"])

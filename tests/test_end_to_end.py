@@ -232,8 +232,9 @@ def test_global_localization_on_the_bundled_demo(tmp_path):
     from mcl.trajectory import read_tum
 
     cfg = load_config(CONFIGS / "default.yaml", ["rerun.mode=save"] + _NEW_DEFAULTS)
-    assert cfg.filter.global_localization
+    assert cfg.filter.initial_pose is None  # global localization: no start pose
     s = run(cfg, tmp_path, progress=False, echo=_quiet)
+    assert s["mode"] == "global"
     assert s["eval"]["scored"] >= 340
     assert 1_000_000 < (tmp_path / "recording.rrd").stat().st_size < 10_000_000
     te, pe = read_tum(tmp_path / "trajectory.tum")

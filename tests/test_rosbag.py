@@ -874,11 +874,16 @@ def test_a_configured_start_overrides_the_bags_initial_pose_and_a_suite_gives_it
     assert main([*base, "--config", str(own), "--out", str(tmp_path / "own")]) == 0
     assert "/initialpose not used: tracking from filter.initial_pose as the config says" in capsys.readouterr().err
     assert abs(first_x(tmp_path / "own") - start[0]) < 0.3  # the config's pose (initial_std 0.1 m)
-    # --set filter.initial_pose alone leaves global_localization true (the default): a note says the pose is unused
-    assert main([*base, "--out", str(tmp_path / "p"), "--set", f"filter.initial_pose=[{start[0]!r}, 0, 0]"]) == 0
+    # --set filter.initial_pose alone tracks from it (global_localization false by default: a null pose is global)
+    pose = f"filter.initial_pose=[{start[0]!r}, {start[1]!r}, {start[2]!r}]"
+    assert main([*base, "--out", str(tmp_path / "p"), "--set", pose]) == 0
+    assert "/initialpose not used: tracking from filter.initial_pose as the command line says" in capsys.readouterr().err
+    assert abs(first_x(tmp_path / "p") - start[0]) < 0.3
+    # --global with a pose: global, and a note says the pose is unused
+    assert main([*base, "--out", str(tmp_path / "q"), "--global", "--set", pose]) == 0
     err = capsys.readouterr().err
     assert "filter.global_localization is true, so filter.initial_pose" in err and "is not used" in err
-    assert json.loads((tmp_path / "p" / "summary.json").read_text())["mode"] == "global"
+    assert json.loads((tmp_path / "q" / "summary.json").read_text())["mode"] == "global"
     # a suite's global mode on the bag is a global run
     import yaml
 
