@@ -36,7 +36,7 @@ def _project_default_config() -> Path | None:
 def _add_run(sub) -> None:
     p = sub.add_parser(
         "run",
-        help="localize a log on a map; write trajectory.tum, recording.rrd, config.yaml, summary.json",
+        help="localize a log on a map; write trajectory.tum, quality.csv, recording.rrd, config.yaml, summary.json",
         description=(
             "Replay a logged dataset (odometry + laser scans) against an occupancy-grid map with Monte Carlo "
             "localization. With no arguments, runs the bundled demo (configs/default.yaml, data/demo). "
@@ -320,7 +320,8 @@ def _add_simulate(sub) -> None:
              description="Draw an indoor world, drive a robot through it, and write map.yaml/map.pgm, log.clf,\n"
              "truth.tum and sim.yaml into OUTDIR.",
              epilog="examples:\n"
-             "  mcl simulate data/demo --seed 0 --duration 60          # the bundled demo (kind office)\n"
+             "  mcl simulate data/demo --seed 7 --duration 70 --range-max 5 --kidnap-at 50 --dynamic-obstacles 4"
+             "   # the bundled demo\n"
              "  mcl simulate runs/w --kind rooms --seed 3 --duration 90 # identical rooms: ambiguous\n"
              "  mcl simulate runs/w --kind hall --range-max 5.6 --fov 240 --beams 241   # short-range laser\n"
              "  mcl simulate runs/w --kind clutter --unmapped-furniture 25\n"
