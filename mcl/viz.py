@@ -101,9 +101,9 @@ ABOUT = """\
 
 **World** (left): the map (grey), the particles (coloured, sized and faded by weight: yellow and large = heavy;
 pale purple, small = light), the estimate (magenta: point, heading, 2-sigma ellipse), the scan laid at the estimate
-(red), where the beams would end if the estimate were right (cyan, `world/scan/expected`), beams beam skipping
-not scored (blue: unmapped objects, or beam skipping), the true pose and path (green; broken where the robot was carried off) and dead-reckoned odometry
-(orange). The view opens on the map's known cells.
+(red), where the beams would end if the estimate were right (cyan, `world/scan/expected`), beams not scored (blue:
+unmapped objects, or beam skipping), the true pose and path (green; broken where the robot was carried off) and
+dead-reckoned odometry (orange). The view opens on the map's known cells.
 Layer `world/likelihood_field` (hidden: tick it in the blueprint tree) is the sensor model's likelihood field,
 p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off with `sensor.likelihood_field.sigma_hit`.
 
