@@ -655,6 +655,26 @@ def test_global_density_draws_the_fresh_poses_where_the_scan_fits_and_counts_the
     assert np.median(own[10]) > np.median(own[1]) + 20.0, (np.median(own[10]), np.median(own[1]))
 
 
+def test_fresh_poses_drawn_anew_from_candidates_are_neither_matched_nor_scored_first():
+    # On a big map a global start's fresh poses are drawn anew from k candidates each (filter.global_density): the
+    # poses themselves were scan-matched and scored first, then replaced (64-80 % of such an update's time on
+    # infinite_corridor). Now only the candidates are scored; a re-seed's old cloud is matched and scored as before.
+    from mcl.filter import StepInfo
+
+    scan = _scan(2.0)
+    pf = _filter_on_a_box("filter.global_density=400", "filter.search_exponent=1.0")  # k = 10 (the test above)
+    scored, matched = [], []
+    score, refine = pf.sensor.log_likelihood, pf._refined
+    pf.sensor.log_likelihood = lambda p, o, out=None, searching=False: (scored.append(p.shape[1]),
+                                                                         score(p, o, out, searching=searching))[1]
+    pf._refined = lambda poses, o, steps: (matched.append(poses.shape[1]), refine(poses, o, steps))[1]
+    pf.init_global()
+    obs = pf.prepare(scan, np.zeros(3))
+    pf.correct(obs, StepInfo(particles=pf.n))
+    assert scored == [10 * pf.n] and matched == [], (scored, matched)
+    assert np.isfinite(pf.logw).all()
+
+
 def test_the_likelihood_field_scores_with_the_search_field_exactly_while_the_laser_is_tempered():
     # sensor.likelihood_field.search_interior applies while a global search runs or lost recovery spreads poses
     # (the updates search_exponent / lost_exponent temper), and the interior field otherwise.
