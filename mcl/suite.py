@@ -580,19 +580,21 @@ def _finish_plan(jobs: list[Job]) -> None:
 def _data_stamp(cfg, memo: dict) -> str:
     """The size and modification time of each file a run reads (the map and the image it names, the log or bag,
     the truth) and mcl's version, for the fingerprint: a truth corrected or a map redrawn in place runs again (its
-    old row was kept, scored on the old file). ``memo``: path -> line, shared by the jobs."""
+    old row was kept, scored on the old file). ``memo``: path -> line (and a map's image path), shared by the jobs."""
     import yaml
 
     from mcl import __version__
 
     paths = [p for p in (cfg.map, cfg.log, cfg.bag, cfg.truth) if p]
     if cfg.map:
-        try:  # the map's image, as the yaml names it
-            image = (yaml.safe_load(Path(cfg.map).read_text()) or {}).get("image")
-            if isinstance(image, str):
-                paths.append(str(Path(cfg.map).parent / image))
-        except (OSError, yaml.YAMLError, AttributeError):
-            pass
+        if ("image", cfg.map) not in memo:  # the map's image, as the yaml names it (read once for every job)
+            try:
+                image = (yaml.safe_load(Path(cfg.map).read_text()) or {}).get("image")
+            except (OSError, yaml.YAMLError, AttributeError):
+                image = None
+            memo["image", cfg.map] = str(Path(cfg.map).parent / image) if isinstance(image, str) else None
+        if memo["image", cfg.map] is not None:
+            paths.append(memo["image", cfg.map])
     lines = [f"mcl {__version__}"]
     for p in paths:
         if p not in memo:
