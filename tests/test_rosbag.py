@@ -750,6 +750,32 @@ def test_map_initial_pose_and_truth_from_the_bag(world, scans, tmp_path):
     assert summary["eval"]["ate_rmse"] < 0.15  # 8 s of tracking from the true pose; measured 0.05
 
 
+@pytest.mark.parametrize("ext", ["mcap", "bag"])
+def test_the_truth_is_recorded_at_its_own_times_among_the_scans(world, scans, tmp_path, ext):
+    # /ground_truth was written after every scan: a bag's record times only go forward, so each pose was recorded at
+    # the bag's end (`ros2 bag play` would send them all at once). Now each at its stamp, among the scans.
+    from rosbags.highlevel import AnyReader
+
+    truth = read_tum(world / "truth.tum")
+    bag = tmp_path / f"t.{ext}"
+    write_scans(bag, scans, truth=truth)
+    with AnyReader([bag]) as r:
+        conn = [c for c in r.connections if c.topic == "/ground_truth"]
+        rows = [(ts, r.deserialize(raw, c.msgtype).header.stamp) for c, ts, raw in r.messages(connections=conn)]
+    assert len(rows) == truth[0].size
+    for ts, st in rows:
+        assert ts == st.sec * 10**9 + st.nanosec, (ts, st)
+
+
+@pytest.mark.parametrize("ext", ["mcap", "db3"])
+def test_a_ros2_bags_own_metadata_names_its_file(scans, tmp_path, ext):
+    # the rosbag2 metadata a written .mcap / .db3 carries listed `out.mcap` (the temporary name) as its file
+    bag = tmp_path / f"run-7.{ext}"
+    write_scans(bag, scans)
+    data = bag.read_bytes()
+    assert f"run-7.{ext}".encode() in data and f"out.{ext}".encode() not in data
+
+
 def test_a_bag_recorded_while_mapping_gives_its_last_map(world, scans, tmp_path):
     # SLAM (gmapping, slam_toolbox) publishes /map again as it grows: the first is a corner of the building, the
     # last the whole of it. The last is used, with a note.

@@ -79,8 +79,11 @@ class BagOut:
                 from rosbags.rosbag2 import StoragePlugin, Writer
 
                 plugin = StoragePlugin.MCAP if self.kind == "mcap" else StoragePlugin.SQLITE3
-                self._file = self._tmp / "out" / f"out.{'mcap' if self.kind == 'mcap' else 'db3'}"
-                self.writer = Writer(self._tmp / "out", version=9, storage_plugin=plugin)
+                # the folder named as the file will be: rosbag2 names its file after it, and the metadata the file
+                # carries lists that name (it said out.mcap for every bag)
+                stem = self.path.stem
+                self._file = self._tmp / stem / f"{stem}.{'mcap' if self.kind == 'mcap' else 'db3'}"
+                self.writer = Writer(self._tmp / stem, version=9, storage_plugin=plugin)
             self.writer.open()
         except BaseException:
             shutil.rmtree(self._tmp, ignore_errors=True)
@@ -190,10 +193,25 @@ def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initi
     ``sweep`` / (beams - 1): s from the first beam to the last (0: none).
     """
     n = 0
+    if truth is not None:  # in time order, each written among the scans at its own time (a bag's record times only
+        tt, pp = truth     # go forward: written after the scans, every pose was recorded at the bag's end)
+        order = np.argsort(np.asarray(tt, dtype=np.float64), kind="stable")
+        tt, pp = np.asarray(tt, dtype=np.float64)[order], np.asarray(pp)[:, order]
+    k = 0
+
+    def truth_until(b: BagOut, t: float) -> int:
+        nonlocal k
+        while truth is not None and k < len(tt) and tt[k] <= t:
+            b.write(truth_topic, "geometry_msgs/msg/PoseStamped", float(tt[k]),
+                    b.msg("geometry_msgs/msg/PoseStamped", header=b.header(float(tt[k]), "map"), pose=b.pose(*pp[:, k])))
+            k += 1
+        return k
+
     with BagOut(out, kind) as b:
         L = "sensor_msgs/msg/LaserScan"
         first_t = None
         for s in scans:
+            truth_until(b, s.t)
             if first_t is None:
                 first_t = s.t
                 static_t = s.t
@@ -233,12 +251,7 @@ def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initi
                 angle_increment=float(s.angle_increment), time_increment=ti, scan_time=0.0, range_min=0.0,
                 range_max=rmax, ranges=r, intensities=np.zeros(0, dtype=np.float32)))
             n += 1
-        if truth is not None:
-            tt, pp = truth
-            for k in range(len(tt)):
-                b.write(truth_topic, "geometry_msgs/msg/PoseStamped", float(tt[k]),
-                        b.msg("geometry_msgs/msg/PoseStamped", header=b.header(float(tt[k]), "map"),
-                              pose=b.pose(*pp[:, k])))
+        truth_until(b, math.inf)
         if n == 0:
             raise DataError(f"{out}: no scans to write")
     return n
