@@ -767,6 +767,24 @@ def test_the_truth_is_recorded_at_its_own_times_among_the_scans(world, scans, tm
         assert ts == st.sec * 10**9 + st.nanosec, (ts, st)
 
 
+@pytest.mark.parametrize("ext", ["bag", "mcap", "db3"])
+def test_map_and_tf_static_are_written_latched(world, scans, tmp_path, ext):
+    # no topic was marked latched (ROS 1) or transient-local (ROS 2): played back, the one /map and /tf_static
+    # message reached only the subscribers of that instant (amcl or RViz started later never got the map)
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import QosDurability
+
+    bag = tmp_path / f"l.{ext}"
+    write_scans(bag, scans, grid=load_map(world / "map.yaml"))
+    with AnyReader([bag]) as r:
+        ext_of = {c.topic: c.ext for c in r.connections}
+    for topic in ("/map", "/tf_static", "/scan"):
+        e = ext_of[topic]
+        kept = (e.latching == 1 if ext == "bag" else
+                bool(e.offered_qos_profiles) and e.offered_qos_profiles[0].durability == QosDurability.TRANSIENT_LOCAL)
+        assert kept == (topic != "/scan"), (topic, e)
+
+
 @pytest.mark.parametrize("ext", ["mcap", "db3"])
 def test_a_ros2_bags_own_metadata_names_its_file(scans, tmp_path, ext):
     # the rosbag2 metadata a written .mcap / .db3 carries listed `out.mcap` (the temporary name) as its file

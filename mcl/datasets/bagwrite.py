@@ -132,12 +132,31 @@ class BagOut:
         """Write ``message`` on ``topic``, logged at its stamp ``t`` (kept non-decreasing, as a recorder's clock)."""
         conn = self._conns.get(topic)
         if conn is None:
-            conn = self._conns[topic] = self.writer.add_connection(topic, msgtype, typestore=self.ts)
+            conn = self._conns[topic] = self.writer.add_connection(topic, msgtype, typestore=self.ts,
+                                                                   **self._latched(topic))
         sec, ns = _stamp(t)
         log_ns = max(sec * 1_000_000_000 + ns, self._last_ns, 0)
         self._last_ns = log_ns
         data = self.ts.serialize_ros1(message, msgtype) if self.ros1 else self.ts.serialize_cdr(message, msgtype)
         self.writer.write(conn, log_ns, data)
+
+    LATCHED = ("/map", "/tf_static")  # published once, kept for late subscribers (map_server, the static broadcaster)
+
+    def _latched(self, topic: str) -> dict:
+        """add_connection's keywords for a latched topic: ROS 1 ``latching``, ROS 2 a transient-local QoS, as
+        map_server and tf2's static broadcaster offer them (without, `rosbag play` / `ros2 bag play` replays the one
+        /map and /tf_static message to the subscribers there at that instant only: amcl or RViz started later,
+        or tf2's transient-local static listener, never get them)."""
+        if topic not in self.LATCHED:
+            return {}
+        if self.ros1:
+            return {"latching": 1}
+        from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+        never = QosTime(9223372036, 854775807)  # rclcpp's infinite duration
+        return {"offered_qos_profiles": [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE,
+                                             QosDurability.TRANSIENT_LOCAL, never, never, QosLiveliness.AUTOMATIC,
+                                             never, False)]}
 
     def close(self) -> None:
         """Finish the bag and move it to its final name."""
