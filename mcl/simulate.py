@@ -1058,8 +1058,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="back the robot up R times over the run, 0.5-3 m along its own track each time "
                         "(its odometry then reads steps backwards); default 0")
     parser.add_argument("--scan-rate", type=float, default=5.0, metavar="HZ",
-                        help="laser scans per second, 0.5-100; default 5. The odometry (ODOM lines, /odom) runs "
-                        "at 10 Hz or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz)")
+                        help="laser scans per second, 0.5-100; default 5. The odometry's ODOM lines run at 10 Hz "
+                        "or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz); a bag's /odom and "
+                        "/ground_truth hold one pose per scan, at its stamp")
     parser.add_argument("--phantom-furniture", type=int, default=0, metavar="N",
                         help="N boxes (0.3-0.9 m) the map shows near walls within 6 m of the path that the world "
                         "no longer has (furniture moved away since the map was made): the laser sees through "

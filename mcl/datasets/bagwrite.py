@@ -276,6 +276,20 @@ def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initi
     return n
 
 
+def _with_odometry_velocities(scans: list, odometry) -> list:
+    """``scans`` whose record carries no velocities (FLASER: tv = rv = 0) with those of the log's last ODOM line at
+    or before each scan, as a ROS /odom message holds them (a bag's /odom twist was zero throughout)."""
+    import dataclasses
+
+    odo = np.asarray(odometry, dtype=np.float64).reshape(-1, 6)
+    if not odo.shape[0] or not np.any(odo[:, 4:6]):
+        return scans
+    odo = odo[np.argsort(odo[:, 0], kind="stable")]
+    last = np.searchsorted(odo[:, 0], np.array([s.t for s in scans], dtype=np.float64), side="right") - 1
+    return [dataclasses.replace(s, tv=float(odo[j, 4]), rv=float(odo[j, 5])) if j >= 0 and s.tv == 0.0 and s.rv == 0.0
+            else s for s, j in zip(scans, last)]
+
+
 def _write_grid(b: BagOut, grid, t: float) -> None:
     h, w = grid.occupancy.shape
     info = b.msg("nav_msgs/msg/MapMetaData", map_load_time=b.header(t, "map").stamp, resolution=float(grid.resolution),
@@ -327,7 +341,7 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=No
         log = read_carmen(src)
         for w in log.warnings:
             echo(f"mcl: warning: {w}")
-        scans = log.laser_stream(laser)
+        scans = _with_odometry_velocities(log.laser_stream(laser), log.odometry)
     if truth is not None and isinstance(scans, list) and scans and len(truth[0]):  # a log's scans (a bag's: mcl run)
         t0, t1 = scans[0].t, scans[-1].t
         if not np.any((truth[0] >= t0) & (truth[0] <= t1)):  # written, it would score nothing: another clock
