@@ -207,8 +207,8 @@ def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initi
     odom: ``topic`` (/odom), ``tf`` (odom -> base_link on /tf) or ``both``. mount: (x, y, theta) of the laser in
     a new base frame: the odometry is then that of base = robot ∘ laser_offset ∘ mount⁻¹ (same laser poses, a
     laser off the base's centre). grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for
-    /initialpose (in ``initial_frame``); truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``. Each LaserScan's
-    time_increment is the scan's own beam time step (``Scan.beam_dt``, when its first beam is at the stamp), else
+    /initialpose (in ``initial_frame``); truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``, each
+    recorded at its time among the scans. Each LaserScan's time_increment is the scan's own beam time step (``Scan.beam_dt``, when its first beam is at the stamp), else
     ``sweep`` / (beams - 1): s from the first beam to the last (0: none).
     """
     n = 0
@@ -218,13 +218,12 @@ def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initi
         tt, pp = np.asarray(tt, dtype=np.float64)[order], np.asarray(pp)[:, order]
     k = 0
 
-    def truth_until(b: BagOut, t: float) -> int:
+    def truth_until(b: BagOut, t: float) -> None:
         nonlocal k
         while truth is not None and k < len(tt) and tt[k] <= t:
             b.write(truth_topic, "geometry_msgs/msg/PoseStamped", float(tt[k]),
                     b.msg("geometry_msgs/msg/PoseStamped", header=b.header(float(tt[k]), "map"), pose=b.pose(*pp[:, k])))
             k += 1
-        return k
 
     with BagOut(out, kind) as b:
         L = "sensor_msgs/msg/LaserScan"
