@@ -208,8 +208,9 @@ def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initi
     a new base frame: the odometry is then that of base = robot ∘ laser_offset ∘ mount⁻¹ (same laser poses, a
     laser off the base's centre). grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for
     /initialpose (in ``initial_frame``); truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``, each
-    recorded at its time among the scans. Each LaserScan's time_increment is the scan's own beam time step (``Scan.beam_dt``, when its first beam is at the stamp), else
-    ``sweep`` / (beams - 1): s from the first beam to the last (0: none).
+    recorded at its time among the scans. Each LaserScan's time_increment is the scan's own beam time step
+    (``Scan.beam_dt``, when its first beam is at the stamp), else ``sweep`` / (beams - 1): s from the first beam to
+    the last (0: none).
     """
     n = 0
     if truth is not None:  # in time order, each written among the scans at its own time (a bag's record times only
