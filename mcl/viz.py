@@ -646,8 +646,9 @@ class RerunLogger:
     ) -> None:
         """Log one filter step. ``weights`` are normalized linear weights (N,).
 
-        ``skipped_world`` (2, S): the endpoints not scored (unmapped objects, beam skipping), in blue over the scan; a step
-        without any clears the previous step's (only once skipping has shown something, to keep recordings small).
+        ``skipped_world`` (2, S): the endpoints not scored (unmapped objects, beam skipping), in blue over the
+        scan; a step without any clears the previous step's (only once skipping has shown something, to keep
+        recordings small).
         ``expected_world`` (2, E): where the beams would end if the estimate were right (see ``expected_scan``).
         The histogram of the weights (all N) is logged with the particles.
         """
