@@ -620,7 +620,9 @@ class PlaneSensor:
 
     def attach(self, updates: list[tuple]) -> list[tuple]:
         """The updates with the frames joined: a frame within 1 ms of an update joins it, any other is an
-        update of its own, ``(frame, None)``; in time order."""
+        update of its own, ``(frame, None)``; in time order. ``updates``: a list, or the runner's lazy
+        ``(scan, None)`` pairs of a log without landmarks (indexed here, so made a list: it was a TypeError)."""
+        updates = list(updates)
         ut = np.array([u[0].t for u in updates])
         taken: set[int] = set()
         out = list(updates)

@@ -318,6 +318,24 @@ def test_planes_only_run_tracks(depth_sim, tmp_path):
     assert all(np.min(np.abs(faces - m).max(axis=1)) < 1e-4 for m in matched)
 
 
+def test_planes_with_the_laser_run_and_track(depth_sim, tmp_path):
+    """The laser and the planes together, the README's command without sensor.use=false: a TypeError before the
+    first update (the runner's updates of a log without landmarks are lazy pairs, which the plane sensor indexed).
+    Tracked within 0.10 m like either alone (500 particles, 12 s), the planes scored at every frame."""
+    import yaml
+
+    from mcl.runner import run
+
+    sim = depth_sim / "depth"
+    start = yaml.safe_load((sim / "sim.yaml").read_text())["start_pose"]
+    s = run(load_config(None, [f"map={sim / 'map.yaml'}", f"log={sim / 'log.clf'}", f"truth={sim / 'truth.tum'}",
+                               "filter.particles=500", f"filter.initial_pose={start}", "rerun.mode=off",
+                               "planes.use=true", f"planes.depth={sim / 'depth'}"]),
+            tmp_path / "lp", progress=False, echo=lambda m: None)
+    assert s["planes"]["walls_per_frame"] > 1.0
+    assert s["eval"]["ate_rmse"] < 0.10, s["eval"]
+
+
 def _grid_of(sim):
     from mcl.maps import load_map
 
