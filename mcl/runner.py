@@ -832,6 +832,10 @@ def _run(
                     if v == 0.0 and w == 0.0:  # no velocities in the log: from the odometry pair
                         v, w, dt = velocities_from_odometry(last_odom, odom, dt)
                     control = Control(last_odom, odom, dt=dt, v=v, w=w)
+                if seed_from_landmarks and not pf.search.tempering:
+                    # the laser settled the search first: its cloud stays (a late landmark observation, a false
+                    # positive, re-drew a localized set 4 m off)
+                    seed_from_landmarks = False
                 if seed_from_landmarks and marks is not None and pf.init_from_landmarks(marks):
                     seed_from_landmarks, control = False, None  # particles drawn for this very time
                 if kidnap_filter_at is not None and kidnap is None and scan.t >= kidnap_filter_at[0]:
