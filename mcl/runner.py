@@ -966,8 +966,9 @@ def _run(
     # The one-paragraph summary.
     ms = summary["ms_per_update"]
     text = (
-        f"{'Interrupted after' if interrupted else 'Localized'} {counts['updates']} updates of {len(scans)} scans "
-        f"({mode}, {_particles_text(summary)}) in {loop_time:.1f} s: "
+        f"{'Interrupted after' if interrupted else 'Localized'} {counts['updates']} updates"
+        + (f" of {len(scans)} scans" if len(scans) else "")  # none: landmarks or depth frames alone
+        + f" ({mode}, {_particles_text(summary)}) in {loop_time:.1f} s: "
         f"{ms['predict']:.1f} ms predict (mean {summary['mean_tries']:.2f} tries), {ms['correct']:.1f} ms correct, "
         f"{ms['resample']:.1f} ms resample, {ms['viz']:.1f} ms rerun per update."
     )

@@ -394,3 +394,4 @@ def test_a_landmark_only_global_run_is_not_called_lost_for_want_of_scans(tmp_pat
     s = run(cfg, tmp_path / "out", progress=False, echo=lambda *a: None)
     assert s["mode"] == "global" and s["eval"]["ate_rmse"] < 0.1, s["eval"]
     assert s["reseeds"] == 0
+    assert s["text"].startswith(f"Localized {s['updates']} updates (global,"), s["text"]  # was "of 0 scans"
