@@ -766,6 +766,7 @@ def _run(
     stage_totals = {"predict": 0.0, "correct": 0.0, "estimate": 0.0, "resample": 0.0, "viz": 0.0}
     counts = {"updates": 0, "predicted": 0, "resamples": 0, "rejected": 0, "degenerate": 0}
     tries_sum = 0.0
+    n_moved = 0
     spread_sum, spread_max, multimodal, skipped_beams = 0.0, 0.0, 0, 0
     n_used: list[int] = []  # particles weighted at each update (KLD sampling varies it)
     injected = 0
@@ -869,6 +870,7 @@ def _run(
                     multimodal += int(info.clusters > 1)
                     skipped_beams += info.skipped_beams
                     tries_sum += info.tries
+                    n_moved += info.tries > 0.0  # an update with a prediction (the first has none)
                     n_used.append(info.particles)
                     injected += info.injected
                     reseeds += int(info.reseeded)
@@ -923,7 +925,7 @@ def _run(
         **({"sweep_order": pf.sweep_order.summary()}
            if pf.sweep_order is not None and pf.sweep_order.scans else {}),
         "resamples": counts["resamples"],
-        "mean_tries": tries_sum / n_up,
+        "mean_tries": tries_sum / max(n_moved, 1),  # over the updates that predicted: at least 1 when any did
         "rejected_particles": counts["rejected"],
         "degenerate_updates": counts["degenerate"],
         "events": dict(pf.events),
