@@ -46,6 +46,39 @@ def position_errors(est_t, est_poses, ref_t, ref_poses):
     return tq, e_pos, e_th
 
 
+def motion_disagreement(odo_t, odo_poses, ref_t, ref_poses, window: float = 5.0):
+    """How often a reference trajectory does not move as the odometry does: (stretches that disagree, stretches
+    where either moved), over consecutive ``window``-second stretches of the time both span.
+
+    Each stretch's motion is the chord's length and the heading's change, which do not depend on the odometry's
+    frame or drift. A stretch disagrees when the chords differ by more than 30 % of the longer (or of 1 m) or the
+    turns by more than 0.5 rad (or 30 % of the larger). A stretch where neither moves 0.2 m nor turns 0.2 rad is
+    not counted. Measured 2026-11-30 over the eight shared logs and 82 generated worlds: a run's own reference
+    disagrees in at most 1 of 11 stretches (the generated worlds' noisy odometry), and another run's, where the
+    two clocks share 10 counted stretches or more, in over a third of them for 97 % of 7,598 pairs (the rest are
+    generated corridors the robot drives alike).
+    """
+    odo_t = np.asarray(odo_t, dtype=np.float64)
+    ref_t = np.asarray(ref_t, dtype=np.float64)
+    if odo_t.size < 2 or ref_t.size < 2:
+        return 0, 0
+    a, b = max(odo_t[0], ref_t[0]), min(odo_t[-1], ref_t[-1])
+    if b - a < 2 * window:
+        return 0, 0
+    ts = np.arange(a, b, window)
+
+    def chords_turns(t, poses):
+        x, y = np.interp(ts, t, poses[0]), np.interp(ts, t, poses[1])
+        return np.hypot(np.diff(x), np.diff(y)), np.diff(np.interp(ts, t, np.unwrap(poses[2])))
+
+    co, ho = chords_turns(odo_t, np.asarray(odo_poses, dtype=np.float64))
+    cr, hr = chords_turns(ref_t, np.asarray(ref_poses, dtype=np.float64))
+    chord, turn = np.maximum(co, cr), np.maximum(np.abs(ho), np.abs(hr))
+    moved = (chord > 0.2) | (turn > 0.2)
+    bad = (np.abs(co - cr) > 0.3 * np.maximum(chord, 1.0)) | (np.abs(ho - hr) > np.maximum(0.5, 0.3 * turn))
+    return int(np.count_nonzero(bad & moved)), int(np.count_nonzero(moved))
+
+
 def settle_time(t, e, t0: float, below: float, stay: float | None = None):
     """Seconds from t0 until the error e (at times t >= t0) falls below ``below`` and stays below it (or,
     with ``stay`` > ``below``, never again exceeds ``stay``); None if it does not; 0 if it is below at the

@@ -366,7 +366,25 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
             echo(f"mcl: warning: {cfg.truth or f'{cfg.bag}: {cfg.topics.truth}'}: no reference pose is stamped within "
                  f"the scans' time span (reference {truth.t.min():.3f}..{truth.t.max():.3f} s, scans {a:.3f}..{b:.3f}"
                  " s): the run will not be scored")
+        else:
+            _check_truth_motion(log, truth, cfg.truth or f"{cfg.bag}: {cfg.topics.truth}", echo)
     return log, grid, scans, marks, truth, initial
+
+
+def _check_truth_motion(log, truth, name: str, echo) -> None:
+    """Warn when the reference does not move as the log's odometry does (``mcl.evaluate.motion_disagreement``):
+    a trajectory of another run whose clock overlaps this one's would be scored as a lost run."""
+    from mcl.evaluate import motion_disagreement
+
+    odometry = np.asarray(getattr(log, "odometry", ()), dtype=np.float64).reshape(-1, 6)
+    if not odometry.shape[0] and isinstance(getattr(log, "scans", None), list):  # a CARMEN log without ODOM lines
+        odometry = np.array([(s.t, *s.odom, 0.0, 0.0) for s in log.scans if s.odom is not None],
+                            dtype=np.float64).reshape(-1, 6)
+    odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
+    bad, n = motion_disagreement(odometry[:, 0], odometry[:, 1:4].T, truth.t, truth.poses)
+    if n >= 10 and bad > n / 3:  # a run's own reference: at most 1 in 11 (the measurement in motion_disagreement)
+        echo(f"mcl: warning: {name}: the reference does not move as the odometry does in {bad} of {n} stretches of "
+             "5 s (a trajectory of another run?): the run is scored against it all the same")
 
 
 def _estimate_bag(cfg: Config, out_dir: Path):
