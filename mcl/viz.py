@@ -73,17 +73,21 @@ _VIRIDIS = np.array(
 # Weights are shown on a log scale spanning this many decades below the heaviest.
 _WEIGHT_DECADES = 3.0
 
-# Time-series groups (see stat_group) and the panel titles a newcomer reads, in panel order.
+# Time-series groups (see stat_group) and the panel titles a newcomer reads, in panel order; the tabs' titles are
+# short (a tab shows about 50 characters) and the About text says what each one holds.
 _STAT_GROUPS = (
     ("error", "Error vs truth: position (m), heading (rad)"),
     ("quality", "Quality: scan vs map at the estimate (match 1 = fits, lost 1 = lost)"),
     ("ess", "Particles: count and effective sample size (ESS)"),
-    ("timings", "Time per update by stage (ms; each stage's first run, which compiles, is left out)"),
-    ("spread", "Spread of the particles (m): whole set and the estimate's cluster"),
+    ("timings", "Time per update (ms)"),
+    ("spread", "Spread (m)"),
     ("tries", "Map rejection tries"),
-    ("other", "Other"),
+    ("recovery", "Recovery (share)"),
+    ("other", "Counts"),
 )
-_MAIN_GROUPS = ("error", "quality", "ess", "timings")  # shown stacked; the others in tabs under them
+# shown stacked with the weight histogram; the others in tabs under them (six stacked panels left each one too
+# short to read at 1080p)
+_MAIN_GROUPS = ("error", "quality", "ess")
 # Each panel's series in these colours, in the order they first appear (Tableau 10): the viewer's own picks gave
 # two series of one panel near-identical hues (position and heading both magenta)
 _SERIES_COLOURS = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
@@ -114,12 +118,13 @@ mapped obstacle, `contradiction` = fraction that pass through one, `lost` = 1 wh
 **Particle weights**: histogram of log10(w / w_max) over all particles at this step (the x range fits the step:
 one scan can put hundreds of decades between poses): one bar at 0 = every particle alike (no evidence yet, or just
 resampled); most particles far left and a few at 0 = the scan singled out a few poses.
-**Time per update**: milliseconds per filter stage. A stage's first real run compiles or loads its numba kernels
-(often over a second): that value is at `warmup/time_ms/*`, left out of the plot so the scale
-reads. Later peaks are real: a global search or a recovery weighs up to `filter.particles` (100,000 by
-default) instead of a few thousand.
-**Spread**, **Map rejection tries**, **Other** (tabs): the particles' spread (m) over the whole set and the
-estimate's cluster; the mean draws per particle of the map-based motion model; the rest (counts and shares).
+In the tabs under them: **Time per update**: milliseconds per filter stage. A stage's first real run compiles or
+loads its numba kernels (often over a second): that value is at `warmup/time_ms/*`, left out of the plot so the
+scale reads. Later peaks are real: a global search or a recovery weighs up to `filter.particles` (100,000 by
+default) instead of a few thousand. **Spread**: the particles' spread (m) over the whole set and the estimate's
+cluster. **Map rejection tries**: the mean draws per particle of the map-based motion model. **Recovery**: the share
+of the particles drawn anew at the next resample. **Counts**: the clusters and the beams not scored.
+The time panel (bottom) and the selection panel open from the viewer's top bar.
 """
 
 _DRAW_ORDER = {"map": -100.0, "trail": 5.0, "particles": 10.0, "scan": 20.0, "truth": 30.0, "estimate": 40.0}
@@ -206,7 +211,7 @@ def _viewer_executable() -> str | None:
 def stat_group(name: str) -> str:
     """Time-series group of a stats entry, by keyword (of the part before a ``/`` if any).
 
-    ``ess``, ``timings``, ``error``, ``tries``; else the prefix before ``/``, else ``other``.
+    ``ess``, ``timings``, ``error``, ``tries``, ``recovery``; else the prefix before ``/``, else ``other``.
     """
     if "/" in name:
         prefix = name.split("/", 1)[0]
@@ -221,6 +226,8 @@ def stat_group(name: str) -> str:
         return "error"
     if "tries" in low or "reject" in low or "retry" in low:
         return "tries"
+    if "inject" in low:  # a share (0..1): not on the counts' scale
+        return "recovery"
     return "other"
 
 
@@ -926,8 +933,11 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = (), bounds=None) -
     right = rrb.Vertical(*main, rrb.Tabs(about, *rest, active_tab=0))
     return rrb.Blueprint(
         rrb.Horizontal(world, right, column_shares=[3, 2]),
-        # the step timeline: every panel spans the whole run (on `time` the plots opened on a window of it)
-        rrb.TimePanel(timeline="step"),
+        # the step timeline: every panel spans the whole run (on `time` the plots opened on a window of it); the
+        # time panel collapsed to its scrubber and the selection panel closed: the views get the screen (both
+        # open from the viewer's top bar)
+        rrb.TimePanel(timeline="step", state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
         collapse_panels=False,
     )
 

@@ -473,6 +473,25 @@ def test_the_world_view_opens_on_the_maps_known_cells():
     assert viz.build_blueprint(["ess"]).time_panel.timeline == "step"
 
 
+def test_the_plots_a_user_reads_first_are_stacked_and_the_rest_in_tabs():
+    # Six stacked panels left each about 150 px tall at 1080p (legends over the curves), and "Other" drew the
+    # injection share (0..1) on the scale of the skipped-beam count (hundreds): a flat line at 0. Now the error, the
+    # quality, the particles and the weights are stacked; the timings, spread, tries, recovery share and counts are
+    # tabs, the share alone in its panel; the time panel opens as its scrubber and the selection panel closed.
+    names = ["ess", "particles", "inject_p", "clusters", "skipped_beams", "time_ms/predict", "error/position",
+             "quality/match", "spread/full", "tries"]
+    b = viz.build_blueprint(names)
+    right = b.root_container.contents[1]
+    stacked, tabs = right.contents[:-1], right.contents[-1]
+    assert [v.name.split(":")[0] for v in stacked] == ["Error vs truth", "Quality", "Particles", "Particle weights"]
+    assert [v.name for v in tabs.contents] == ["About this recording", "Time per update (ms)", "Spread (m)",
+                                               "Map rejection tries", "Recovery (share)", "Counts"]
+    assert max(len(v.name) for v in tabs.contents) <= 25  # a tab's title is cut at about 50 characters
+    assert viz.stat_group("inject_p") == "recovery" and viz.stat_group("skipped_beams") == "other"
+    assert str(b.time_panel.state).lower().endswith("collapsed")
+    assert str(b.selection_panel.state).lower().endswith("collapsed")
+
+
 def test_the_true_path_is_broken_where_the_robot_jumps(tmp_path):
     # A kidnap carried the robot 12 m: one line through the walls read as a path. The strip is cut at a step over
     # 10 median steps (and 1 m); a path without jumps stays one strip.
