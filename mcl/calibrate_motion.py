@@ -232,9 +232,25 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     r0 = minimize(nll, z0, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-10, "maxiter": 8000})
     r = minimize(nll, r0.x, method="L-BFGS-B", bounds=[(lo, hi)] * 4 + [(-12.0, 12.0)])
     best = r if r.fun <= r0.fun else r0
-    alphas, p = unpack(best.x)
+    z_best = best.x.copy()
+    z_best[:4] = np.clip(z_best[:4], lo, hi)  # Nelder-Mead is unbounded: keep the documented bounds
+    alphas, p = unpack(z_best)
+    alphas = np.clip(alphas, *ALPHA_BOUNDS)  # exp(log(100)) is 100.00000000000004
     notes = []
-    big = [f"alpha{k + 1} = {a:.3g}" for k, a in enumerate(alphas) if a > ALPHA_PLAUSIBLE]
+    # An alpha the data do not constrain (no turn: alpha1, alpha4; no translation: alpha2, alpha3) drifts anywhere
+    # on a flat likelihood: say so instead of printing it as a fit.
+    base = float(np.sum(lls(z_best)))
+    loose = []
+    for k in range(4):
+        zk = z_best.copy()
+        zk[k] = min(z_best[k] + math.log(4.0), hi) if z_best[k] < hi - 1e-9 else z_best[k] - math.log(4.0)
+        if abs(float(np.sum(lls(zk))) - base) < 2.0:  # a 4x change moves the log-likelihood by < 2: undetermined
+            loose.append(k)
+    if loose:
+        notes.append(f"calibrate motion: {', '.join(f'alpha{k + 1}' for k in loose)} not determined by this log "
+                     f"(a 4x change moves the log-likelihood by less than 2: the reference hardly turns or "
+                     f"translates); keep your config's value")
+    big = [f"alpha{k + 1} = {a:.3g}" for k, a in enumerate(alphas) if a > ALPHA_PLAUSIBLE and k not in loose]
     if big:
         notes.append(f"calibrate motion: {', '.join(big)} above {ALPHA_PLAUSIBLE:g} is implausible (a noise as large "
                      f"as the motion itself): check that the reference is this log's, in step with its odometry")
@@ -243,6 +259,7 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     return {"alphas": [float(a) for a in alphas], "p_turn": float(p), "log_likelihood": float(-best.fun * m),
             "pairs": int(m), "skipped": int(np.count_nonzero(still)),
             "converged": bool((r.success or r0.success) and best.fun < 1e300), "message": str(best.message),
+            "undetermined": [f"alpha{k + 1}" for k in loose], "noise_form": noise_form, "noise": noise,
             "warnings": notes}
 
 
@@ -253,9 +270,15 @@ def format_yaml(result: dict, noise_form: str, noise: str, source: str = "") -> 
            f"# {result['pairs']} pairs ({result['skipped']} still pairs skipped), " \
            f"log-likelihood {result['log_likelihood']:.1f}{'' if result['converged'] else ', NOT converged'}; " \
            f"turn split not observed in a share p_turn = {result.get('p_turn', 0.0):.3f} of the pairs\n"
-    body = "motion:\n" f"  noise_form: {noise_form}\n" f"  noise: {noise}\n" + \
-        "".join(f"  alpha{k + 1}: {a[k]:.6g}{'  # implausible (> 1)' if a[k] > ALPHA_PLAUSIBLE else ''}\n"
-                for k in range(4))
+    und = set(result.get("undetermined", ()))
+
+    def line(k):  # an undetermined alpha is left out (commented), so pasting keeps the config's own value
+        if f"alpha{k + 1}" in und:
+            return f"  # alpha{k + 1}: not determined by this log (the fit drifted to {a[k]:.3g}); keep your own\n"
+        return f"  alpha{k + 1}: {a[k]:.6g}{'  # implausible (> 1)' if a[k] > ALPHA_PLAUSIBLE else ''}\n"
+    # model: odometry -- the alphas are the odometry model's (a velocity config's alpha1..4 mean something else)
+    body = "motion:\n  model: odometry\n" f"  noise_form: {noise_form}\n" f"  noise: {noise}\n" + \
+        "".join(line(k) for k in range(4))
     return head + body
 
 
@@ -278,6 +301,9 @@ def run_from_args(args) -> int:
 
     check_min_trans(args.min_trans)
     cfg = load_config(args.config, list(args.set))
+    if getattr(cfg.motion, "model", "odometry") != "odometry":
+        warnings.warn(f"calibrate motion: fits the odometry model only, not motion.model={cfg.motion.model}: the "
+                      f"block sets model: odometry", MclWarning, stacklevel=2)
     pairs = pairs_from_log(args.log, args.truth)
     res = fit_odometry_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise,
                               min_trans=args.min_trans, t=pairs[4])

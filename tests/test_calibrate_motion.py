@@ -202,3 +202,38 @@ def test_a_bag_as_log_says_to_convert_it(sim, tmp_path, capsys):
     rc = main(["calibrate", "motion", "--log", str(bag), "--truth", str(sim / "truth10.tum")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "\n" not in err and "read CARMEN logs" in err and f"mcl convert {bag}" in err
+
+
+def _straight_pairs(seed, m=600, alphas=A):
+    """Reference steps straight ahead (rot1 = rot2 = 0, 5 cm), odometry with the variance form's noise: no turn
+    at all, so alpha1 (turn noise from turning) and alpha4 (travel noise from turning) multiply zero."""
+    a = alphas
+    rng = np.random.default_rng(seed)
+    ht = np.full(m, 0.05)
+    s_rot, s_tr = np.sqrt(a[1] * ht ** 2), np.sqrt(a[2] * ht ** 2)
+    r1, tr, r2 = s_rot * rng.standard_normal(m), ht + s_tr * rng.standard_normal(m), s_rot * rng.standard_normal(m)
+    z = np.zeros((3, m))
+    return z, _pose(r1, tr, r2), z, _pose(np.zeros(m), ht, np.zeros(m))
+
+
+def test_alphas_a_log_cannot_determine_are_said_and_left_out_of_the_block():
+    # A robot that never turns: alpha1 and alpha4 multiply zero. The fit printed alpha1 = 3e7 and alpha4 = 1.5e5
+    # (past its own bound of 100: Nelder-Mead is unbounded) under a warning blaming the reference. Now both stay in
+    # the bounds, are named as not determined (a 4x change moves the log-likelihood by less than 2) and are
+    # commented out of the block, so pasting it keeps the config's own values; alpha2 and alpha3 are fitted.
+    from mcl.calibrate_motion import ALPHA_BOUNDS, format_yaml
+    from mcl.errors import MclWarning
+
+    with pytest.warns(MclWarning, match=r"alpha1, alpha4 not determined by this log"):
+        res = fit_odometry_alphas(*_straight_pairs(0))
+    assert res["undetermined"] == ["alpha1", "alpha4"]
+    assert all(ALPHA_BOUNDS[0] <= a <= ALPHA_BOUNDS[1] for a in res["alphas"])
+    # 600 pairs: alpha2 and alpha3 within 20 % (their standard error is about 6 %)
+    np.testing.assert_allclose([res["alphas"][1], res["alphas"][2]], [A[1], A[2]], rtol=0.20)
+    block = yaml.safe_load(format_yaml(res, "variance", "normal"))["motion"]
+    assert block["model"] == "odometry" and block["noise_form"] == "variance"
+    assert "alpha1" not in block and "alpha4" not in block and set(block) >= {"alpha2", "alpha3"}
+    assert res["noise_form"] == "variance" and res["noise"] == "normal"
+    # a log that turns and translates determines all four: nothing is left out
+    full = fit_odometry_alphas(*_model_pairs(0))
+    assert full["undetermined"] == [] and "alpha1" in yaml.safe_load(format_yaml(full, "variance", "normal"))["motion"]
