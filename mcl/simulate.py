@@ -633,10 +633,15 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(n_beams, (int, np.integer)) and 2 <= n_beams <= 4096, "n_beams", f"expected 2..4096, got {n_beams}")
     _check(0.0 < fov <= 2 * math.pi, "fov", f"expected 0 < fov <= 2 pi rad (360 degrees), got {fov:g} rad ({math.degrees(fov):g} degrees)")
     _check(math.isfinite(range_max) and 0.5 <= range_max <= 100.0, "range_max", f"expected 0.5..100 m, got {range_max}")
-    _check(range_sigma >= 0 and 0 <= p_short and 0 <= p_max and p_short + p_max <= 1, "range_sigma/p_short/p_max",
-           "noise must be >= 0 and p_short + p_max <= 1")
-    _check(len(odom_alphas) == 4 and all(a >= 0 for a in odom_alphas), "odom_alphas", "expected four values >= 0")
+    _check(math.isfinite(range_sigma) and 0 <= range_sigma <= 1.0, "range_sigma", f"expected 0..1 m, got {range_sigma}")
+    _check(0 <= p_short <= 1, "p_short", f"expected 0..1, got {p_short}")
+    _check(0 <= p_max <= 1 and p_short + p_max <= 1, "p_max", f"expected 0..1 with p_short + p_max <= 1, got {p_max} "
+           f"(p_short {p_short})")
+    _check(len(odom_alphas) == 4 and all(math.isfinite(a) and 0 <= a <= 100 for a in odom_alphas), "odom_alphas",
+           f"expected four values in 0..100, got {list(odom_alphas)}")
     _check(0.5 <= odom_scale <= 1.5, "odom_scale", f"expected 0.5..1.5, got {odom_scale}")
+    _check(math.isfinite(odom_yaw_drift) and abs(odom_yaw_drift) <= 0.5, "odom_yaw_drift",
+           f"expected -0.5..0.5 rad per metre, got {odom_yaw_drift}")
     _check(0.1 <= speed <= 2.0, "speed", f"expected 0.1..2 m/s, got {speed}")
     _check(0.1 <= turn_rate <= 3.0, "turn_rate", f"expected 0.1..3 rad/s, got {turn_rate}")
     _check(isinstance(dynamic_obstacles, (int, np.integer)) and 0 <= dynamic_obstacles <= 200, "dynamic_obstacles",
@@ -1075,6 +1080,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "beam first); at most one scan period, needs --dynamic-obstacles 0 --unmapped-furniture 0. "
                         "A bag (--format) carries |S| as LaserScan time_increment; default 0 (every beam at the "
                         "stamp)")
+    noise = parser.add_argument_group(
+        "noise", "the laser's and the odometry's (default: the values below, as suites/synthetic.yaml's worlds have)")
+    noise.add_argument("--range-sigma", type=float, default=None, metavar="M",
+                       help="std of a hit's range error (sigma_hit); default 0.02 m")
+    noise.add_argument("--p-short", type=float, default=None, metavar="P",
+                       help="share of beams ending short, uniformly before the wall; default 0.03")
+    noise.add_argument("--p-max", type=float, default=None, metavar="P",
+                       help="share of beams returning nothing (written as the maximum range); default 0.01")
+    noise.add_argument("--odom-alphas", default=None, metavar="A1,A2,A3,A4",
+                       help="the odometry motion model's alpha1..alpha4, variance form (Table 5.6: the variance of "
+                       "rot1 is alpha1 rot1^2 + alpha2 trans^2, ...); default 0.05,0.05,0.05,0.02")
+    noise.add_argument("--odom-scale", type=float, default=None, metavar="S",
+                       help="every odometry translation times S (a wheel radius off), 0.5-1.5; default 1.01")
+    noise.add_argument("--odom-yaw-drift", type=float, default=None, metavar="R",
+                       help="rad of heading error per metre travelled; default 0.01. Set --odom-scale 1 "
+                       "--odom-yaw-drift 0 for odometry with the motion model's noise only (to check mcl calibrate)")
     parser.add_argument("--ground-hits", type=int, default=0, metavar="G",
                         help="tilt the laser onto the ground G times over the run, 2 s each: a line of returns "
                         "1.5-5 m ahead, moving every scan, on no map (a robot rocking on a ramp); default 0")
@@ -1098,7 +1119,13 @@ def write_log_as_bag(outdir, fmt: str, sweep: float = 0.0) -> Path:
 
 
 def _simulate_from_args(args: argparse.Namespace) -> dict:
-    return simulate(args.outdir, kind=args.kind, seed=args.seed, duration=args.duration, range_max=args.range_max,
+    noise = {k: getattr(args, k, None) for k in ("range_sigma", "p_short", "p_max", "odom_scale", "odom_yaw_drift")}
+    if getattr(args, "odom_alphas", None) is not None:
+        try:
+            noise["odom_alphas"] = tuple(float(v) for v in args.odom_alphas.split(","))
+        except ValueError:
+            raise ConfigError(f"--odom-alphas: expected four numbers A1,A2,A3,A4, got {args.odom_alphas!r}") from None
+    return simulate(args.outdir, **{k: v for k, v in noise.items() if v is not None}, kind=args.kind, seed=args.seed, duration=args.duration, range_max=args.range_max,
                     n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
                     dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                     landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
