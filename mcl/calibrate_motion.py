@@ -80,7 +80,7 @@ def pairs_from_log(log_path, truth_path):
     t, poses = read_tum(truth_path)
     order = np.argsort(t, kind="stable")
     t, poses = t[order], poses[:, order]
-    log = read_carmen(log_path)
+    log = read_carmen(log_path, need_laser=False)  # ODOM lines are enough
     odo = np.asarray(log.odometry, dtype=np.float64)
     if odo.size == 0:
         rows = [(s.t, *s.odom[:3]) for s in log.scans if s.odom is not None]

@@ -13,6 +13,7 @@ Seed fixed; 1,200 pairs give a relative standard error of about 5-15 % per
 alpha, so 30 % is a 2-6 sigma bound (measured: within 18 %).
 """
 
+import json
 import math
 from pathlib import Path
 
@@ -237,3 +238,19 @@ def test_alphas_a_log_cannot_determine_are_said_and_left_out_of_the_block():
     # a log that turns and translates determines all four: nothing is left out
     full = fit_odometry_alphas(*_model_pairs(0))
     assert full["undetermined"] == [] and "alpha1" in yaml.safe_load(format_yaml(full, "variance", "normal"))["motion"]
+
+
+def test_odom_lines_alone_are_a_log_to_fit(tmp_path, capsys):
+    # The help says ODOM lines are enough, but the log was read as for a run and refused: "no laser messages".
+    demo = Path(__file__).resolve().parents[1] / "data" / "demo"
+    odo = tmp_path / "odo.clf"
+    odo.write_text("".join(ln for ln in (demo / "log.clf").read_text().splitlines(True) if ln.startswith("ODOM")))
+    assert main(["calibrate", "motion", "--log", str(odo), "--truth", str(demo / "truth.tum"), "--json"]) == 0
+    alone = json.loads(capsys.readouterr().out)
+    assert main(["calibrate", "motion", "--log", str(demo / "log.clf"), "--truth", str(demo / "truth.tum"),
+                 "--json"]) == 0
+    whole = json.loads(capsys.readouterr().out)
+    assert alone["alphas"] == whole["alphas"] and alone["pairs"] == whole["pairs"] == 350
+    (tmp_path / "none.clf").write_text("PARAM robot_front_laser_max 30\n")
+    assert main(["calibrate", "motion", "--log", str(tmp_path / "none.clf"), "--truth", str(demo / "truth.tum")]) == 2
+    assert "no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4) and no ODOM lines" in capsys.readouterr().err

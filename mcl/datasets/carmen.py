@@ -354,8 +354,9 @@ def _read_bytes(path: str | os.PathLike, name: str, warnings: list[str]) -> byte
     return b"".join(out)
 
 
-def read_carmen(path: str | os.PathLike) -> Log:
-    """Read a CARMEN log (plain or gzip, detected by magic bytes) into a :class:`Log`."""
+def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
+    """Read a CARMEN log (plain or gzip, detected by magic bytes) into a :class:`Log`. ``need_laser`` False (``mcl
+    calibrate motion``): ODOM lines alone are a log too."""
     name = str(path)
     warnings: list[str] = []
     data = _read_bytes(path, name, warnings)
@@ -421,8 +422,9 @@ def read_carmen(path: str | os.PathLike) -> Log:
         warnings.append(f"{name}:{lineno}: {len(damaged)} line{'s' if len(damaged) > 1 else ''} skipped whose "
                         f"message name looks damaged (the first: {_printable_word(word)!r}; a known one misspelt or "
                         "not a name at all)")
-    if not scans and not landmarks:
-        raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4)")
+    if not scans and not landmarks and (need_laser or not odom_rows):
+        raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4)"
+                        + ("" if need_laser else " and no ODOM lines"))
     odometry = np.array(odom_rows, dtype=np.float64).reshape(-1, 6)
     scans = _fill_odom(scans, odometry, name)
     scans = _param_max_range(scans, params)
