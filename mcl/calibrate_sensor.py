@@ -374,6 +374,9 @@ def _check_fit(fit: FitResult, near: float, cfg) -> None:
                       f"{cfg.log}, and {cfg.truth} in its frame?", MclWarning, stacklevel=3)
     if sigma <= _SIGMA_MIN:
         fit.bounds["sigma_hit"] = "lower"
+    dmax = fit.extra.get("likelihood_max_dist") if fit.extra else None
+    if dmax is not None and sigma >= 100.0 * dmax * (1.0 - 1e-6):  # _truncated_sigma's upper bound: a flat field
+        fit.bounds["sigma_hit"] = "upper"
     lam = fit.params.get("lambda_short")
     if lam is not None and lam <= _LAMBDA_MIN:
         fit.bounds["lambda_short"] = "lower"  # g(0+) = sum r (z*/2 - z) <= 0: short readings past z*/2 on average

@@ -222,3 +222,25 @@ def test_a_bag_as_log_says_to_convert_it(sim_log, tmp_path, capsys):
         assert main(["calibrate", "sensor", "--config", str(cfg), *args]) == 2
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and "read CARMEN logs" in err and f"mcl convert {bag}" in err, err
+
+
+def test_a_likelihood_field_sigma_on_its_upper_bound_is_flagged():
+    # On the wrong map the field's fit drifted to sigma_hit = 200 m, the M-step's upper bound (100 dmax: the
+    # truncated half-normal is then flat), and the block printed it as a fit. Now it is flagged like the lower one.
+    from mcl.calibrate_sensor import FitResult, _check_fit, format_yaml
+
+    cfg = load_config(None, [])
+    for sigma, flagged in ((200.0, True), (0.05, False)):
+        fit = FitResult("likelihood_field", dict(z_hit=0.5, z_rand=0.5, sigma_hit=sigma), 1000, -1.0, 10, True,
+                        extra=dict(w_hit=0.5, w_rand=0.5, likelihood_max_dist=2.0, range_max=30.0), scans=10)
+        if flagged:
+            with warnings.catch_warnings(record=True) as said:
+                warnings.simplefilter("always")
+                _check_fit(fit, 0.9, cfg)
+            said = [str(w.message) for w in said if issubclass(w.category, MclWarning)]
+            assert any("the readings do not fit the map" in m for m in said)  # sigma_hit above 0.5 m, as before
+            assert "calibrate sensor: sigma_hit landed on its upper bound 200" in said
+            assert fit.bounds == {"sigma_hit": "upper"} and "# on its upper bound" in format_yaml(fit)
+        else:
+            _check_fit(fit, 0.9, cfg)
+            assert fit.bounds == {}
