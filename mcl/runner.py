@@ -753,15 +753,21 @@ def _run(
     viz = None
     rrd_path = out_dir / "recording.rrd"
     if cfg.rerun.mode != "off":
-        from mcl.viz import RerunLogger, particles_every_within
+        from mcl.viz import RerunLogger, particles_every_within, recording_floor_mb
 
         # the first scans tell the laser (a bag's scans are a stream: no slicing, and each pass reads the bag)
         beams = max((len(s.ranges) for s in itertools.islice(scans, 1000)), default=0)
         logged = min(cfg.rerun.particles_max, fc.particles)  # the cloud logged: at most the filter's (KLD's maximum)
         every = particles_every_within(cfg.rerun.budget_mb, len(updates), beams, logged,
                                        cfg.rerun.particles_every, cfg.rerun.scan)
-        if every > cfg.rerun.particles_every:
-            echo(f"mcl: recording: the particle cloud on one update in {every}, to keep {len(updates)} updates near "
+        floor = recording_floor_mb(len(updates), beams, cfg.rerun.scan)
+        if cfg.rerun.budget_mb > 0 and floor > cfg.rerun.budget_mb:
+            # the estimates and scans alone are over: thinning the cloud cannot keep the budget; say so, not that it is kept
+            echo(f"mcl: warning: recording: the estimates and {beams}-beam scans of {len(updates)} scans alone take "
+                 f"about {floor:.0f} MB, over rerun.budget_mb ({cfg.rerun.budget_mb:g} MB): the cloud is logged on the "
+                 "first update only; rerun.scan: false or a larger budget")
+        elif every > cfg.rerun.particles_every:
+            echo(f"mcl: recording: the particle cloud on one update in {every}, to keep {len(updates)} scans near "
                  f"rerun.budget_mb ({cfg.rerun.budget_mb:g} MB)")
         viz = RerunLogger(
             cfg.rerun.mode,

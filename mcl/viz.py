@@ -399,8 +399,17 @@ def _log_grid_image(rec: Any, path: str, grid: Any, img: np.ndarray, mode: str, 
 
 # Bytes a recording takes per update, measured on generated worlds (rerun-sdk 0.41, 181-beam scan, 150 updates):
 CLOUD_POINT_BYTES = 12.5  # a logged particle (f32 x, y, RGBA colour, radius; the weight histogram with them): 11.6-12.3
-SCAN_POINT_BYTES = 10.0  # a scan endpoint (f32 x, y): 9.6
+# The scan (world/scan and world/scan/expected, f32 x, y each) compresses better the more beams it has: 9.1 B a beam
+# at 181 beams, 5.8 at 1,440, 5.6 at 2,880 (3,000 updates of each): a fixed part and a per-beam part, not 10 B a beam
+SCAN_FIXED_BYTES = 700.0
+SCAN_POINT_BYTES = 5.8
 STEP_BYTES = 1500.0  # the estimate, its ellipse, the trails and the stats: 1,350
+
+
+def recording_floor_mb(updates: int, beams: int, log_scan: bool = True) -> float:
+    """MB (10^6 bytes) the estimates and scans of ``updates`` updates take: what no ``particles_every`` thins."""
+    per_update = STEP_BYTES + ((SCAN_FIXED_BYTES + SCAN_POINT_BYTES * beams) if log_scan and beams else 0.0)
+    return per_update * max(int(updates), 0) / 1e6
 
 
 def particles_every_within(budget_mb: float, updates: int, beams: int, particles_max: int,
@@ -412,8 +421,8 @@ def particles_every_within(budget_mb: float, updates: int, beams: int, particles
     every = max(int(particles_every), 1)
     if budget_mb <= 0.0 or particles_max <= 0 or updates <= 0:
         return every
-    per_update = STEP_BYTES + (SCAN_POINT_BYTES * beams if log_scan else 0.0)
-    fits = int((budget_mb * 1e6 - per_update * updates) // (CLOUD_POINT_BYTES * particles_max))  # clouds in budget
+    fits = int((budget_mb - recording_floor_mb(updates, beams, log_scan)) * 1e6
+               // (CLOUD_POINT_BYTES * particles_max))  # clouds in budget
     if -(-updates // every) <= fits:  # ceil(updates / every) clouds
         return every
     if fits <= 1:

@@ -592,7 +592,7 @@ def test_particles_every_within_a_budget():
     # the bound holds exactly: the chosen stride fits, one less does not
     for u in (1_000, 2_000, 3_001):  # 5.1-15.3 MB of estimates and scans
         k = particles_every_within(20, u, 360, 2000)
-        per = viz.STEP_BYTES + viz.SCAN_POINT_BYTES * 360
+        per = viz.recording_floor_mb(1, 360) * 1e6
         assert per * u + viz.CLOUD_POINT_BYTES * 2000 * math.ceil(u / k) <= 20e6
         assert per * u + viz.CLOUD_POINT_BYTES * 2000 * math.ceil(u / (k - 1)) > 20e6
 
@@ -607,7 +607,7 @@ def test_a_run_past_its_recording_budget_logs_the_cloud_on_fewer_updates(tmp_pat
     from mcl.simulate import simulate
 
     simulate(tmp_path / "w", kind="office", seed=3, duration=20.0)
-    per = viz.STEP_BYTES + viz.SCAN_POINT_BYTES * 181
+    per = viz.recording_floor_mb(1, 181) * 1e6
     budget = (per * 101 + viz.CLOUD_POINT_BYTES * 1000 * 26 + 500) / 1e6  # (+500 B: not at the edge of a float)
     said: list[str] = []
 
@@ -632,3 +632,34 @@ def test_a_run_past_its_recording_budget_logs_the_cloud_on_fewer_updates(tmp_pat
     s1, _ = go("unbounded", "rerun.budget_mb=0")
     assert s1["recording_particles_every"] == 1 and not any("budget" in m for m in said), said
 
+    # a budget the estimates and scans alone pass: no stride keeps it, and the line says so (it said "to keep")
+    said.clear()
+    s2, _ = go("under", f"rerun.budget_mb={per * 101 / 2e6}")
+    assert s2["recording_particles_every"] == 101
+    assert any("alone take about" in m and "over rerun.budget_mb" in m for m in said), said
+    assert not any("to keep" in m for m in said), said
+
+
+def test_the_scan_cost_per_beam_falls_with_the_beam_count(tmp_path):
+    # The budget charged 10 B a beam, as measured at 181 beams; scans of 1,440 and 2,880 beams compress to about
+    # 5.8 B a beam, so an hour of a 2,880-beam laser was given one cloud in all (18,001 updates) in 311 MB of a
+    # 500 MB budget. The model is now 700 B + 5.8 B a beam: the scans' measured bytes (this run with and without
+    # them) must lie within it and above 80 % of it (a model far above the cost thins the cloud for nothing).
+    from mcl.config import PROJECT_ROOT, load_config
+    from mcl.runner import run
+    from mcl.simulate import simulate
+
+    simulate(tmp_path / "w", kind="office", seed=3, duration=12.0, n_beams=1440, fov=2 * math.pi, range_max=30.0)
+
+    def size(name, scan):
+        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+            f"map={tmp_path / 'w' / 'map.yaml'}", f"log={tmp_path / 'w' / 'log.clf'}", "rerun.mode=save",
+            "rerun.particles_max=0", f"rerun.scan={str(scan).lower()}"])
+        s = run(cfg, tmp_path / name, progress=False, echo=lambda m: None)
+        return (tmp_path / name / "recording.rrd").stat().st_size, s["updates"]
+
+    with_scan, updates = size("scan", True)
+    without, _ = size("noscan", False)
+    per_scan = (with_scan - without) / updates
+    model = viz.recording_floor_mb(1, 1440) * 1e6 - viz.STEP_BYTES
+    assert 0.8 * model <= per_scan <= model, (per_scan, model)
