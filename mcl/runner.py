@@ -23,6 +23,7 @@ import functools
 import itertools
 import json
 import math
+import os
 import signal
 import sys
 import time
@@ -85,6 +86,31 @@ def check_out_dir(out: Path, flag: str = "--out") -> None:
         if names and "config.yaml" not in names:  # a trajectory.tum of the user's own, say
             raise ConfigError(f"{flag} {out}: the folder holds {', '.join(names)} but no config.yaml: not an "
                               "mcl run's folder; choose a new or empty folder")
+
+
+def _failure_text(failure: BaseException, out_dir: Path | None = None) -> str:
+    """What stopped a run, in one phrase: an output that could not be written as "FILE: cannot write: REASON"."""
+    if isinstance(failure, OSError):
+        return f"{failure.filename or out_dir}: cannot write: {failure.strerror or failure}"
+    return str(failure)
+
+
+def _lock_out_dir(out_dir: Path) -> int | None:
+    """An exclusive lock on the run's folder for as long as the run writes there (flock on the folder itself: no
+    lock file, released by the kernel if the process dies). ConfigError when another run holds it: two runs into
+    one folder would delete each other's recording and mix their config.yaml, trajectory and summary."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        return None
+    fd = os.open(out_dir, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise ConfigError(f"--out {out_dir}: another mcl run is writing in this folder now: wait for it to end, or "
+                          "choose another folder") from None
+    return fd
 
 
 def _clear_run_outputs(out_dir: Path) -> None:
@@ -497,7 +523,11 @@ def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     that came after the summary was made (the run is whole) sets ``summary["late_signal"]`` instead.
     """
     with _Interrupts() as signals, small_pages():
-        summary = _run(cfg, out_dir, signals, **kwargs)
+        try:
+            summary = _run(cfg, out_dir, signals, **kwargs)
+        finally:
+            if getattr(signals, "lock_fd", None) is not None:
+                os.close(signals.lock_fd)
     # A signal noted after the summary was made (while it was written): the run is whole, but the caller must
     # still hear of the Ctrl-C (mcl eval and mcl tune run jobs in this process with --jobs 1).
     summary["late_signal"] = signals.caught and not summary["interrupted"]
@@ -745,6 +775,7 @@ def _run(
     out_dir = Path(out_dir)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
+        signals.lock_fd = _lock_out_dir(out_dir)  # released as run() returns
         _clear_run_outputs(out_dir)
         atomic_write_text(out_dir / "config.yaml", dump_config(cfg))
     except OSError as e:
@@ -913,12 +944,14 @@ def _run(
         failure = e
     finally:
         bar.close()
-        writer.close()
-        quality_out.close()
-        if bag_out is not None:
-            bag_out.close()
-        if viz is not None:
-            viz.close()
+        # each output is closed whatever another's close raised (a full disk): what could be written is kept
+        for out_file in (writer, quality_out, bag_out, viz):
+            if out_file is None:
+                continue
+            try:
+                out_file.close()
+            except (OSError, RuntimeError) as e:
+                failure = failure if failure is not None else e
     loop_time = time.perf_counter() - loop0
     interrupted = interrupted or signals.caught  # also a signal while the outputs were closed
 
@@ -926,7 +959,8 @@ def _run(
     summary: dict = {
         "mode": mode,
         "interrupted": interrupted,
-        **({"error": f"stopped after {counts['updates']} updates: {failure}"} if failure is not None else {}),
+        **({"error": f"stopped after {counts['updates']} updates: {_failure_text(failure)}"}
+           if failure is not None else {}),
         "map": cfg.map,
         "log": cfg.log,
         "bag": cfg.bag,
@@ -982,8 +1016,15 @@ def _run(
             )
         except DataError as e:
             summary["eval"] = {"error": str(e)}
-    atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    try:
+        atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    except OSError:
+        if failure is None:
+            raise
     if failure is not None:  # one error line from the caller; the folder holds the poses up to it, and says so
+        if isinstance(failure, OSError):  # an output mcl could not write: named, with what is kept
+            raise DataError(f"{_failure_text(failure, out_dir)} (stopped after {counts['updates']} updates; the poses "
+                            f"written so far are in {out_dir})") from None
         if isinstance(failure, MclError):
             raise type(failure)(f"{failure} (stopped after {counts['updates']} updates; the poses so far and a "
                                 f"summary.json that says so are in {out_dir})") from None

@@ -41,11 +41,13 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
         # mkstemp creates 0600; give the file the permissions open() would have.
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         try:
             os.unlink(tmp)
         except OSError:
             pass
+        if isinstance(e, OSError) and e.filename in (None, tmp):  # named by the user's path, not the temp file's
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from None
         raise
 
 
@@ -147,27 +149,52 @@ class LineWriter:
         self.partial = self.path.with_name(self.path.name + ".partial")
         self._f = open(self.partial, "w", encoding="utf-8")
         self.count = 0
+        self._good = 0  # bytes of whole lines known to be in the file
+        self._error: OSError | None = None
         if header is not None:
-            self._f.write(header if header.endswith("\n") else header + "\n")
+            self._put(header if header.endswith("\n") else header + "\n")
+
+    def _named(self, e: OSError) -> OSError:
+        return OSError(e.errno, e.strerror or str(e), str(self.path))
+
+    def _put(self, text: str) -> None:
+        try:
+            self._f.write(text)
+            self._f.flush()
+        except OSError as e:  # a full disk, a file size limit: the lines before this one stay whole
+            self._error = self._error or e
+            raise self._named(e) from None
+        self._good += len(text.encode("utf-8"))
 
     def write_line(self, line: str) -> None:
         if self._f is None:
             raise ValueError(f"{type(self).__name__}({self.path}): append after close")
-        self._f.write(line if line.endswith("\n") else line + "\n")
-        self._f.flush()
+        self._put(line if line.endswith("\n") else line + "\n")
         self.count += 1
 
     def close(self) -> None:
-        """Flush, fsync and rename the partial file to the final name (idempotent)."""
+        """Flush, fsync and rename the partial file to the final name (idempotent). After a failed write the
+        file is cut back to its last whole line and renamed all the same (the lines so far are kept), and the
+        write's error is raised, named by the final path."""
         if self._f is None:
             return
         f, self._f = self._f, None
+        error = self._error
         try:
             f.flush()
             os.fsync(f.fileno())
+        except OSError as e:
+            error = error or e
         finally:
-            f.close()
+            try:
+                f.close()
+            except OSError as e:  # the buffer's unwritten tail
+                error = error or e
+        if error is not None:
+            os.truncate(self.partial, self._good)  # shrinking a file needs no space
         os.replace(self.partial, self.path)
+        if error is not None:
+            raise self._named(error) from None
 
     @property
     def closed(self) -> bool:

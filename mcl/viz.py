@@ -717,10 +717,18 @@ class RerunLogger:
         self._flush_columns(rec)
         if self._blueprint_key is None:
             self._send_blueprint_to(rec)
-        if self.mode == "spawn":  # a viewer that died (closed, its display gone) must not hold the run for good
-            rec.flush(timeout_sec=SPAWN_FLUSH_S)
-        else:
-            rec.flush()
+        try:
+            if self.mode == "spawn":  # a viewer that died (closed, its display gone) must not hold the run for good
+                rec.flush(timeout_sec=SPAWN_FLUSH_S)
+            else:
+                rec.flush()
+        except RuntimeError as e:  # the file sink failed (a full disk): one error naming the recording
+            import errno
+
+            if self.path is not None and self.path.exists():  # cut short: not under its final name
+                os.replace(self.path, self.path.with_name(self.path.name + ".partial"))
+            raise OSError(errno.EIO, f"the recording could not be written ({e}); what was written is in "
+                          f"{self.path.name}.partial", str(self.path)) from None
         if self.mode == "serve":
             # Disconnecting, or dropping the stream with this logger when the run returns, shuts the gRPC server
             # down before a viewer could read the buffered data: keep the stream for the rest of the process.

@@ -133,3 +133,55 @@ def test_a_bad_input_found_mid_run_keeps_the_poses_and_the_summary_says_why(worl
     poses = (out / "trajectory.tum").read_text().splitlines()
     assert len(poses) == summary["updates"] + summary["predicted_poses"] >= 10
     assert not list(out.glob("*.partial"))
+
+
+def test_a_full_disk_mid_run_keeps_the_whole_lines_and_says_which_file(world, tmp_path):
+    # A file size limit (a full disk, as `ulimit -f` makes it) hit by the trajectory: the error was "File too
+    # large" naming no file, the trajectory stayed as .partial with a line cut in half, the other outputs were never
+    # closed and no summary.json was written. Now one line names the file and what was kept, the trajectory holds
+    # its whole lines under its own name, and summary.json says the run stopped.
+    import resource
+    import subprocess
+    import sys
+
+    simulate(tmp_path / "w", seed=3, duration=30.0)  # 151 scans: a trajectory of about 10 kB
+    out = tmp_path / "full"
+    limit = 6_000  # bytes: config.yaml (4 kB) and summary.json (2.3 kB) fit, the trajectory does not
+
+    def cap():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    w = tmp_path / "w"
+    p = subprocess.run([sys.executable, "-m", "mcl", "run", "--map", str(w / "map.yaml"), "--log",
+                        str(w / "log.clf"), "--particles", "300", "--rerun", "off", "--no-progress", "--out",
+                        str(out)], preexec_fn=cap, capture_output=True, text=True, timeout=300)
+    errors = [ln for ln in p.stderr.splitlines() if ln.startswith("mcl: error:")]
+    assert p.returncode == 2 and len(errors) == 1, p.stderr
+    assert "cannot write: File too large (stopped after" in errors[0] and str(out) in errors[0]
+    assert errors[0].split(": ")[2].endswith((".tum", ".csv"))  # the file named, not a temporary one
+    lines = (out / "trajectory.tum").read_text().splitlines()
+    assert lines and all(len(ln.split()) == 8 for ln in lines)  # every line whole
+    assert not list(out.glob("*.partial"))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["error"].startswith("stopped after ") and "trajectory.tum: cannot write: File too large" in \
+        summary["error"], summary
+    assert summary["updates"] + summary["predicted_poses"] == len(lines)  # the poses the trajectory kept
+
+
+def test_a_second_run_into_a_folder_a_run_is_writing_in_is_refused(world, tmp_path, capsys):
+    # Two runs into one --out at once deleted each other's recording and left one's config.yaml beside the other's
+    # trajectory. The folder is locked while a run writes there (flock on the folder: released if the run dies).
+    from mcl.runner import _lock_out_dir
+
+    out = tmp_path / "busy"
+    out.mkdir()
+    fd = _lock_out_dir(out)
+    try:
+        assert _run(world, out) == 2
+        assert _error_lines(capsys) == [f"mcl: error: --out {out}: another mcl run is writing in this folder now: "
+                                        "wait for it to end, or choose another folder"]
+        assert list(out.iterdir()) == []
+    finally:
+        os.close(fd)
+    assert _run(world, out) == 0  # free again
+    assert (out / "trajectory.tum").exists()
