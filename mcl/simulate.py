@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -1135,22 +1136,70 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     unknown_floor=args.unknown_floor)
 
 
+# What ``mcl simulate`` writes into its folder: an earlier world's are replaced whole, anything else is kept
+WORLD_OUTPUTS = ("map.yaml", "map.pgm", "log.clf", "log.bag", "log.db3", "log.mcap", "truth.tum", "sim.yaml",
+                 "landmarks.yaml", "depth")
+
+
+def _check_world_folder(out: Path) -> None:
+    """ConfigError unless ``out`` is new, empty, or an earlier world (its sim.yaml): a folder of other files would
+    get a world's files among its own (a map.yaml of the user's overwritten)."""
+    if not out.is_dir():
+        return
+    entries = sorted(p.name for p in out.iterdir())
+    if entries and "sim.yaml" not in entries:
+        shown = ", ".join(entries[:3]) + (", ..." if len(entries) > 3 else "")
+        raise ConfigError(f"OUTDIR {out}: holds files ({shown}) and no sim.yaml: not an earlier world; choose a "
+                          "new or empty folder")
+
+
+def _swap_world(tmp: Path, out: Path) -> None:
+    """The world made in ``tmp`` put in place of ``out``'s earlier one: every file an earlier world had goes (a
+    bag, landmarks or depth frames of another run stayed beside the new map and log), others (a README) stay."""
+    import shutil
+
+    out.mkdir(parents=True, exist_ok=True)
+    for name in WORLD_OUTPUTS:
+        old = out / name
+        if old.is_dir() and not old.is_symlink():
+            shutil.rmtree(old)
+        elif old.exists() or old.is_symlink():
+            old.unlink()
+    for p in sorted(tmp.iterdir()):
+        os.replace(p, out / p.name)
+    tmp.rmdir()
+
+
 def run_from_args(args: argparse.Namespace) -> int:
-    """Run ``mcl simulate`` from parsed arguments; prints a one-line summary."""
+    """Run ``mcl simulate`` from parsed arguments; prints a one-line summary. The world is made in a folder beside
+    OUTDIR and moved in when whole: an error or Ctrl-C leaves OUTDIR as it was."""
+    import shutil
+    import tempfile
+
     from mcl.trajectory import check_writable_folder
 
-    check_writable_folder(args.outdir, f"OUTDIR {args.outdir}")
+    out = Path(args.outdir)
+    check_writable_folder(out, f"OUTDIR {args.outdir}")
+    _check_world_folder(out)
+    parent = out.resolve().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name}."))
     try:
-        s = _simulate_from_args(args)
-    except ConfigError as e:  # a parameter named as the command line spells it: "simulate: n_beams" -> "--beams"
-        key, _, msg = str(e).removeprefix("simulate: ").partition(": ")
-        option = {"n_beams": "beams"}.get(key, key)
-        if not hasattr(args, option):
-            raise
-        raise ConfigError(f"--{option.replace('_', '-')}: {msg}") from None
-    fmt = getattr(args, "format", "clf")
-    if fmt != "clf":
-        write_log_as_bag(s["outdir"], fmt, sweep=args.scan_sweep)
+        try:
+            s = _simulate_from_args(argparse.Namespace(**{**vars(args), "outdir": str(tmp)}))
+        except ConfigError as e:  # a parameter named as the command line spells it: "simulate: n_beams" -> "--beams"
+            key, _, msg = str(e).removeprefix("simulate: ").partition(": ")
+            option = {"n_beams": "beams"}.get(key, key)
+            if not hasattr(args, option):
+                raise
+            raise ConfigError(f"--{option.replace('_', '-')}: {msg}") from None
+        fmt = getattr(args, "format", "clf")
+        if fmt != "clf":
+            write_log_as_bag(tmp, fmt, sweep=args.scan_sweep)
+        _swap_world(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    s["outdir"] = str(out)
     x, y, th = s["start_pose"]
     msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
            f"start pose {x:.3f} {y:.3f} {th:.3f}")

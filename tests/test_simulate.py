@@ -550,3 +550,47 @@ def test_the_noise_is_set_from_the_command_line(tmp_path, capsys):
     assert main(["simulate", str(tmp_path / "bad"), "--odom-alphas", "0.1,0.1"]) == 2
     assert "--odom-alphas: expected four values in 0..100" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+
+
+def test_a_world_made_again_replaces_the_earlier_whole_and_a_stopped_one_leaves_it(tmp_path, capsys, monkeypatch):
+    # Into an earlier world's folder, seed 0's bag, landmarks and depth frames stayed beside seed 3's map and log;
+    # Ctrl-C mid-way left a half-swapped world; a user's own map.yaml was overwritten. Now the world is made beside
+    # the folder and moved in whole: an earlier world's files all go (a README stays), a folder of other files is
+    # refused, and a stopped run leaves the folder as it was.
+    import mcl.simulate as sim
+    from mcl.cli import main
+
+    w = tmp_path / "w"
+    assert main(["simulate", str(w), "--duration", "4", "--landmarks", "3", "--format", "mcap"]) == 0
+    (w / "README.md").write_text("mine\n")
+    assert {"landmarks.yaml", "log.mcap"} <= {p.name for p in w.iterdir()}
+    assert main(["simulate", str(w), "--duration", "4", "--seed", "3"]) == 0
+    assert sorted(p.name for p in w.iterdir()) == ["README.md", "log.clf", "map.pgm", "map.yaml", "sim.yaml",
+                                                   "truth.tum"]
+    before = {p.name: p.read_bytes() for p in w.iterdir()}
+
+    def stopped(*_a, **_k):
+        raise KeyboardInterrupt
+
+    import mcl.trajectory
+
+    monkeypatch.setattr(mcl.trajectory, "write_tum", stopped)  # Ctrl-C while the new world is being written
+    with pytest.raises(KeyboardInterrupt):
+        sim.run_from_args(_parsed(["simulate", str(w), "--seed", "5", "--duration", "4"]))
+    monkeypatch.undo()
+    assert {p.name: p.read_bytes() for p in w.iterdir()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["w"]  # no temporary folder left beside it
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "map.yaml").write_text("my map\n")
+    capsys.readouterr()
+    assert main(["simulate", str(mine), "--duration", "4"]) == 2
+    assert "holds files (map.yaml) and no sim.yaml: not an earlier world" in capsys.readouterr().err
+    assert (mine / "map.yaml").read_text() == "my map\n"
+
+
+def _parsed(argv):
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers(dest="command")
+    add_arguments(sub.add_parser("simulate"))
+    return p.parse_args(argv)
