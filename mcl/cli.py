@@ -492,10 +492,13 @@ def cmd_convert(args) -> int:
         raise MclError(f"{args.out}: exists already")
     if not out.parent.is_dir():  # a mistyped folder is not made
         raise MclError(f"{args.out}: the folder {out.parent} does not exist")
+    from mcl.suite import TermAsInterrupt
+
     try:
-        n = convert(args.src, args.out, topics=cfg.topics, frames=cfg.frames, odom=args.odom, mount=args.mount,
-                    grid=grid, initial=initial, truth=truth, echo=lambda m: print(m, file=sys.stderr),
-                    truth_name=str(args.truth))
+        with TermAsInterrupt():  # SIGTERM (kill, timeout) stops it as Ctrl-C does: the output not left half-written
+            n = convert(args.src, args.out, topics=cfg.topics, frames=cfg.frames, odom=args.odom, mount=args.mount,
+                        grid=grid, initial=initial, truth=truth, echo=lambda m: print(m, file=sys.stderr),
+                        truth_name=str(args.truth))
     except OSError as e:  # named by the user's path, not a temp file's
         raise MclError(f"{args.out}: cannot write: {e.strerror or e}") from None
     print(f"{args.out}: {n} scans")

@@ -1275,3 +1275,38 @@ def _laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.
                                 angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0,
                                 range_min=range_min, range_max=s.max_range, ranges=r,
                                 intensities=np.zeros(0, dtype=np.float32)))
+
+
+@pytest.mark.parametrize("suffix", ["mcap", "clf"])
+def test_convert_stopped_by_sigterm_leaves_nothing(tmp_path, suffix):
+    # SIGTERM (kill, timeout) killed `mcl convert` at once: no line, and a .partial file or a hidden temporary bag
+    # folder left behind. Now it stops as Ctrl-C does (exit 130, "mcl: interrupted") and removes what it wrote.
+    # The signal is sent by the process to itself at the 20th scan written.
+    import subprocess
+    import sys
+
+    demo = Path(__file__).resolve().parents[1] / "data" / "demo" / "log.clf"
+    src = demo
+    if suffix == "clf":  # a bag to convert back
+        src = tmp_path / "in.mcap"
+        assert main(["convert", str(demo), str(src)]) == 0
+    out = tmp_path / "out" / f"x.{suffix}"
+    out.parent.mkdir()
+    hook = ("_clf_line_of" if suffix == "clf" else "BagOut.write")
+    code = f"""
+import os, signal, sys
+import mcl.datasets.bagwrite as bw
+from mcl.cli import main
+owner, name = (bw.BagOut, "write") if "{hook}" == "BagOut.write" else (bw, "_clf_line_of")
+real, n = getattr(owner, name), [0]
+def counted(*a, **k):
+    n[0] += 1
+    if n[0] == 20:
+        os.kill(os.getpid(), signal.SIGTERM)
+    return real(*a, **k)
+setattr(owner, name, counted)
+sys.exit(main(["convert", {str(src)!r}, {str(out)!r}]))
+"""
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 130 and p.stderr.strip().endswith("mcl: interrupted"), p.stderr
+    assert list(out.parent.iterdir()) == []

@@ -359,7 +359,10 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=No
             w.write_line(_clf_line_of(s).rstrip("\n"))
             n += 1
     except BaseException:
-        w._f.close()  # noqa: SLF001 - drop the partial file: nothing half-written
+        try:
+            w._f.close()  # noqa: SLF001 - drop the partial file: nothing half-written
+        except OSError:  # its buffered tail could not be written either (a full disk): dropped all the same
+            pass
         os.unlink(w.partial)
         raise
     w.close()
