@@ -12,6 +12,7 @@ import argparse
 import dataclasses
 import math
 import textwrap
+from pathlib import Path
 
 import numpy as np
 
@@ -97,7 +98,13 @@ def render_png(path, pose, panels, title: str = "") -> None:
         ex, ey = to_px(pose[0] + 0.08 * span * math.cos(pose[2]), pose[1] + 0.08 * span * math.sin(pose[2]), k)
         d.line([px, py, ex, ey], fill=(220, 0, 0), width=3)
         d.ellipse([px - 4, py - 4, px + 4, py + 4], outline=(220, 0, 0), width=2)
-    img.save(path)
+    import io
+
+    from mcl.trajectory import atomic_write_bytes
+
+    buf = io.BytesIO()
+    img.save(buf, format="PNG")
+    atomic_write_bytes(path, buf.getvalue())  # a failed write keeps an earlier file whole
 
 
 def _parse_alphas(texts, model: str):
@@ -147,6 +154,11 @@ def run_from_args(args) -> int:
     if not 1 <= args.samples <= 10_000_000 or not 1 <= args.steps <= 1000:
         raise MclError("--samples must be 1..1e7 and --steps 1..1000")
     cfg = load_config(args.config, list(args.set))
+    out = Path(str(args.out))
+    if not out.name.lower().endswith((".png", ".rrd")):
+        raise MclError(f"--out {out}: expected a .png or .rrd file")
+    if not out.parent.is_dir():  # said before the sampling, not after it
+        raise MclError(f"--out {out}: the folder {out.parent} does not exist")
     odom = tuple(args.odom) if args.odom else (0.0, 0.0, 0.0, math.cos(0.25), math.sin(0.25), 0.5)
     for option, values in (("--pose", args.pose), ("--odom", odom)):
         if not all(math.isfinite(v) for v in values):
@@ -160,14 +172,14 @@ def run_from_args(args) -> int:
     control = (f"odom ({', '.join(f'{v:.4g}' for v in odom[:3])}) -> ({', '.join(f'{v:.4g}' for v in odom[3:])})"
                if model == "odometry" else f"v={vel[0]:g} w={vel[1]:g} dt={vel[2]:g}")
     title = f"{model} model, {control}, noise {cfg.motion.noise} ({cfg.motion.noise_form}), {args.samples} samples x {args.steps}"
-    out = str(args.out)
-    if out.endswith(".rrd"):
-        from mcl.viz import log_motion_samples
+    try:
+        if out.name.lower().endswith(".rrd"):
+            from mcl.viz import log_motion_samples
 
-        log_motion_samples(out, pose, panels)
-    elif out.lower().endswith(".png"):
-        render_png(out, pose, panels, title)
-    else:
-        raise MclError(f"--out {out}: expected a .png or .rrd file")
+            log_motion_samples(out, pose, panels)
+        else:
+            render_png(out, pose, panels, title)
+    except OSError as e:
+        raise MclError(f"--out {out}: cannot write: {e.strerror or e}") from None
     print(f"wrote {out}: {len(panels)} panel(s), {title}")
     return 0

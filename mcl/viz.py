@@ -1034,6 +1034,9 @@ def log_line_features(logger: RerunLogger, segments: np.ndarray) -> None:
     )
 
 
+EXPLORE_FLUSH_S = 120.0  # s: the longest a motion-sample recording's write may take before it is given up
+
+
 def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) -> None:
     """Write samples of a motion model (``mcl explore motion``) to a Rerun recording at ``path``.
 
@@ -1041,8 +1044,10 @@ def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) 
     ``motion/<k>``, offset along x so the panels sit side by side; the
     start pose is ``motion/<k>/start``; one ``step`` per application.
     """
+    path = Path(path)
+    partial = path.with_name(path.name + ".partial")  # renamed when whole: a failed write keeps an earlier file
     rec = rr.RecordingStream("mcl_explore_motion", recording_id=str(uuid.uuid4()))
-    rec.save(str(path))
+    rec.save(str(partial))
     allp = np.concatenate([c for _, clouds in panels for c in clouds], axis=1)
     span = float(max(np.ptp(allp[0]), np.ptp(allp[1]), 1e-3)) * 1.3
     for k, (label, clouds) in enumerate(panels):
@@ -1055,7 +1060,22 @@ def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) 
             rec.set_time("step", sequence=j)
             rec.log(f"motion/{k}/samples", rr.Points2D(np.stack([c[0] + dx, c[1]], axis=1), radii=0.003 * span,
                                                        colors=[[40, 40, 160]]))
-    rec.flush()
+    import errno
+
+    try:
+        rec.flush(timeout_sec=EXPLORE_FLUSH_S)  # a file sink that failed (a full disk) hung an untimed flush
+        rec.disconnect()
+    except RuntimeError as e:
+        partial.unlink(missing_ok=True)
+        raise OSError(errno.EIO, f"the recording could not be written ({e})", str(path)) from None
+    if not partial.exists() or partial.stat().st_size == 0:
+        partial.unlink(missing_ok=True)
+        raise OSError(errno.EIO, "the recording could not be written", str(path))
+    try:
+        os.replace(partial, path)
+    except OSError:
+        partial.unlink(missing_ok=True)
+        raise
 
 
 # -- plane features (mcl.planes) ----------------------------------------------------------------

@@ -61,6 +61,38 @@ def test_explore_motion_needs_a_finite_pose_and_odometry(tmp_path, capsys, args,
     assert not (tmp_path / "m.png").exists()
 
 
+@pytest.mark.parametrize("name", ["m.png", "m.rrd"])
+def test_explore_output_missing_folder_and_failed_write(tmp_path, capsys, monkeypatch, name):
+    # --out nodir/m.rrd was a traceback (after sampling); a failed write (a full disk) cut an earlier good PNG in
+    # place, and the recording's untimed flush could hang. Now the folder is checked first, and a failed write is
+    # one line that keeps the earlier file whole.
+    assert main(["explore", "motion", "--samples", "200", "--out", str(tmp_path / "nodir" / name)]) == 2
+    assert _one_error(capsys) == f"mcl: error: --out {tmp_path / 'nodir' / name}: the folder {tmp_path / 'nodir'} does not exist"
+    good = tmp_path / name
+    assert main(["explore", "motion", "--samples", "200", "--out", str(good)]) == 0
+    before = good.read_bytes()
+    if name.endswith(".rrd"):  # whole under its own name (written as .partial, renamed after the flush)
+        from rerun.chunk import RrdReader
+
+        assert "/motion/0/samples" in {str(c.entity_path) for c in RrdReader(good).stream().to_chunks()}
+    capsys.readouterr()
+    import mcl.trajectory
+    import mcl.viz
+
+    def full(*_a, **_k):
+        raise OSError(28, "No space left on device")
+
+    if name.endswith(".png"):
+        monkeypatch.setattr(mcl.trajectory.os, "replace", full)
+    else:
+        monkeypatch.setattr(mcl.viz.os, "replace", full)
+    assert main(["explore", "motion", "--samples", "200", "--seed", "3", "--out", str(good)]) == 2
+    monkeypatch.undo()
+    assert _one_error(capsys) == f"mcl: error: --out {good}: cannot write: No space left on device"
+    assert good.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]  # no temporary file left
+
+
 def test_eval_of_trajectories_on_two_clocks_names_both_and_their_spans(tmp_path, capsys):
     import numpy as np
 
