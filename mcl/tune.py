@@ -484,12 +484,43 @@ class Settings:
                 for p in self.space]
 
 
+def _check_journal(path: Path) -> None:
+    """A journal whose last record was cut short (a full disk, a kill mid-write) loses that record, with a warning:
+    optuna appended the next records onto the cut line and could then read the study no more. A record that is not
+    JSON elsewhere is one error naming the line."""
+    if not path.is_file():
+        return
+    from optuna.storages.journal import JournalFileSymlinkLock
+
+    lock = JournalFileSymlinkLock(str(path))  # optuna's own writers' lock: a record being written is not cut
+    lock.acquire()
+    try:
+        data = path.read_bytes()
+        if data and not data.endswith(b"\n"):
+            cut = data.rfind(b"\n") + 1
+            with open(path, "r+b") as f:
+                f.truncate(cut)
+            print(f"mcl: warning: {path}: its last record was cut short (a full disk, or a process killed while "
+                  f"writing it): dropped ({len(data) - cut} bytes)", file=sys.stderr)
+            data = data[:cut]
+    finally:
+        lock.release()
+    for n, line in enumerate(data.splitlines(), start=1):
+        if line.strip():
+            try:
+                json.loads(line)
+            except ValueError:
+                raise ConfigError(f"{path}:{n}: not a journal record (JSON): the study cannot be read; move the "
+                                  "file away to start the study afresh") from None
+
+
 def _open_study(study_dir: Path, s: Settings, create: bool):
     import optuna
     from optuna.storages import JournalStorage
     from optuna.storages.journal import JournalFileBackend
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    _check_journal(study_dir / "journal.log")
     storage = JournalStorage(JournalFileBackend(str(study_dir / "journal.log")))
     directions = ["minimize"] * len(s.objectives)
     if create:

@@ -241,6 +241,27 @@ def test_resume_after_k_trials_reaches_the_same_best(serial, files, capsys):
         assert f"the study's settings are in {study}/study.json; not with {option[0]}" in err, err
 
 
+def test_a_journal_cut_short_resumes_and_a_corrupt_one_is_one_line(files, capsys):
+    # A full disk cut the journal's last record; --resume appended onto the cut line and crashed (JSONDecodeError),
+    # and --resume and --report failed for good. Now the cut record is dropped with a warning and the study goes on;
+    # a record that is not JSON elsewhere is one error naming the line.
+    study = files / "cut"
+    assert main(_args(files, study, "--trials", "3", "--jobs", "1")) == 0
+    journal = study / "journal.log"
+    lines = journal.read_bytes().splitlines(keepends=True)
+    journal.write_bytes(b"".join(lines[:-1]) + lines[-1][: len(lines[-1]) // 2])
+    capsys.readouterr()
+    assert main(["tune", "--resume", str(study), "--trials", "4", "--jobs", "1", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"{journal}: its last record was cut short" in err, err
+    assert journal.read_bytes().endswith(b"\n")
+    assert sum(r["state"] == "complete" for r in _trials(study)) == 4
+    good = journal.read_bytes().splitlines(keepends=True)
+    journal.write_bytes(b"".join(good[:2]) + b"{not json\n" + b"".join(good[2:]))
+    assert main(["tune", "--report", str(study), "--no-progress"]) == 2
+    assert f"mcl: error: {journal}:3: not a journal record (JSON)" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("sig, jobs", [("SIGINT", "1"), ("SIGTERM", "2")])
 def test_sigint_then_resume_reaches_the_same_best(serial, files, sig, jobs):
     """A real Ctrl-C to `python -m mcl tune` once two runs are written: exit 130 with the finished trials kept
