@@ -456,6 +456,8 @@ def _truth_start(truth: str) -> tuple[float, float, float]:
 
 def make_dir(path: Path, option: str) -> None:
     """mkdir -p ``path``; MclError naming the option that gave it when it cannot be made."""
+    if Path(path).exists() and not Path(path).is_dir():
+        raise MclError(f"{option} {path}: exists and is not a folder")
     try:
         Path(path).mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -1057,7 +1059,12 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
              f"{BASELINE!r})")
     if suite.world:
         echo(f"every generated world with {_world_text(suite.world)} (--world)")
-    if any(j.world is not None for j in job_list):  # the inputs are checked: now the folders
+    # the inputs are checked: now the folders (--out checked first: the default cache is in it, and a --cache that
+    # cannot be made leaves no --out behind)
+    from mcl.trajectory import check_writable_folder
+
+    check_writable_folder(out, f"--out {out}")
+    if any(j.world is not None for j in job_list):
         make_dir(cache, "--cache")
     make_dir(out, "--out")
     ctx = multiprocessing.get_context("spawn")  # fresh workers: no numba threads inherited from a fork

@@ -1049,9 +1049,9 @@ def run_from_args(args) -> int:
         if not tuner.plan({}, study_dir / "trials" / "base", tuner.tuning):  # the base config checks too
             raise ConfigError(f"{tuner.suite.path}: no run to tune on (modes {args.modes} not in any tuned dataset)")
         s.fingerprint = fingerprint(s)
+        make_dir(study_dir, "--study")  # first: a --study that cannot be made is said as --study, not as its cache
         if any(d.simulate is not None for d in tuner.suite.datasets):
             make_dir(Path(s.cache), "--cache")
-        make_dir(study_dir, "--study")
         atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")
         _open_study(study_dir, s, create=True)
     tuner = Tuner(study_dir, s)
