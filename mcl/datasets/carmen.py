@@ -354,6 +354,18 @@ def _read_bytes(path: str | os.PathLike, name: str, warnings: list[str]) -> byte
     return b"".join(out)
 
 
+def _lines(text: str):
+    """The lines of ``text`` one at a time (str.split would hold them all beside the text), without their
+    newlines; a last line without one too."""
+    start, end = 0, len(text)
+    while start < end:
+        stop = text.find("\n", start)
+        if stop < 0:
+            stop = end
+        yield text[start:stop]
+        start = stop + 1
+
+
 def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
     """Read a CARMEN log (plain or gzip, detected by magic bytes) into a :class:`Log`. ``need_laser`` False (``mcl
     calibrate motion``): ODOM lines alone are a log too."""
@@ -376,10 +388,8 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
         warnings.append(f"{name}:{line}: truncated last line skipped (not UTF-8)")
         ends_with_newline = True
 
-    lines = text.split("\n")
-    if ends_with_newline and lines and lines[-1] == "":
-        lines.pop()
-    last = len(lines)
+    del data  # the decoded text alone from here (a log of hundreds of MB held three times over)
+    last = text.count("\n") + (0 if text.endswith("\n") else 1)  # the lines, a last one without its newline too
 
     scans: list[Scan] = []
     odom_rows: list[list[float]] = []
@@ -388,7 +398,7 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
     params: dict[str, str] = {}
     damaged: list[tuple[int, str]] = []  # lines whose keyword looks like a known one damaged (skipped)
     parsers = _PARSERS
-    for lineno, raw in enumerate(lines, start=1):
+    for lineno, raw in enumerate(_lines(text), start=1):
         parts = raw.split()
         if not parts:
             skipped["(blank)"] = skipped.get("(blank)", 0) + 1
@@ -417,6 +427,7 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
                 continue
             raise DataError(f"{name}:{lineno}: {e}") from None
 
+    del text  # parsed: the scans hold what is needed
     if damaged:
         lineno, word = damaged[0]
         warnings.append(f"{name}:{lineno}: {len(damaged)} line{'s' if len(damaged) > 1 else ''} skipped whose "
@@ -481,7 +492,7 @@ def _detected_max_range(scans: list[Scan], name: str, notes: list[str]) -> list[
         idx = [k for k, s in enumerate(scans) if s.kind == kind and s.max_range is None]
         if not idx:
             continue
-        nr = detect_no_return(np.concatenate([scans[k].ranges for k in idx]))
+        nr = detect_no_return([scans[k].ranges for k in idx])  # a block at a time: not every reading copied
         if nr is None:
             notes.append(f"{name}: {kind}: no no-return value found in the readings; sensor.range_max decides")
             continue

@@ -65,21 +65,57 @@ class NoReturn:
         return f"no-return readings at {at} ({self.count:,} of {self.total:,} readings, {share:.1f} %)"
 
 
+_BLOCK = 1 << 20  # readings a block: 8 MB of float64
+
+
+def _blocks(ranges):
+    """The finite readings in (0, _MAX_M] of ``ranges`` (an array, or a list of arrays joined up to _BLOCK readings
+    at a time), as a lazy list of float64 arrays: one pass for the histogram, one for the count."""
+
+    def kept(r):
+        r = np.asarray(r, dtype=np.float64).ravel()
+        with np.errstate(invalid="ignore"):
+            return r[np.isfinite(r) & (r > 0.0) & (r <= _MAX_M)]
+
+    if isinstance(ranges, np.ndarray):
+        return [kept(ranges)]
+    groups, group, size = [], [], 0
+    for r in ranges:
+        group.append(r)
+        size += np.size(r)
+        if size >= _BLOCK:
+            groups.append(group)
+            group, size = [], 0
+    if group:
+        groups.append(group)
+
+    class _Lazy:  # each block filtered when iterated: at most one block's copies alive at a time
+        def __iter__(self):
+            return (kept(np.concatenate([np.ravel(a) for a in g])) for g in groups)
+
+    return _Lazy()
+
+
 def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, spike_ratio: float = 20.0,
                      top_fraction: float = 0.9, margin: float = 0.01) -> NoReturn | None:
-    """The no-return marker of a set of readings (any shape, metres), or None when there is no spike.
+    """The no-return marker of a set of readings (an array of any shape, metres, or a list of such arrays: a log's
+    scans, taken a block at a time), or None when there is no spike.
 
     See the module docstring for the rule and its parameters.
     """
-    r = np.asarray(ranges, dtype=np.float64).ravel()
-    with np.errstate(invalid="ignore"):
-        r = r[np.isfinite(r) & (r > 0.0) & (r <= _MAX_M)]
-    total = int(r.size)
+    blocks = _blocks(ranges)
+    hist, total, top = np.zeros(0), 0, 0
+    for r in blocks:  # the centimetre histogram, a block at a time: a long log's readings are not copied whole
+        if r.size:
+            cm = np.rint(r * 100.0).astype(np.int64)
+            h = np.bincount(cm)
+            if h.size > hist.size:
+                hist = np.concatenate([hist, np.zeros(h.size - hist.size)])
+            hist[:h.size] += h
+            total += int(r.size)
+            top = max(top, int(cm.max()))
     if total == 0:
         return None
-    cm = np.rint(r * 100.0).astype(np.int64)
-    hist = np.bincount(cm).astype(np.float64)
-    top = int(cm.max())
     cand = np.flatnonzero((hist >= max(min_count, min_share * total)) & (np.arange(hist.size) >= top_fraction * top))
     if cand.size == 0:
         return None
@@ -89,7 +125,7 @@ def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, sp
     if spikes.size == 0:
         return None
     threshold = (1.0 - margin) * spikes[0] / 100.0
-    count = int(np.count_nonzero(r >= threshold))
+    count = sum(int(np.count_nonzero(r >= threshold)) for r in blocks)
     if total - count < max(min_count, 0.05 * total):  # hardly any real reading: nothing to tell the marker from
         return None
     return NoReturn(float(threshold), tuple(float(v) / 100.0 for v in spikes), count, total)
