@@ -7,6 +7,7 @@ Entity paths name things, not steps::
     world/likelihood_field static: the likelihood field p(endpoint | map) as an image (hidden by default)
     world/particles       Points2D, at most ``particles_max`` (evenly strided), coloured and sized by weight
     world/estimate        Points2D + Arrows2D (heading) + LineStrips2D (2-sigma ellipse of x, y)
+    world/follow          Transform3D per step: the estimate's position (y flipped): the "Robot" view's frame
     world/scan            Points2D, scan endpoints in the world frame
     world/scan/skipped    Points2D, the endpoints beam skipping ignored at this step (empty when none)
     world/scan/expected   Points2D, where the scan's beams would end if the estimate were right (ray cast)
@@ -103,12 +104,14 @@ _HIST_DECADES, _HIST_BINS = 6.0, 24
 ABOUT = """\
 # What this recording shows
 
-**World** (left): the map (grey), the particles (coloured, sized and faded by weight: yellow and large = heavy;
+**World** (the whole map): the map (grey), the particles (coloured, sized and faded by weight: yellow and large = heavy;
 pale purple, small = light), the estimate (magenta: point, heading, 2-sigma ellipse), the scan laid at the estimate
 (red), where the beams would end if the estimate were right (cyan, `world/scan/expected`), beams not scored (blue:
 unmapped objects, or beam skipping), the true pose and path (green; broken where the robot was carried off) and
 dead-reckoned odometry (orange). The view opens on the map's known cells.
-Layer `world/likelihood_field` (hidden: tick it in the blueprint tree) is the sensor model's likelihood field,
+**Robot** (far left, on a map over 60 m across): the same layers in a square of about 24 m that follows the
+estimate (north stays up): on a building-sized map the cloud and the scans are a few pixels in World.
+Layer `world/likelihood_field` (hidden: open the blueprint panel from the top bar and tick it) is the sensor model's likelihood field,
 p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off with `sensor.likelihood_field.sigma_hit`.
 
 **Error vs truth**: distance from the estimate to the reference pose (only when a truth file is given).
@@ -124,8 +127,18 @@ scale reads. Later peaks are real: a global search or a recovery weighs up to `f
 default) instead of a few thousand. **Spread**: the particles' spread (m) over the whole set and the estimate's
 cluster. **Map rejection tries**: the mean draws per particle of the map-based motion model. **Recovery**: the share
 of the particles drawn anew at the next resample. **Counts**: the clusters and the beams not scored.
-The time panel (bottom) and the selection panel open from the viewer's top bar.
+The time panel (bottom), the blueprint panel and the selection panel open from the viewer's top bar.
 """
+
+# The frame the "Robot" view is drawn in: the estimate's position at each step (see _log_estimate), and the half
+# width (m) of the square that view shows around it: on a building-sized map the cloud, the scan and the expected
+# scan are a few pixels in the whole-map view
+FOLLOW_ENTITY = "world/follow"
+FOLLOW_HALF_M = 12.0
+# The Robot view is shown when the known map's larger side exceeds this (m): on a smaller map (the demo's 22 m,
+# intel_lab's 43 m, fr079's 49 m) the World view draws the robot as large, and a second view of it wasted a third
+# of the screen; mit_csail (93 m), aces (63 m) and the larger maps get it
+FOLLOW_MIN_SIDE_M = 60.0
 
 _DRAW_ORDER = {"map": -100.0, "trail": 5.0, "particles": 10.0, "scan": 20.0, "truth": 30.0, "estimate": 40.0}
 
@@ -143,7 +156,8 @@ def _save_batcher() -> rr.ChunkBatcherConfig:
                                  flush_num_rows=d.flush_num_rows)
 
 
-_COLUMN_DTYPES = {"colors": np.uint8, "radii": np.float32, "draw_order": np.float32}
+_COLUMN_DTYPES = {"colors": np.uint8, "radii": np.float32, "draw_order": np.float32, "translation": np.float32,
+                  "scale": np.float32}
 
 
 SPAWN_FLUSH_S = 30.0  # s a spawned viewer has to take the rest of the recording at the end (the .rrd has it all)
@@ -808,6 +822,9 @@ class RerunLogger:
             "LineStrips2D": dict(strips=covariance_ellipse(e[:2], c[:2, :2]).astype(np.float32), colors=color,
                                  radii=-1.0, draw_order=order),
         })
+        # the "Robot" view's frame: the estimate's position (not its heading: the map stays north-up), y flipped
+        # as on `world` (a view drawn from this origin does not see the flip on its ancestor)
+        self._buffer(FOLLOW_ENTITY, {"Transform3D": dict(translation=[e[0], e[1], 0.0], scale=[1.0, -1.0, 1.0])})
 
     def _log_pose(
         self,
@@ -900,7 +917,9 @@ def known_bounds(grid: Any, margin: float = 0.05) -> tuple[tuple[float, float], 
 
 
 def build_blueprint(stat_names: list[str] | tuple[str, ...] = (), bounds=None) -> rrb.Blueprint:
-    """World view large on the left; one time-series view per stats group on the right. ``bounds`` ((x0, x1),
+    """The Robot view (following the estimate: origin ``world/follow``; on a map over ``FOLLOW_MIN_SIDE_M`` across)
+    and the World view (the whole map) on the left; one time-series view per stats group on the right, each over
+    the whole run. ``bounds`` ((x0, x1),
     (y0, y1)) in world metres (``known_bounds``): the world view opens on them and keeps them while the time runs
     (fitted to what each step draws, the map jumped and zoomed at every step)."""
     trail_range = [
@@ -909,6 +928,25 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = (), bounds=None) -
         )
         for timeline in ("step", "time")
     ]
+    # every series over the whole run: without a range the plots showed a window of about 2,500 steps that
+    # followed the cursor (fr079, 4,110 updates: at step 0 the left half empty, the run's end off screen)
+    whole_run = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
+                                                        end=rrb.TimeRangeBoundary.infinite()))
+    trail_overrides = {
+        "world/truth/trail": rrb.VisibleTimeRanges(trail_range),
+        "world/odometry/trail": rrb.VisibleTimeRanges(trail_range),
+        "world/likelihood_field": rrb.EntityBehavior(visible=False),
+    }
+    follow = bounds is None or max(bounds[0][1] - bounds[0][0], bounds[1][1] - bounds[1][0]) > FOLLOW_MIN_SIDE_M
+    robot = rrb.Spatial2DView(
+        name=f"Robot: {2 * FOLLOW_HALF_M:g} m around the estimate",
+        origin=f"/{FOLLOW_ENTITY}",
+        contents=["+ /world/**"],
+        background=[30, 30, 30],
+        visual_bounds=rrb.VisualBounds2D(x_range=[-FOLLOW_HALF_M, FOLLOW_HALF_M],
+                                         y_range=[-FOLLOW_HALF_M, FOLLOW_HALF_M]),
+        overrides=dict(trail_overrides),
+    )
     world = rrb.Spatial2DView(
         name="World",
         origin="/",
@@ -917,11 +955,7 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = (), bounds=None) -
         # y flipped on `world` (drawn y up): the view's y is minus the world's
         visual_bounds=(None if bounds is None else
                        rrb.VisualBounds2D(x_range=list(bounds[0]), y_range=[-bounds[1][1], -bounds[1][0]])),
-        overrides={
-            "world/truth/trail": rrb.VisibleTimeRanges(trail_range),
-            "world/odometry/trail": rrb.VisibleTimeRanges(trail_range),
-            "world/likelihood_field": rrb.EntityBehavior(visible=False),
-        },
+        overrides=dict(trail_overrides),
     )
     groups: dict[str, list[str]] = {}
     for name in stat_names:
@@ -933,6 +967,7 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = (), bounds=None) -
             name=titles.get(g, g),
             origin="/stats",
             contents=[f"+ /stats/{n}" for n in groups[g]] + ([f"+ /stats/{g}/**"] if g not in titles else []),
+            axis_x=whole_run,
         )
         for g in order
         if g in groups
@@ -949,12 +984,14 @@ def build_blueprint(stat_names: list[str] | tuple[str, ...] = (), bounds=None) -
         rest = [rrb.Spatial3DView(name="Depth", origin="/", contents=["+ /depth/**"])] + rest
     right = rrb.Vertical(*main, rrb.Tabs(about, *rest, active_tab=0))
     return rrb.Blueprint(
-        rrb.Horizontal(world, right, column_shares=[3, 2]),
+        (rrb.Horizontal(robot, world, right, column_shares=[2, 2, 2]) if follow else
+         rrb.Horizontal(world, right, column_shares=[3, 2])),
         # the step timeline: every panel spans the whole run (on `time` the plots opened on a window of it); the
         # time panel collapsed to its scrubber and the selection panel closed: the views get the screen (both
         # open from the viewer's top bar)
         rrb.TimePanel(timeline="step", state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),  # its 200 px to the views
         collapse_panels=False,
     )
 

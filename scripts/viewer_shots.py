@@ -3,7 +3,8 @@
     apt-get install -y mesa-vulkan-drivers        # Debian's software Vulkan renderer (llvmpipe), once
     python scripts/viewer_shots.py runs/x/recording.rrd --steps 0,2,252,349 --out shots/
 
-Writes ``full_stepNNNN.png`` (the whole window, 1920 x 1080) and ``world_stepNNNN.png`` (the World view alone) per
+Writes ``full_stepNNNN.png`` (the whole window, 1920 x 1080), ``world_stepNNNN.png`` (the World view alone) and
+``robot_stepNNNN.png`` (the view that follows the estimate) per
 step, and one PNG per time-series panel at the last step. The recording is loaded, then paused at each step (the
 blueprint plays on load, and a headless viewer plays about 6x faster than real time). Rerun 0.41's
 ``rerun.experimental.ViewerClient``; about 1 s a screenshot with the software renderer.
@@ -43,12 +44,15 @@ def main(argv=None) -> int:
             time.sleep(0.1)
         time.sleep(a.settle)
         views = client.get_state().views
-        world = next(v.view_id for v in views if v.view_class == "2D")
+        # the whole-map view ("World") as world_*, the one that follows the estimate ("Robot: ...") as robot_*
+        spatial = [(("world" if v.name == "World" else v.name.split(":")[0].lower()), v.view_id)
+                   for v in views if v.view_class == "2D"]
         for s in (int(v) for v in a.steps.split(",")):
             client.set_time("step", sequence=s, play_state="paused")
             time.sleep(0.3)
             (a.out / f"full_step{s:04d}.png").write_bytes(client.take_screenshot())
-            (a.out / f"world_step{s:04d}.png").write_bytes(client.take_screenshot(view_id=world))
+            for prefix, view_id in spatial:
+                (a.out / f"{prefix}_step{s:04d}.png").write_bytes(client.take_screenshot(view_id=view_id))
         for v in client.get_state().views:  # a view in an inactive tab is not drawn: skipped
             if v.view_class in ("TimeSeries", "BarChart"):
                 name = "".join(ch if ch.isalnum() else "_" for ch in v.name)[:40]

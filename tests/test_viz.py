@@ -16,6 +16,7 @@ import pytest
 rr = pytest.importorskip("rerun")
 import pyarrow as pa  # noqa: E402  (a dependency of rerun-sdk)
 from rerun.chunk import RrdReader  # noqa: E402
+import rerun.blueprint as rrb  # noqa: E402
 
 from mcl import viz  # noqa: E402
 from mcl.viz import RerunLogger  # noqa: E402
@@ -465,7 +466,8 @@ def test_the_world_view_opens_on_the_maps_known_cells():
     pad = 0.05 * 2.0  # the larger side: 20 cells = 2 m
     assert (x0, x1) == pytest.approx((ORIGIN[0] + 0.5 - pad, ORIGIN[0] + 2.5 + pad))
     assert (y0, y1) == pytest.approx((ORIGIN[1] + 1.0 - pad, ORIGIN[1] + 2.0 + pad))
-    view = viz.build_blueprint(["ess"], ((x0, x1), (y0, y1))).root_container.contents[0]
+    view = viz.build_blueprint(["ess"], ((x0, x1), (y0, y1))).root_container.contents[0]  # a 2 m map: no Robot view
+    assert view.name == "World"
     got = view.properties["VisualBounds2D"].range.as_arrow_array().to_pylist()[0]
     assert got["x_range"] == pytest.approx([x0, x1]) and got["y_range"] == pytest.approx([-y1, -y0])
     assert viz.known_bounds(OccupancyGrid.from_occupancy(np.full((5, 5), -1, dtype=np.int8), RES, ORIGIN)) is None
@@ -480,16 +482,45 @@ def test_the_plots_a_user_reads_first_are_stacked_and_the_rest_in_tabs():
     # tabs, the share alone in its panel; the time panel opens as its scrubber and the selection panel closed.
     names = ["ess", "particles", "inject_p", "clusters", "skipped_beams", "time_ms/predict", "error/position",
              "quality/match", "spread/full", "tries"]
-    b = viz.build_blueprint(names)
+    b = viz.build_blueprint(names, ((0.0, 22.0), (0.0, 17.0)))  # the demo's map: the World view alone
     right = b.root_container.contents[1]
     stacked, tabs = right.contents[:-1], right.contents[-1]
     assert [v.name.split(":")[0] for v in stacked] == ["Error vs truth", "Quality", "Particles", "Particle weights"]
     assert [v.name for v in tabs.contents] == ["About this recording", "Time per update (ms)", "Spread (m)",
                                                "Map rejection tries", "Recovery (share)", "Counts"]
     assert max(len(v.name) for v in tabs.contents) <= 25  # a tab's title is cut at about 50 characters
+    # every plot over the whole run: without a range, a run of over 2,000 updates showed a window that followed
+    # the cursor (fr079, 4,110 updates: at step 0 the left half empty, the run's end off screen)
+    plots = [v for v in [*stacked, *tabs.contents] if isinstance(v, rrb.TimeSeriesView)]
+    assert len(plots) == 8 and all("TimeAxis" in v.properties for v in plots)
     assert viz.stat_group("inject_p") == "recovery" and viz.stat_group("skipped_beams") == "other"
     assert str(b.time_panel.state).lower().endswith("collapsed")
     assert str(b.selection_panel.state).lower().endswith("collapsed")
+
+
+def test_a_view_follows_the_estimate_on_a_big_map(tmp_path):
+    # On a 250 m map (infinite_corridor) the whole-map view draws the cloud, the scan and the expected scan in a few
+    # pixels: the "Robot" view is drawn in the frame of world/follow, which holds the estimate's position (y flipped
+    # as on `world`, so the map reads as in the World view), and opens on a square around it.
+    b = viz.build_blueprint(["ess"], ((0.0, 250.0), (0.0, 245.0)))
+    robot = b.root_container.contents[0]
+    assert [v.name for v in b.root_container.contents[:2]] == [robot.name, "World"]
+    # a map 60 m across or less (the demo's 22 m, intel_lab's 43 m) shows the robot as large in World: no second view
+    small = viz.build_blueprint(["ess"], ((0.0, 43.0), (0.0, 40.0))).root_container.contents
+    assert small[0].name == "World" and not any((getattr(v, "name", None) or "").startswith("Robot") for v in small)
+    assert robot.name.startswith("Robot") and str(robot.origin) == "/" + viz.FOLLOW_ENTITY
+    got = robot.properties["VisualBounds2D"].range.as_arrow_array().to_pylist()[0]
+    h = viz.FOLLOW_HALF_M
+    assert got["x_range"] == pytest.approx([-h, h]) and got["y_range"] == pytest.approx([-h, h])
+    path = tmp_path / "f.rrd"
+    with RerunLogger("save", path, particles_max=0) as log:
+        for i in range(3):
+            log.log_step(i, 0.1 * i, particles=np.zeros((3, 4)), weights=np.full(4, 0.25),
+                         estimate=np.array([10.0 + i, -5.0, 0.3]), cov=np.eye(3) * 0.01)
+        rows = log._pending[viz.FOLLOW_ENTITY][2]
+        assert rows[("Transform3D", "translation")] == [[10.0 + i, -5.0, 0.0] for i in range(3)]
+        assert rows[("Transform3D", "scale")] == [[1.0, -1.0, 1.0]] * 3
+    assert path.stat().st_size > 0
 
 
 def test_the_true_path_is_broken_where_the_robot_jumps(tmp_path):
