@@ -221,7 +221,13 @@ def point_log_likelihood(d, cfg) -> np.ndarray:
     d = np.minimum(np.asarray(d, dtype=np.float64), float(cfg.likelihood_max_dist))
     gauss = np.exp(-0.5 * (d / sigma) ** 2) / (math.sqrt(2.0 * math.pi) * sigma)
     with np.errstate(divide="ignore"):
-        return np.log(float(cfg.z_hit) * gauss + float(cfg.z_rand) / float(cfg.range_max))
+        out = np.log(float(cfg.z_hit) * gauss + float(cfg.z_rand) / float(cfg.range_max))
+    if float(cfg.z_rand) == 0.0 and float(cfg.z_hit) > 0.0:
+        # exp(-(d/sigma)^2 / 2) underflows to 0 past d = 38.6 sigma: with z_rand 0 the log was -inf there (every
+        # particle at weight 0 on a scan with one far endpoint) where the model's is finite: taken in log space
+        out = np.where(np.isneginf(out), math.log(float(cfg.z_hit)) - 0.5 * (d / sigma) ** 2
+                       - math.log(math.sqrt(2.0 * math.pi) * sigma), out)
+    return out
 
 
 def field_distance(grid, cfg, interior: str | None = None) -> np.ndarray:
