@@ -574,6 +574,10 @@ def _cross_checks(cfg: Config) -> None:
     if s.likelihood_field.z_hit + s.likelihood_field.z_rand <= 0:
         raise _CrossCheckError("sensor.likelihood_field.z_hit: z_hit + z_rand must be positive",
                                "sensor.likelihood_field.z_rand")
+    if s.use and s.model == "likelihood_field" and s.likelihood_field.z_hit <= 0:  # every pose alike: no laser
+        raise _CrossCheckError("sensor.likelihood_field.z_hit: 0 makes every pose score alike (the scan would "
+                               "correct nothing); for a run without the laser set sensor.use: false",
+                               "sensor.model", "sensor.use")
     lm = cfg.landmarks
     if lm.z_det + lm.z_fp <= 0:
         raise _CrossCheckError("landmarks.z_det: z_det + z_fp must be positive", "landmarks.z_fp")

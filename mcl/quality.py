@@ -35,7 +35,8 @@ occlusion rule: an estimate 0.2-0.3 m off, as people pulling at the cloud
 leave it, sees a few walls 0.35-0.55 m farther than the map has them. The
 filter believes it is **lost** once ``lost_after`` of the last
 ``2 lost_after - 1`` updates with a scan were bad, and no longer lost once
-at most ``lost_after // 2`` of them were (3 of 5, and 1 of 5, by default):
+at most ``lost_after // 2`` of them were (3 of 5, and 1 of 5, by default; a window still filling after a
+reset clears with 3 updates or more, at most half of them bad):
 a window rather than a run, because a slipped track fits now and then. One
 update whose score is below ``quality.lost_at_once_below`` (0 by default:
 more beams through walls than twice the beams that match) calls it lost at
@@ -269,7 +270,9 @@ class ScanQuality:
                 if not self._doubting():  # a new episode: the track before it is the reference
                     self._before = float(np.median(self._held)) if len(self._held) >= DOUBT_HISTORY // 2 else None
                     self._since_episode = -1  # 0 after this update
-            elif self.lost and n_bad <= k // 2 and len(self._recent) >= k:
+            elif self.lost and len(self._recent) >= min(k, 3) and n_bad <= min(len(self._recent), k) // 2:
+                # at most half the window bad; after a reset (a global start) the window is still filling: a large
+                # lost_after (slower to call lost) kept a converged search "lost", re-seeding it, for k updates
                 self.lost = False
             if not self.lost and not self._doubting() and not math.isnan(fit.score):
                 self._held.append(fit.score)

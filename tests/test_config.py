@@ -232,3 +232,13 @@ def test_a_yaml_file_not_utf8_says_so(tmp_path):
     p.write_bytes(b"seed: 1\n# caf\xe9\n")
     with pytest.raises(ConfigError, match=rf"^{re.escape(str(p))}: not a UTF-8 text file$"):
         load_config(p)
+
+
+def test_a_likelihood_field_with_z_hit_0_is_refused_unless_the_laser_is_off():
+    # z_hit 0 made every pose score alike: the run went on as if without a laser (6.79 m on the demo), silently
+    with pytest.raises(ConfigError, match=r"sensor.likelihood_field.z_hit: 0 makes every pose score alike"):
+        load_config(None, ["sensor.likelihood_field.z_hit=0", "sensor.likelihood_field.z_rand=1"])
+    # not read by the beam model, nor with the laser off (landmarks alone)
+    assert load_config(None, ["sensor.likelihood_field.z_hit=0", "sensor.model=beam"]).sensor.model == "beam"
+    assert not load_config(None, ["sensor.likelihood_field.z_hit=0", "sensor.use=false", "landmarks.use=true",
+                                  "landmarks.map=m.yaml"]).sensor.use

@@ -443,3 +443,26 @@ def test_the_view_is_measured_for_a_scan_whose_only_beams_through_walls_are_near
     sparse = dict(predicted=7, directions=60)
     assert q._bad_now(Fit(13, 0.33, 1 / 13, deep=0.0, missing=1, **sparse)) is False  # measured: occlusion
     assert q._bad_now(Fit(13, 0.33, 1 / 13, deep=0.0, missing=3, **sparse)) is True  # 3 of 7 gone: a wrong place
+
+
+def test_a_large_lost_after_clears_a_global_start_once_its_window_holds_mostly_good_fits():
+    # lost_after = 30 (slower to call a track lost) made a global start "lost" until 30 fits had come in: on the
+    # demo 25 re-seeds over a search that had converged at 1 s (error 0.83 m over 1-50 s, against 0.06 m). The
+    # window still filling after a reset now clears once it holds 3 fits or more, at most half of them bad; a full
+    # window keeps its rule (at most lost_after // 2 bad of the last 2 lost_after - 1), and lost_after = 3 is as before.
+    good, bad = Fit(60, 0.95, 0.0), Fit(60, 0.2, 0.3)
+    q = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(QCFG), "lost_after": 30}))
+    q.reset(lost=True)
+    assert [q.update(f) for f in (good, bad, good)] == [True, True, False]  # 1 bad of 3
+    q.reset(lost=True)
+    assert [q.update(f) for f in (bad, bad, good, good)] == [True, True, True, False]  # 2 of 3 bad, then 2 of 4
+    # once lost from a track (30 bad fits), it clears only with at most 15 of the last 59 bad, as before
+    q.reset(lost=False)
+    for _ in range(30):
+        q.update(bad)
+    assert q.lost
+    for _ in range(14):
+        assert q.update(good) is True  # the window: 30 bad, then 14 good: 30 of 44 bad
+    q3 = ScanQuality(_box_grid(), QCFG)  # lost_after 3: after a reset, three fits with at most one bad, as before
+    q3.reset(lost=True)
+    assert [q3.update(f) for f in (bad, good, good)] == [True, True, False]
