@@ -799,7 +799,7 @@ def _run(
                                        cfg.rerun.particles_every, cfg.rerun.scan)
         floor = recording_floor_mb(len(updates), beams, cfg.rerun.scan)
         if cfg.rerun.budget_mb > 0 and floor > cfg.rerun.budget_mb:
-            # the estimates and scans alone are over: thinning the cloud cannot keep the budget; say so, not that it is kept
+            # the estimates and scans alone are over: no thinning of the cloud keeps the budget; say so
             echo(f"mcl: warning: recording: the estimates and {beams}-beam scans of {len(updates)} scans alone take "
                  f"about {floor:.0f} MB, over rerun.budget_mb ({cfg.rerun.budget_mb:g} MB): the cloud is logged on the "
                  "first update only; rerun.scan: false or a larger budget")

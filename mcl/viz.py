@@ -111,8 +111,9 @@ unmapped objects, or beam skipping), the true pose and path (green; broken where
 dead-reckoned odometry (orange). The view opens on the map's known cells.
 **Robot** (far left, on a map over 60 m across): the same layers in a square of about 24 m that follows the
 estimate (north stays up): on a building-sized map the cloud and the scans are a few pixels in World.
-Layer `world/likelihood_field` (hidden: open the blueprint panel from the top bar and tick it) is the sensor model's likelihood field,
-p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off with `sensor.likelihood_field.sigma_hit`.
+Layer `world/likelihood_field` (hidden: open the blueprint panel from the top bar and tick it) is the sensor
+model's likelihood field, p(endpoint | map) of an endpoint at each cell: bright next to walls, falling off with
+`sensor.likelihood_field.sigma_hit`.
 
 **Error vs truth**: distance from the estimate to the reference pose (only when a truth file is given).
 **Quality**: the scan laid on the map at the estimate, without truth: `match` = fraction of beams ending near a
