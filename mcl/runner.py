@@ -1045,6 +1045,11 @@ def _run(
         f"{ms['predict']:.1f} ms predict (mean {summary['mean_tries']:.2f} tries), {ms['correct']:.1f} ms correct, "
         f"{ms['resample']:.1f} ms resample, {ms['viz']:.1f} ms rerun per update."
     )
+    q = summary["quality"]
+    if q.get("lost_updates"):  # the one sign a run without a reference gives that it lost the robot
+        text += (f" Believed lost in {q['lost_updates']} of {q['updates']} updates ({q['lost_episodes']} episode"
+                 f"{'s' if q['lost_episodes'] != 1 else ''}{', lost at the end' if q['lost_at_end'] else ''}"
+                 f"{', a global search the first' if summary['mode'] == 'global' else ''}; quality.csv).")
     if "eval" in summary and "ate_rmse" in summary["eval"]:
         text += " " + format_eval(summary["eval"]) + "."
     elif "eval" in summary and "error" in summary["eval"]:

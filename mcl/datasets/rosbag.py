@@ -877,6 +877,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         if topic == init_topic and initial is None:
             initial = (np.array(_pose_msg(msg)), _cov3(msg.pose.covariance))
             init_frame = _frame(msg.header.frame_id)
+            init_t = stamp_seconds(msg.header.stamp) or rec  # RViz stamps it; a zero stamp: when it was recorded
         if topic == truth_topic:
             truth_rows.append((stamp_seconds(msg.header.stamp), *_pose_msg(msg), rec))
 
@@ -998,8 +999,14 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
                              "the odometry moves")
         if pose is None:
             offsets[t] = None
-            notes.append(f"{path}: {t}: no transform {base_frame} -> {f} in /tf_static or /tf; the laser pose comes "
-                         "from sensor.laser_pose (else the robot centre)")
+            frames_tried = base_frame if not odom_child or odom_child == base_frame else f"{odom_child} or {base_frame}"
+            if laser_pose is not None:
+                notes.append(f"{path}: {t}: no transform {frames_tried} -> {f} in /tf_static or /tf; the laser pose "
+                             f"is sensor.laser_pose {list(laser_pose)}")
+            else:  # a heading wrong by the laser's yaw (a TurtleBot's laser mounted backwards: pi) loses the track
+                warnings.append(f"{path}: {t}: no transform {frames_tried} -> {f} in /tf_static or /tf (a recording "
+                                "that missed /tf_static?): the laser is taken at the robot centre, facing forward; "
+                                "give its mounting with --set sensor.laser_pose=[x,y,theta]")
         else:
             if not all(math.isfinite(v) for v in pose[:3]):
                 raise DataError(f"{path}: {t}: the transform {base_frame} -> {f} is not finite ({pose[:3]})")
@@ -1031,6 +1038,21 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         odometry = _scan_odometry(path, scans, scan_topics[0], mount, warnings, counts, progress)
         scans.odometry = odometry
         src_name = f"laser odometry (scan matching of {scan_topics[0]})"
+    if initial is not None and scan_t and odometry.shape[0] >= 2:
+        # The first /initialpose is the start, but an operator may give it after the robot has moved (RViz's
+        # 2D Pose Estimate some way into the recording): it says where the robot was at its own time. Carried back
+        # to the first scan through the odometry, as the filter would have moved it forward.
+        from mcl.estimate import compose, inverse
+        t_first = float(min(scan_t))
+        a, b = odometry_at(odometry, init_t)[0], odometry_at(odometry, t_first)[0]
+        d = compose(inverse(a), b)
+        if math.hypot(float(d[0]), float(d[1])) > 0.05 or abs(float(d[2])) > 0.05:
+            start = compose(initial[0], d)
+            notes.append(f"{path}: {init_topic}: stamped {init_t - t_first:.1f} s after the first scan, "
+                         f"{math.hypot(float(d[0]), float(d[1])):.2f} m and {abs(math.degrees(float(d[2]))):.0f} deg "
+                         f"from where the odometry puts the robot at that scan: carried back to it through the "
+                         f"odometry ({start[0]:.3f}, {start[1]:.3f}, {start[2]:.3f})")
+            initial = (np.asarray(start, dtype=np.float64), initial[1])
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps)
