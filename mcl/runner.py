@@ -970,7 +970,8 @@ def _run(
         "map": cfg.map,
         "log": cfg.log,
         "bag": cfg.bag,
-        "truth": cfg.truth,
+        # what the run was scored against: a file, or a bag's topic (`--truth-topic`: cfg.truth is null then)
+        "truth": cfg.truth or (f"{cfg.bag}: {cfg.topics.truth}" if cfg.bag is not None and truth is not None else None),
         "seed": cfg.seed,
         "scans": len(scans),
         "landmark_lines": len(marks_all),

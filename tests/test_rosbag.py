@@ -1341,3 +1341,18 @@ def test_an_initial_pose_given_after_the_robot_moved_is_carried_back_to_the_firs
     assert math.hypot(got[0] - first[0], got[1] - first[1]) < 0.3
     assert abs(math.remainder(got[2] - first[2], 2 * math.pi)) < 0.2
     assert any("/initialpose: stamped" in n and "carried back" in n for n in src.notes), src.notes
+
+
+def test_a_truth_topic_in_another_frame_is_warned_about_and_the_summary_names_the_topic(world, scans, tmp_path):
+    # `--truth-topic /odom` scored the run against the odometry's frame (17 m) without a word, and summary.json said
+    # "truth": null for a run scored against a topic. Now a reference in a frame other than the map's is a warning,
+    # and the summary names the bag and the topic.
+    t, poses = read_tum(world / "truth.tum")
+    bag = tmp_path / "t.mcap"
+    write_scans(bag, scans, truth=(t, poses), truth_topic="/ground_truth")
+    topics = lambda name: load_config(None, [f"topics.truth={name}"]).topics  # noqa: E731
+    assert not [w for w in open_bag(bag, topics("/ground_truth")).warnings if "reference poses" in w]
+    said = [w for w in open_bag(bag, topics("/odom")).warnings if "reference poses" in w]
+    assert len(said) == 1 and "/odom: the reference poses are in frame 'odom', not the map's ('map')" in said[0]
+    s, _ = _run(tmp_path, "scored", bag=bag, **{"topics.truth": "/ground_truth"})
+    assert s["truth"] == f"{bag}: /ground_truth" and "ate_rmse" in s["eval"]

@@ -811,7 +811,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     scan_rec: list[float] = []  # each scan's record time, and its topic (for a topic whose stamps are all 0)
     scan_of: list[str] = []
     grid = initial = map_msg = None
-    init_frame = ""
+    init_frame = truth_frame = ""
     n_maps = 0
     truth_rows: list[tuple] = []
     other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
@@ -879,6 +879,8 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
             init_frame = _frame(msg.header.frame_id)
             init_t = stamp_seconds(msg.header.stamp) or rec  # RViz stamps it; a zero stamp: when it was recorded
         if topic == truth_topic:
+            if not truth_rows:
+                truth_frame = _frame(msg.header.frame_id)
             truth_rows.append((stamp_seconds(msg.header.stamp), *_pose_msg(msg), rec))
 
     for t in sorted(wanted):
@@ -1020,6 +1022,9 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         if not truth_rows:
             raise DataError(f"{path}: {truth_topic}: no messages")
         a = _record_timed(np.array(truth_rows, dtype=np.float64), truth_topic, path, notes)
+        if truth_frame not in ("", map_frame):  # /odom given as the truth scores the odometry's frame (17 m)
+            warnings.append(f"{path}: {truth_topic}: the reference poses are in frame {truth_frame!r}, not the map's "
+                            f"({map_frame!r}): the run is scored against them as if they were")
         truth = (a[:, 0].copy(), np.ascontiguousarray(a[:, 1:].T))
     odom_type = topics[odom_topic].msgtype if odom_topic else None
     src_name = f"{odom_topic} ({odom_type.replace('/msg/', '/')})" if odom_topic else tf_odom
