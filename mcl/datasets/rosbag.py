@@ -1053,10 +1053,12 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         d = compose(inverse(a), b)
         if math.hypot(float(d[0]), float(d[1])) > 0.05 or abs(float(d[2])) > 0.05:
             start = compose(initial[0], d)
-            notes.append(f"{path}: {init_topic}: stamped {init_t - t_first:.1f} s after the first scan, "
-                         f"{math.hypot(float(d[0]), float(d[1])):.2f} m and {abs(math.degrees(float(d[2]))):.0f} deg "
-                         f"from where the odometry puts the robot at that scan: carried back to it through the "
-                         f"odometry ({start[0]:.3f}, {start[1]:.3f}, {start[2]:.3f})")
+            gap = init_t - t_first
+            notes.append(f"{path}: {init_topic}: stamped {abs(gap):.1f} s {'after' if gap > 0 else 'before'} the "
+                         f"first scan, {math.hypot(float(d[0]), float(d[1])):.2f} m and "
+                         f"{abs(math.degrees(float(d[2]))):.0f} deg from where the odometry puts the robot at that "
+                         f"scan: carried {'back' if gap > 0 else 'forward'} to it through the odometry "
+                         f"({start[0]:.3f}, {start[1]:.3f}, {start[2]:.3f})")
             initial = (np.asarray(start, dtype=np.float64), initial[1])
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
