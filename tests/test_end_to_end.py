@@ -35,7 +35,7 @@ def test_tracking_accuracy_on_real_logs(tmp_path, name, kld):
     # Issue 1: ATE RMSE <= 0.06 m with the dataset config, seed 1 and a fixed 5,000 particles
     # (measured 0.057 on intel_lab, 0.043 on mit_csail). Issue 3: with KLD sampling on, as the
     # dataset configs have it, the same bound holds while the mean particle count drops at least
-    # 3x from the maximum (measured intel_lab 0.0593 at 2,009 of 10,000; mit_csail, whose config takes default.yaml's
+    # 3x from the maximum (measured intel_lab 0.0595 at 2,009 of 10,000; mit_csail, whose config takes default.yaml's
     # filter since 2026-11-30, 0.041 at 5,051 of 100,000).
     overrides = ["rerun.mode=off"] + ([] if kld else ["filter.kld=false", "filter.particles=5000"])
     cfg = load_config(CONFIGS / f"{name}.yaml", overrides)
