@@ -301,7 +301,7 @@ def run_from_args(args) -> int:
 
     check_min_trans(args.min_trans)
     cfg = load_config(args.config, list(args.set))
-    if getattr(cfg.motion, "model", "odometry") != "odometry":
+    if cfg.motion.model != "odometry":
         warnings.warn(f"calibrate motion: fits the odometry model only, not motion.model={cfg.motion.model}: the "
                       f"block sets model: odometry", MclWarning, stacklevel=2)
     pairs = pairs_from_log(args.log, args.truth)

@@ -298,20 +298,27 @@ def _retimed(s, odometry: np.ndarray, offset: float):
     return dataclasses.replace(s, t=t, odom=odometry_at(odometry, t)[0])
 
 
+def _odometry_rows(log, scans) -> tuple[np.ndarray, bool]:
+    """The log's odometry as time-sorted rows (t, x, y, theta, tv, rv): its own stream (a CARMEN log's ODOM lines, a
+    bag's odometry topic or transforms), or, for a CARMEN log without ODOM lines, ``scans``' own poses (then True)."""
+    odometry = np.asarray(log.odometry, dtype=np.float64).reshape(-1, 6)
+    from_scans = odometry.shape[0] == 0
+    if from_scans:
+        odometry = np.array([(s.t, *s.odom, s.tv, s.rv) for s in scans if s.odom is not None],
+                            dtype=np.float64).reshape(-1, 6)
+    return odometry[np.argsort(odometry[:, 0], kind="stable")], from_scans
+
+
 def _retime(scans, log, offset: float, echo):
     """``scans`` with ``sensor.time_offset`` applied (``_retimed``, lazily), or as they are when it is 0. The
     odometry is the log's own stream (a CARMEN log's ODOM lines, a bag's odometry topic or transforms); a CARMEN
     log without ODOM lines interpolates its scans' own poses."""
     if offset == 0.0 or not len(scans):
         return scans
-    odometry = np.asarray(log.odometry, dtype=np.float64).reshape(-1, 6)
-    what = "odometry"
-    if odometry.shape[0] == 0:
-        odometry = np.array([(s.t, *s.odom, s.tv, s.rv) for s in scans], dtype=np.float64).reshape(-1, 6)
-        what = "its scans' own odometry poses"
+    odometry, from_scans = _odometry_rows(log, scans)
+    what = "its scans' own odometry poses" if from_scans else "odometry"
     echo(f"{log.path}: sensor.time_offset {offset:+g} s: each scan paired with the {what} at its stamp "
          f"{'+' if offset > 0 else '-'} {abs(offset):g} s")
-    odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
     if not hasattr(log, "stamps_checked"):  # a CARMEN log (a bag's stamps are checked when it opens)
         from mcl.datasets.rosbag import outside_span
 
@@ -402,11 +409,8 @@ def _check_truth_motion(log, truth, name: str, echo) -> None:
     a trajectory of another run whose clock overlaps this one's would be scored as a lost run."""
     from mcl.evaluate import motion_disagreement
 
-    odometry = np.asarray(getattr(log, "odometry", ()), dtype=np.float64).reshape(-1, 6)
-    if not odometry.shape[0] and isinstance(getattr(log, "scans", None), list):  # a CARMEN log without ODOM lines
-        odometry = np.array([(s.t, *s.odom, 0.0, 0.0) for s in log.scans if s.odom is not None],
-                            dtype=np.float64).reshape(-1, 6)
-    odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
+    # a CARMEN log without ODOM lines: every laser's poses (a bag always has an odometry stream)
+    odometry, _ = _odometry_rows(log, log.scans if isinstance(getattr(log, "scans", None), list) else [])
     bad, n = motion_disagreement(odometry[:, 0], odometry[:, 1:4].T, truth.t, truth.poses)
     if n >= 10 and bad > n / 3:  # a run's own reference: at most 1 in 11 (the measurement in motion_disagreement)
         echo(f"mcl: warning: {name}: the reference does not move as the odometry does in {bad} of {n} stretches of "

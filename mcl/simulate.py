@@ -1128,7 +1128,8 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
             raise ConfigError(f"--odom-alphas: expected four numbers A1,A2,A3,A4, got {args.odom_alphas!r}") from None
     noise = {k: v for k, v in noise.items() if v is not None}  # the options not given keep simulate()'s defaults
     return simulate(args.outdir, **noise, kind=args.kind, seed=args.seed, duration=args.duration,
-                    range_max=args.range_max, n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed, kidnap_at=args.kidnap_at,
+                    range_max=args.range_max, n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed,
+                    kidnap_at=args.kidnap_at,
                     dynamic_obstacles=args.dynamic_obstacles, unmapped_furniture=args.unmapped_furniture,
                     landmarks=args.landmarks, landmark_range=args.landmark_range, depth=args.depth,
                     depth_every=args.depth_every, map_resolution=args.map_resolution,

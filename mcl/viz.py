@@ -35,6 +35,7 @@ not compress), about 2 KB per step for everything else with a 181-beam scan.  Lo
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import sys
@@ -738,8 +739,6 @@ class RerunLogger:
             else:
                 rec.flush()
         except RuntimeError as e:  # the file sink failed (a full disk): one error naming the recording
-            import errno
-
             if self.path is not None and self.path.exists():  # cut short: not under its final name
                 os.replace(self.path, self.path.with_name(self.path.name + ".partial"))
             raise OSError(errno.EIO, f"the recording could not be written ({e}); what was written is in "
@@ -1098,8 +1097,6 @@ def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) 
             rec.set_time("step", sequence=j)
             rec.log(f"motion/{k}/samples", rr.Points2D(np.stack([c[0] + dx, c[1]], axis=1), radii=0.003 * span,
                                                        colors=[[40, 40, 160]]))
-    import errno
-
     try:
         rec.flush(timeout_sec=EXPLORE_FLUSH_S)  # a file sink that failed (a full disk) hung an untimed flush
         rec.disconnect()

@@ -70,7 +70,7 @@ _BLOCK = 1 << 20  # readings a block: 8 MB of float64
 
 def _blocks(ranges):
     """The finite readings in (0, _MAX_M] of ``ranges`` (an array, or a list of arrays joined up to _BLOCK readings
-    at a time), as a lazy list of float64 arrays: one pass for the histogram, one for the count."""
+    at a time), a float64 block at a time: only one block's copies alive at once."""
 
     def kept(r):
         r = np.asarray(r, dtype=np.float64).ravel()
@@ -78,22 +78,17 @@ def _blocks(ranges):
             return r[np.isfinite(r) & (r > 0.0) & (r <= _MAX_M)]
 
     if isinstance(ranges, np.ndarray):
-        return [kept(ranges)]
-    groups, group, size = [], [], 0
+        yield kept(ranges)
+        return
+    group, size = [], 0
     for r in ranges:
-        group.append(r)
-        size += np.size(r)
+        group.append(np.ravel(r))
+        size += group[-1].size
         if size >= _BLOCK:
-            groups.append(group)
+            yield kept(np.concatenate(group))
             group, size = [], 0
     if group:
-        groups.append(group)
-
-    class _Lazy:  # each block filtered when iterated: at most one block's copies alive at a time
-        def __iter__(self):
-            return (kept(np.concatenate([np.ravel(a) for a in g])) for g in groups)
-
-    return _Lazy()
+        yield kept(np.concatenate(group))
 
 
 def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, spike_ratio: float = 20.0,
@@ -103,9 +98,8 @@ def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, sp
 
     See the module docstring for the rule and its parameters.
     """
-    blocks = _blocks(ranges)
     hist, total, top = np.zeros(0), 0, 0
-    for r in blocks:  # the centimetre histogram, a block at a time: a long log's readings are not copied whole
+    for r in _blocks(ranges):  # the centimetre histogram, a block at a time: a long log's readings are not copied whole
         if r.size:
             cm = np.rint(r * 100.0).astype(np.int64)
             h = np.bincount(cm)
@@ -125,7 +119,7 @@ def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, sp
     if spikes.size == 0:
         return None
     threshold = (1.0 - margin) * spikes[0] / 100.0
-    count = sum(int(np.count_nonzero(r >= threshold)) for r in blocks)
+    count = sum(int(np.count_nonzero(r >= threshold)) for r in _blocks(ranges))  # a second pass
     if total - count < max(min_count, 0.05 * total):  # hardly any real reading: nothing to tell the marker from
         return None
     return NoReturn(float(threshold), tuple(float(v) / 100.0 for v in spikes), count, total)
