@@ -57,6 +57,8 @@ from mcl.worlds import (  # noqa: F401  (RESOLUTION, make_world, World: importab
 
 _ODOM_RATE = 10.0  # Hz, truth and ODOM: the lowest rate, and the rate at the default 5 Hz scan rate
 _SIM_DT = 0.01  # integration step, s
+_NOISE_BLOCK = 1 << 20  # readings a block of the laser's noise draws (8 MB a float array)
+_LOG_BLOCK_LINES = 2000  # log lines formatted before they are written
 
 
 def _rates(scan_rate: float) -> tuple[float, int, float]:
@@ -321,6 +323,35 @@ def _ground_hits(rng, t, angles, episodes: int, duration: float, exact) -> list[
             on = c > 0.35
             exact[k, on] = np.minimum(exact[k, on], dist / c[on])
     return windows
+
+
+def _noisy_ranges(exact: np.ndarray, rng, range_sigma: float, p_short: float, p_max: float,
+                  range_max: float) -> np.ndarray:
+    """The laser's readings of the true ranges ``exact`` (scans, beams): Gaussian noise ``range_sigma``, a share
+    ``p_short`` short (uniform over 5-100 % of the true range), a share ``p_max`` no-return (``range_max``).
+
+    The draws come in blocks of rows, in the order of whole-array draws (every normal, then every uniform, then
+    every fraction: a Generator's draws split into consecutive blocks are the same numbers), so a long run needs
+    about two floats a reading instead of five."""
+    ranges = np.empty_like(exact)
+    short = np.empty(exact.shape, dtype=bool)
+    maxed = np.empty(exact.shape, dtype=bool)
+    rows = max(1, _NOISE_BLOCK // max(1, exact.shape[1]))
+    blocks = [slice(a, a + rows) for a in range(0, exact.shape[0], rows)]
+    for b in blocks:
+        ranges[b] = exact[b] + range_sigma * rng.standard_normal(exact[b].shape)
+    for b in blocks:
+        u = rng.random(exact[b].shape)
+        short[b] = u < p_short
+        maxed[b] = (u >= p_short) & (u < p_short + p_max)
+    for b in blocks:
+        frac = rng.uniform(0.05, 1.0, exact[b].shape)
+        s = short[b]
+        ranges[b][s] = exact[b][s] * frac[s]
+    ranges[maxed] = range_max
+    ranges[exact >= range_max] = range_max
+    np.clip(ranges, 0.0, range_max, out=ranges)
+    return ranges
 
 
 def _drive(world, rng, n_ticks, speed, turn_rate, kidnap_tick, plan_stride=1, leg_max=None, reversals=None,
@@ -622,7 +653,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     """
     from mcl.kernels.raycast import cast_rays
     from mcl.maps import OccupancyGrid, save_map
-    from mcl.trajectory import atomic_write_text, write_tum
+    from mcl.trajectory import atomic_write_text, atomic_writer, write_tum
 
     _check(kind in KINDS, "kind", f"expected one of {', '.join(KINDS)}, got {kind!r}")
     defaults = KIND_DEFAULTS[kind]
@@ -725,15 +756,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         # A ninth child stream: the others are unchanged.
         rng_ground = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(9)[8])
         hit_windows = _ground_hits(rng_ground, t[scan_ticks], angles, int(ground_hits), float(duration), exact)
-    noise = rng_laser.standard_normal(exact.shape)
-    u = rng_laser.random(exact.shape)
-    frac = rng_laser.uniform(0.05, 1.0, exact.shape)
-    ranges = exact + range_sigma * noise
-    short = u < p_short
-    ranges[short] = exact[short] * frac[short]
-    ranges[(u >= p_short) & (u < p_short + p_max)] = range_max
-    ranges[exact >= range_max] = range_max
-    ranges = np.clip(ranges, 0.0, range_max)
+    ranges = _noisy_ranges(exact, rng_laser, range_sigma, p_short, p_max, range_max)
     lm_obs = None
     if landmarks:
         # A sixth child stream: the others (world, drive, odometry, laser, obstacles) are unchanged.
@@ -771,24 +794,28 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              f"fov={fov:.6f} range_max={range_max:g}; poses in the odometry frame\n",
              f"PARAM robot_front_laser_max {range_max:g} {0.0:.6f} {host} {0.0:.6f}\n"]
     scan_row = {int(k): i for i, k in enumerate(scan_ticks)}
-    for k in range(n_ticks):
-        ts = f"{t[k]:.6f} {host} {t[k]:.6f}"
-        x, y, th = odom[k]
-        lines.append(f"ODOM {x:.6f} {y:.6f} {th:.6f} {tv[k]:.6f} {rv[k]:.6f} 0.000000 {ts}\n")
-        i = scan_row.get(k)
-        if i is None:
-            continue
-        rs = " ".join(f"{r:.3f}" for r in ranges[i])
-        pose = f"{x:.6f} {y:.6f} {th:.6f}"
-        if flaser:
-            lines.append(f"FLASER {angles.size} {rs} {pose} {pose} {ts}\n")
-        else:
-            lines.append(f"ROBOTLASER1 0 {angles[0]:.9f} {fov:.9f} {fov / (angles.size - 1):.9f} "
-                         f"{range_max:g} 0.01 0 {angles.size} {rs} 0 {pose} {pose} "
-                         f"{tv[k]:.6f} {rv[k]:.6f} 0.0 0.0 0.0 {ts}\n")
-        if lm_obs is not None:
-            lines.append(_landmark_line(lm_obs[i], ts))
-    atomic_write_text(out / "log.clf", "".join(lines))
+    # Written as it is formatted, a block of lines at a time: an hour of 2,880-beam scans is 360 MB of text.
+    with atomic_writer(out / "log.clf", "w", encoding="utf-8") as f:
+        for k in range(n_ticks):
+            ts = f"{t[k]:.6f} {host} {t[k]:.6f}"
+            x, y, th = odom[k]
+            lines.append(f"ODOM {x:.6f} {y:.6f} {th:.6f} {tv[k]:.6f} {rv[k]:.6f} 0.000000 {ts}\n")
+            i = scan_row.get(k)
+            if i is not None:
+                rs = " ".join(f"{r:.3f}" for r in ranges[i])
+                pose = f"{x:.6f} {y:.6f} {th:.6f}"
+                if flaser:
+                    lines.append(f"FLASER {angles.size} {rs} {pose} {pose} {ts}\n")
+                else:
+                    lines.append(f"ROBOTLASER1 0 {angles[0]:.9f} {fov:.9f} {fov / (angles.size - 1):.9f} "
+                                 f"{range_max:g} 0.01 0 {angles.size} {rs} 0 {pose} {pose} "
+                                 f"{tv[k]:.6f} {rv[k]:.6f} 0.0 0.0 0.0 {ts}\n")
+                if lm_obs is not None:
+                    lines.append(_landmark_line(lm_obs[i], ts))
+            if len(lines) >= _LOG_BLOCK_LINES:
+                f.write("".join(lines))
+                lines.clear()
+        f.write("".join(lines))
     if lm_obs is not None:
         from mcl.landmarks import save_landmarks
 

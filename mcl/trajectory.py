@@ -14,13 +14,14 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from mcl.errors import DataError
 
-__all__ = ["read_tum", "write_tum", "TumWriter", "atomic_write_text", "atomic_write_bytes"]
+__all__ = ["read_tum", "write_tum", "TumWriter", "atomic_write_text", "atomic_write_bytes", "atomic_writer"]
 
 
 def _umask() -> int:
@@ -29,13 +30,16 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (same-dir temp file, fsync, os.replace)."""
+@contextmanager
+def atomic_writer(path: str | os.PathLike, mode: str = "wb", encoding: str | None = None):
+    """A file object whose contents appear at ``path`` only when the ``with`` block ends without an error (same-dir
+    temp file, fsync, os.replace); on an error the temp file is removed and an OSError names ``path``. For outputs
+    written in pieces (a long simulated log), where :func:`atomic_write_bytes` would need them whole in memory."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
+        with os.fdopen(fd, mode, encoding=encoding) as f:
+            yield f
             f.flush()
             os.fsync(f.fileno())
         # mkstemp creates 0600; give the file the permissions open() would have.
@@ -49,6 +53,12 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
         if isinstance(e, OSError) and e.filename in (None, tmp):  # named by the user's path, not the temp file's
             raise OSError(e.errno, e.strerror or str(e), str(path)) from None
         raise
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (same-dir temp file, fsync, os.replace)."""
+    with atomic_writer(path) as f:
+        f.write(data)
 
 
 def check_writable_folder(out: str | os.PathLike, what: str) -> None:

@@ -42,6 +42,34 @@ def test_same_seed_gives_byte_identical_files(sim, tmp_path):
         assert (tmp_path / name).read_bytes() == (out / name).read_bytes(), name
 
 
+def test_the_noise_drawn_in_blocks_and_the_log_written_in_blocks_are_the_whole_array_draws(sim, tmp_path,
+                                                                                            monkeypatch):
+    """Blocks of a few readings and a few lines give the log of whole-array draws, byte for byte (the blocks only
+    bound the memory of a long run)."""
+    import mcl.simulate as s
+
+    exact = np.random.default_rng(0).uniform(0.0, 14.0, (23, 9))
+    exact[3, 4] = 20.0  # beyond range_max: a no-return
+    ref_rng = np.random.default_rng(5)
+    noise, u = ref_rng.standard_normal(exact.shape), ref_rng.random(exact.shape)
+    frac = ref_rng.uniform(0.05, 1.0, exact.shape)
+    want = exact + 0.02 * noise
+    want[u < 0.2] = (exact * frac)[u < 0.2]
+    want[(u >= 0.2) & (u < 0.3)] = 12.0
+    want[exact >= 12.0] = 12.0
+    want = np.clip(want, 0.0, 12.0)
+    monkeypatch.setattr(s, "_NOISE_BLOCK", 20)  # two rows a block, the last one short
+    got = s._noisy_ranges(exact, np.random.default_rng(5), 0.02, 0.2, 0.1, 12.0)
+    assert np.array_equal(got, want)
+    monkeypatch.setattr(s, "_NOISE_BLOCK", 1 << 20)
+    assert np.array_equal(s._noisy_ranges(exact, np.random.default_rng(5), 0.02, 0.2, 0.1, 12.0), want)
+
+    monkeypatch.setattr(s, "_NOISE_BLOCK", 500)
+    monkeypatch.setattr(s, "_LOG_BLOCK_LINES", 3)
+    simulate(tmp_path, seed=4, duration=40.0)
+    assert (tmp_path / "log.clf").read_bytes() == (sim[0] / "log.clf").read_bytes()
+
+
 def test_different_seeds_give_different_worlds(sim, tmp_path):
     out, _ = sim
     simulate(tmp_path, seed=5, duration=2.0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mcl.errors import DataError
-from mcl.trajectory import TumWriter, atomic_write_bytes, atomic_write_text, read_tum, write_tum
+from mcl.trajectory import TumWriter, atomic_write_bytes, atomic_write_text, atomic_writer, read_tum, write_tum
 
 
 def test_round_trip(tmp_path):
@@ -111,6 +111,27 @@ def test_atomic_write_helpers(tmp_path):
     atomic_write_bytes(p, b"\x00\x01")
     assert p.read_bytes() == b"\x00\x01"
     assert [q.name for q in tmp_path.iterdir()] == ["a.txt"]
+
+
+def test_atomic_writer_shows_the_file_only_when_its_block_ends_and_keeps_the_old_one_on_an_error(tmp_path):
+    p = tmp_path / "log.clf"
+    p.write_text("old\n")
+    with atomic_writer(p, "w", encoding="utf-8") as f:
+        f.write("new 1\n")
+        f.flush()
+        assert p.read_text() == "old\n"  # written in pieces under a temp name
+        f.write("new 2\n")
+    assert p.read_text() == "new 1\nnew 2\n"
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_writer(p, "w", encoding="utf-8") as f:
+            f.write("cut")
+            raise KeyboardInterrupt
+    assert p.read_text() == "new 1\nnew 2\n"
+    with pytest.raises(OSError) as e:  # a write error is said of the file, not of its temp name
+        with atomic_writer(p, "w", encoding="utf-8") as f:
+            raise OSError(28, "No space left on device")
+    assert e.value.filename == str(p) and p.read_text() == "new 1\nnew 2\n"
+    assert [q.name for q in tmp_path.iterdir()] == ["log.clf"]
 
 
 def test_write_tum_rejects_bad_shapes(tmp_path):
