@@ -19,7 +19,8 @@ of one such log, into OUTDIR:
   top of the log's range, ``mcl.datasets.noreturn``) only clear cells, up to ``--free-range``.
 
 Nothing it makes belongs in the repository (``data/`` holds only what the project makes itself; real logs are
-never copied in): write into a scratch folder, and list it in a suite file to evaluate the default on buildings it was never tuned on::
+never copied in): write into a scratch folder, and list it in a suite file to evaluate the default on buildings
+it was never tuned on::
 
     .venv/bin/python scripts/radish_dataset.py seattle-corrected.log.gz /tmp/heldout-real/seattle
 """
