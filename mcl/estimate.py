@@ -32,11 +32,14 @@ def inverse(a: np.ndarray) -> np.ndarray:
 
 
 def weighted_mean_pose(particles: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Weighted mean (x, y) and circular mean theta of a (3, N) particle set with weights summing to 1."""
-    x = float(np.dot(w, particles[0]))
-    y = float(np.dot(w, particles[1]))
+    """Weighted mean (x, y) and circular mean theta of a (3, N) particle set with weights summing to 1.
+
+    numpy's own loop (einsum), not np.dot: above 10,000 weights OpenBLAS splits a dot product over its threads and
+    the sum's last digits change with OPENBLAS_NUM_THREADS (as ``mcl.resampling.effective_sample_size``)."""
+    x = float(np.einsum("n,n->", w, particles[0]))
+    y = float(np.einsum("n,n->", w, particles[1]))
     th = particles[2]
-    theta = float(np.arctan2(np.dot(w, np.sin(th)), np.dot(w, np.cos(th))))
+    theta = float(np.arctan2(np.einsum("n,n->", w, np.sin(th)), np.einsum("n,n->", w, np.cos(th))))
     return np.array([x, y, theta])
 
 

@@ -191,3 +191,17 @@ def test_the_kernel_gives_the_books_mean_and_covariance_of_the_set_and_of_one_cl
         np.testing.assert_allclose(mean1, want1, rtol=0, atol=1e-10, err_msg=f"trial {trial}")
         np.testing.assert_allclose(cov1, weighted_covariance(p[:, sel], w[sel] / total, want1), rtol=1e-9,
                                    atol=1e-12, err_msg=f"trial {trial}")
+
+
+def test_weighted_mean_pose_does_not_change_with_the_blas_thread_count():
+    # np.dot over 100,000 weights is split over OpenBLAS's threads: its last digits differed between
+    # OPENBLAS_NUM_THREADS=1 and 2. Two processes, one BLAS thread and two: the same bits.
+    import os
+    import subprocess
+    import sys
+
+    code = ("import numpy as np; from mcl.estimate import weighted_mean_pose as f; r = np.random.default_rng(1); "
+            "p = r.normal(0, 30, (3, 100000)); w = r.random(100000); w /= w.sum(); print(f(p, w).tobytes().hex())")
+    got = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                          env={**os.environ, "OPENBLAS_NUM_THREADS": t, "OMP_NUM_THREADS": t}).stdout for t in "12"}
+    assert len(got) == 1, got

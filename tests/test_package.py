@@ -39,7 +39,7 @@ def test_cli_prints_each_warning_as_one_clean_line(tmp_path, capsys):
     _short_bad_log(tmp_path / "bad.clf")
     rc = main(["run", "--map", str(DEMO / "map.yaml"), "--log", str(tmp_path / "bad.clf"), "--out",
                str(tmp_path / "out"), "--rerun", "off", "--no-progress", "--particles", "200",
-               "--initial-pose", "18.961318", "9.225", "3.0954", "--set", "filter.update_min_d=0",
+               "--initial-pose", "2.062007", "10.160616", "-0.218311", "--set", "filter.update_min_d=0",
                "--set", "filter.update_min_a=0"])
     assert rc == 0
     err = capsys.readouterr().err.splitlines()
@@ -232,7 +232,7 @@ def test_mcl_run_says_once_that_it_compiles_the_kernels_when_the_cache_is_cold(t
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
     _short_bad_log(tmp_path / "short.clf", scans=10)
     argv = ["run", "--map", str(DEMO / "map.yaml"), "--log", str(tmp_path / "short.clf"), "--rerun", "off",
-            "--no-progress", "--particles", "100", "--initial-pose", "18.961318", "9.225", "3.0954"]
+            "--no-progress", "--particles", "100", "--initial-pose", "2.062007", "10.160616", "-0.218311"]
     assert main(argv + ["--out", str(tmp_path / "a")]) == 0
     err = capsys.readouterr().err.splitlines()
     assert err.count("mcl: compiling kernels (once; cached for later runs)") == 1, err
