@@ -68,12 +68,14 @@ from mcl.sensors import LikelihoodField, beam_endpoints  # noqa: E402
 
 
 def motion_cfg():
+    # configs/default.yaml's motion model, not MotionConfig()'s plain values (robot_radius 0.0 against the default's
+    # 0.1: map rejection then tried fewer poses again than a default run does)
     try:
-        from mcl.config import MotionConfig
-        return MotionConfig()
+        from mcl.config import load_config
+        return load_config(ROOT / "configs" / "default.yaml").motion
     except Exception:  # config module absent or changed: the book-ish defaults
         return SimpleNamespace(model="odometry", noise_form="variance", alpha1=0.05, alpha2=0.05, alpha3=0.05,
-                               alpha4=0.05, map_rejection=True, max_tries=10, robot_radius=0.0)
+                               alpha4=0.05, map_rejection=True, max_tries=10, robot_radius=0.1)
 
 
 def sensor_cfg(max_beams):
@@ -477,7 +479,8 @@ def bench_kernels(args) -> None:
     print(f"# {note}; numba {numba.__version__}, threading layer after warm-up below, "
           f"{max_threads} threads available")
     print(f"# motion: noise_form={mcfg.noise_form} alphas=({mcfg.alpha1}, {mcfg.alpha2}, {mcfg.alpha3}, {mcfg.alpha4}) "
-          f"max_tries={mcfg.max_tries}; beams: {', '.join(f'{b}->{e.shape[1]} valid' for b, e in beams.items())}")
+          f"max_tries={mcfg.max_tries} robot_radius={mcfg.robot_radius}; "
+          f"beams: {', '.join(f'{b}->{e.shape[1]} valid' for b, e in beams.items())}")
 
     rng = np.random.default_rng(0)
     # warm-up: compile (or load from cache) every kernel once

@@ -7,8 +7,9 @@ Beam skipping here is the config's (the default: rule ``short``, 0.25 m / 0.5;
 Synthetic: ``mcl simulate --dynamic-obstacles N`` worlds (boxes near the path and
 walking people that block the laser but are not in the saved map), tracked from
 the true start pose with the default config, beam skipping off and on, and each
-with augmented MCL (filter.recovery) on (the default) and off: unexplained beams
-lower the measurement likelihood, which recovery reads as a kidnapping. The same
+with augmented MCL (``filter.recovery=true``; the default is ``lost``, which this
+script does not run) on and off: unexplained beams lower the measurement
+likelihood, which augmented MCL reads as a kidnapping. The same
 worlds without the obstacles are the reference. Real: ``../shared/data/fr079``
 (people walking) with configs/fr079.yaml, beam skipping off and on.
 

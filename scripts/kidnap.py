@@ -4,14 +4,16 @@ For each seed, ``mcl.simulate.simulate(..., kidnap_at=T)`` makes a world and a
 log in which the robot is teleported at T s to a pose at least 5 m away
 (the odometry never sees the jump). The filter tracks from the true start
 pose with the default config (configs/default.yaml), once with
-``filter.recovery`` on and once off, and the script prints, per seed:
+``filter.recovery=true`` (augmented MCL: not the default's ``lost`` recovery, which
+``--set filter.recovery=lost`` gives both runs) and once with it off, and the script
+prints, per seed:
 
 - ATE RMSE before the jump (m), for both runs;
 - recovery time: seconds from the jump until the position error falls below
   ``--within`` (0.5 m) and stays below it to the end of the log (None: never);
 - mean particle count.
 
-Usage: .venv/bin/python scripts/kidnap.py [--seeds 0-9] [--particles N] [--kidnap-at 30] [--duration 80]
+Usage: .venv/bin/python scripts/kidnap.py [--seeds 0-9] [--kidnap-at 30] [--duration 80] [--set filter.particles=N]
 Requirement (issue 4): recovered in < 30 s in >= 9 of 10 worlds, ATE before the jump no worse with recovery on.
 """
 

@@ -12,7 +12,7 @@
    are serial), which a machine shared with other processes does not inflate.
 3. Localization: ``mcl simulate --depth`` for ``--duration`` s, then tracking runs with the laser alone,
    the planes alone and both (2,000 particles); ATE RMSE of each.
-Writes ``bench.json`` in ``--out`` and prints a table.
+Writes ``bench.json`` in ``--out`` and prints each result as it comes (one line per run, stride and view).
 """
 
 from __future__ import annotations
