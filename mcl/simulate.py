@@ -40,6 +40,7 @@ noise that no wheel odometry has.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
 import os
 from pathlib import Path
@@ -49,7 +50,7 @@ import numpy as np
 from mcl.errors import ConfigError
 from mcl.motion import noise_angle
 
-__all__ = ["simulate", "make_world", "World", "add_arguments", "run_from_args"]
+__all__ = ["simulate", "make_world", "World", "add_arguments", "run_from_args", "simulator_stamp"]
 
 from mcl.worlds import (  # noqa: F401  (RESOLUTION, make_world, World: importable from here as before)
     KIND_DEFAULTS, KINDS, RESOLUTION, World, _components, generate, make_world,
@@ -59,6 +60,26 @@ _ODOM_RATE = 10.0  # Hz, truth and ODOM: the lowest rate, and the rate at the de
 _SIM_DT = 0.01  # integration step, s
 _NOISE_BLOCK = 1 << 20  # readings a block of the laser's noise draws (8 MB a float array)
 _LOG_BLOCK_LINES = 2000  # log lines formatted before they are written
+
+
+# The sources whose code decides a generated world's bytes (the floor plan, the drive, the readings, the files).
+_WORLD_SOURCES = ("simulate.py", "worlds.py", "depthsim.py", "kernels/raycast.py", "datasets/bagwrite.py")
+
+
+def simulator_stamp() -> str:
+    """A short hash of the code that makes a world (``_WORLD_SOURCES``), for caches of generated worlds (``mcl eval
+    --suite``'s, the scripts'): keyed on the keywords alone, a cache kept serving worlds of an older simulator."""
+    global _STAMP
+    if _STAMP is None:
+        h = hashlib.sha1()
+        root = Path(__file__).resolve().parent
+        for name in _WORLD_SOURCES:
+            h.update(name.encode() + b"\0" + (root / name).read_bytes())
+        _STAMP = h.hexdigest()[:8]
+    return _STAMP
+
+
+_STAMP: str | None = None
 
 
 def _rates(scan_rate: float) -> tuple[float, int, float]:

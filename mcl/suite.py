@@ -340,8 +340,12 @@ def load_suite(path: str | os.PathLike) -> Suite:
 
 
 def _world_dir(cache: Path, d: Dataset, kidnapped: bool) -> Path:
+    """The world's folder in the cache: named by its keywords and the simulator's code (``simulator_stamp``), so a
+    world made by an older simulator is made again, not served."""
+    from mcl.simulate import simulator_stamp
+
     kw = _sim_kwargs(d, kidnapped)
-    h = hashlib.sha1(json.dumps(kw, sort_keys=True).encode()).hexdigest()[:10]
+    h = hashlib.sha1((json.dumps(kw, sort_keys=True) + simulator_stamp()).encode()).hexdigest()[:10]
     return cache / f"{d.name}-{'kidnap-' if kidnapped else ''}{h}"
 
 

@@ -38,7 +38,7 @@ def run_case(data: Path, overrides: list[str], out: Path) -> dict:
 
 
 def main(argv=None) -> int:
-    from mcl.simulate import simulate
+    from mcl.simulate import simulate, simulator_stamp
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default="0-4")
@@ -54,7 +54,7 @@ def main(argv=None) -> int:
     print("seed   default config: converged (s) / mean particles / wall (s)   plain 5,000: converged (s) / wall (s)")
     ok_d = ok_p = n = 0
     for seed in range(int(a), int(b) + 1):
-        data = root / f"seed{seed}_r5_d{args.duration:g}"
+        data = root / f"seed{seed}_r5_d{args.duration:g}_{simulator_stamp()}"  # a world of today's simulator
         if not (data / "truth.tum").is_file():
             simulate(data, seed=seed, range_max=5.0, duration=args.duration)
         d = run_case(data, args.overrides, root / "runs" / f"{seed}_default")

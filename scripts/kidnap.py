@@ -33,9 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def make_world(root: Path, seed: int, kidnap_at: float, duration: float, range_max: float = 12.0) -> tuple[Path, dict]:
     """The simulated data set for a seed (made once, reused from ``root``)."""
-    from mcl.simulate import simulate
+    from mcl.simulate import simulate, simulator_stamp
 
-    out = root / f"seed{seed}_k{kidnap_at:g}_d{duration:g}_r{range_max:g}"
+    out = root / f"seed{seed}_k{kidnap_at:g}_d{duration:g}_r{range_max:g}_{simulator_stamp()}"
     meta = out / "meta.json"
     if meta.is_file():
         return out, json.loads(meta.read_text())

@@ -215,6 +215,22 @@ def test_a_shipped_suites_start_poses_are_where_its_truth_puts_the_robot_at_the_
     assert checked >= 1
 
 
+def test_a_cached_world_is_keyed_on_the_simulators_code_too(tmp_path, monkeypatch):
+    # keyed on the keywords alone, a cache kept serving the worlds an older simulator made
+    import mcl.simulate
+    from mcl.suite import _world_dir
+
+    demo = next(d for d in load_suite(PROJECT_ROOT / "suites" / "smoke.yaml").datasets if d.name == "demo")
+    today = mcl.simulate.simulator_stamp()
+    assert len(today) == 8 and _world_dir(tmp_path, demo, True) == _world_dir(tmp_path, demo, True)
+    monkeypatch.setattr(mcl.simulate, "_STAMP", "0" * 8)  # another simulator's code
+    older = _world_dir(tmp_path, demo, True)
+    monkeypatch.setattr(mcl.simulate, "_STAMP", today)
+    assert _world_dir(tmp_path, demo, True) != older
+    monkeypatch.setattr(mcl.simulate, "_STAMP", None)  # computed again from the sources: the same
+    assert mcl.simulate.simulator_stamp() == today
+
+
 def test_table_median_and_worst():
     def row(seed, rmse, mx, lost, conv, wall, n, config="default"):
         return {"dataset": "a", "mode": "tracking", "config": config, "seed": seed, "rmse": rmse, "max": mx,
