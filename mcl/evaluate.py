@@ -122,9 +122,11 @@ def evaluate(est_t, est_poses, ref_t, ref_poses, *, converged_within: float = 0.
 
 def format_eval(r: dict) -> str:
     """One paragraph for the terminal."""
-    conv = "never" if r["convergence_time"] is None else f"{r['convergence_time']:.1f} s"
+    within = f"{r['converged_within']:g} m"
+    conv = (f"never within {within} for good" if r["convergence_time"] is None
+            else f"converged within {within} after {r['convergence_time']:.1f} s")
     return (
         f"ATE RMSE {r['ate_rmse']:.3f} m, max {r['ate_max']:.3f} m, heading RMSE {r['heading_rmse_deg']:.2f} deg, "
-        f"converged within {r['converged_within']:g} m after {conv} "
+        f"{conv} "
         f"({r['scored']} reference poses scored, {r['unscored']} outside the estimate's span)"
     )

@@ -66,6 +66,7 @@ def default_out_dir(root: Path | None = None) -> Path:
 # what a run writes into its folder (mcl.runner._run), and the partial files of its line writers
 RUN_OUTPUTS = ("config.yaml", "trajectory.tum", "quality.csv", "summary.json", "recording.rrd", "estimate.bag",
                "estimate.db3", "estimate.mcap")
+PARTIAL_RECORDING = "recording.partial.rrd"  # a recording cut short (mcl.viz.partial_recording)
 
 
 def check_out_dir(out: Path, flag: str = "--out") -> None:
@@ -78,7 +79,7 @@ def check_out_dir(out: Path, flag: str = "--out") -> None:
     check_writable_folder(out, f"{flag} {out}")
     if out.is_dir():
         names = sorted(p.name for p in out.iterdir())
-        other = [n for n in names if n.removesuffix(".partial") not in RUN_OUTPUTS]
+        other = [n for n in names if n.removesuffix(".partial") not in RUN_OUTPUTS and n != PARTIAL_RECORDING]
         if other:
             more = f", ... ({len(other)} in all)" if len(other) > 4 else ""
             raise ConfigError(f"{flag} {out}: the folder holds files that are not a run's outputs "
@@ -120,6 +121,8 @@ def _clear_run_outputs(out_dir: Path) -> None:
         for p in (out_dir / name, out_dir / f"{name}.partial"):
             if p.is_file():
                 p.unlink()
+    if (out_dir / PARTIAL_RECORDING).is_file():
+        (out_dir / PARTIAL_RECORDING).unlink()
 
 
 # frames of mcl's own code have a file name starting with one of these

@@ -739,16 +739,26 @@ class RerunLogger:
             else:
                 rec.flush()
         except RuntimeError as e:  # the file sink failed (a full disk): one error naming the recording
-            if self.path is not None and self.path.exists():  # cut short: not under its final name
-                os.replace(self.path, self.path.with_name(self.path.name + ".partial"))
-            raise OSError(errno.EIO, f"the recording could not be written ({e}); what was written is in "
-                          f"{self.path.name}.partial", str(self.path)) from None
+            self._cut_short(str(e))
         if self.mode == "serve":
             # Disconnecting, or dropping the stream with this logger when the run returns, shuts the gRPC server
             # down before a viewer could read the buffered data: keep the stream for the rest of the process.
             _SERVED.append(rec)
             return
         rec.disconnect()
+        # The file sink writes its last buffer and the footer when disconnected, and a failure there (a file size
+        # limit, a full disk) is only logged by rerun: the run ended with exit 0 and "Open the recording with" a
+        # recording.rrd cut short (`rerun rrd verify`: "Missing RRD footer")
+        if self.path is not None and self.path.exists() and not recording_is_whole(self.path):
+            self._cut_short("its end could not be written")
+
+    def _cut_short(self, why: str) -> None:
+        """The recording could not be written whole: leave it as ``recording.partial.rrd`` and raise OSError."""
+        cut = partial_recording(self.path if self.path is not None else "recording.rrd")
+        if self.path is not None and self.path.exists():  # cut short: not under its final name, but still
+            os.replace(self.path, cut)                     # an .rrd (the viewer opens no other name)
+        raise OSError(errno.EIO, f"the recording could not be written ({why}); what was written is in "
+                      f"{cut.name} (rerun {cut.name} shows it)", str(self.path)) from None
 
     def expected_scan(self, grid: Any, pose: np.ndarray, laser_pose: np.ndarray, angles: np.ndarray,
                       range_max: float) -> np.ndarray:
@@ -1072,6 +1082,32 @@ def log_line_features(logger: RerunLogger, segments: np.ndarray) -> None:
 
 
 EXPLORE_FLUSH_S = 120.0  # s: the longest a motion-sample recording's write may take before it is given up
+
+
+def recording_is_whole(path: str | os.PathLike) -> bool:
+    """Whether the .rrd at ``path`` ends in its footer (rerun's reader finds its manifest): a file sink that failed
+    while ending the stream leaves it without one."""
+    import warnings
+
+    try:
+        from rerun.chunk import RrdReader
+    except ImportError:  # no reader to ask
+        return True
+    try:
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            RrdReader(path).recordings()
+    except Exception:
+        return False
+    # "RRD file has no footer/manifest" is a warning; another warning (a newer rerun's) says nothing of the end
+    return not any("footer" in str(w.message).lower() or "manifest" in str(w.message).lower() for w in said)
+
+
+def partial_recording(path: str | os.PathLike) -> Path:
+    """Where a recording cut short (a full disk) is left: ``recording.partial.rrd`` for ``recording.rrd``. The
+    Rerun viewer chooses its importer by the extension: ``recording.rrd.partial`` was "No importer support"."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.partial{path.suffix}")
 
 
 def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) -> None:

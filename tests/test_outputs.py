@@ -212,3 +212,48 @@ def test_the_last_line_says_when_the_filter_believed_it_was_lost(world, tmp_path
     assert _run(world, tmp_path / "t", "--initial-pose", *map(str, start)) == 0
     said = capsys.readouterr()
     assert "Localized " in said.out + said.err and "Believed lost" not in said.out + said.err
+
+
+def test_a_recording_cut_short_is_left_under_a_name_the_viewer_opens(world, tmp_path):
+    # A file size limit hit by the recording left `recording.rrd.partial`: the viewer picks its importer by the
+    # extension and said `No importer support for "recording.rrd.partial"`. Now it is `recording.partial.rrd`, which
+    # the viewer loads (the steps up to the cut), and a run again into the folder clears it.
+    import resource
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path / "cut"
+    limit = 500_000  # bytes: the trajectory and the other files fit, the recording (about 0.6 MB) does not
+
+    def cap():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    p = subprocess.run([sys.executable, "-m", "mcl", "run", "--map", str(world / "map.yaml"), "--log",
+                        str(world / "log.clf"), "--particles", "300", "--rerun", "save", "--no-progress", "--out",
+                        str(out)], preexec_fn=cap, capture_output=True, text=True, timeout=300)
+    errors = [ln for ln in p.stderr.splitlines() if ln.startswith("mcl: error:")]
+    assert p.returncode == 2 and len(errors) == 1, p.stderr
+    assert "recording.partial.rrd" in errors[0], errors[0]
+    names = sorted(q.name for q in out.iterdir())
+    assert "recording.partial.rrd" in names and not [n for n in names if n.endswith(".partial")], names
+    viewer = Path(sys.executable).parent / "rerun"
+    viewer = str(viewer) if viewer.exists() else shutil.which("rerun")
+    if viewer:  # the viewer's importer takes it: re-saved whole, it holds the run's steps up to the cut
+        saved = tmp_path / "saved.rrd"
+        v = subprocess.run([viewer, "--save", str(saved), str(out / "recording.partial.rrd")], capture_output=True,
+                           text=True, timeout=120)
+        assert "No importer support" not in v.stderr and saved.is_file() and saved.stat().st_size > 0, v.stderr
+    assert _run(world, out) == 0  # an earlier run's cut recording is one of its outputs: replaced, not refused
+    assert not (out / "recording.partial.rrd").exists()
+
+
+def test_the_summary_line_says_a_run_that_never_settled_in_words():
+    # "converged within 0.3 m after never" read as a number left out
+    from mcl.evaluate import format_eval
+
+    r = dict(ate_rmse=1.2, ate_max=9.0, heading_rmse_deg=3.0, converged_within=0.3, scored=5, unscored=0)
+    assert "never within 0.3 m for good (5 reference" in format_eval({**r, "convergence_time": None})
+    assert "after never" not in format_eval({**r, "convergence_time": None})
+    assert "converged within 0.3 m after 2.0 s (" in format_eval({**r, "convergence_time": 2.0})

@@ -135,7 +135,10 @@ class BagOut:
             conn = self._conns[topic] = self.writer.add_connection(topic, msgtype, typestore=self.ts,
                                                                    **self._latched(topic))
         sec, ns = _stamp(t)
-        log_ns = max(sec * 1_000_000_000 + ns, self._last_ns, 0)
+        # ROS 1 has no record time 0: rosbag's C++ API (rosbag play, rqt_bag) reads from ros::TIME_MIN = 1 ns and
+        # skipped a log's messages at t = 0 (mcl simulate's first scan, odometry and the only /tf_static); the header
+        # stamps stay the log's
+        log_ns = max(sec * 1_000_000_000 + ns, self._last_ns, 1 if self.ros1 else 0)
         self._last_ns = log_ns
         data = self.ts.serialize_ros1(message, msgtype) if self.ros1 else self.ts.serialize_cdr(message, msgtype)
         self.writer.write(conn, log_ns, data)
