@@ -123,7 +123,7 @@ UNUSED = {"transform_tolerance": "the map -> odom transform's post-dating", "sav
           "tf_broadcast": "", "first_map_only": "", "always_reset_initial_pose": "", "gui_publish_rate": "",
           "use_map_topic": "mcl reads a map file, else the bag's topics.map", "bag_scan_period": "",
           "restore_defaults": "", "global_frame_id": "mcl's estimate is in the map's frame",
-          "initial_pose.z": "", "set_initial_pose": ""}
+          "initial_pose.z": ""}
 # ROS 1 reads this misspelling too (amcl_node.cpp; navigation#790)
 ALIASES = {"beam_skip_error_threshold_": "beam_skip_error_threshold"}
 # parameters every ROS 2 node has, and rosparam's own
@@ -149,6 +149,7 @@ class Source:
     where: str
     remaps: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    guessed: bool = False  # no name says which: read as nav2_amcl's
 
 
 def _flatten(d: dict, prefix: str = "") -> dict:
@@ -174,12 +175,13 @@ def _score(params: dict) -> int:
     return sum(ALIASES.get(str(k), str(k)) in _STRONG for k in _flatten(params))
 
 
-def _flavour_of(params: dict) -> str:
-    """ROS1 or NAV2 by the names only one of them has (a tie: nav2, whose names are the plainer)."""
+def _flavour_of(params: dict) -> tuple[str, bool]:
+    """ROS1 or NAV2 by the names only one of them has (a tie: nav2, whose names are the plainer), and whether no
+    such name decided it."""
     names = [ALIASES.get(str(k), str(k)) for k in _flatten(params)]
     ros1 = sum(n in _BY_NAME[ROS1] and n not in _BY_NAME[NAV2] for n in names)
     nav2 = sum(n in _BY_NAME[NAV2] and n not in _BY_NAME[ROS1] for n in names)
-    return ROS1 if ros1 > nav2 else NAV2
+    return (ROS1 if ros1 > nav2 else NAV2), ros1 == nav2 == 0
 
 
 def _walk(node: Any, path: tuple = (), depth: int = 0):
@@ -218,7 +220,12 @@ def _from_yaml(path: Path, doc: Any) -> Source:
                        "<node pkg=\"amcl\">)")
     named = [c for c in candidates if _is_amcl_name(c[0])]
     p, params = named[0] if named else max(candidates, key=lambda c: _score(c[1]))
-    return Source(path, _flavour_of(params), _flatten(params), "/".join(p) if p else "the top level")
+    flavour, guessed = _flavour_of(params)
+    src = Source(path, flavour, _flatten(params), "/".join(p) if p else "the top level", guessed=guessed)
+    if guessed:
+        src.warnings.append("every name here is both ROS 1 amcl's and nav2_amcl's: read as nav2_amcl's (its defaults "
+                            "fill a group's missing parameters)")
+    return src
 
 
 _SUBST = re.compile(r"\$\((\w+)\s*([^)]*)\)")
@@ -419,8 +426,11 @@ class _Converter:
                     extra = f" (did you mean {hint[0]}?)" if hint else ""
                     self.warnings.append(f"{raw_name}: not a {self.flavour} parameter{extra}: not used")
                 continue
-            if p.key in self.values:
-                self.warnings.append(f"{raw_name}: given twice ({self.names[p.key]} and {raw_name}): the last is read")
+            if p.key in self.values:  # beam_skip_error_threshold and its misspelling: ROS 1 reads the misspelt one
+                keep = self.names[p.key] if self.names[p.key] in ALIASES else str(raw_name)
+                self.warnings.append(f"{raw_name}: given as {self.names[p.key]} too: {keep} is read, as AMCL does")
+                if keep != str(raw_name):
+                    continue
             self.values[p.key] = self._coerce(raw, p, str(raw_name))
             self.names[p.key] = str(raw_name)
 
