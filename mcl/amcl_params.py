@@ -149,7 +149,6 @@ class Source:
     where: str
     remaps: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
-    guessed: bool = False  # no name says which: read as nav2_amcl's
 
 
 def _flatten(d: dict, prefix: str = "") -> dict:
@@ -221,7 +220,7 @@ def _from_yaml(path: Path, doc: Any) -> Source:
     named = [c for c in candidates if _is_amcl_name(c[0])]
     p, params = named[0] if named else max(candidates, key=lambda c: _score(c[1]))
     flavour, guessed = _flavour_of(params)
-    src = Source(path, flavour, _flatten(params), "/".join(p) if p else "the top level", guessed=guessed)
+    src = Source(path, flavour, _flatten(params), "/".join(p) if p else "the top level")
     if guessed:
         src.warnings.append("every name here is both ROS 1 amcl's and nav2_amcl's: read as nav2_amcl's (its defaults "
                             "fill a group's missing parameters)")
@@ -303,7 +302,7 @@ def _from_launch(path: Path, text: str) -> Source:
             value = subst(el.get("value"), name)
             if value is not None:
                 params[name] = _roslaunch_value(value, el.get("type"))
-        elif el.tag == "rosparam":
+        elif el.tag == "rosparam" and el.get("command", "load") == "load":
             loaded = None
             if el.get("file"):
                 file = subst(el.get("file"), "<rosparam file>")
@@ -410,7 +409,7 @@ class _Converter:
     def read(self) -> None:
         other = NAV2 if self.flavour == ROS1 else ROS1
         for raw_name, raw in self.src.params.items():
-            name = ALIASES.get(str(raw_name), str(raw_name))
+            name = ALIASES.get(str(raw_name), str(raw_name)) if self.flavour == ROS1 else str(raw_name)
             p = _BY_NAME[self.flavour].get(name)
             if p is None:
                 q = _BY_NAME[other].get(name)
@@ -529,7 +528,7 @@ class _Converter:
         model = str(self.get("robot_model_type"))
         kind = model.lower()
         said = self.said("robot_model_type")
-        if kind in ("diff-corrected", "differential", "nav2_amcl::differentialmotionmodel"):
+        if kind == "diff-corrected" or "differential" in kind:  # nav2: differential, nav2_amcl::DifferentialMotionModel
             how = "sample_motion_model_odometry with std sqrt(alpha1 rot^2 + alpha2 trans^2): the variance form"
         elif kind == "diff":
             d = float(self.get("update_min_d")) or 0.2

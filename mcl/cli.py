@@ -518,7 +518,8 @@ def package_version() -> str:
 def _add_config(sub) -> None:
     csub = _group(sub, "config", help="print the commented default config, the resolved config of a run, or the "
                   "config ROS AMCL parameters correspond to",
-                  description="Configs: the documented defaults to start one from, and what a run really used.")
+                  description="Configs: the documented defaults to start one from, what a run really used, and "
+                  "the config that ROS AMCL parameters mean.")
     p = csub.add_parser("default", help="print configs/default.yaml: every key with its default and a comment",
                         description="Print the default config (the bundled demo's; every key, commented). Its "
                         "paths find the demo from anywhere.",
@@ -537,7 +538,7 @@ def _add_config(sub) -> None:
     p.set_defaults(func=cmd_config_show)
     p = csub.add_parser(
         "from-amcl", help="print the mcl config that ROS AMCL parameters (ROS 1 amcl, nav2_amcl) correspond to",
-        description=(
+        description=_wrap(
             "Read a tuned ROS AMCL parameter file and print the mcl config keys its parameters correspond to, "
             "each commented with the AMCL parameter it came from; only those keys, so the output runs as it is "
             "(mcl run OUT.yaml --bag B) or merges into a config. PARAMS is a nav2 params file (the amcl node's "
@@ -576,6 +577,14 @@ def cmd_config_show(args) -> int:
         path = path / "config.yaml"
     sys.stdout.write(dump_config(load_config(path, list(args.set))))
     return 0
+
+
+def _wrap(text: str) -> str:
+    """A long description in lines of at most 100 characters (for RawDescriptionHelpFormatter, which keeps the
+    epilog's examples as they are written)."""
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, 100, break_on_hyphens=False))
 
 
 def cmd_config_from_amcl(args) -> int:
