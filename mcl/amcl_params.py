@@ -118,11 +118,14 @@ PARAMS = (
     _Param("use_map_topic", "use_map_topic", None, bool),
     _Param("bag_scan_period", "bag_scan_period", None, float),
     _Param("restore_defaults", "restore_defaults", None, bool),
+    _Param("force_update_after_initialpose", "force_update_after_initialpose", None, bool),
+    _Param("force_update_after_set_map", "force_update_after_set_map", None, bool),
 )
 UNUSED = {"transform_tolerance": "the map -> odom transform's post-dating", "save_pose_rate": "",
           "tf_broadcast": "", "first_map_only": "", "always_reset_initial_pose": "", "gui_publish_rate": "",
           "use_map_topic": "mcl reads a map file, else the bag's topics.map", "bag_scan_period": "",
-          "restore_defaults": "", "global_frame_id": "mcl's estimate is in the map's frame",
+          "restore_defaults": "", "force_update_after_initialpose": "", "force_update_after_set_map": "",
+          "global_frame_id": "mcl's estimate is in the map's frame",
           "initial_pose.z": ""}
 # ROS 1 reads this misspelling too (amcl_node.cpp; navigation#790)
 ALIASES = {"beam_skip_error_threshold_": "beam_skip_error_threshold"}
