@@ -516,8 +516,10 @@ def package_version() -> str:
 
 
 def _add_config(sub) -> None:
-    csub = _group(sub, "config", help="print the commented default config, or the resolved config of a run",
-                  description="Configs: the documented defaults to start one from, and what a run really used.")
+    csub = _group(sub, "config", help="print the commented default config, the resolved config of a run, or the "
+                  "config ROS AMCL parameters correspond to",
+                  description="Configs: the documented defaults to start one from, what a run really used, and "
+                  "the config that ROS AMCL parameters mean.")
     p = csub.add_parser("default", help="print configs/default.yaml: every key with its default and a comment",
                         description="Print the default config (the bundled demo's; every key, commented). Its "
                         "paths find the demo from anywhere.",
@@ -534,6 +536,27 @@ def _add_config(sub) -> None:
     p.add_argument("path", metavar="RUN_DIR|CONFIG", help="a run folder (its config.yaml) or a config file")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (repeatable)")
     p.set_defaults(func=cmd_config_show)
+    p = csub.add_parser(
+        "from-amcl", help="print the mcl config that ROS AMCL parameters (ROS 1 amcl, nav2_amcl) correspond to",
+        description=_wrap(
+            "Read a tuned ROS AMCL parameter file and print the mcl config keys its parameters correspond to, "
+            "each commented with the AMCL parameter it came from; only those keys, so the output runs as it is "
+            "(mcl run OUT.yaml --bag B) or merges into a config. PARAMS is a nav2 params file (the amcl node's "
+            "ros__parameters among the other nodes', or the bare mapping), ROS 1 amcl parameters as YAML (flat or "
+            "under the node's name), or a ROS 1 .launch file with <node pkg=\"amcl\"> (its <param>, <rosparam> "
+            "and scan/map <remap>; $(arg ...) resolved). What it maps, following AMCL's sources: particle counts "
+            "and KLD (kld_z/pf_z is a normal quantile: kld_delta = 1 - Phi(z)), the odometry alphas (diff-corrected "
+            "and nav2's model are mcl's variance form; ROS 1's diff and the omni models are warned about), the "
+            "laser model and its weights (AMCL's unnormalised Gaussian made a density), beam skipping, update "
+            "gating, augmented-MCL recovery, the start pose, frames and topics. Parameters with no mcl "
+            "counterpart are listed at the end; an unknown name is a warning (with a did-you-mean). The output is "
+            "checked as mcl loads a config: a value mcl refuses is an error naming the AMCL parameter."),
+        epilog="examples:\n  mcl config from-amcl nav2_params.yaml -o amcl.yaml && mcl run amcl.yaml --bag run.mcap\n"
+        "  mcl config from-amcl amcl_diff.launch\nmapping table: README, 'Coming from ROS AMCL'",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("params", metavar="PARAMS", help="AMCL parameters: nav2 params YAML, ROS 1 amcl YAML or .launch")
+    p.add_argument("-o", "--out", metavar="OUT.yaml", help="write the config here (default: print it)")
+    p.set_defaults(func=cmd_config_from_amcl)
 
 
 def cmd_config_default(args) -> int:
@@ -553,6 +576,39 @@ def cmd_config_show(args) -> int:
             raise MclError(f"{path}: no config.yaml (not a run folder?)")
         path = path / "config.yaml"
     sys.stdout.write(dump_config(load_config(path, list(args.set))))
+    return 0
+
+
+def _wrap(text: str) -> str:
+    """A long description in lines of at most 100 characters (for RawDescriptionHelpFormatter, which keeps the
+    epilog's examples as they are written)."""
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, 100, break_on_hyphens=False))
+
+
+def cmd_config_from_amcl(args) -> int:
+    from mcl.amcl_params import convert
+
+    if args.out is not None and Path(args.out).resolve() == Path(args.params).resolve():
+        raise MclError(f"-o {args.out}: that is the AMCL parameter file itself")
+    if args.out is not None and not Path(args.out).resolve().parent.is_dir():
+        raise MclError(f"-o {args.out}: the folder {Path(args.out).parent} does not exist")
+    result = convert(args.params)
+    for w in result.warnings:
+        print(f"mcl: warning: {w}", file=sys.stderr)
+    if args.out is None:
+        sys.stdout.write(result.text)
+        return 0
+    out = Path(args.out)
+    tmp = out.with_name(out.name + ".partial")
+    try:
+        tmp.write_text(result.text, encoding="utf-8")
+        os.replace(tmp, out)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise MclError(f"-o {args.out}: cannot write: {e.strerror or e}") from None
+    print(f"{args.out}: {len(result.keys)} keys", file=sys.stderr)
     return 0
 
 

@@ -1,0 +1,333 @@
+"""mcl config from-amcl: ROS AMCL parameters (nav2 params YAML, ROS 1 amcl YAML, ROS 1 .launch) as an mcl config."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import yaml
+
+from mcl.amcl_params import convert
+from mcl.cli import main
+from mcl.config import load_config
+
+# nav2_bringup/params/nav2_params.yaml's amcl block (Humble on), with a start pose, among other nodes
+NAV2 = """\
+amcl:
+  ros__parameters:
+    use_sim_time: True
+    alpha1: 0.2
+    alpha2: 0.2
+    alpha3: 0.2
+    alpha4: 0.2
+    alpha5: 0.2
+    base_frame_id: "base_footprint"
+    beam_skip_distance: 0.5
+    beam_skip_error_threshold: 0.9
+    beam_skip_threshold: 0.3
+    do_beamskip: false
+    global_frame_id: "map"
+    lambda_short: 0.1
+    laser_likelihood_max_dist: 2.0
+    laser_max_range: 100.0
+    laser_min_range: -1.0
+    laser_model_type: "likelihood_field"
+    max_beams: 60
+    max_particles: 2000
+    min_particles: 500
+    odom_frame_id: "odom"
+    pf_err: 0.05
+    pf_z: 0.99
+    recovery_alpha_fast: 0.0
+    recovery_alpha_slow: 0.0
+    resample_interval: 1
+    robot_model_type: "nav2_amcl::DifferentialMotionModel"
+    save_pose_rate: 0.5
+    sigma_hit: 0.2
+    tf_broadcast: true
+    transform_tolerance: 1.0
+    update_min_a: 0.2
+    update_min_d: 0.25
+    z_hit: 0.5
+    z_max: 0.05
+    z_rand: 0.5
+    z_short: 0.05
+    scan_topic: scan
+    set_initial_pose: true
+    initial_pose:
+      x: 1.5
+      y: -2.0
+      z: 0.0
+      yaw: 0.3
+
+bt_navigator:
+  ros__parameters:
+    use_sim_time: True
+    global_frame: map
+    robot_base_frame: base_link
+    transform_tolerance: 0.1
+
+controller_server:
+  ros__parameters:
+    controller_frequency: 20.0
+    FollowPath:
+      plugin: "dwb_core::DWBLocalPlanner"
+      max_vel_x: 0.26
+"""
+
+ROS1 = """\
+amcl:
+  odom_model_type: diff-corrected
+  odom_alpha1: 0.005
+  odom_alpha2: 0.005
+  odom_alpha3: 0.01
+  odom_alpha4: 0.005
+  laser_model_type: likelihood_field_prob
+  do_beamskip: true
+  beam_skip_distance: 0.4
+  beam_skip_threshold: 0.3
+  beam_skip_error_threshold: 0.85
+  laser_z_hit: 0.9
+  laser_z_rand: 0.1
+  laser_sigma_hit: 0.1
+  laser_max_beams: 120
+  laser_max_range: 12.0
+  min_particles: 500
+  max_particles: 5000
+  kld_err: 0.05
+  kld_z: 2.326
+  recovery_alpha_slow: 0.001
+  recovery_alpha_fast: 0.1
+  initial_pose_x: 2.0
+  initial_pose_y: 3.0
+  initial_pose_a: 1.57
+  initial_cov_xx: 0.04
+  initial_cov_yy: 0.09
+  initial_cov_aa: 0.01
+  base_frame_id: /base_link
+  transform_tolerance: 0.2
+"""
+
+LAUNCH = """\
+<launch>
+  <arg name="scan_topic" default="base_scan"/>
+  <arg name="initial_pose_x" default="0.5"/>
+  <node pkg="amcl" type="amcl" name="amcl" output="screen">
+    <remap from="scan" to="$(arg scan_topic)"/>
+    <param name="odom_model_type" value="diff"/>
+    <param name="odom_alpha1" value="0.2"/>
+    <param name="odom_alpha2" value="0.2"/>
+    <param name="odom_alpha3" value="0.8"/>
+    <param name="odom_alpha4" value="0.2"/>
+    <param name="laser_max_beams" value="30"/>
+    <param name="min_particles" value="500"/>
+    <param name="max_particles" value="5000"/>
+    <param name="laser_model_type" value="likelihood_field"/>
+    <param name="update_min_d" value="0.2"/>
+    <param name="initial_pose_x" value="$(arg initial_pose_x)"/>
+    <param name="base_frame_id" value="$(env ROBOT_BASE)"/>
+    <rosparam>
+      initial_cov_xx: 0.01
+    </rosparam>
+  </node>
+</launch>
+"""
+
+
+def _write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+def test_a_nav2_params_file_converts_to_the_keys_its_amcl_block_means(tmp_path):
+    p = _write(tmp_path, "nav2_params.yaml", NAV2)
+    r = convert(p)
+    k = r.keys
+    assert r.warnings == []  # use_sim_time is every ROS 2 node's; the other nodes' blocks are not read
+    assert k["filter.particles"] == 2000 and k["filter.min_particles"] == 500 and k["filter.kld"] is True
+    assert k["filter.kld_epsilon"] == 0.05
+    assert round(k["filter.kld_delta"], 3) == 0.161  # pf_z is the quantile z itself: delta = 1 - Phi(0.99)
+    assert (k["filter.update_min_d"], k["filter.update_min_a"]) == (0.25, 0.2)
+    assert k["filter.initial_pose"] == [1.5, -2.0, 0.3]  # set_initial_pose: true
+    assert "filter.initial_std" not in k  # nav2 has no initial covariance parameter
+    assert "filter.recovery" not in k  # both recovery rates 0: mcl's own default recovery is left
+    assert (k["motion.model"], k["motion.noise_form"]) == ("odometry", "variance")
+    assert [k[f"motion.alpha{i}"] for i in range(1, 5)] == [0.2] * 4
+    assert "motion.alpha5" not in k  # omni only; mcl's alpha5 is the velocity model's
+    assert k["sensor.model"] == "likelihood_field" and k["sensor.likelihood_field.interior"] == "zero"
+    zh, zr = k["sensor.likelihood_field.z_hit"], k["sensor.likelihood_field.z_rand"]
+    # AMCL's unnormalised Gaussian made a density: the same p(z) up to a common factor
+    assert zh + zr == pytest.approx(1.0, abs=1e-5)
+    assert zh / zr == pytest.approx(0.5 * math.sqrt(2 * math.pi) * 0.2 / 0.5, rel=1e-5)
+    assert k["sensor.likelihood_field.sigma_hit"] == 0.2 and k["sensor.likelihood_field.likelihood_max_dist"] == 2.0
+    assert k["sensor.max_beams"] == 60 and k["sensor.range_max"] == 100.0 and "sensor.range_min" not in k
+    assert "sensor.beam_skip" not in k  # do_beamskip matters with likelihood_field_prob only
+    assert k["topics.scan"] == "/scan"
+    assert (k["frames.odom"], k["frames.base"]) == ("odom", "base_footprint")
+    # the text: each key commented with its AMCL parameter; every parameter of the block accounted for
+    lines = r.text.splitlines()
+    assert any(ln.strip().startswith("kld_delta: 0.1611") and "pf_z 0.99" in ln for ln in lines)
+    assert any(ln.strip().startswith("particles: 2000") and "max_particles 2000" in ln for ln in lines)
+    for name in yaml.safe_load(NAV2)["amcl"]["ros__parameters"]:
+        assert name in r.text, name
+    assert "Not used (no mcl counterpart):" in r.text and "transform_tolerance 1" in r.text
+    # the text is the keys, as load_config reads them
+    out = _write(tmp_path, "out.yaml", r.text)
+    cfg = load_config(out)
+    assert cfg.filter.kld_delta == k["filter.kld_delta"] and cfg.sensor.likelihood_field.interior == "zero"
+    assert cfg.frames.base == "base_footprint" and cfg.topics.scan == "/scan"
+    assert cfg.quality.lost_below == load_config(None).quality.lost_below  # the rest are default.yaml's
+
+
+def test_a_bare_ros_parameters_mapping_and_a_flat_mapping_read_alike(tmp_path):
+    block = yaml.safe_load(NAV2)["amcl"]
+    bare = convert(_write(tmp_path, "bare.yaml", yaml.safe_dump(block))).keys
+    flat = convert(_write(tmp_path, "flat.yaml", yaml.safe_dump(block["ros__parameters"]))).keys
+    assert bare == flat == convert(_write(tmp_path, "full.yaml", NAV2)).keys
+
+
+def test_ros1_likelihood_field_prob_is_beam_skipping_the_amcl_way(tmp_path):
+    r = convert(_write(tmp_path, "amcl.yaml", ROS1))
+    k = r.keys
+    assert r.warnings == []  # diff-corrected is mcl's variance form: nothing to warn about
+    assert k["sensor.model"] == "likelihood_field" and k["sensor.likelihood_field.interior"] == "zero"
+    assert k["sensor.beam_skip"] is True and k["sensor.beam_skip_rule"] == "amcl"
+    assert (k["sensor.beam_skip_distance"], k["sensor.beam_skip_threshold"],
+            k["sensor.beam_skip_error_threshold"]) == (0.4, 0.3, 0.85)
+    assert k["sensor.max_beams"] == 120 and k["sensor.range_max"] == 12.0
+    assert [k[f"motion.alpha{i}"] for i in range(1, 5)] == [0.005, 0.005, 0.01, 0.005]
+    assert round(k["filter.kld_delta"], 4) == 0.01  # kld_z 2.326 is the book's delta = 0.01
+    assert k["filter.recovery"] == "augmented"
+    assert (k["filter.recovery_alpha_slow"], k["filter.recovery_alpha_fast"]) == (0.001, 0.1)
+    assert k["filter.initial_pose"] == [2.0, 3.0, 1.57]
+    assert k["filter.initial_std"] == pytest.approx([0.2, 0.3, 0.1])  # square roots of the covariances
+    assert k["frames.base"] == "base_link"
+
+
+def test_likelihood_field_prob_without_do_beamskip_skips_nothing_as_in_amcl(tmp_path):
+    # amcl_laser.cpp / likelihood_field_model_prob.cpp skip beams only when do_beamskip is true (default false)
+    text = ROS1.replace("  do_beamskip: true\n", "")
+    k = convert(_write(tmp_path, "amcl.yaml", text)).keys
+    assert k["sensor.beam_skip"] is False and k["sensor.beam_skip_rule"] == "amcl"
+
+
+def test_a_launch_file_with_args_remaps_and_a_rosparam_block(tmp_path):
+    r = convert(_write(tmp_path, "amcl_diff.launch", LAUNCH))
+    k = r.keys
+    assert k["topics.scan"] == "/base_scan"  # <remap from="scan" to="$(arg scan_topic)"/>
+    assert k["filter.initial_pose"] == [0.5, 0.0, 0.0]  # $(arg initial_pose_x); y and a AMCL's 0
+    assert k["filter.initial_std"] == pytest.approx([0.1, 0.5, math.pi / 12])  # <rosparam>; AMCL's defaults
+    assert [k[f"motion.alpha{i}"] for i in range(1, 5)] == [0.2, 0.2, 0.8, 0.2]
+    assert k["sensor.max_beams"] == 30 and k["filter.particles"] == 5000
+    assert "frames.base" not in k  # $(env ...) cannot be resolved
+    assert len(r.warnings) == 2
+    env, diff = r.warnings
+    assert "base_frame_id: $(env ROBOT_BASE) cannot be resolved here: not used" in env
+    # ROS 1's uncorrected diff model takes the alpha expression as the std: mapped unchanged, and said so
+    assert "odom_model_type diff: ROS 1's uncorrected model takes alpha1 rot^2 + alpha2 trans^2 as the std" in diff
+    assert "5.6 times AMCL's" in diff  # 1 / (sqrt(0.8) * 0.2)
+
+
+@pytest.mark.parametrize("model,line", [
+    ("omni-corrected", "odom_model_type omni-corrected: mcl has no omnidirectional motion model"),
+    ("omni", "odom_model_type omni: mcl has no omnidirectional motion model"),
+])
+def test_omni_models_are_one_warning_and_keep_the_alphas(tmp_path, model, line):
+    text = ROS1.replace("diff-corrected", model) + "  odom_alpha5: 0.1\n"
+    r = convert(_write(tmp_path, "amcl.yaml", text))
+    assert len(r.warnings) == 1 and line in r.warnings[0]
+    assert r.keys["motion.alpha3"] == 0.01 and "motion.alpha5" not in r.keys
+    assert "odom_alpha5 0.1: AMCL's omni models only" in r.text
+
+
+def test_beam_model_weights_are_made_to_sum_to_one(tmp_path):
+    # nav2's defaults sum to 1.1, which mcl's beam model refuses as they are
+    text = NAV2.replace('laser_model_type: "likelihood_field"', 'laser_model_type: "beam"')
+    k = convert(_write(tmp_path, "beam.yaml", text)).keys
+    w = [k[f"sensor.beam.{z}"] for z in ("z_hit", "z_short", "z_max", "z_rand")]
+    assert sum(w) == pytest.approx(1.0, abs=1e-5)
+    assert w[1] == pytest.approx(w[2]) and w[3] / w[1] == pytest.approx(10.0)  # z_rand : z_short kept
+    assert k["sensor.model"] == "beam" and "sensor.likelihood_field.interior" not in k
+
+
+def _one_error(capsys) -> str:
+    captured = capsys.readouterr()
+    err = captured.err.splitlines()
+    lines = [ln for ln in err if ln.startswith("mcl: error:")]
+    assert len(lines) == 1 and len(err) == 1 and not captured.out, captured
+    return lines[0]
+
+
+@pytest.mark.parametrize("text,msg", [
+    ("laser_z_hit: -1\nlaser_z_rand: 0.05\n",
+     "laser_z_hit -1: sensor.likelihood_field.z_hit: -1.0 is out of range (must be >= 0.0)"),
+    ("amcl:\n  ros__parameters:\n    z_hit: abc\n", "z_hit: expected a number, got 'abc'"),
+    ("max_particles: lots\n", "max_particles: expected an integer, got 'lots'"),
+    ("kld_z: 40\n", "kld_z 40: filter.kld_delta: 0.0 is out of range (must be > 0.0)"),
+    ("kld_err: 0\n", "kld_err 0: filter.kld_epsilon: 0.0 is out of range (must be > 0.0)"),
+    ("recovery_alpha_slow: 0.2\nrecovery_alpha_fast: 0.1\n",
+     "recovery_alpha_slow 0.2: filter.recovery_alpha_slow: 0.2 must be below filter.recovery_alpha_fast (0.1)"),
+    ("max_beams: 3\n", "max_beams 3: quality.min_beams: 5 is more than sensor.max_beams (3): no update would have "
+     "beams enough to judge"),
+    ("initial_pose_x: 1\ninitial_cov_xx: -0.5\n", "initial_cov_xx: -0.5 is a variance, it must be >= 0"),
+])
+def test_a_value_mcl_refuses_is_one_error_naming_the_amcl_parameter(tmp_path, capsys, text, msg):
+    p = _write(tmp_path, "amcl.yaml", text)
+    out = tmp_path / "out.yaml"
+    assert main(["config", "from-amcl", str(p), "-o", str(out)]) == 2
+    assert _one_error(capsys) == f"mcl: error: {p}: {msg}"
+    assert not out.exists()
+
+
+def test_unknown_and_other_flavour_names_are_warnings(tmp_path, capsys):
+    p = _write(tmp_path, "amcl.yaml", ROS1 + "  odom_alpha6: 0.1\n  pf_z: 0.5\n  laser_sigma_hitt: 0.3\n")
+    assert main(["config", "from-amcl", str(p)]) == 0
+    captured = capsys.readouterr()
+    err = captured.err.splitlines()
+    assert err == [
+        f"mcl: warning: {p}: odom_alpha6: not a ROS 1 amcl parameter (did you mean odom_alpha5?): not used",
+        f"mcl: warning: {p}: pf_z: a nav2_amcl parameter, not a ROS 1 amcl one (ROS 1 amcl reads kld_z): not used",
+        f"mcl: warning: {p}: laser_sigma_hitt: not a ROS 1 amcl parameter (did you mean laser_sigma_hit?): not used",
+    ]
+    assert yaml.safe_load(captured.out)["filter"]["kld_delta"] == pytest.approx(0.01, abs=1e-4)  # kld_z, not pf_z
+
+
+@pytest.mark.parametrize("name,content,msg", [
+    ("other.yaml", "foo: 1\nbar: {baz: 2}\n", "no AMCL parameters found"),
+    ("costmap.yaml", "local_costmap:\n  ros__parameters:\n    transform_tolerance: 0.3\n    robot_base_frame: base\n",
+     "no AMCL parameters found"),
+    ("empty.yaml", "", "no AMCL parameters found"),
+    ("list.yaml", "- 1\n- 2\n", "no AMCL parameters found"),
+    ("bad.yaml", "a: [1, 2\n", ":2: invalid YAML"),
+    ("bad.launch", '<launch><node pkg="amcl" type="amcl">\n</launch>', ":2: invalid XML"),
+    ("other.launch", '<launch><node pkg="map_server" type="map_server"/></launch>', 'no <node pkg="amcl">'),
+    ("blob.bin", b"\x89PNG\r\n\x1a\n\xff\xfe\x00", "not a text file"),
+    ("mcl.yaml", "filter:\n  particles: 100\n  update_min_d: 0.1\n", "an mcl config"),
+])
+def test_a_file_that_holds_no_amcl_parameters_is_one_error_naming_it(tmp_path, capsys, name, content, msg):
+    p = tmp_path / name
+    p.write_bytes(content if isinstance(content, bytes) else content.encode())
+    assert main(["config", "from-amcl", str(p)]) == 2
+    line = _one_error(capsys)
+    assert line.startswith(f"mcl: error: {p}") and msg in line
+
+
+def test_the_converted_config_runs(tmp_path, capsys):
+    from mcl.simulate import simulate
+
+    world = tmp_path / "world"
+    simulate(world, seed=3, duration=10)
+    text = NAV2.replace("    set_initial_pose: true\n", "")  # nav2 then waits for /initialpose: a global start
+    p = _write(tmp_path, "nav2_params.yaml", text)
+    out = tmp_path / "amcl.yaml"
+    assert main(["config", "from-amcl", str(p), "-o", str(out)]) == 0
+    assert "filter.initial_pose" not in convert(p).keys
+    run = tmp_path / "run"
+    assert main(["run", str(out), "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"),
+                 "--truth", str(world / "truth.tum"), "--rerun", "off", "--no-progress", "--threads", "1",
+                 "--out", str(run)]) == 0
+    used = load_config(run / "config.yaml")
+    assert used.filter.particles == 2000 and used.sensor.likelihood_field.interior == "zero"
+    assert (run / "trajectory.tum").stat().st_size > 0
+    assert "mcl: error" not in capsys.readouterr().err
