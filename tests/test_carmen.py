@@ -265,3 +265,36 @@ def test_param_lines_give_flaser_its_maximum_range(tmp_path):
     assert log.scans_of("FLASER")[0].max_range == 12.0
     assert log.scans_of("RLASER")[0].max_range is None  # no robot_rear_laser_max given
     assert log.skipped["PARAM"] == 1
+
+
+def test_the_few_fields_of_a_line_read_as_numpy_read_them(tmp_path):
+    # poses, beam geometry and times are parsed with Python's float, the ranges with numpy: the same values (numpy
+    # parses each string with Python's float), spellings float() alone takes included
+    odd = ("ROBOTLASER1 0 -1.5_0 3.0 0.75 3_0.0 0.01 0 5 1 2 3 4 5 0 "
+           "0.5 0.2 +0.0 0.3 0.2 -0.0 0.7 -0.2 0.5 0.5 0 1_0.7 host 0.3")
+    log = read_carmen(write(tmp_path, [ODOM_A, FLASER, RLASER, odd, ODOM_B, RAWLASER.format(k=1, t=11.0)]))
+    fl, rl, rb, raw = log.scans
+    for s in log.scans:
+        assert type(s.t) is float and type(s.angle_min) is float and type(s.angle_increment) is float
+        assert isinstance(s.odom, np.ndarray) and s.odom.dtype == np.float64 and s.odom.shape == (3,)
+    assert rb.angle_min == -1.5 and rb.max_range == 30.0 and rb.t == 10.7 and (rb.tv, rb.rv) == (0.7, -0.2)
+    assert np.array_equal(rb.odom, np.array("0.3 0.2 -0.0".split(), dtype=np.float64))
+    assert math.copysign(1.0, rb.odom[2]) == -1.0  # the sign of a -0.0 heading kept
+    assert np.array_equal(fl.odom, np.array([1.0, 2.0, 1.5707963267948966]))
+    assert np.allclose(fl.laser_offset, [0.1, 0.0, 0.0])
+    assert np.allclose(rl.laser_offset[:2], [-0.2, 0.0]) and abs(rl.laser_offset[2]) == pytest.approx(math.pi)
+    assert np.array_equal(log.odometry, np.array([ODOM_A.split()[1:7] + ["10"], ODOM_B.split()[1:7] + ["12"]],
+                                                 dtype=np.float64)[:, [6, 0, 1, 2, 3, 4]])
+
+
+@pytest.mark.parametrize("line,kind,msg", [
+    ("ODOM 0 0 nan 0.1 0.2 0 10 host 10", "ODOM", "non-finite value"),
+    ("ODOM 0 0 0 0.1 0.2 0 inf host 10", "ODOM", "non-finite timestamp"),
+    (FLASER.replace(" 1 2.1 ", " 1 x2.1 "), "FLASER", "non-numeric pose 'x2.1'"),
+    (ROBOTLASER1.replace(" 0.7 -0.2 ", " 0.7 -inf "), "ROBOTLASER1", "non-finite pose/velocity"),
+    (ROBOTLASER1.replace(" 30.0 0.01 ", " 30.0 O.01 "), "ROBOTLASER1", "non-numeric config field 'O.01'"),
+    (RAWLASER.format(k=1, t=11.0).replace(" 2 7 8 ", " 2 7 eight "), "RAWLASER1", "non-numeric remission 'eight'"),
+])
+def test_a_bad_small_field_is_named_as_before(tmp_path, line, kind, msg):
+    with pytest.raises(DataError, match=rf"log\.clf:2: {kind}: {msg}"):
+        read_carmen(write(tmp_path, [ODOM_A, line, FLASER]))
