@@ -36,6 +36,7 @@ not compress), about 2 KB per step for everything else with a 181-beam scan.  Lo
 from __future__ import annotations
 
 import errno
+import functools
 import math
 import os
 import sys
@@ -47,6 +48,9 @@ from urllib.parse import quote
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+from rerun.time import to_nanos, to_nanos_since_epoch
+
+from mcl.kernels.style import cloud_style, histogram_counts
 
 __all__ = ["RerunLogger", "MODES", "has_display", "stat_group"]
 
@@ -101,6 +105,7 @@ _RADII_AT = np.array([0.5, 0.9])
 
 # Weight histogram: _HIST_BINS bins of log10(w / w_max) over [-span, 0], span >= _HIST_DECADES (weight_histogram).
 _HIST_DECADES, _HIST_BINS = 6.0, 24
+_HIST_COLOR = np.array([[92, 200, 99]], dtype=np.uint8)
 
 ABOUT = """\
 # What this recording shows
@@ -145,9 +150,10 @@ FOLLOW_MIN_SIDE_M = 60.0
 _DRAW_ORDER = {"map": -100.0, "trail": 5.0, "particles": 10.0, "scan": 20.0, "truth": 30.0, "estimate": 40.0}
 
 _TIMESTAMP_THRESHOLD = 1e8  # seconds: larger t is taken as Unix time (1973 onwards)
-# The small per-step entities (the stats, the estimate, the truth and odometry poses: about 25 of a step's 30 log
-# calls) are buffered and sent as columns every this many steps and at close: one rr.log costs 25-100 us of Python
-# per archetype, a column of 64 rows about as much as one. The particles and scans are logged as they come.
+# Everything a step logs (the stats, the estimate, the truth and odometry poses, the cloud, the scans, the weight
+# histogram) is buffered and sent as columns every this many steps and at close: one rr.log costs 25-100 us of Python
+# per archetype (the histogram's tensor 0.45 ms), a column of 64 rows about as much as one. A live viewer sees the
+# run in batches of this many steps.
 COLUMN_FLUSH_STEPS = 64
 
 
@@ -160,6 +166,54 @@ def _save_batcher() -> rr.ChunkBatcherConfig:
 
 _COLUMN_DTYPES = {"colors": np.uint8, "radii": np.float32, "draw_order": np.float32, "translation": np.float32,
                   "scale": np.float32}
+# The archetype fields that are tensors (rerun.components.TensorData): rerun 0.41 converts one tensor at a time
+# ("Tensors do not support batches"), so a column of them is built here (_TensorColumn); and BarChart's other
+# fields, which its .columns() takes only with values (its converter fails on values=None): their component batch
+_TENSOR_FIELDS = {("BarChart", "values"), ("BarChart", "abscissa")}
+_FIELD_BATCHES = {("BarChart", "widths"): "LengthBatch", ("BarChart", "color"): "ColorBatch"}
+
+
+class _TensorColumn:
+    """K 1-D tensors (numpy arrays of one dtype) as one column of rerun.components.TensorData, a row each: the
+    arrow array rerun's own converter builds for each tensor alone (rr.BarChart(values)), built for the K at once
+    (its converter took 0.45 ms a tensor). For rr.ComponentColumn: ``as_arrow_array``."""
+
+    _type: Any = None
+
+    def __init__(self, rows: list[np.ndarray]) -> None:
+        self.rows = rows
+
+    @classmethod
+    def arrow_type(cls) -> Any:
+        if cls._type is None:  # rerun's own TensorData type
+            cls._type = rr.components.TensorDataBatch._ARROW_DATATYPE
+        return cls._type
+
+    def as_arrow_array(self) -> Any:
+        import pyarrow as pa
+
+        from rerun.encodings.tensor_data_ext import DTYPE_MAP
+
+        data_type = self.arrow_type()
+        union = data_type.field("buffer").type
+        k = len(self.rows)
+        flat = np.concatenate([np.ravel(r) for r in self.rows]) if k else np.zeros(0, dtype=np.float32)
+        lengths = np.array([np.size(r) for r in self.rows], dtype=np.int64)
+        offsets = np.zeros(k + 1, dtype=np.int32)
+        np.cumsum(lengths, out=offsets[1:])
+        shape = pa.ListArray.from_arrays(pa.array(np.arange(k + 1, dtype=np.int32)), pa.array(lengths.astype(np.uint64)),
+                                         type=data_type.field("shape").type)
+        names = pa.nulls(k, type=data_type.field("names").type)
+        idx = [f.name for f in union].index(DTYPE_MAP[flat.dtype.type])
+        # typed as rerun's (non-null items): no cast, which imports pyarrow.compute (30 ms, once)
+        child = pa.ListArray.from_arrays(pa.array(offsets), pa.array(flat), type=union[idx].type)
+        children = [pa.nulls(0, type=f.type) for f in union]
+        children[idx] = child
+        buffer = pa.Array.from_buffers(type=union, length=k,
+                                       buffers=[None, pa.array(np.full(k, idx, dtype=np.int8)).buffers()[1],
+                                                pa.array(np.arange(k, dtype=np.int32)).buffers()[1]],
+                                       children=children)
+        return pa.StructArray.from_arrays([shape, names, buffer], fields=list(data_type))
 
 
 SPAWN_FLUSH_S = 30.0  # s a spawned viewer has to take the rest of the recording at the end (the .rrd has it all)
@@ -259,6 +313,16 @@ def weight_scale(weights: np.ndarray) -> np.ndarray:
     return np.clip(1.0 + rel / _WEIGHT_DECADES, 0.0, 1.0)
 
 
+def _log_relative(w: np.ndarray) -> np.ndarray:
+    """log10(w / w_max) of float64 weights as weight_scale takes it (-inf for a zero weight); all -inf when the
+    heaviest is not a positive number (weight_scale: all 0)."""
+    wmax = w.max() if w.size else 0.0
+    if not np.isfinite(wmax) or wmax <= 0.0:
+        return np.full(w.shape, -np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.log10(np.where(w > 0, w / wmax, 0.0))
+
+
 def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """(counts (B,), bin centres (B,), bin width) of log10(w / w_max) over [-span, 0], ``_HIST_BINS`` bins.
 
@@ -282,7 +346,8 @@ def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float
     if rel is None:
         return np.zeros(_HIST_BINS), centres, span / _HIST_BINS
     rel = np.clip(np.nan_to_num(rel, nan=-span, neginf=-span), -span, 0.0)
-    counts, _ = np.histogram(rel, bins=edges)
+    # np.histogram(rel, bins=edges)'s counts (it sorts the values: 20 us at 5,000 weights, 4 here)
+    counts = histogram_counts(rel, edges, np.empty(_HIST_BINS, dtype=np.int64))
     return counts.astype(np.float64), centres, span / _HIST_BINS
 
 
@@ -293,7 +358,12 @@ def weight_colors(weights: np.ndarray, faded: bool = False) -> np.ndarray:
     colour for the lightest, all of it for the heaviest), so the light particles recede and the heavy ones stand
     out. Rerun (0.41) draws points with an alpha below 255 darker, not see-through: the lightest, at alpha 60, were
     near-black specks that read as obstacles on the map."""
-    u = weight_scale(weights)
+    return scale_colors(weight_scale(weights), faded)
+
+
+def scale_colors(u: np.ndarray, faded: bool = False) -> np.ndarray:
+    """:func:`weight_colors` of weights whose :func:`weight_scale` is ``u`` (computed once for the colours and
+    the radii of a cloud)."""
     pos = u * (len(_VIRIDIS) - 1)
     i0 = np.minimum(pos.astype(np.intp), len(_VIRIDIS) - 2)
     f = (pos - i0)[:, None]
@@ -304,6 +374,11 @@ def weight_colors(weights: np.ndarray, faded: bool = False) -> np.ndarray:
     return np.rint(rgb).astype(np.uint8)
 
 
+def _xy32(points: np.ndarray) -> np.ndarray:
+    """(K, 2) float32 points (a new array) of (2+, K) float64 ones: the positions of a Points2D."""
+    return np.ascontiguousarray(points[:2].T, dtype=np.float32)
+
+
 def subsample_indices(n: int, m: int) -> np.ndarray:
     """At most ``m`` indices evenly strided over ``range(n)`` (deterministic, unbiased)."""
     if n <= m:
@@ -311,14 +386,21 @@ def subsample_indices(n: int, m: int) -> np.ndarray:
     return (np.arange(m, dtype=np.int64) * n) // m
 
 
+@functools.lru_cache(maxsize=8)
+def _unit_circle(n: int) -> np.ndarray:
+    """(2, n+1) cos, sin of n + 1 angles from 0 to 2 pi (read-only; made once: a third of an ellipse's time)."""
+    a = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    circle = np.stack([np.cos(a), np.sin(a)])
+    circle.setflags(write=False)
+    return circle
+
+
 def covariance_ellipse(mean_xy: np.ndarray, cov_xy: np.ndarray, k: float = 2.0, n: int = 48) -> np.ndarray:
     """(n+1, 2) closed polyline of the k-sigma ellipse of a 2x2 covariance."""
     c = 0.5 * (np.asarray(cov_xy, dtype=np.float64) + np.asarray(cov_xy, dtype=np.float64).T)
     vals, vecs = np.linalg.eigh(c)
     vals = np.clip(np.nan_to_num(vals, nan=0.0), 0.0, None)
-    a = np.linspace(0.0, 2.0 * np.pi, n + 1)
-    circle = np.stack([np.cos(a), np.sin(a)])  # (2, n+1)
-    pts = vecs @ (k * np.sqrt(vals)[:, None] * circle)
+    pts = vecs @ (k * np.sqrt(vals)[:, None] * _unit_circle(n))
     pts[:, -1] = pts[:, 0]
     return (pts + np.asarray(mean_xy, dtype=np.float64)[:, None]).T
 
@@ -498,9 +580,13 @@ class RerunLogger:
         self._prev_truth: np.ndarray | None = None
         self._prev_odom: np.ndarray | None = None
         # rows waiting to be sent as columns: (entity path, archetype) -> (steps, times, {field: [one row each]})
-        self._pending: dict[tuple[str, str], tuple[list, list, dict[str, list]]] = {}
+        self._pending: dict[str, tuple[list, list, dict[tuple[str, str], list]]] = {}
+        # rows of any number of instances (the cloud, the scans, the histogram), the same way (_buffer_rows):
+        # (entity path, archetype, fields) -> (steps, times, {field: [one array per row]})
+        self._pending_rows: dict[tuple[str, str, tuple[str, ...]], tuple[list, list, dict[str, list]]] = {}
         self._step_now = 0
-        self._t_now: float | None = None  # the time timeline's value at the current step (None: never set)
+        self._t_now: int | None = None  # the time timeline's value at the current step, ns (None: never set)
+        self._groups: dict[str, str] = {}  # stat_group of each stats name
         if mode == "off":
             return
 
@@ -700,14 +786,14 @@ class RerunLogger:
         self._log_estimate(rec, estimate, cov)
         if self.log_scan and scan_world is not None:
             s = np.asarray(scan_world, dtype=np.float64)
-            rec.log("world/scan", rr.Points2D(np.ascontiguousarray(s[:2].T, dtype=np.float32)))
+            self._buffer_rows("world/scan", "Points2D", dict(positions=_xy32(s)))
         if self.log_scan and (skipped_world is not None or self._skipped_shown):
             k = np.asarray(skipped_world, dtype=np.float64) if skipped_world is not None else np.zeros((2, 0))
-            rec.log("world/scan/skipped", rr.Points2D(np.ascontiguousarray(k[:2].T, dtype=np.float32)))
+            self._buffer_rows("world/scan/skipped", "Points2D", dict(positions=_xy32(k)))
             self._skipped_shown = k.shape[1] > 0
         if self.log_scan and expected_world is not None:
             x = np.asarray(expected_world, dtype=np.float64)
-            rec.log("world/scan/expected", rr.Points2D(np.ascontiguousarray(x[:2].T, dtype=np.float32)))
+            self._buffer_rows("world/scan/expected", "Points2D", dict(positions=_xy32(x)))
         if truth_pose is not None:
             self._prev_truth = self._log_pose(
                 rec, "world/truth", truth_pose, self._prev_truth, [40, 170, 40], trail=not self._truth_path_logged
@@ -791,7 +877,8 @@ class RerunLogger:
         if self._time_kind is None:
             self._time_kind = "timestamp" if t > _TIMESTAMP_THRESHOLD else "duration"
             self._flush_columns(rec)  # the rows so far have no time: sent apart
-        self._t_now = t
+        # the buffered rows' time in nanoseconds, as set_time takes it (a column of floats was converted per row)
+        self._t_now = to_nanos_since_epoch(t) if self._time_kind == "timestamp" else to_nanos(t)
         if self._time_kind == "timestamp":
             rec.set_time("time", timestamp=t)
         else:
@@ -803,22 +890,24 @@ class RerunLogger:
         xy = np.empty((idx.size, 2), dtype=np.float32)
         xy[:, 0] = p[0, idx]
         xy[:, 1] = p[1, idx]
-        w = np.asarray(weights)[idx]
+        w = np.asarray(weights, dtype=np.float64)[idx]
         # Size and fading by weight too: among thousands of points of similar colour the heavy ones still stand out.
         # Three sizes (1, 2, 3.5 UI points: below 1.5 decades under the heaviest, within it, within 0.3 decades):
         # few distinct values keep the recording small (they compress), and still read at a glance.
-        radii = rr.Radius.ui_points(_RADII[np.searchsorted(_RADII_AT, weight_scale(w))])
-        rec.log("world/particles", rr.Points2D(xy, colors=weight_colors(w, faded=True), radii=radii))
+        # weight_scale, scale_colors(faded) and rr.Radius.ui_points(_RADII[np.searchsorted(_RADII_AT, u)]) in one
+        # kernel (the same values; tests/test_viz.py), the logarithms as weight_scale takes them
+        colors = np.empty((idx.size, 3), dtype=np.uint8)
+        radii = np.empty(idx.size, dtype=np.float32)
+        cloud_style(_log_relative(w), _WEIGHT_DECADES, _VIRIDIS, float(_FREE), True, _RADII, _RADII_AT, colors, radii)
+        self._buffer_rows("world/particles", "Points2D", dict(positions=xy, colors=colors, radii=radii))
         counts, centres, width = weight_histogram(weights)
         if width != self._hist_width:  # the bins only when they change (the viewer takes the latest): ~2 ms saved
             self._hist_width = width
             # a bar spans [abscissa, abscissa + width] in the viewer: the bins' left edges, not their centres
-            chart = rr.BarChart(counts.astype(np.float32), abscissa=centres - 0.5 * width,
-                                widths=np.full(centres.size, width),
-                                color=[92, 200, 99])
-        else:
-            chart = rr.BarChart(counts.astype(np.float32))
-        rec.log("weights/histogram", chart)
+            self._buffer_rows("weights/histogram", "BarChart",
+                              dict(abscissa=centres - 0.5 * width, widths=np.full(centres.size, width),
+                                   color=_HIST_COLOR))
+        self._buffer_rows("weights/histogram", "BarChart", dict(values=counts.astype(np.float32)))
 
     def _log_estimate(self, rec: rr.RecordingStream, estimate: np.ndarray, cov: np.ndarray) -> None:
         e = np.asarray(estimate, dtype=np.float64)
@@ -859,13 +948,14 @@ class RerunLogger:
         for name, value in stats.items():
             if value is None:
                 continue
-            if name not in self._stat_names:  # its panel from the start, even while its values go to warmup/
-                group = stat_group(name)
+            group = self._groups.get(name)
+            if group is None:  # its panel from the start, even while its values go to warmup/
+                group = self._groups[name] = stat_group(name)
                 i = sum(stat_group(n) == group for n in self._stat_names)  # its place in its panel
                 rec.log(f"stats/{name}", rr.SeriesLines(colors=[_SERIES_COLOURS[i % len(_SERIES_COLOURS)]],
                                                         names=[name]), static=True)
                 self._stat_names.append(name)
-            if stat_group(name) == "timings" and name not in self._warm:
+            if group == "timings" and name not in self._warm:
                 # A stage's first run (the filter times only stages that ran: no prediction at the first update)
                 # compiles or loads its numba kernels: that time goes apart, to warmup/, so the plot's scale reads.
                 # Not a threshold on the value: kernels another run in this process loaded are fast at once.
@@ -885,18 +975,52 @@ class RerunLogger:
             for name, value in fields.items():
                 columns.setdefault((archetype, name), []).append(value)
 
+    def _buffer_rows(self, path: str, archetype: str, fields: dict[str, Any]) -> None:
+        """One row of ``archetype`` at ``path`` for the current step, each field a batch of any number of instances
+        (an (n, ...) array; a tensor field (_TENSOR_FIELDS): one tensor), sent with the other rows of the same path
+        and fields by _flush_columns: as ``rec.log(path, archetype(**fields))`` at this step would have logged it.
+        The arrays are kept: pass ones nothing changes afterwards."""
+        steps, times, columns = self._pending_rows.setdefault((path, archetype, tuple(fields)), ([], [], {}))
+        steps.append(self._step_now)
+        times.append(self._t_now)
+        for name, value in fields.items():
+            columns.setdefault(name, []).append(value)
+
+    def _indexes(self, steps: list, times: list) -> list:
+        """The step and time columns of buffered rows (``times``: nanoseconds, or None before any time)."""
+        indexes = [rr.TimeColumn("step", sequence=steps)]
+        if times[0] is not None:
+            unit = "datetime64[ns]" if self._time_kind == "timestamp" else "timedelta64[ns]"
+            indexes.append(rr.TimeColumn("time", **{self._time_kind: np.array(times, dtype=np.int64).astype(unit)}))
+        return indexes
+
     def _flush_columns(self, rec: rr.RecordingStream) -> None:
-        """Send the buffered rows as columns, one chunk per path: each row as one rr.log of its archetypes at its
-        step and time would have logged it."""
+        """Send the buffered rows as columns, one chunk per path (and set of fields): each row as one rr.log of its
+        archetypes at its step and time would have logged it."""
+        pending_rows, self._pending_rows = self._pending_rows, {}
+        for (path, archetype, _), (steps, times, columns) in pending_rows.items():
+            kind = getattr(rr, archetype)
+            cols: list[Any] = []
+            for name, values in columns.items():
+                if (archetype, name) in _TENSOR_FIELDS:
+                    cols.append(rr.ComponentColumn(getattr(kind, f"descriptor_{name}")(), _TensorColumn(values)))
+                elif (archetype, name) in _FIELD_BATCHES:
+                    batch = getattr(rr.components, _FIELD_BATCHES[archetype, name])(np.concatenate(values))
+                    cols.append(rr.ComponentColumn(getattr(kind, f"descriptor_{name}")(), batch,
+                                                   lengths=[len(v) for v in values]))
+                else:
+                    cols += kind.columns(**{name: np.concatenate(values)}).partition([len(v) for v in values])
+            rec.send_columns(path, indexes=self._indexes(steps, times), columns=cols)
         pending, self._pending = self._pending, {}
         for path, (steps, times, columns) in pending.items():
-            indexes = [rr.TimeColumn("step", sequence=steps)]
-            if times[0] is not None:
-                indexes.append(rr.TimeColumn("time", **{self._time_kind: times}))
+            indexes = self._indexes(steps, times)
             per_arch: dict[str, dict[str, Any]] = {}
             for (archetype, name), values in columns.items():
-                per_arch.setdefault(archetype, {})[name] = (
-                    values if name == "strips" else np.asarray(values, dtype=_COLUMN_DTYPES.get(name)))
+                if name == "strips":  # one strip a row: (K, points, 2) when all have as many points (faster)
+                    same = all(len(v) == len(values[0]) for v in values)
+                    per_arch.setdefault(archetype, {})[name] = np.asarray(values) if same else values
+                    continue
+                per_arch.setdefault(archetype, {})[name] = np.asarray(values, dtype=_COLUMN_DTYPES.get(name))
             cols = [c for archetype, fields in per_arch.items()
                     for c in getattr(rr, archetype).columns(**fields).partition([1] * len(steps))]
             rec.send_columns(path, indexes=indexes, columns=cols)

@@ -694,3 +694,42 @@ def test_the_scan_cost_per_beam_falls_with_the_beam_count(tmp_path):
     per_scan = (with_scan - without) / updates
     model = viz.recording_floor_mb(1, 1440) * 1e6 - viz.STEP_BYTES
     assert 0.8 * model <= per_scan <= model, (per_scan, model)
+
+
+def test_the_clouds_kernels_give_numpys_values_to_the_bit():
+    # The cloud's colours and radii (mcl.kernels.style.cloud_style) and the histogram's counts (histogram_counts)
+    # replaced numpy expressions in the recording: the same values, weights of many decades, zero, equal, none
+    # positive; values on the histogram's edges and next to them.
+    from mcl.kernels.style import cloud_style, histogram_counts
+
+    rng = np.random.default_rng(5)
+    cases = [10.0 ** rng.uniform(-12, 0, 3000), np.r_[10.0 ** -rng.uniform(0, 4, 500), 0.0, 0.0], np.full(9, 0.1),
+             np.zeros(4), np.r_[rng.random(20), np.nan], np.exp(-rng.exponential(200.0, 2000)), np.zeros(0)]
+    for w in cases:
+        u = viz.weight_scale(w)
+        colors, radii = np.empty((w.size, 3), dtype=np.uint8), np.empty(w.size, dtype=np.float32)
+        cloud_style(viz._log_relative(w), viz._WEIGHT_DECADES, viz._VIRIDIS, float(viz._FREE), True, viz._RADII,
+                    viz._RADII_AT, colors, radii)
+        np.testing.assert_array_equal(colors, viz.scale_colors(u, faded=True))
+        np.testing.assert_array_equal(radii, rr.Radius.ui_points(viz._RADII[np.searchsorted(viz._RADII_AT, u)]))
+        assert radii.dtype == np.float32
+        for span in (6.0, 12.0, 48.0, 6.0 * 2.0 ** 40):
+            edges = np.linspace(-span, 0.0, viz._HIST_BINS + 1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rel = np.log10(np.where(w > 0, w / max(np.nanmax(w, initial=0.0), 1e-300), 0.0))
+            rel = np.clip(np.nan_to_num(rel, nan=-span, neginf=-span), -span, 0.0)
+            rel = np.r_[rel, edges, np.clip(np.nextafter(edges, -np.inf), -span, 0.0),
+                        np.clip(np.nextafter(edges, np.inf), -span, 0.0)]
+            np.testing.assert_array_equal(histogram_counts(rel, edges, np.empty(viz._HIST_BINS, dtype=np.int64)),
+                                          np.histogram(rel, bins=edges)[0])
+
+
+def test_a_column_of_tensors_is_what_rerun_logs_for_each():
+    # rerun 0.41 converts one tensor at a time ("Tensors do not support batches"): the histogram's column of
+    # TensorData is built in one go, the same arrow data as rerun's converter gives each tensor.
+    rows = [np.arange(24, dtype=np.float32) * k for k in range(5)]
+    ref = pa.concat_arrays([rr.components.TensorDataBatch(r).as_arrow_array() for r in rows])
+    got = viz._TensorColumn(rows).as_arrow_array()
+    assert got.type == ref.type and got.equals(ref)
+    f64 = [np.linspace(-6.0, 0.0, 24)]
+    assert viz._TensorColumn(f64).as_arrow_array().equals(rr.components.TensorDataBatch(f64[0]).as_arrow_array())
