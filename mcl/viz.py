@@ -40,6 +40,7 @@ import functools
 import math
 import os
 import sys
+import time
 import uuid
 from pathlib import Path
 from typing import Any, Mapping
@@ -153,8 +154,9 @@ _TIMESTAMP_THRESHOLD = 1e8  # seconds: larger t is taken as Unix time (1973 onwa
 # Everything a step logs (the stats, the estimate, the truth and odometry poses, the cloud, the scans, the weight
 # histogram) is buffered and sent as columns every this many steps and at close: one rr.log costs 25-100 us of Python
 # per archetype (the histogram's tensor 0.45 ms), a column of 64 rows about as much as one. A live viewer sees the
-# run in batches of this many steps.
+# run in batches of this many steps, or of LIVE_FLUSH_S of wall time if that comes first (spawn, serve).
 COLUMN_FLUSH_STEPS = 64
+LIVE_FLUSH_S = 0.2  # s: the longest a live viewer waits for the steps buffered so far (a saved file: steps alone)
 
 
 def _save_batcher() -> rr.ChunkBatcherConfig:
@@ -569,6 +571,7 @@ class RerunLogger:
         self._rec: rr.RecordingStream | None = None
         self._closed = False
         self._calls = 0
+        self._flushed_at = 0.0  # time.monotonic() of the last flush of the buffered columns (live modes)
         self._skipped_shown = False  # world/scan/skipped holds points (a step without must clear them)
         self._time_kind: str | None = None
         self._stat_names: list[str] = []
@@ -775,8 +778,11 @@ class RerunLogger:
             return
         call = self._calls
         self._calls += 1
-        if call % COLUMN_FLUSH_STEPS == 0:
+        live = self.mode in ("spawn", "serve")
+        if call % COLUMN_FLUSH_STEPS == 0 or (live and time.monotonic() - self._flushed_at > LIVE_FLUSH_S):
+            # a saved file by steps alone: its layout does not follow the machine's load
             self._flush_columns(rec)
+            self._flushed_at = time.monotonic()
         rec.set_time("step", sequence=int(step))
         self._step_now = int(step)
         self._set_time(rec, float(t))

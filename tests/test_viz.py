@@ -733,3 +733,26 @@ def test_a_column_of_tensors_is_what_rerun_logs_for_each():
     assert got.type == ref.type and got.equals(ref)
     f64 = [np.linspace(-6.0, 0.0, 24)]
     assert viz._TensorColumn(f64).as_arrow_array().equals(rr.components.TensorDataBatch(f64[0]).as_arrow_array())
+
+
+def test_a_live_viewer_waits_at_most_live_flush_s_for_the_buffered_steps_a_saved_file_goes_by_steps(tmp_path,
+                                                                                                   monkeypatch):
+    # every step's rows are sent as columns every COLUMN_FLUSH_STEPS steps: a live viewer (spawn, serve) then saw a
+    # run at 5 Hz in jumps of 13 s; it is now sent once LIVE_FLUSH_S of wall time has passed too. A saved file's
+    # chunks follow the steps alone (its layout must not follow the machine's load).
+    import mcl.viz as viz
+
+    clock = [100.0]
+    monkeypatch.setattr(viz.time, "monotonic", lambda: clock[0])
+    four = np.full(4, 0.25)
+    for mode, want in (("save", [0]), ("spawn", list(range(10)))):
+        with RerunLogger("save", tmp_path / f"{mode}.rrd") as log:
+            log.mode = mode  # as a live logger decides, without a viewer to start
+            flushed, real = [], log._flush_columns
+            monkeypatch.setattr(log, "_flush_columns", lambda rec: (flushed.append(log._calls - 1), real(rec)))
+            for k in range(10):
+                clock[0] += 0.3  # each step longer than LIVE_FLUSH_S
+                log.log_step(k, 0.2 * k, particles=np.zeros((3, 4)), weights=four, estimate=np.zeros(3),
+                             cov=np.eye(3), stats={"ess": 4.0})
+            assert sorted(set(flushed)) == want, mode  # (the first step flushes twice: its time kind is decided)
+            log.mode = "save"
