@@ -45,7 +45,7 @@ from typing import Any
 import yaml
 
 from mcl.errors import ConfigError, MclError
-from mcl.yamlfile import finite_number, read_yaml, short_repr
+from mcl.yamlfile import SAFE_LOADER, finite_number, read_yaml, short_repr
 
 WIDTH = 118  # the output's lines, comments wrapped
 ROS1 = "ROS 1 amcl"
@@ -272,6 +272,10 @@ def _from_launch(path: Path, text: str) -> Source:
         def one(m):
             if m.group(1) == "arg" and m.group(2).strip() in args:
                 return args[m.group(2).strip()]
+            if m.group(1) == "find":  # the package's folder: the launch file's ancestor of that name
+                pkg = next((p for p in path.resolve().parents if p.name == m.group(2).strip()), None)
+                if pkg is not None:
+                    return str(pkg)
             raise KeyError(m.group(0))
 
         for _ in range(5):  # an arg's default may name another arg
@@ -312,7 +316,12 @@ def _from_launch(path: Path, text: str) -> Source:
                 if file is not None:
                     f = Path(file)
                     f = f if f.is_absolute() else path.parent / f
-                    loaded = read_yaml(f, MclError)
+                    try:
+                        loaded = read_yaml(f, MclError)
+                    except MclError as e:
+                        if ": duplicate key " not in str(e):
+                            raise
+                        loaded = _read_last_wins(f, warnings, f"{f}:")
             elif (el.text or "").strip():
                 body = el.text if el.get("subst_value") not in ("true", "True") else subst(el.text, "<rosparam>")
                 try:
@@ -330,6 +339,42 @@ def _from_launch(path: Path, text: str) -> Source:
     return Source(path, flavour, params, f"<node name=\"{node.get('name', 'amcl')}\">", remaps, warnings)
 
 
+class _LastWins(SAFE_LOADER):
+    """SAFE_LOADER that keeps the last of a key given twice in one mapping, as rosparam (PyYAML) does, and records
+    it (line, key) in ``duplicates``: a shipped AMCL file may repeat a parameter (PAL's amcl.yaml repeats
+    laser_lambda_short), which mcl's own files refuse."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self.duplicates: list = []
+        self._checked: set = set()
+
+    def flatten_mapping(self, node):
+        first = node not in self._checked
+        self._checked.add(node)
+        own = [k for k, _ in node.value if k.tag != "tag:yaml.org,2002:merge"]
+        super().flatten_mapping(node)
+        if first:
+            seen = set()
+            for k in own:
+                if isinstance(k, yaml.ScalarNode):
+                    key = self.construct_object(k)
+                    if key in seen:
+                        self.duplicates.append((k.start_mark.line + 1, key))
+                    seen.add(key)
+
+
+def _read_last_wins(path: Path, warnings: list, where: str = "line ") -> Any:
+    loader = _LastWins(path.read_text(encoding="utf-8"))
+    try:
+        doc = loader.get_single_data()
+    finally:
+        loader.dispose()
+    for line, key in loader.duplicates:
+        warnings.append(f"{where}{line}: {key} given twice: the last is read, as rosparam does")
+    return doc
+
+
 def read_source(path: str | Path) -> Source:
     """The AMCL parameters of ``path``: a .launch / .xml file (or any file starting with '<') read as roslaunch
     XML, anything else as YAML. MclError (one line naming the file) when it is neither or holds none."""
@@ -342,8 +387,16 @@ def read_source(path: str | Path) -> Source:
         raise MclError(f"{path}: cannot read: {getattr(e, 'strerror', None) or type(e).__name__}") from None
     if path.suffix.lower() in (".launch", ".xml") or text.lstrip().startswith("<"):
         return _from_launch(path, text)
-    doc = read_yaml(path, MclError)
-    return _from_yaml(path, doc)
+    dup: list = []
+    try:
+        doc = read_yaml(path, MclError)
+    except MclError as e:
+        if ": duplicate key " not in str(e):
+            raise
+        doc = _read_last_wins(path, dup)
+    src = _from_yaml(path, doc)
+    src.warnings[:0] = dup
+    return src
 
 
 # ----------------------------------------------------------------------------- the mcl keys
@@ -544,9 +597,14 @@ class _Converter:
                       f"(ros-planning/navigation#20), mcl as the variance (as diff-corrected and nav2 do); the alphas "
                       f"are kept{wider}: retune them (mcl calibrate motion)")
         elif "omni" in kind:
-            how = "no omnidirectional model in mcl: the alphas are kept for the differential one"
-            self.warn(f"{said}: mcl has no omnidirectional motion model (no sideways noise; AMCL's omni uses "
-                      "alpha1 and alpha4 in other roles); the alphas are kept for mcl's differential model")
+            how = ("no omnidirectional model in mcl: the alphas go to the differential one by their roles (AMCL's "
+                   "omni alpha4 is rotation noise from rotation, alpha1 translation and strafe noise from rotation)")
+            uncorrected = ("; and ROS 1's uncorrected omni takes alpha3 trans^2 + alpha1 rot^2 itself as the std "
+                           "(ros-planning/navigation#20), mcl as the variance: retune them (mcl calibrate motion)"
+                           if kind == "omni" and self.flavour == ROS1 else "")
+            self.warn(f"{said}: mcl has no omnidirectional motion model (no sideways noise); AMCL's omni alpha1 "
+                      "(translation noise from rotation) and alpha4 (rotation noise from rotation) go to mcl's "
+                      f"motion.alpha4 and motion.alpha1, the others alpha for alpha{uncorrected}")
         else:
             how = "not an AMCL motion model: the alphas are kept for the differential one"
             self.warn(f"{said}: not an AMCL motion model (diff, diff-corrected, omni, omni-corrected; nav2: "
@@ -555,8 +613,12 @@ class _Converter:
         self.set("motion.noise_form", "variance", "sigma^2 = alpha1 rot^2 + alpha2 trans^2 (Table 5.6)")
         what = {"alpha1": "rotation noise from rotation", "alpha2": "rotation noise from translation",
                 "alpha3": "translation noise from translation", "alpha4": "translation noise from rotation"}
+        # AMCL's omni models (amcl_odom.cpp, nav2 omni_motion_model.cpp): rot std from alpha4 rot^2 + alpha2 trans^2,
+        # trans std from alpha3 trans^2 + alpha1 rot^2: alpha1 and alpha4 swap roles against the differential model
+        source = {"alpha1": "alpha4", "alpha4": "alpha1"} if "omni" in kind else {}
         for a in alphas:
-            self.set(f"motion.{a}", self.get(a), f"{self.said(a)}: {what[a]}", a)
+            src = source.get(a, a)
+            self.set(f"motion.{a}", self.get(src), f"{self.said(src)}: {what[a]}", src)
         if self.given("alpha5"):
             self.note(f"{self.said('alpha5')}: AMCL's omni models only (mcl's motion.alpha5 is the velocity model's, "
                       "another thing): not used", "alpha5")
@@ -776,7 +838,9 @@ def convert(path: str | Path) -> Conversion:
     c = _Converter(src)
     c.read()
     if not any(p.key not in _WEAK for p in map(_BY_KEY.get, c.values)):
-        raise MclError(f"{src.path}: no AMCL parameters found in {src.where}")
+        why = [w for w in c.warnings if "cannot be resolved" in w or "not read" in w]
+        raise MclError(f"{src.path}: no AMCL parameters found in {src.where}"
+                       + (f" ({'; '.join(why)}: give that file)" if why else ""))
     c.convert()
     text = c.text()
     with tempfile.TemporaryDirectory() as tmp:

@@ -10,6 +10,7 @@ import yaml
 from mcl.amcl_params import convert
 from mcl.cli import main
 from mcl.config import load_config
+from mcl.errors import MclError
 
 # nav2_bringup/params/nav2_params.yaml's amcl block (Humble on), with a start pose, among other nodes
 NAV2 = """\
@@ -331,3 +332,101 @@ def test_the_converted_config_runs(tmp_path, capsys):
     assert used.filter.particles == 2000 and used.sensor.likelihood_field.interior == "zero"
     assert (run / "trajectory.tum").stat().st_size > 0
     assert "mcl: error" not in capsys.readouterr().err
+
+
+# --- real files (audit): trimmed copies of public robot repositories' AMCL parameters
+
+# pal-robotics/tiago_navigation tiago_2dnav/config/localization/amcl.yaml: laser_lambda_short twice
+TIAGO = """\
+odom_model_type: diff
+odom_alpha1    : 0.2
+odom_alpha2    : 0.2
+odom_alpha3    : 0.8
+odom_alpha4    : 0.2
+min_particles    : 500
+max_particles    : 5000
+laser_model_type         : likelihood_field
+laser_z_hit              : 0.5
+laser_z_rand             : 0.5
+laser_sigma_hit          : 0.2
+laser_lambda_short       : 0.1
+laser_lambda_short       : 0.1
+laser_likelihood_max_dist: 2.0
+base_frame_id: base_footprint
+"""
+
+
+def test_a_parameter_given_twice_is_read_as_rosparam_reads_it(tmp_path):
+    r = convert(_write(tmp_path, "amcl.yaml", TIAGO))  # mcl's own files refuse a duplicate key; rosparam keeps the last
+    assert any("line 13: laser_lambda_short given twice: the last is read" in w for w in r.warnings)
+    assert r.keys["filter.particles"] == 5000 and r.keys["frames.base"] == "base_footprint"
+
+
+# ros-planning/navigation amcl/examples/amcl_omni.launch (trimmed)
+OMNI_LAUNCH = """\
+<launch>
+<node pkg="amcl" type="amcl" name="amcl">
+  <param name="odom_model_type" value="omni"/>
+  <param name="odom_alpha5" value="0.1"/>
+  <param name="min_particles" value="500"/>
+  <param name="max_particles" value="5000"/>
+  <param name="odom_alpha1" value="0.2"/>
+  <param name="odom_alpha2" value="0.2"/>
+  <param name="odom_alpha3" value="0.8"/>
+  <param name="odom_alpha4" value="0.2"/>
+  <param name="update_min_d" value="0.2"/>
+</node>
+</launch>
+"""
+
+
+@pytest.mark.parametrize("model", ["omni", "omni-corrected"])
+def test_omni_alphas_go_by_their_roles(tmp_path, model):
+    # amcl_odom.cpp's omni: trans std from alpha3 trans^2 + alpha1 rot^2, rot std from alpha4 rot^2 + alpha2 trans^2
+    text = OMNI_LAUNCH.replace('value="omni"', f'value="{model}"').replace(
+        'odom_alpha1" value="0.2', 'odom_alpha1" value="0.3')
+    r = convert(_write(tmp_path, "amcl_omni.launch", text))
+    assert r.keys["motion.alpha1"] == 0.2 and r.keys["motion.alpha4"] == 0.3  # swapped
+    assert r.keys["motion.alpha2"] == 0.2 and r.keys["motion.alpha3"] == 0.8
+    assert "odom_alpha4 0.2: rotation noise from rotation" in r.text
+    (w,) = r.warnings
+    # ROS 1's uncorrected omni has diff's bug: the alpha expression is the std
+    assert ("uncorrected omni takes alpha3 trans^2 + alpha1 rot^2 itself as the std" in w) == (model == "omni")
+
+
+# ZebraDevs/fetch_ros fetch_navigation/launch/include/amcl.launch.xml and config/amcl.yaml (trimmed)
+FETCH_LAUNCH = """\
+<launch>
+  <arg name="scan_topic"     default="base_scan" />
+  <arg name="use_map_topic"  default="false" />
+  <node pkg="amcl" type="amcl" name="amcl">
+    <remap from="scan" to="$(arg scan_topic)" />
+    <param name="use_map_topic"  value="$(arg use_map_topic)" />
+    <rosparam file="$(find fetch_navigation)/config/amcl.yaml" command="load" />
+  </node>
+</launch>
+"""
+FETCH_YAML = """\
+min_particles: 500
+max_particles: 2000
+kld_err: 0.01
+kld_z: 0.99
+laser_model_type: "likelihood_field"
+odom_model_type: "diff"
+odom_alpha1: 1.5
+"""
+
+
+def test_find_is_the_launch_files_package_folder(tmp_path):
+    pkg = tmp_path / "fetch_navigation"
+    (pkg / "config").mkdir(parents=True)
+    (pkg / "config" / "amcl.yaml").write_text(FETCH_YAML)
+    (pkg / "launch" / "include").mkdir(parents=True)
+    launch = pkg / "launch" / "include" / "amcl.launch.xml"
+    launch.write_text(FETCH_LAUNCH)
+    k = convert(launch).keys
+    assert k["filter.kld_epsilon"] == 0.01 and k["motion.alpha1"] == 1.5 and k["topics.scan"] == "/base_scan"
+    # elsewhere the package cannot be found: the error says which file to give
+    other = _write(tmp_path, "amcl.launch.xml", FETCH_LAUNCH)
+    with pytest.raises(MclError, match=r"no AMCL parameters found .*\$\(find fetch_navigation\) cannot be resolved"):
+        convert(other)
