@@ -168,6 +168,9 @@ def _flatten(d: dict, prefix: str = "") -> dict:
 # names other nodes have too (a controller's transform_tolerance, a costmap's frames): they alone make no AMCL node
 _WEAK = {*UNUSED, "odom_frame_id", "base_frame_id", "scan_topic", "map_topic"}
 _STRONG = {name for flavour in (ROS1, NAV2) for name, p in _BY_NAME[flavour].items() if p.key not in _WEAK}
+# names no other localization node of a nav2 params file holds (z_hit, sigma_hit, laser_max_range are common)
+_DISTINCT = {"laser_model_type", "robot_model_type", "pf_z", "pf_err", "recovery_alpha_slow",
+             "recovery_alpha_fast", "max_particles", "min_particles", "odom_model_type", "kld_z", "kld_err"}
 # the sections of an mcl config: such a file is not AMCL's
 _MCL_SECTIONS = ("filter", "motion", "sensor", "quality", "rerun", "topics", "frames")
 
@@ -207,7 +210,9 @@ def _from_yaml(path: Path, doc: Any) -> Source:
     nodes = [(p, m["ros__parameters"]) for p, m in _walk(doc) if isinstance(m.get("ros__parameters"), dict)]
     if nodes:  # a nav2 params file: the amcl node's block, else the one that holds AMCL's names
         named = [(p, m) for p, m in nodes if _is_amcl_name(p)]
-        pick = named or sorted((n for n in nodes if _score(n[1])), key=lambda n: -_score(n[1]))
+        # a node not named amcl must hold a name only AMCL has: another localizer's z_hit and sigma_hit are not enough
+        pick = named or sorted((n for n in nodes if _score(n[1]) and _DISTINCT & set(map(str, _flatten(n[1])))),
+                               key=lambda n: -_score(n[1]))
         if pick:
             p, params = pick[0]
             src = Source(path, NAV2, _flatten(params), f"{'/'.join(p) + ': ' if p else ''}ros__parameters")
@@ -215,6 +220,9 @@ def _from_yaml(path: Path, doc: Any) -> Source:
                 src.warnings.append(f"{len(named)} amcl nodes ({', '.join('/'.join(n[0]) for n in named)}): "
                                     f"the first ({'/'.join(p)}) is read")
             return src
+        listed = ", ".join("/".join(n[0]) or "(top)" for n in nodes[:6]) + (", ..." if len(nodes) > 6 else "")
+        raise MclError(f"{path}: no AMCL parameters found: no amcl node among its nodes ({listed}); a nav2 params "
+                       "file's are under amcl: ros__parameters:")
     candidates = [(p, m) for p, m in _walk(doc) if _score(m)]
     if not candidates:
         raise MclError(f"{path}: no AMCL parameters found (expected a nav2 params file with amcl: ros__parameters:, "

@@ -430,3 +430,17 @@ def test_find_is_the_launch_files_package_folder(tmp_path):
     other = _write(tmp_path, "amcl.launch.xml", FETCH_LAUNCH)
     with pytest.raises(MclError, match=r"no AMCL parameters found .*\$\(find fetch_navigation\) cannot be resolved"):
         convert(other)
+
+
+def test_a_nav2_file_without_an_amcl_node_is_refused_not_read_from_another_localizer(tmp_path, capsys):
+    # navigation2's nav2_params.yaml of a release without AMCL held a localization_server whose z_hit, sigma_hit and
+    # laser_max_range made it "AMCL's": exit 0, five keys and sixteen warnings
+    p = tmp_path / "nav2_params.yaml"
+    p.write_text(yaml.safe_dump({
+        "localization_server": {"ros__parameters": {"z_hit": 0.5, "sigma_hit": 0.2, "laser_max_range": 100.0,
+                                                    "base_frame_id": "base_footprint", "scan_topic": "scan"}},
+        "controller_server": {"ros__parameters": {"controller_frequency": 20.0}}}))
+    assert main(["config", "from-amcl", str(p)]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and "no AMCL parameters found: no amcl node among its nodes (" in err[0], err
+    assert "localization_server" in err[0] and "controller_server" in err[0]
