@@ -712,7 +712,8 @@ class _Converter:
         for k in keys:
             if k in mixture:
                 how = ("" if not ok else ": AMCL's unnormalised hit Gaussian x sqrt(2 pi) sigma_hit, then the "
-                       "weights scaled to sum to 1 (the same weights)" if k == "z_hit" else
+                       "weights scaled to sum to 1 (the same weights where sensor.range_max is the scan's, over which AMCL "
+                       "spreads z_rand)" if k == "z_hit" else
                        ": scaled with z_hit (see there)")
                 self.set(f"{block}.{k}", float(f"{w[k]:.6g}") if ok else self.get(k), f"{self.said(k)}{how}", k)
             else:
