@@ -308,7 +308,22 @@ def _from_launch(path: Path, text: str) -> Source:
     flavour = ROS1 if node.get("pkg") == "amcl" else NAV2
     params: dict = {}
     remaps: dict = {}
+
+    def skipped(el) -> bool:
+        """roslaunch's if= / unless= on an element (true/false/1/0 once substituted): True when it is not loaded; an
+        unresolved condition is loaded, with subst's warning."""
+        for attr, load_when in (("if", True), ("unless", False)):
+            cond = el.get(attr)
+            if cond is not None:
+                value = subst(cond, f"<{el.tag} {attr}=>")
+                if value is not None and value.strip().lower() in ("true", "1", "false", "0"):
+                    if (value.strip().lower() in ("true", "1")) != load_when:
+                        return True
+        return False
+
     for el in node:
+        if skipped(el):
+            continue
         if el.tag == "param" and el.get("name"):
             name = el.get("name").lstrip("~")
             if el.get("value") is None:

@@ -544,7 +544,7 @@ def _add_config(sub) -> None:
             "(mcl run OUT.yaml --bag B) or merges into a config. PARAMS is a nav2 params file (the amcl node's "
             "ros__parameters among the other nodes', or the bare mapping), ROS 1 amcl parameters as YAML (flat or "
             "under the node's name), or a ROS 1 .launch file with <node pkg=\"amcl\"> (its <param>, <rosparam> "
-            "and scan/map <remap>; $(arg ...) resolved). What it maps, following AMCL's sources: particle counts "
+            "and scan/map <remap>; $(arg ...), $(find ...), if= and unless= resolved). What it maps, following AMCL's sources: particle counts "
             "and KLD (kld_z/pf_z is a normal quantile: kld_delta = 1 - Phi(z)), the odometry alphas (diff-corrected "
             "and nav2's model are mcl's variance form; ROS 1's diff and the omni models are warned about), the "
             "laser model and its weights (AMCL's unnormalised Gaussian made a density), beam skipping, update "

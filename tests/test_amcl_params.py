@@ -444,3 +444,24 @@ def test_a_nav2_file_without_an_amcl_node_is_refused_not_read_from_another_local
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and "no AMCL parameters found: no amcl node among its nodes (" in err[0], err
     assert "localization_server" in err[0] and "controller_server" in err[0]
+
+
+def test_a_launch_files_if_and_unless_decide_which_params_are_loaded(tmp_path):
+    # TIAGo's localization launch loads a second set of parameters only if="$(arg multiple)" (false by default):
+    # every <param> was read whatever its condition
+    p = tmp_path / "amcl.launch"
+    p.write_text("""<launch>
+  <arg name="multiple" default="false"/>
+  <node pkg="amcl" type="amcl" name="amcl">
+    <param name="odom_model_type" value="diff-corrected"/>
+    <param name="max_particles" value="3000"/>
+    <param name="max_particles" value="9000" if="$(arg multiple)"/>
+    <param name="min_particles" value="700" unless="$(arg multiple)"/>
+    <param name="min_particles" value="100" if="true"/>
+    <param name="update_min_d" value="0.3" unless="1"/>
+  </node>
+</launch>
+""")
+    cfg = convert(p).keys
+    assert cfg["filter.particles"] == 3000 and cfg["filter.min_particles"] == 100
+    assert "filter.update_min_d" not in cfg or cfg["filter.update_min_d"] != 0.3
