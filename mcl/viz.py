@@ -303,26 +303,21 @@ def stat_group(name: str) -> str:
     return "other"
 
 
-def weight_scale(weights: np.ndarray) -> np.ndarray:
-    """(N,) in [0, 1]: linear weights on a log scale, 1 the heaviest, 0 at ``_WEIGHT_DECADES`` below or lighter."""
-    w = np.asarray(weights, dtype=np.float64)
-    wmax = w.max() if w.size else 0.0
-    if not np.isfinite(wmax) or wmax <= 0.0:
-        return np.zeros(w.shape)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.log10(np.where(w > 0, w / wmax, 0.0))
-    rel = np.nan_to_num(rel, nan=-_WEIGHT_DECADES, neginf=-_WEIGHT_DECADES)
-    return np.clip(1.0 + rel / _WEIGHT_DECADES, 0.0, 1.0)
-
-
 def _log_relative(w: np.ndarray) -> np.ndarray:
-    """log10(w / w_max) of float64 weights as weight_scale takes it (-inf for a zero weight); all -inf when the
-    heaviest is not a positive number (weight_scale: all 0)."""
+    """log10(w / w_max) of float64 weights (-inf for a zero weight; all -inf when the heaviest is not a positive
+    number): what weight_scale, weight_histogram and the cloud's colours (_log_particles) are drawn from."""
     wmax = w.max() if w.size else 0.0
     if not np.isfinite(wmax) or wmax <= 0.0:
         return np.full(w.shape, -np.inf)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.log10(np.where(w > 0, w / wmax, 0.0))
+
+
+def weight_scale(weights: np.ndarray) -> np.ndarray:
+    """(N,) in [0, 1]: linear weights on a log scale, 1 the heaviest, 0 at ``_WEIGHT_DECADES`` below or lighter."""
+    rel = np.nan_to_num(_log_relative(np.asarray(weights, dtype=np.float64)), nan=-_WEIGHT_DECADES,
+                        neginf=-_WEIGHT_DECADES)  # all -inf without a positive heaviest weight: all 0
+    return np.clip(1.0 + rel / _WEIGHT_DECADES, 0.0, 1.0)
 
 
 def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -332,20 +327,15 @@ def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float
     of two (6, 12, 24, ... decades): one scan can set hundreds of decades between poses (60 beams of a few nats
     each), so a fixed range would put nearly every particle in one bin. Zero weights count in the first bin;
     equal weights put every particle in the last."""
-    w = np.asarray(weights, dtype=np.float64)
-    wmax = w.max() if w.size else 0.0
+    rel = _log_relative(np.asarray(weights, dtype=np.float64))
+    finite = rel[np.isfinite(rel)]  # none without a positive heaviest weight (it is 0 here when there is one)
     span = _HIST_DECADES
-    rel = None
-    if np.isfinite(wmax) and wmax > 0.0:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rel = np.log10(np.where(w > 0, w / wmax, 0.0))
-        finite = rel[np.isfinite(rel)]
-        if finite.size:
-            # a power-of-two multiple of _HIST_DECADES: the bins change only now and then (see _log_particles)
-            span = _HIST_DECADES * 2.0 ** max(0.0, math.ceil(math.log2(max(-float(finite.min()), 1e-9) / _HIST_DECADES)))
+    if finite.size:
+        # a power-of-two multiple of _HIST_DECADES: the bins change only now and then (see _log_particles)
+        span = _HIST_DECADES * 2.0 ** max(0.0, math.ceil(math.log2(max(-float(finite.min()), 1e-9) / _HIST_DECADES)))
     edges = np.linspace(-span, 0.0, _HIST_BINS + 1)
     centres = 0.5 * (edges[:-1] + edges[1:])
-    if rel is None:
+    if not finite.size:
         return np.zeros(_HIST_BINS), centres, span / _HIST_BINS
     rel = np.clip(np.nan_to_num(rel, nan=-span, neginf=-span), -span, 0.0)
     # np.histogram(rel, bins=edges)'s counts (it sorts the values: 20 us at 5,000 weights, 4 here)
@@ -846,9 +836,11 @@ class RerunLogger:
 
     def _cut_short(self, why: str) -> None:
         """The recording could not be written whole: leave it as ``recording.partial.rrd`` and raise OSError."""
-        cut = partial_recording(self.path if self.path is not None else "recording.rrd")
-        if self.path is not None and self.path.exists():  # cut short: not under its final name, but still
-            os.replace(self.path, cut)                     # an .rrd (the viewer opens no other name)
+        if self.path is None:  # a stream with no file (a live viewer's): nothing is left behind
+            raise OSError(errno.EIO, f"the recording could not be sent ({why})", "the recording") from None
+        cut = partial_recording(self.path)
+        if self.path.exists():  # cut short: not under its final name, but still an .rrd (the viewer opens no other)
+            os.replace(self.path, cut)
         raise OSError(errno.EIO, f"the recording could not be written ({why}); what was written is in "
                       f"{cut.name} (rerun {cut.name} shows it)", str(self.path)) from None
 

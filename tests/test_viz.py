@@ -756,3 +756,13 @@ def test_a_live_viewer_waits_at_most_live_flush_s_for_the_buffered_steps_a_saved
                              cov=np.eye(3), stats={"ess": 4.0})
             assert sorted(set(flushed)) == want, mode  # (the first step flushes twice: its time kind is decided)
             log.mode = "save"
+
+
+def test_a_stream_with_no_file_that_fails_is_one_error_naming_the_recording_not_a_traceback(tmp_path):
+    # a live viewer's stream has no path: its failure went through path.name (an AttributeError)
+    with RerunLogger("save", tmp_path / "r.rrd") as log:
+        path, log.path = log.path, None
+        with pytest.raises(OSError) as e:
+            log._cut_short("the viewer went away")
+        log.path = path
+    assert e.value.filename == "the recording" and "could not be sent (the viewer went away)" in str(e.value)
