@@ -196,12 +196,9 @@ def test_the_kernel_gives_the_books_mean_and_covariance_of_the_set_and_of_one_cl
 def test_weighted_mean_pose_does_not_change_with_the_blas_thread_count():
     # np.dot over 100,000 weights is split over OpenBLAS's threads: its last digits differed between
     # OPENBLAS_NUM_THREADS=1 and 2. Two processes, one BLAS thread and two: the same bits.
-    import os
-    import subprocess
-    import sys
+    from tests.blas import outputs_by_blas_threads
 
-    code = ("import numpy as np; from mcl.estimate import weighted_mean_pose as f; r = np.random.default_rng(1); "
-            "p = r.normal(0, 30, (3, 100000)); w = r.random(100000); w /= w.sum(); print(f(p, w).tobytes().hex())")
-    got = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                          env={**os.environ, "OPENBLAS_NUM_THREADS": t, "OMP_NUM_THREADS": t}).stdout for t in "12"}
+    got = outputs_by_blas_threads(
+        "import numpy as np; from mcl.estimate import weighted_mean_pose as f; r = np.random.default_rng(1); "
+        "p = r.normal(0, 30, (3, 100000)); w = r.random(100000); w /= w.sum(); print(f(p, w).tobytes().hex())")
     assert len(got) == 1, got

@@ -172,12 +172,8 @@ def test_effective_sample_size_does_not_change_with_the_blas_thread_count():
     # np.dot over 100,000 weights is split over OpenBLAS's threads: 1 / sum(w^2) differed in its last digits between
     # OPENBLAS_NUM_THREADS=1 and 2 (74978.83611698521 against ...519), and the ESS decides whether to resample, so
     # one seed's trajectory could depend on the machine. Two processes, one BLAS thread and two: the same bits.
-    import os
-    import subprocess
-    import sys
+    from tests.blas import outputs_by_blas_threads
 
-    code = ("import numpy as np; from mcl.resampling import effective_sample_size as e; "
-            "w = np.random.default_rng(1).random(100000); w /= w.sum(); print(repr(e(w)))")
-    got = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                          env={**os.environ, "OPENBLAS_NUM_THREADS": t, "OMP_NUM_THREADS": t}).stdout for t in "12"}
+    got = outputs_by_blas_threads("import numpy as np; from mcl.resampling import effective_sample_size as e; "
+                                  "w = np.random.default_rng(1).random(100000); w /= w.sum(); print(repr(e(w)))")
     assert len(got) == 1, got
