@@ -301,13 +301,20 @@ def _reversal_plan(rng, n_ticks, reversals):
 GROUND_HIT_S = 2.0  # s: how long each of simulate(ground_hits=G)'s episodes lasts
 
 
+def _mounted(poses: np.ndarray, mount: np.ndarray) -> np.ndarray:
+    """(M, 3) poses ∘ mount: where a laser mounted at ``mount`` (robot frame) is when the robot is at ``poses``."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    return np.stack([poses[:, 0] + c * mount[0] - s * mount[1], poses[:, 1] + s * mount[0] + c * mount[1],
+                     poses[:, 2] + mount[2]], axis=1)
+
+
 def _swept(truth, pre, t, scan_ticks, angles, sweep: float, world, range_max: float,
-           kidnap_tick: int | None) -> np.ndarray:
+           kidnap_tick: int | None, mount: np.ndarray | None = None) -> np.ndarray:
     """Ranges (S, B) of scans taken while the robot moves: beam ``j`` of the scan stamped at tick ``k`` is cast
     from the true pose at ``t[k] + j / (B - 1) * sweep`` (linear between ticks, the heading unwrapped), as a
     spinning laser sweeps its beams in angle order after the stamp (ROS LaserScan ``time_increment`` > 0); a
     negative ``sweep`` takes them the other way (the last beam at the stamp). A scan stamped before a kidnap is
-    swept along the pose before the teleport (``pre``)."""
+    swept along the pose before the teleport (``pre``). ``mount``: the laser's pose on the robot (None: its centre)."""
     from mcl.kernels.raycast import cast_rays
 
     b = angles.size
@@ -319,7 +326,9 @@ def _swept(truth, pre, t, scan_ticks, angles, sweep: float, world, range_max: fl
         a, b = (pre[:, col], truth[:, col]) if col < 2 else (np.unwrap(pre[:, 2]), np.unwrap(truth[:, 2]))
         return np.where(before, np.interp(tb, t, a), np.interp(tb, t, b)).ravel()
 
-    rays = np.vstack([at(0), at(1), at(2) + np.tile(angles, scan_ticks.size)])
+    robot = np.stack([at(0), at(1), at(2)], axis=1)
+    laser = _mounted(robot, mount) if mount is not None else robot
+    rays = np.vstack([laser[:, 0], laser[:, 1], laser[:, 2] + np.tile(angles, scan_ticks.size)])
     out = np.empty((rays.shape[1], 1))
     cast_rays(np.ascontiguousarray(rays), np.zeros(1), world.blocked, world.origin[0], world.origin[1],
               world.resolution, range_max, out)
@@ -628,7 +637,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
-             unknown_floor: int = 0, _check_only: bool = False) -> dict | None:
+             unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -667,6 +676,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     ``ground_hits`` = G tilts the laser onto the ground G times, spread over the run, for ``GROUND_HIT_S`` (2 s)
     each (``_ground_hits``): a robot pitching on a ramp or braking hard, whose scan then reads a line of returns
     1.5-5 m ahead that moves every scan and is on no map. G = 0 leaves every output byte-identical.
+    ``laser_pose`` = (x, y, theta) mounts the laser off the robot's centre (m, m, rad in the robot frame; within
+    ``robot_radius`` of it): every scan is cast from truth ∘ laser_pose, the log's FLASER/ROBOTLASER1 lines carry
+    the laser's pose beside the robot's (a bag's ``/tf_static`` the mounting), and truth.tum stays the robot's, as a
+    real robot's laser sits ahead of, behind or beside ``base_link``. (0, 0, 0) leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -727,6 +740,13 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected 0..500, got {phantom_furniture!r}")
     _check(isinstance(unknown_floor, (int, np.integer)) and 0 <= unknown_floor <= 20, "unknown_floor",
            f"expected 0..20, got {unknown_floor!r}")
+    _check(isinstance(laser_pose, (list, tuple, np.ndarray)) and len(laser_pose) == 3
+           and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v)
+                   for v in laser_pose)
+           and math.hypot(laser_pose[0], laser_pose[1]) <= robot_radius + 1e-12, "laser_pose",
+           f"expected [x, y, theta] with the laser within the robot's {robot_radius:g} m radius, got {laser_pose!r}")
+    mount = np.array([float(v) for v in laser_pose])
+    mounted = bool(np.any(mount != 0.0))
     odom_rate, scan_every, sim_dt = _rates(float(scan_rate))
     n_ticks = int(round(duration * odom_rate)) + 1
     kidnap_tick = None
@@ -758,10 +778,12 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     angles = beam_angles(int(n_beams), fov)
     blocked = world.blocked
     exact = np.empty((scan_ticks.size, angles.size))
-    cast_rays(np.ascontiguousarray(truth[scan_ticks].T), angles, blocked, world.origin[0], world.origin[1],
+    at_laser = _mounted(truth, mount) if mounted else truth  # where each scan is taken from (the robot's truth)
+    cast_rays(np.ascontiguousarray(at_laser[scan_ticks].T), angles, blocked, world.origin[0], world.origin[1],
               world.resolution, range_max, exact)
     if scan_sweep:
-        exact = _swept(truth, pre, t, scan_ticks, angles, float(scan_sweep), world, range_max, kidnap_tick)
+        exact = _swept(truth, pre, t, scan_ticks, angles, float(scan_sweep), world, range_max, kidnap_tick,
+                       mount if mounted else None)
     furniture = []
     if unmapped_furniture:
         # A seventh child stream: the others are unchanged.
@@ -771,7 +793,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         # A fifth child stream: the first four (world, drive, odometry, laser) are unchanged.
         rng_obst = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(5)[4])
         _cast_with_unmapped(world, truth[scan_ticks], t[scan_ticks], angles, range_max, int(dynamic_obstacles),
-                            rng_obst, exact, furniture)
+                            rng_obst, exact, furniture, cast_from=at_laser[scan_ticks] if mounted else None)
     hit_windows = []
     if ground_hits:
         # A ninth child stream: the others are unchanged.
@@ -825,11 +847,15 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
             if i is not None:
                 rs = " ".join(f"{r:.3f}" for r in ranges[i])
                 pose = f"{x:.6f} {y:.6f} {th:.6f}"
+                at = pose  # the laser's pose in the odometry frame, then the robot's (CARMEN's order)
+                if mounted:
+                    lx, ly, lth = _mounted(odom[k : k + 1], mount)[0]
+                    at = f"{lx:.6f} {ly:.6f} {math.remainder(lth, 2 * math.pi):.6f}"
                 if flaser:
-                    lines.append(f"FLASER {angles.size} {rs} {pose} {pose} {ts}\n")
+                    lines.append(f"FLASER {angles.size} {rs} {at} {pose} {ts}\n")
                 else:
                     lines.append(f"ROBOTLASER1 0 {angles[0]:.9f} {fov:.9f} {fov / (angles.size - 1):.9f} "
-                                 f"{range_max:g} 0.01 0 {angles.size} {rs} 0 {pose} {pose} "
+                                 f"{range_max:g} 0.01 0 {angles.size} {rs} 0 {at} {pose} "
                                  f"{tv[k]:.6f} {rv[k]:.6f} 0.0 0.0 0.0 {ts}\n")
                 if lm_obs is not None:
                     lines.append(_landmark_line(lm_obs[i], ts))
@@ -881,6 +907,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["reversals"] = int(reversals)
     if scan_sweep:
         params["laser"]["sweep_s"] = float(scan_sweep)
+    if mounted:
+        params["laser"]["pose"] = [float(v) for v in mount]
     if phantoms:
         params["phantom_furniture"] = len(phantoms)
     if grey:
@@ -1018,9 +1046,10 @@ def _painted(occupancy: np.ndarray, boxes, origin, resolution: float) -> np.ndar
 
 
 def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angles: np.ndarray, range_max: float,
-                        n: int, rng: np.random.Generator, out: np.ndarray, furniture=()) -> None:
+                        n: int, rng: np.random.Generator, out: np.ndarray, furniture=(), cast_from=None) -> None:
     """Cast every scan (poses (M, 3)) into ``out`` (M, B) against the world plus ``n`` unmapped obstacles
-    and the unmapped ``furniture`` boxes.
+    and the unmapped ``furniture`` boxes. ``cast_from`` (M, 3): the laser's poses when it is not at the robot's
+    centre (the obstacles are placed by the robot's ``poses`` either way).
 
     Obstacles are painted on free cells only. A person within 0.6 m of the
     robot steps aside (is not drawn); boxes stand at least 0.8 m from the path.
@@ -1028,6 +1057,9 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
     from mcl.kernels.raycast import cast_rays, cast_rays_serial
 
     boxes, people = _unmapped_obstacles(world, poses[:, :2], n, rng) if n else ([], [])
+    robot = poses
+    if cast_from is not None:
+        poses = cast_from
     boxes = boxes + list(furniture)
     res = world.resolution
     ox, oy = world.origin
@@ -1051,7 +1083,7 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
     yy = oy + (np.arange(h) + 0.5) * res
     xx = ox + (np.arange(w) + 0.5) * res
     for m in range(poses.shape[0]):
-        rx, ry = poses[m, 0], poses[m, 1]
+        rx, ry = robot[m, 0], robot[m, 1]
         grid = base | (static & free)
         for a, b, speed, phase in people:
             length = float(np.hypot(*(b - a)))
@@ -1129,6 +1161,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "beam first); at most one scan period, needs --dynamic-obstacles 0 --unmapped-furniture 0. "
                         "A bag (--format) carries |S| as LaserScan time_increment; default 0 (every beam at the "
                         "stamp)")
+    parser.add_argument("--laser-pose", nargs=3, type=float, default=None, metavar=("X", "Y", "THETA"),
+                        help="mount the laser at (X, Y, THETA) on the robot (m, m, rad; within the robot's 0.2 m "
+                        "radius), e.g. 0.15 0 0 ahead of the centre or -0.15 0 3.1416 at the back looking back: the "
+                        "log carries the laser's pose beside the robot's (a bag: base_link -> laser on /tf_static), "
+                        "truth.tum the robot's; default 0 0 0")
     noise = parser.add_argument_group(
         "noise", "the laser's and the odometry's (default: the values below, as suites/synthetic.yaml's worlds have)")
     noise.add_argument("--range-sigma", type=float, default=None, metavar="M",
@@ -1183,7 +1220,8 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     depth_every=args.depth_every, map_resolution=args.map_resolution,
                     reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
                     scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
-                    unknown_floor=args.unknown_floor)
+                    unknown_floor=args.unknown_floor,
+                    laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0))
 
 
 # What ``mcl simulate`` writes into its folder: an earlier world's are replaced whole, anything else is kept

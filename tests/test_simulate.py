@@ -434,6 +434,10 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(phantom_furniture=-1), "phantom_furniture"),
     (dict(unknown_floor=21), "unknown_floor"),
     (dict(scan_sweep=0.3), "scan_sweep"),
+    (dict(laser_pose=(0.25, 0.0, 0.0)), "laser_pose"),  # off the robot's 0.2 m body: it could stand in a wall
+    (dict(laser_pose=(0.1, 0.0)), "laser_pose"),
+    (dict(laser_pose=(0.1, 0.0, float("nan"))), "laser_pose"),
+    (dict(laser_pose=0.1), "laser_pose"),
 ])
 def test_bad_options_raise_config_error(tmp_path, kw, key):
     with pytest.raises(ConfigError, match=key):
@@ -622,3 +626,50 @@ def _parsed(argv):
     sub = p.add_subparsers(dest="command")
     add_arguments(sub.add_parser("simulate"))
     return p.parse_args(argv)
+
+
+MOUNT = (-0.15, 0.05, math.pi)  # 0.16 m behind the centre and to the left, looking back
+
+
+def test_a_mounted_laser_scans_from_its_mounting_and_the_log_says_where_it_sits(sim, exact, tmp_path):
+    # laser_pose: every scan cast from truth ∘ mount; the log's laser pose is odom ∘ mount, so the reader's
+    # laser_offset (robot^-1 ∘ laser) gives the mounting back to the 6-decimal rounding of the file (1e-6, and
+    # theta wrapped); truth.tum, the map and the odometry are the robot's, as without it; (0, 0, 0) is the
+    # default's bytes.
+    from mcl.estimate import compose
+
+    simulate(tmp_path / "zero", seed=4, duration=40.0, laser_pose=(0.0, 0.0, 0.0))
+    for name in ("log.clf", "truth.tum", "map.pgm", "sim.yaml"):
+        assert (tmp_path / "zero" / name).read_bytes() == (sim[0] / name).read_bytes(), name
+    out = tmp_path / "m"
+    simulate(out, seed=4, duration=40.0, laser_pose=MOUNT, **NOISE_FREE)
+    for name in ("truth.tum", "map.pgm"):
+        assert (out / name).read_bytes() == (exact / name).read_bytes(), name
+    assert yaml.safe_load((out / "sim.yaml").read_text())["laser"]["pose"] == list(MOUNT)
+    log, centred = read_carmen(out / "log.clf"), read_carmen(exact / "log.clf")
+    np.testing.assert_array_equal(np.array([s.odom for s in log.scans]), np.array([s.odom for s in centred.scans]))
+    off = np.array([s.laser_offset for s in log.scans])
+    np.testing.assert_allclose(off[:, :2], np.tile(MOUNT[:2], (len(off), 1)), atol=2e-6)
+    np.testing.assert_allclose(np.abs(_wrap(off[:, 2] - MOUNT[2])), 0.0, atol=2e-6)
+    g = load_map(out / "map.yaml")
+    t, p = read_tum(out / "truth.tum")
+    at = np.array([compose(p[:, i], np.array(MOUNT)) for i in range(t.size)]).T
+    angles = beam_angles(181, math.pi)
+    ref, from_centre = np.empty((t.size, 181)), np.empty((t.size, 181))
+    cast_rays(np.ascontiguousarray(at), angles, g.occupied, g.origin[0], g.origin[1], g.resolution, 12.0, ref)
+    cast_rays(np.ascontiguousarray(p), angles, g.occupied, g.origin[0], g.origin[1], g.resolution, 12.0, from_centre)
+    got = np.vstack([s.ranges for s in log.scans])
+    # 3-decimal ranges; a ray grazing a cell corner may flip (as test_noise_free_ranges_equal_ray_casting_from_truth)
+    assert np.mean(np.abs(got - ref) <= 0.0005 + 1e-9) > 0.995
+    assert np.mean(np.abs(got - from_centre) <= 0.0005 + 1e-9) < 0.2  # looking back from elsewhere: other ranges
+
+
+def test_a_mounted_lasers_bag_carries_the_mounting_on_tf_static(tmp_path):
+    from mcl.datasets.rosbag import open_bag
+    from mcl.simulate import write_log_as_bag
+
+    simulate(tmp_path, seed=4, duration=10.0, laser_pose=MOUNT)
+    src = open_bag(write_log_as_bag(tmp_path, "mcap"))
+    off = np.asarray(src.laser_offsets["/scan"], dtype=float)
+    np.testing.assert_allclose(off[:2], MOUNT[:2], atol=2e-6)
+    assert abs(_wrap(off[2] - MOUNT[2])) < 2e-6
