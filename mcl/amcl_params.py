@@ -239,6 +239,7 @@ def _from_yaml(path: Path, doc: Any) -> Source:
 
 
 _SUBST = re.compile(r"\$\((\w+)\s*([^)]*)\)")
+_AMCL_PKGS = ("amcl", "nav2_amcl")
 
 
 def _roslaunch_value(text: str, kind: str | None) -> Any:
@@ -267,16 +268,10 @@ def _from_launch(path: Path, text: str) -> Source:
     except ET.ParseError as e:
         line = getattr(e, "position", (None,))[0]
         raise MclError(f"{path}{f':{line}' if line else ''}: invalid XML: {str(e).split(':')[0]}") from None
-    args = {}
-    for a in root.iter("arg"):
-        if a.get("name") is not None:
-            value = a.get("value", a.get("default"))
-            if value is not None:
-                args.setdefault(a.get("name"), value)
     warnings: list[str] = []
 
-    def subst(value: str, what: str) -> str | None:
-        """$(arg NAME) replaced; None (and a warning) for any other substitution."""
+    def subst(value: str, what: str, args: dict) -> str | None:
+        """$(arg NAME) replaced from ``args``; None (and a warning) for any other substitution."""
         def one(m):
             if m.group(1) == "arg" and m.group(2).strip() in args:
                 return args[m.group(2).strip()]
@@ -297,45 +292,74 @@ def _from_launch(path: Path, text: str) -> Source:
             value = new
         return value
 
-    nodes = [n for n in root.iter("node") if n.get("pkg") in ("amcl", "nav2_amcl")]
-    if not nodes:
-        includes = [i.get("file", "") for i in root.iter("include")]
-        extra = (f"; it includes {', '.join(includes)}: give the included file" if includes else "")
-        raise MclError(f"{path}: no <node pkg=\"amcl\"> in this launch file{extra}")
-    node = nodes[0]
-    if len(nodes) > 1:
-        warnings.append(f"{len(nodes)} amcl nodes: the first ({node.get('name', 'amcl')}) is read")
-    flavour = ROS1 if node.get("pkg") == "amcl" else NAV2
-    params: dict = {}
-    remaps: dict = {}
-
-    def skipped(el) -> bool:
+    def skipped(el, args: dict) -> bool:
         """roslaunch's if= / unless= on an element (true/false/1/0 once substituted): True when it is not loaded; an
         unresolved condition is loaded, with subst's warning."""
         for attr, load_when in (("if", True), ("unless", False)):
             cond = el.get(attr)
             if cond is not None:
-                value = subst(cond, f"<{el.tag} {attr}=>")
+                value = subst(cond, f"<{el.tag} {attr}=>", args)
                 if value is not None and value.strip().lower() in ("true", "1", "false", "0"):
                     if (value.strip().lower() in ("true", "1")) != load_when:
                         return True
         return False
 
+    # As roslaunch reads the file: in document order, each <arg> declared where it stands (one in a <group> for that
+    # group only), and an <arg>, <group> or <node> whose if= / unless= is false skipped with all it holds (nested
+    # groups too): an amcl node in a group whose condition is false is not launched. Only the conditions that can
+    # matter are evaluated (another node's, or a group's without an amcl node, would only add warnings).
+    nodes: list[tuple] = []  # (amcl node launched, the args in scope there)
+    not_launched = 0
+
+    def walk(parent, args: dict) -> None:
+        nonlocal not_launched
+        for el in parent:
+            if el.tag not in ("arg", "group", "node"):
+                continue
+            if el.tag != "arg" and not any(n.get("pkg") in _AMCL_PKGS for n in el.iter("node")):
+                continue
+            if skipped(el, args):
+                not_launched += sum(n.get("pkg") in _AMCL_PKGS for n in el.iter("node"))
+            elif el.tag == "arg" and el.get("name") is not None:
+                value = el.get("value", el.get("default"))
+                if value is not None:
+                    args.setdefault(el.get("name"), value)
+            elif el.tag == "group":
+                walk(el, dict(args))
+            elif el.tag == "node" and el.get("pkg") in _AMCL_PKGS:
+                nodes.append((el, dict(args)))
+
+    walk(root, {})
+    if not nodes:
+        includes = [i.get("file", "") for i in root.iter("include")]
+        extra = (f"; it includes {', '.join(includes)}: give the included file" if includes else "")
+        if not_launched:
+            raise MclError(f"{path}: no <node pkg=\"amcl\"> is launched with the args' defaults: {not_launched} amcl "
+                           f"node{'s' if not_launched > 1 else ''} under an if= / unless= that is false (on the node or "
+                           f"a <group> around it){extra}")
+        raise MclError(f"{path}: no <node pkg=\"amcl\"> in this launch file{extra}")
+    node, args = nodes[0]
+    if len(nodes) > 1:
+        warnings.append(f"{len(nodes)} amcl nodes launched: the first ({node.get('name', 'amcl')}) is read")
+    flavour = ROS1 if node.get("pkg") == "amcl" else NAV2
+    params: dict = {}
+    remaps: dict = {}
+
     for el in node:
-        if skipped(el):
+        if skipped(el, args):
             continue
         if el.tag == "param" and el.get("name"):
             name = el.get("name").lstrip("~")
             if el.get("value") is None:
                 warnings.append(f"{name}: a <param> without value= (command=, textfile=) is not read")
                 continue
-            value = subst(el.get("value"), name)
+            value = subst(el.get("value"), name, args)
             if value is not None:
                 params[name] = _roslaunch_value(value, el.get("type"))
         elif el.tag == "rosparam" and el.get("command", "load") == "load":
             loaded = None
             if el.get("file"):
-                file = subst(el.get("file"), "<rosparam file>")
+                file = subst(el.get("file"), "<rosparam file>", args)
                 if file is not None:
                     f = Path(file)
                     f = f if f.is_absolute() else path.parent / f
@@ -346,7 +370,7 @@ def _from_launch(path: Path, text: str) -> Source:
                             raise
                         loaded = _read_last_wins(f, warnings, f"{f}:")
             elif (el.text or "").strip():
-                body = el.text if el.get("subst_value") not in ("true", "True") else subst(el.text, "<rosparam>")
+                body = el.text if el.get("subst_value") not in ("true", "True") else subst(el.text, "<rosparam>", args)
                 try:
                     loaded = yaml.safe_load(body) if body is not None else None
                 except yaml.YAMLError:
@@ -356,7 +380,7 @@ def _from_launch(path: Path, text: str) -> Source:
             if isinstance(loaded, dict):
                 params.update(_flatten(loaded))
         elif el.tag == "remap" and el.get("from", "").strip("/") in ("scan", "map") and el.get("to"):
-            to = subst(el.get("to"), "<remap>")
+            to = subst(el.get("to"), "<remap>", args)
             if to is not None:
                 remaps[el.get("from").strip("/")] = to
     return Source(path, flavour, params, f"<node name=\"{node.get('name', 'amcl')}\">", remaps, warnings)

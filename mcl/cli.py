@@ -440,16 +440,18 @@ def _add_convert(sub) -> None:
         "convert", help="a ROS bag to a CARMEN log, or a CARMEN log to a ROS bag (.bag, .db3, .mcap)",
         description="Convert between a ROS bag and a CARMEN log, keeping everything mcl uses: scan stamps, ranges, "
         "beam geometry, maximum range, odometry (pose and velocities) at each scan, laser mounting pose. A log "
-        "becomes /scan (LaserScan), /odom (Odometry) or odom -> base_link on /tf, base_link -> laser on /tf_static; "
-        "a bag becomes ROBOTLASER1 + ODOM lines. The output appears only when complete.",
-        epilog="examples:\n  mcl convert run.mcap run.clf\n  mcl convert log.clf log.mcap --odom tf\n"
+        "becomes /scan (LaserScan), /odom (Odometry) and odom -> base_link on /tf (as a ROS robot records them: "
+        "ROS AMCL and RViz need the /tf), base_link -> laser on /tf_static; a bag becomes ROBOTLASER1 + ODOM lines. "
+        "The output appears only when complete.",
+        epilog="examples:\n  mcl convert run.mcap run.clf\n  mcl convert log.clf log.mcap --odom topic\n"
         "  mcl convert log.clf log.bag --map map.yaml --initial-pose 1 2 0.5",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("src", help="bag (.bag, .db3, .mcap, rosbag2 folder) or CARMEN log")
     p.add_argument("out", help="output: .clf, .bag, .db3 or .mcap")
     _bag_options(p)
-    p.add_argument("--odom", choices=["topic", "tf", "both"], default="topic",
-                   help="bag output: odometry as /odom, as odom -> base_link on /tf, or both (default topic)")
+    p.add_argument("--odom", choices=["both", "topic", "tf"], default="both",
+                   help="bag output: odometry as /odom and as odom -> base_link on /tf (both, the default), as /odom "
+                   "only (topic) or on /tf only (tf)")
     p.add_argument("--mount", nargs=3, type=float, metavar=("X", "Y", "THETA"),
                    help="bag output: the laser's pose in a new base frame; the odometry becomes that base's")
     p.add_argument("--map", help="bag output: also write this map as /map (OccupancyGrid)")
@@ -544,7 +546,8 @@ def _add_config(sub) -> None:
             "(mcl run OUT.yaml --bag B) or merges into a config. PARAMS is a nav2 params file (the amcl node's "
             "ros__parameters among the other nodes', or the bare mapping), ROS 1 amcl parameters as YAML (flat or "
             "under the node's name), or a ROS 1 .launch file with <node pkg=\"amcl\"> (its <param>, <rosparam> "
-            "and scan/map <remap>; $(arg ...), $(find ...), if= and unless= resolved). What it maps, following "
+            "and scan/map <remap>; $(arg ...), $(find ...), if= and unless= resolved, on the node and its <group>s "
+            "too: the first amcl node launched with the args' defaults is read). What it maps, following "
             "AMCL's sources: particle counts "
             "and KLD (kld_z/pf_z is a normal quantile: kld_delta = 1 - Phi(z)), the odometry alphas (diff-corrected "
             "and nav2's model are mcl's variance form; ROS 1's diff and the omni models are warned about), the "

@@ -1135,7 +1135,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a depth frame every K-th scan; default 1")
     parser.add_argument("--format", choices=["clf", "bag1", "db3", "mcap"], default="clf",
                         help="the log as a CARMEN log.clf (default) or a ROS bag: log.bag (ROS 1), log.db3 or "
-                        "log.mcap (ROS 2), with /scan, /odom, /tf_static and the truth as /ground_truth")
+                        "log.mcap (ROS 2), with /scan, the odometry as /odom and as odom -> base_link on /tf, "
+                        "/tf_static and the truth as /ground_truth")
     parser.add_argument("--map-resolution", type=float, default=None, metavar="M",
                         help="write the map with M metre cells (0.01-0.5) instead of the world's 0.05 m, as a "
                         "mapper at that resolution would (walls thicken on coarser maps); the laser still sees "
@@ -1145,8 +1146,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(its odometry then reads steps backwards); default 0")
     parser.add_argument("--scan-rate", type=float, default=5.0, metavar="HZ",
                         help="laser scans per second, 0.5-100; default 5. The odometry's ODOM lines run at 10 Hz "
-                        "or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz); a bag's /odom and "
-                        "/ground_truth hold one pose per scan, at its stamp")
+                        "or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz); a bag's /odom, /tf "
+                        "and /ground_truth hold one pose per scan, at its stamp")
     parser.add_argument("--phantom-furniture", type=int, default=0, metavar="N",
                         help="N boxes (0.3-0.9 m) the map shows near walls within 6 m of the path that the world "
                         "no longer has (furniture moved away since the map was made): the laser sees through "
@@ -1189,9 +1190,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def write_log_as_bag(outdir, fmt: str, sweep: float = 0.0) -> Path:
     """Replace ``outdir/log.clf`` by the same data as a ROS bag (``log.bag``, ``log.db3`` or ``log.mcap``,
-    mcl.datasets.bagwrite): /scan, /odom, /tf_static, and truth.tum as /ground_truth. ``sweep`` (the world's
-    ``scan_sweep``) gives each LaserScan its time_increment, |sweep| / (beams - 1): positive for a negative sweep
-    too, as ``rplidar_ros`` writes beams taken against their order."""
+    mcl.datasets.bagwrite): /scan, the odometry as /odom and as odom -> base_link on /tf (a ROS robot's bag has
+    both, REP 105), /tf_static, and truth.tum as /ground_truth. ``sweep`` (the world's ``scan_sweep``) gives each
+    LaserScan its time_increment, |sweep| / (beams - 1): positive for a negative sweep too, as ``rplidar_ros``
+    writes beams taken against their order."""
     from mcl.datasets.bagwrite import convert
     from mcl.trajectory import read_tum
 
@@ -1199,7 +1201,8 @@ def write_log_as_bag(outdir, fmt: str, sweep: float = 0.0) -> Path:
     bag = out / ("log." + {"bag1": "bag", "db3": "db3", "mcap": "mcap"}[fmt])
     if bag.exists():
         bag.unlink()
-    convert(out / "log.clf", bag, truth=read_tum(out / "truth.tum"), echo=lambda m: None, sweep=abs(sweep))
+    convert(out / "log.clf", bag, odom="both", truth=read_tum(out / "truth.tum"), echo=lambda m: None,
+            sweep=abs(sweep))
     (out / "log.clf").unlink()
     return bag
 

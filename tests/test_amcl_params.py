@@ -465,3 +465,65 @@ def test_a_launch_files_if_and_unless_decide_which_params_are_loaded(tmp_path):
     cfg = convert(p).keys
     assert cfg["filter.particles"] == 3000 and cfg["filter.min_particles"] == 100
     assert "filter.update_min_d" not in cfg or cfg["filter.update_min_d"] != 0.3
+
+
+SIM_OR_REAL = """<launch>
+  <arg name="sim" default="false"/>
+  <group if="$(arg sim)">
+    <arg name="particles" default="500"/>
+    <node pkg="amcl" type="amcl" name="amcl_sim">
+      <param name="odom_model_type" value="diff-corrected"/>
+      <param name="max_particles" value="$(arg particles)"/>
+      <param name="update_min_d" value="0.1"/>
+    </node>
+  </group>
+  <group unless="$(arg sim)">
+    <arg name="particles" default="4000"/>
+    <node pkg="amcl" type="amcl" name="amcl_real">
+      <param name="odom_model_type" value="diff-corrected"/>
+      <param name="max_particles" value="$(arg particles)"/>
+    </node>
+  </group>
+</launch>
+"""
+
+
+def test_an_amcl_node_in_a_group_whose_condition_is_false_is_not_the_one_read(tmp_path):
+    # A launch file with a simulation and a real robot's amcl, in <group if="$(arg sim)"> / <group unless=...>:
+    # the groups' conditions were not evaluated, so the first node (sim, never launched with sim false) was read
+    from mcl.amcl_params import read_source
+
+    p = _write(tmp_path, "amcl.launch", SIM_OR_REAL)
+    src = read_source(p)
+    assert src.where == '<node name="amcl_real">' and src.params["max_particles"] == 4000, (src.where, src.params)
+    assert "update_min_d" not in src.params and not src.warnings, src.warnings
+    assert convert(p).keys["filter.particles"] == 4000
+    sim = _write(tmp_path, "sim.launch", SIM_OR_REAL.replace('name="sim" default="false"', 'name="sim" default="true"'))
+    assert read_source(sim).where == '<node name="amcl_sim">' and read_source(sim).params["max_particles"] == 500
+
+
+def test_nested_groups_and_a_nodes_own_condition_decide_whether_it_is_launched(tmp_path, capsys):
+    from mcl.amcl_params import read_source
+
+    p = _write(tmp_path, "nested.launch", """<launch>
+  <arg name="a" default="1"/>
+  <group if="$(arg a)">
+    <group unless="$(arg a)">
+      <node pkg="amcl" type="amcl" name="inner"><param name="min_particles" value="1"/></node>
+    </group>
+    <node pkg="amcl" type="amcl" name="off" if="false"><param name="min_particles" value="2"/></node>
+  </group>
+  <group unless="true"><group if="true"><node pkg="amcl" type="amcl" name="outer_off"/></group></group>
+  <node pkg="map_server" type="map_server" name="map" if="$(eval arg('a') == 1)"/>
+  <group>
+    <node pkg="amcl" type="amcl" name="launched"><param name="min_particles" value="300"/></node>
+  </group>
+</launch>
+""")
+    src = read_source(p)
+    assert src.where == '<node name="launched">' and src.params == {"min_particles": 300} and not src.warnings, src
+    none = _write(tmp_path, "none.launch", SIM_OR_REAL.replace('<group unless="$(arg sim)">', '<group if="0">'))
+    assert main(["config", "from-amcl", str(none)]) == 2
+    line = _one_error(capsys)
+    assert line.startswith(f"mcl: error: {none}: no <node pkg=\"amcl\"> is launched with the args' defaults: 2 amcl "
+                           "nodes under an if= / unless= that is false"), line

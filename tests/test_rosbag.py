@@ -993,6 +993,63 @@ def test_simulate_writes_bags(tmp_path, capsys):
     assert len(src.scans) == t.size and np.array_equal(src.truth[0], t)
 
 
+def _odometry_messages(bag):
+    """(sec, nanosec, parent, child, x, y, qz, qw) of each /odom message, and of each /tf transform, in order."""
+    from rosbags.highlevel import AnyReader
+
+    odom, tf = [], []
+    with AnyReader([bag]) as r:
+        for c, _, raw in r.messages([c for c in r.connections if c.topic in ("/odom", "/tf")]):
+            m = r.deserialize(raw, c.msgtype)
+            if c.topic == "/odom":
+                p = m.pose.pose
+                odom.append((m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id, m.child_frame_id,
+                             p.position.x, p.position.y, p.orientation.z, p.orientation.w))
+            else:
+                tf += [(ts.header.stamp.sec, ts.header.stamp.nanosec, ts.header.frame_id, ts.child_frame_id,
+                        ts.transform.translation.x, ts.transform.translation.y, ts.transform.rotation.z,
+                        ts.transform.rotation.w) for ts in m.transforms]
+    return odom, tf
+
+
+def test_simulated_and_converted_bags_carry_odom_to_base_link_on_tf(world, tmp_path):
+    # A ROS robot's bag always has odom -> base_link on /tf (REP 105): ROS AMCL or RViz playing mcl's bag could not
+    # place the laser, which had the odometry on /odom only. Now by default both, the same pose at the same stamp;
+    # --odom topic and --odom tf still write one of them.
+    assert main(["simulate", str(tmp_path / "s"), "--duration", "3", "--format", "bag1"]) == 0
+    assert main(["convert", str(world / "log.clf"), str(tmp_path / "c.mcap")]) == 0
+    for bag, n in ((tmp_path / "s" / "log.bag", 16), (tmp_path / "c.mcap", len(read_carmen(world / "log.clf").scans))):
+        odom, tf = _odometry_messages(bag)
+        assert len(odom) == n and tf == odom, bag
+        assert {r[2:4] for r in tf} == {("odom", "base_link")}
+    assert main(["convert", str(world / "log.clf"), str(tmp_path / "t.mcap"), "--odom", "topic"]) == 0
+    assert main(["convert", str(world / "log.clf"), str(tmp_path / "f.mcap"), "--odom", "tf"]) == 0
+    odom, tf = _odometry_messages(tmp_path / "c.mcap")
+    assert _odometry_messages(tmp_path / "t.mcap") == (odom, [])
+    assert _odometry_messages(tmp_path / "f.mcap") == ([], tf)
+
+
+def test_a_bag_with_both_odometry_sources_reads_as_the_odom_topic_alone(scans, tmp_path, capsys):
+    # The default bag has /odom and /tf odom -> base_link: read from /odom as a bag of /odom alone, the same bytes,
+    # with no note or warning about two sources
+    both, topic = tmp_path / "both.mcap", tmp_path / "topic.mcap"
+    write_scans(both, scans)
+    write_scans(topic, scans, odom="topic")
+    a, b = open_bag(both), open_bag(topic)
+    assert a.odom_source == b.odom_source == "/odom (nav_msgs/Odometry)"
+    assert a.odometry.tobytes() == b.odometry.tobytes()
+    for x, y in zip(a.scans, b.scans):
+        assert x.odom.tobytes() == y.odom.tobytes() and (x.tv, x.rv) == (y.tv, y.rv)
+    assert (a.notes, a.warnings) == (b.notes, b.warnings) == ([], [])
+    ia, ib = bag_info(both), bag_info(topic)
+    assert (ia["frames"]["/tf"], ib["frames"]["/tf"]) == (["odom -> base_link"], [])
+    assert str(ia["mcl_uses"]).replace("both.mcap", "topic.mcap") == str(ib["mcl_uses"])
+    assert main(["bag", "info", str(both)]) == 0
+    text = capsys.readouterr().out
+    assert "frames in /tf: odom -> base_link" in text and "odometry:     /odom (nav_msgs/Odometry)" in text
+    assert "note" not in text and "warning" not in text
+
+
 def test_write_bag_holds_the_estimate(world, scans, tmp_path):
     bag = tmp_path / "in.bag"
     write_scans(bag, scans)
@@ -1011,10 +1068,24 @@ def test_write_bag_holds_the_estimate(world, scans, tmp_path):
         poses = [r.deserialize(raw, c.msgtype) for c, _, raw in r.messages(conn)]
         conn = [c for c in r.connections if c.topic == "/particlecloud"]
         cloud = [r.deserialize(raw, c.msgtype) for c, _, raw in r.messages(conn)]
+        conn = [c for c in r.connections if c.topic == "/tf"]
+        m2o = [r.deserialize(raw, c.msgtype).transforms[0] for c, _, raw in r.messages(conn)]
     t, p = read_tum(tmp_path / "r" / "trajectory.tum")
     last = poses[-1].pose.pose.position
     assert (last.x, last.y) == pytest.approx((p[0, -1], p[1, -1]), abs=1e-9)
     assert 0 < len(cloud[0].poses) <= 50
+    # map -> odom (the estimate's) then odom -> base_link (the input bag's /tf, written by default) at the last
+    # update's stamp: the tree RViz follows places base_link at /amcl_pose
+    assert (m2o[-1].header.frame_id, m2o[-1].child_frame_id) == ("map", "odom")
+    stamp = (m2o[-1].header.stamp.sec, m2o[-1].header.stamp.nanosec)
+    o2b = [r for r in _odometry_messages(bag)[1] if r[:2] == stamp]
+    assert len(o2b) == 1 and o2b[0][2:4] == ("odom", "base_link")
+    pose2 = lambda x, y, qz, qw: np.array([x, y, 2.0 * math.atan2(qz, qw)])  # noqa: E731
+    tr = m2o[-1].transform
+    base = compose(pose2(tr.translation.x, tr.translation.y, tr.rotation.z, tr.rotation.w), pose2(*o2b[0][4:]))
+    q = poses[-1].pose.pose.orientation
+    want = pose2(last.x, last.y, q.z, q.w)
+    assert base[:2] == pytest.approx(want[:2], abs=1e-9) and abs(math.remainder(base[2] - want[2], math.tau)) < 1e-9
 
 
 def test_bag_info_names_what_mcl_would_use(scans, tmp_path, capsys):

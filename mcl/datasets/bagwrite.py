@@ -3,7 +3,8 @@
 :class:`BagOut` writes messages into a bag that appears under its final name only when closed (a half-written bag
 is never left: the writers work in a temporary file or folder next to it). :func:`write_scans` writes a stream of
 :class:`mcl.datasets.carmen.Scan` records as a bag mcl reads back unchanged: ``/scan`` (LaserScan, frame
-``laser``), the odometry as ``/odom`` (nav_msgs/Odometry) or as ``odom -> base_link`` on ``/tf``, the laser
+``laser``), the odometry as ``/odom`` (nav_msgs/Odometry) and as ``odom -> base_link`` on ``/tf`` (by default both,
+as a ROS robot's bag has them, REP 105: ROS AMCL and RViz place the laser through /tf; or either alone), the laser
 mounting ``base_link -> laser`` on ``/tf_static``, and optionally ``/map``, ``/initialpose`` and a truth topic.
 :func:`convert` turns a bag into a CARMEN log (ROBOTLASER1 + ODOM lines, every number in round-trip precision)
 and a CARMEN log into a bag.
@@ -203,11 +204,12 @@ def _inverse(a):
     return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
 
 
-def write_scans(out, scans, *, odom: str = "topic", mount=None, grid=None, initial=None, initial_frame: str = "map",
+def write_scans(out, scans, *, odom: str = "both", mount=None, grid=None, initial=None, initial_frame: str = "map",
                 truth=None, truth_topic: str = "/ground_truth", kind: str | None = None, sweep: float = 0.0) -> int:
     """Write ``scans`` (Scan records) as a bag (see the module doc); returns the number of scans written.
 
-    odom: ``topic`` (/odom), ``tf`` (odom -> base_link on /tf) or ``both``. mount: (x, y, theta) of the laser in
+    odom: ``both`` (default: /odom, and odom -> base_link on /tf at the same stamps with the same poses, as a ROS
+    robot records them), ``topic`` (/odom only) or ``tf`` (/tf only). mount: (x, y, theta) of the laser in
     a new base frame: the odometry is then that of base = robot ∘ laser_offset ∘ mount⁻¹ (same laser poses, a
     laser off the base's centre). grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for
     /initialpose (in ``initial_frame``); truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``, each
@@ -319,7 +321,7 @@ def _clf_line_of(s) -> str:
             f"{pose(laser)} {pose(robot)} {float(s.tv)!r} {float(s.rv)!r} 0.0 0.0 0.0 {ts}\n")
 
 
-def convert(src, out, *, topics=None, frames=None, odom: str = "topic", mount=None, grid=None, initial=None,
+def convert(src, out, *, topics=None, frames=None, odom: str = "both", mount=None, grid=None, initial=None,
             truth=None, laser: str = "auto", echo=print, sweep: float = 0.0, truth_name: str = "truth") -> int:
     """``mcl convert``: a bag to a CARMEN log, a CARMEN log (or a bag) to a bag. Returns the scans written.
     A ``truth`` given with a CARMEN log (named ``truth_name`` in an error) must have a pose within its scans' span."""
