@@ -371,6 +371,9 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         scans = log.scans if cfg.sensor.use else []
         marks: list = []
         initial = log.initial_pose
+        if cfg.truth is None and cfg.topics.truth is None and log.references:
+            echo(f"{cfg.bag}: not scored: no reference given; the bag has {', '.join(log.references)} "
+                 f"(--truth-topic {log.references[0]} scores the run against it)")
     else:
         from mcl.datasets.carmen import read_carmen
 

@@ -1098,10 +1098,42 @@ def test_bag_info_names_what_mcl_would_use(scans, tmp_path, capsys):
     assert info["mcl_uses"]["laser_pose"]["/scan"] == [0.1, 0.0, 0.0]
     assert info["mcl_uses"]["scan_span_s"] == [scans[0].t, scans[-1].t] == info["mcl_uses"]["odometry_span_s"]
     assert info["mcl_uses"]["warnings"] == []
+    assert info["mcl_uses"]["references"] == []
     assert main(["bag", "info", str(bag)]) == 0
     text = capsys.readouterr().out
     assert "mcl would use:" in text and "/tf odom -> base_link" in text
+    assert "reference:    no pose topic besides the odometry (--truth T.tum scores against a file)" in text
     assert f"stamps:       scans {scans[0].t:.3f}..{scans[-1].t:.3f} s, odometry {scans[0].t:.3f}..{scans[-1].t:.3f} s" in text
+
+
+def test_bag_info_names_the_topics_a_run_could_score_against(scans, tmp_path, capsys):
+    # A simulated bag's /ground_truth (PoseStamped) is offered as a reference, the /odom it reads as odometry and an
+    # /initialpose are not: a user running `mcl run --bag` on it otherwise gets no ATE and no hint why.
+    bag = tmp_path / "r.mcap"
+    t = np.array([s.t for s in scans])
+    write_scans(bag, scans, odom="both", truth=(t, np.array([s.odom for s in scans]).T),
+                initial=((0.0, 0.0, 0.0), np.eye(3) * 0.01))
+    info = bag_info(bag)
+    assert info["mcl_uses"]["odometry"].startswith("/odom ")
+    assert info["mcl_uses"]["references"] == ["/ground_truth"]
+    assert main(["bag", "info", str(bag)]) == 0
+    assert (f"reference:    /ground_truth (geometry_msgs/PoseStamped, {len(scans)}): score a run against one with "
+            "--truth-topic TOPIC") in capsys.readouterr().out
+    # a run with no reference says which topic would score it; given it, scored and no such line
+    world = tmp_path / "w"
+    from mcl.maps import OccupancyGrid, save_map
+
+    world.mkdir()
+    save_map(OccupancyGrid.from_occupancy(np.zeros((400, 400), np.int8), 0.05, (-10.0, -10.0)), world / "map.yaml")
+    common = ["run", "--map", str(world / "map.yaml"), "--bag", str(bag), "--rerun", "off", "--particles", "300",
+              "--no-progress", "--initial-pose", "0", "0", "0"]
+    assert main([*common, "--out", str(tmp_path / "a")]) == 0
+    text = "".join(capsys.readouterr())
+    assert f"{bag}: not scored: no reference given; the bag has /ground_truth (--truth-topic /ground_truth" in text
+    assert "ATE" not in text
+    assert main([*common, "--out", str(tmp_path / "b"), "--truth-topic", "/ground_truth"]) == 0
+    text = "".join(capsys.readouterr())
+    assert "not scored" not in text and "ATE RMSE" in text
 
 
 # ----------------------------------------------------------------------------- bad input: one line, exit 2

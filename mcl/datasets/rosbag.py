@@ -304,6 +304,9 @@ class BagSource:
     landmarks: list = field(default_factory=list)
     scan_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0))  # every scan's header stamp (s)
     sweeps: dict = field(default_factory=dict)  # LaserScan topic -> its first message's sweep (s; 0: no beam times)
+    # pose and odometry topics a run could score against (--truth-topic): all but the odometry read, the initial pose
+    # and the truth topic in use (a simulator's /ground_truth, a motion-capture topic, a localizer's /amcl_pose)
+    references: list = field(default_factory=list)
 
     def stamps_checked(self, offset: float = 0.0) -> list[str]:
         """The scans' stamps (plus ``sensor.time_offset``) against the odometry's time span: DataError when none
@@ -1062,7 +1065,9 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
             initial = (np.asarray(start, dtype=np.float64), initial[1])
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
-                     warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps)
+                     warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps,
+                     references=sorted(n for n, i in topics.items() if i.msgtype in TRUTH_TYPES
+                                       and n not in (src_name.split(" ", 1)[0], init_topic, truth_topic)))
 
 
 def odometry_gaps(odometry: np.ndarray, scan_stamps: np.ndarray) -> list[tuple[float, float, int]]:
@@ -1209,6 +1214,7 @@ def bag_info(path, topics=None, frames=None) -> dict:
             "map": "from the bag" if src.grid is not None else "needs --map",
             "initial_pose": (None if src.initial_pose is None
                              else [round(float(v), 6) for v in src.initial_pose[0]]),
+            "references": src.references,
             "notes": src.notes,
         }
     except DataError as e:
@@ -1242,6 +1248,9 @@ def format_info(info: dict) -> str:
                                                      "says how long a sweep takes"))
         lines.append(f"  map:          {u['map']}")
         lines.append(f"  initial pose: {u['initial_pose'] if u['initial_pose'] is not None else 'none in the bag'}")
+        refs = [f"{n} ({info['topics'][n]['type']}, {info['topics'][n]['count']})" for n in u["references"]]
+        lines.append("  reference:    " + (", ".join(refs) + ": score a run against one with --truth-topic TOPIC" if refs
+                                          else "no pose topic besides the odometry (--truth T.tum scores against a file)"))
         lines += [f"  note: {n}" for n in u.get("notes", [])]
         lines += [f"  warning: {w}" for w in u["warnings"]]
     return "\n".join(lines)
