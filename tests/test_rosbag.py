@@ -1088,6 +1088,152 @@ def test_write_bag_holds_the_estimate(world, scans, tmp_path):
     assert base[:2] == pytest.approx(want[:2], abs=1e-9) and abs(math.remainder(base[2] - want[2], math.tau)) < 1e-9
 
 
+def _yaw_pose(x, y, qz, qw):
+    return np.array([x, y, 2.0 * math.atan2(qz, qw)])
+
+
+def _recorded_odometry(bag, frame: str, topic: str = "/tf") -> dict:
+    """{(sec, nanosec): (x, y, theta)} of the odometry in ``frame`` the input ``bag`` records: its /tf transforms
+    from ``frame``, or the messages on ``topic`` (Odometry, pose topics) stamped in it."""
+    from rosbags.highlevel import AnyReader
+
+    out = {}
+    with AnyReader([bag]) as r:
+        for c, _, raw in r.messages([c for c in r.connections if c.topic == topic]):
+            m = r.deserialize(raw, c.msgtype)
+            if topic == "/tf":
+                for ts in m.transforms:
+                    if ts.header.frame_id == frame:
+                        tr = ts.transform
+                        out[(ts.header.stamp.sec, ts.header.stamp.nanosec)] = _yaw_pose(
+                            tr.translation.x, tr.translation.y, tr.rotation.z, tr.rotation.w)
+            elif m.header.frame_id == frame:
+                p = m.pose.pose if hasattr(m.pose, "pose") else m.pose
+                out[(m.header.stamp.sec, m.header.stamp.nanosec)] = _yaw_pose(
+                    p.position.x, p.position.y, p.orientation.z, p.orientation.w)
+    return out
+
+
+def _estimate_joins(world, bag, out, *overrides) -> tuple[str, list]:
+    """Run ``bag`` with --write-bag; (the odometry frame of its map -> X on /tf, and for each update the base pose
+    that map -> X composed with the input's odometry pose ``X -> base`` at the update's stamp gives, next to
+    /amcl_pose's pose: [(stamp, composed, amcl)]) — X read from the estimate bag itself."""
+    from rosbags.highlevel import AnyReader
+
+    cfg = load_config(None, ["rerun.mode=off", "filter.particles=300", f"map={world / 'map.yaml'}", "log=null",
+                             f"bag={bag}", "truth=null", *overrides])
+    run(cfg, out, progress=False, echo=_quiet, write_bag=True)
+    est = next(out.glob("estimate.*"))
+    with AnyReader([est]) as r:
+        amcl, m2o = {}, {}
+        for c, _, raw in r.messages([c for c in r.connections if c.topic in ("/amcl_pose", "/tf")]):
+            m = r.deserialize(raw, c.msgtype)
+            if c.topic == "/amcl_pose":
+                assert m.header.frame_id == "map"
+                p = m.pose.pose
+                amcl[(m.header.stamp.sec, m.header.stamp.nanosec)] = _yaw_pose(p.position.x, p.position.y,
+                                                                               p.orientation.z, p.orientation.w)
+            else:
+                (ts,) = m.transforms
+                tr = ts.transform
+                m2o[(ts.header.stamp.sec, ts.header.stamp.nanosec)] = (
+                    ts.header.frame_id, ts.child_frame_id,
+                    _yaw_pose(tr.translation.x, tr.translation.y, tr.rotation.z, tr.rotation.w))
+    assert m2o.keys() == amcl.keys() and len(amcl) > 10
+    assert {v[0] for v in m2o.values()} == {"map"}
+    (frame,) = {v[1] for v in m2o.values()}
+    return frame, [(k, m2o[k][2], amcl[k]) for k in sorted(amcl)]
+
+
+def _joined(rows, odometry: dict) -> int:
+    """How many of ``rows`` (``_estimate_joins``) have the input's odometry at their stamp; each must compose to
+    /amcl_pose within 1e-6."""
+    n = 0
+    for stamp, m2o, amcl in rows:
+        if stamp in odometry:
+            got = compose(m2o, odometry[stamp])
+            assert got[:2] == pytest.approx(amcl[:2], abs=1e-6), stamp
+            assert abs(math.remainder(got[2] - amcl[2], math.tau)) < 1e-6, stamp
+            n += 1
+    return n
+
+
+def _frames_bag(path, scans, case: str) -> tuple[str, str, list]:
+    """A bag whose odometry is not odom -> base_link: (the odometry frame, the topic it is on, config overrides)."""
+    from mcl.datasets.bagwrite import _compose, _inverse
+
+    TF, PWCS = "tf2_msgs/msg/TFMessage", "geometry_msgs/msg/PoseWithCovarianceStamped"
+    if case == "namespaced":
+        _namespaced_bag(path, scans, ["robot1"])
+        return "robot1/odom", "/tf", []
+    mount = (0.2, 0.0, 0.0)
+    with BagOut(path) as b:
+        b.write("/tf_static", TF, scans[0].t, b.msg(TF, transforms=[
+            b.transform(scans[0].t, "base_link" if case == "odometry-topic" else "base_footprint", "laser", mount)]))
+        for k, s in enumerate(scans):
+            base = _compose(tuple(s.odom), _inverse(mount))
+            if case == "nav2":
+                b.write("/tf", TF, s.t, b.msg(TF, transforms=[b.transform(s.t, "odom", "base_footprint", base)]))
+            elif case == "ekf":  # with a localizer's map -> odom_combined above it, as recorded
+                b.write("/tf", TF, s.t, b.msg(TF, transforms=[
+                    b.transform(s.t, "map", "odom_combined", (0.01 * k, 0.0, 0.002 * k)),
+                    b.transform(s.t, "odom_combined", "base_footprint", base)]))
+            elif case == "odometry-topic":
+                _odom(b, s, pose=base, frame="odom_wheel")
+            elif case == "pose-topic":
+                pw = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*base), covariance=np.zeros(36))
+                b.write("/ekf/odom_combined", PWCS, s.t, b.msg(PWCS, header=b.header(s.t, "odom_combined"), pose=pw))
+            _laser(b, "/scan", s, frame="laser")
+    return {"nav2": ("odom", "/tf", []), "ekf": ("odom_combined", "/tf", []),
+            "odometry-topic": ("odom_wheel", "/odom", []),
+            "pose-topic": ("odom_combined", "/ekf/odom_combined", ["topics.odom=/ekf/odom_combined"])}[case]
+
+
+@pytest.mark.parametrize("case", ["namespaced", "nav2", "ekf", "odometry-topic", "pose-topic"])
+def test_write_bag_map_to_odom_names_the_odometry_frame_the_bag_was_read_in(world, scans, tmp_path, case):
+    # The estimate bag's map -> odom was always named frames.odom ("odom"): with a bag whose odometry is
+    # robot1/odom -> robot1/base_link, robot_pose_ekf's odom_combined -> base_footprint, an Odometry in odom_wheel
+    # or a pose topic in odom_combined, RViz playing both bags had two trees, map -> odom and the robot's. Now map ->
+    # the frame the reader read the odometry in; composed with the input's own odometry pose at each update's stamp
+    # (of the frame the odometry moves: base_footprint, robot1/base_link) it places the robot at /amcl_pose.
+    bag = tmp_path / f"{case}.bag"
+    frame, topic, overrides = _frames_bag(bag, scans, case)
+    cfg = load_config(None, overrides)
+    assert open_bag(bag, cfg.topics, cfg.frames).odom_frame == frame
+    got, rows = _estimate_joins(world, bag, tmp_path / "r", *overrides)
+    assert got == frame
+    assert _joined(rows, _recorded_odometry(bag, frame, topic)) == len(rows)
+
+
+def test_write_bag_with_laser_odometry_names_frames_odom(world, scans, tmp_path):
+    # no odometry frame in the bag (scans alone: laser odometry): map -> frames.odom, whatever it is named
+    bag = tmp_path / "scans.mcap"
+    with BagOut(bag) as b:
+        for s in scans:
+            _laser(b, "/scan", s, frame="base_link")
+    assert open_bag(bag).odom_frame is None
+    frame, _ = _estimate_joins(world, bag, tmp_path / "r", "topics.odom=laser", "frames.odom=scan_odom")
+    assert frame == "scan_odom"
+
+
+def test_write_bag_map_to_odom_joins_the_recorded_odometry_after_a_gap(world, scans, tmp_path):
+    # /odom stops for 4 s and the gap is filled by laser odometry, which moves the odometry after it rigidly: map ->
+    # odom taken from those moved poses placed the robot off /amcl_pose by that move (the input bag's /odom is not
+    # moved) for every update after the gap. From the odometry as recorded, they compose.
+    t0 = scans[0].t
+    bag = tmp_path / "gap.mcap"
+    with BagOut(bag) as b:
+        for s in scans:
+            if not 2.0 <= s.t - t0 <= 6.0:
+                _odom(b, s)
+            _laser(b, "/scan", s, frame="base_link")
+    assert any("stops while the scans go on" in w for w in open_bag(bag).warnings)
+    frame, rows = _estimate_joins(world, bag, tmp_path / "r")
+    assert frame == "odom"
+    after = sum(1 for k, _, _ in rows if k[0] + 1e-9 * k[1] - t0 > 6.0)
+    assert after > 3 and _joined(rows, _recorded_odometry(bag, "odom", "/odom")) >= after
+
+
 def test_bag_info_names_what_mcl_would_use(scans, tmp_path, capsys):
     bag = tmp_path / "i.mcap"
     write_scans(bag, scans, odom="tf", mount=(0.1, 0.0, 0.0))
@@ -1326,15 +1472,15 @@ def _explode_after(items, n):
 # ----------------------------------------------------------------------------- helpers writing raw messages
 
 
-def _odom(b: BagOut, s, stamp=None, child="base_link", pose=None) -> None:
-    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child``, no velocities."""
+def _odom(b: BagOut, s, stamp=None, child="base_link", pose=None, frame="odom") -> None:
+    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child`` in ``frame``, no velocities."""
     cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*(s.odom if pose is None else pose)),
                 covariance=np.zeros(36))
     v3 = lambda x, z: b.msg("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)  # noqa: E731
     tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
                twist=b.msg("geometry_msgs/msg/Twist", linear=v3(0.0, 0.0), angular=v3(0.0, 0.0)),
                covariance=np.zeros(36))
-    h = b.header(s.t if stamp is None else stamp, "odom")
+    h = b.header(s.t if stamp is None else stamp, frame)
     b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=h,
                                                         child_frame_id=child, pose=cov, twist=tw))
 

@@ -376,18 +376,27 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "both", mount=Non
 
 class EstimateBag:
     """``mcl run --write-bag``: the filter's output as ROS messages, to play next to the input bag: ``/amcl_pose``
-    (PoseWithCovarianceStamped, frame map), ``map -> odom`` on ``/tf`` (estimate ∘ odometry⁻¹, as AMCL publishes)
-    and ``/particlecloud`` (PoseArray, at most ``particles_max`` poses, an even stride through the set)."""
+    (PoseWithCovarianceStamped, frame map), ``map -> odom_frame`` on ``/tf`` (estimate ∘ odometry⁻¹, as AMCL
+    publishes) and ``/particlecloud`` (PoseArray, at most ``particles_max`` poses, an even stride through the set).
 
-    def __init__(self, path, kind: str, particles_max: int = 2000, odom_frame: str = "odom"):
+    ``odom_frame``: the frame the input's odometry is in. ``odometry``: the input's odometry as recorded (rows t, x,
+    y, theta, ...; time-sorted), interpolated at each update's stamp for map -> odom; None: the pose ``update`` is
+    given (the filter's, which differs from the recording's after a gap filled by laser odometry)."""
+
+    def __init__(self, path, kind: str, particles_max: int = 2000, odom_frame: str = "odom", odometry=None):
         self.out = BagOut(path, kind)
         self.particles_max, self.odom_frame = int(particles_max), odom_frame
+        self.odometry = None if odometry is None else np.asarray(odometry, dtype=np.float64)
 
     def update(self, t: float, mean, cov, odom, particles) -> None:
         b = self.out
         pw = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*mean), covariance=b.cov36(cov))
         b.write("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t,
                 b.msg("geometry_msgs/msg/PoseWithCovarianceStamped", header=b.header(t, "map"), pose=pw))
+        if self.odometry is not None:
+            from mcl.datasets.rosbag import odometry_at
+
+            odom = odometry_at(self.odometry, t)[0]
         m2o = _compose(tuple(float(v) for v in mean), _inverse(tuple(float(v) for v in odom)))
         b.write("/tf", "tf2_msgs/msg/TFMessage", t,
                 b.msg("tf2_msgs/msg/TFMessage", transforms=[b.transform(t, "map", self.odom_frame, m2o)]))
