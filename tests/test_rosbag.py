@@ -1029,6 +1029,22 @@ def test_simulated_and_converted_bags_carry_odom_to_base_link_on_tf(world, tmp_p
     assert _odometry_messages(tmp_path / "f.mcap") == ([], tf)
 
 
+def test_write_scans_and_convert_refuse_an_unknown_odom_value(world, scans, tmp_path):
+    # write_scans(odom="odometry") (the API; the command line restricts --odom) wrote a bag without any odometry,
+    # which mcl then read by laser odometry: one line naming the output, the value and the choices, nothing written
+    for bad in ("odometry", "Topic", None):
+        out = tmp_path / "o" / "x.mcap"
+        with pytest.raises(ConfigError) as e:
+            write_scans(out, scans, odom=bad)
+        msg = str(e.value)
+        assert str(out) in msg and repr(bad) in msg and "both, topic, tf" in msg and "\n" not in msg, msg
+        assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+    for ext in ("mcap", "clf"):
+        with pytest.raises(ConfigError, match="odom 'odometry': expected one of both, topic, tf"):
+            convert(world / "log.clf", tmp_path / f"c.{ext}", odom="odometry", echo=_quiet)
+        assert not (tmp_path / f"c.{ext}").exists()
+
+
 def test_a_bag_with_both_odometry_sources_reads_as_the_odom_topic_alone(scans, tmp_path, capsys):
     # The default bag has /odom and /tf odom -> base_link: read from /odom as a bag of /odom alone, the same bytes,
     # with no note or warning about two sources

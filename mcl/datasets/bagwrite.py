@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from mcl.datasets.rosbag import BAG_SUFFIXES, is_bag
-from mcl.errors import DataError
+from mcl.errors import ConfigError, DataError
 
 __all__ = ["BagOut", "write_scans", "convert", "kind_of_output"]
 
@@ -204,19 +204,29 @@ def _inverse(a):
     return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
 
 
+ODOM_CHOICES = ("both", "topic", "tf")  # write_scans / convert ``odom``: where the odometry goes
+
+
+def _check_odom(out, odom) -> None:
+    if odom not in ODOM_CHOICES:
+        raise ConfigError(f"{out}: odom {odom!r}: expected one of {', '.join(ODOM_CHOICES)} (where the odometry is "
+                          "written: /odom and /tf, /odom alone, /tf alone)")
+
+
 def write_scans(out, scans, *, odom: str = "both", mount=None, grid=None, initial=None, initial_frame: str = "map",
                 truth=None, truth_topic: str = "/ground_truth", kind: str | None = None, sweep: float = 0.0) -> int:
     """Write ``scans`` (Scan records) as a bag (see the module doc); returns the number of scans written.
 
     odom: ``both`` (default: /odom, and odom -> base_link on /tf at the same stamps with the same poses, as a ROS
-    robot records them), ``topic`` (/odom only) or ``tf`` (/tf only). mount: (x, y, theta) of the laser in
-    a new base frame: the odometry is then that of base = robot ∘ laser_offset ∘ mount⁻¹ (same laser poses, a
-    laser off the base's centre). grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for
+    robot records them), ``topic`` (/odom only) or ``tf`` (/tf only); another value is a ConfigError. mount:
+    (x, y, theta) of the laser in a new base frame: the odometry is then that of base = robot ∘ laser_offset ∘
+    mount⁻¹ (same laser poses, a laser off the base's centre). grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for
     /initialpose (in ``initial_frame``); truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``, each
     recorded at its time among the scans. Each LaserScan's time_increment is the scan's own beam time step
     (``Scan.beam_dt``, when its first beam is at the stamp), else ``sweep`` / (beams - 1): s from the first beam to
     the last (0: none).
     """
+    _check_odom(out, odom)  # an unknown value wrote no odometry at all
     n = 0
     if truth is not None:  # in time order, each written among the scans at its own time (a bag's record times only
         tt, pp = truth     # go forward: written after the scans, every pose was recorded at the bag's end)
@@ -329,6 +339,7 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "both", mount=Non
 
     src, out = Path(src), Path(out)
     out_kind = kind_of_output(out)
+    _check_odom(out, odom)  # before the source is read
     if is_bag(src):
         from mcl.datasets.rosbag import open_bag
 
