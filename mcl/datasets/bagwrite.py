@@ -128,9 +128,42 @@ class BagOut:
                     c[idx[a] * 6 + idx[b]] = cov3[a][b]
         return c
 
+    def serialize(self, message, msgtype: str):
+        """``message``'s bytes in the bag's encoding (ROS 1, or CDR with its 4-byte encapsulation header)."""
+        return self.ts.serialize_ros1(message, msgtype) if self.ros1 else self.ts.serialize_cdr(message, msgtype)
+
+    POSE_ARRAY = "geometry_msgs/msg/PoseArray"
+
+    def pose_array(self, t: float, frame: str, poses) -> bytes:
+        """The serialized PoseArray of planar ``poses`` ((3, N): x, y, theta; z 0, the quaternion of the yaw, as
+        :meth:`pose`), built with numpy: the bytes :meth:`serialize` gives for the message of N :meth:`pose` s
+        (tests/test_rosbag.py), at a fraction of the cost (a Python object per pose cost 2.6 ms for 1000).
+        The header and the uint32 count as the serializer writes them; then N x 7 float64 (position x, y, z,
+        orientation x, y, z, w), ROS 1 unaligned, CDR's first aligned to 8 from the end of the encapsulation header."""
+        p = np.asarray(poses, dtype=np.float64).reshape(3, -1)
+        head = bytes(self.serialize(self.msg(self.POSE_ARRAY, header=self.header(t, frame), poses=[]),
+                                    self.POSE_ARRAY))
+        # the empty message ends with the poses' count, 0: replaced by N
+        little = self.ros1 or head[1] == 1  # CDR encapsulation 0x0001: little-endian, 0x0000: big
+        end = "<" if little else ">"
+        n = p.shape[1]
+        out = [head[:-4], np.array(n, dtype=f"{end}u4").tobytes()]
+        if not self.ros1 and n:  # the first float64 aligned to 8 in the body (no padding without one)
+            out.append(b"\0" * ((-(len(head) - 4)) % 8))
+        a = np.zeros((n, 7), dtype=f"{end}f8")
+        a[:, 0], a[:, 1] = p[0], p[1]
+        half = 0.5 * p[2]
+        a[:, 5], a[:, 6] = np.sin(half), np.cos(half)
+        out.append(a.tobytes())
+        return b"".join(out)
+
     # --- writing
     def write(self, topic: str, msgtype: str, t: float, message) -> None:
         """Write ``message`` on ``topic``, logged at its stamp ``t`` (kept non-decreasing, as a recorder's clock)."""
+        self.write_raw(topic, msgtype, t, self.serialize(message, msgtype))
+
+    def write_raw(self, topic: str, msgtype: str, t: float, data) -> None:
+        """Write ``data``, a ``msgtype`` already serialized in the bag's encoding, as :meth:`write` does."""
         conn = self._conns.get(topic)
         if conn is None:
             conn = self._conns[topic] = self.writer.add_connection(topic, msgtype, typestore=self.ts,
@@ -141,7 +174,6 @@ class BagOut:
         # stamps stay the log's
         log_ns = max(sec * 1_000_000_000 + ns, self._last_ns, 1 if self.ros1 else 0)
         self._last_ns = log_ns
-        data = self.ts.serialize_ros1(message, msgtype) if self.ros1 else self.ts.serialize_cdr(message, msgtype)
         self.writer.write(conn, log_ns, data)
 
     LATCHED = ("/map", "/tf_static")  # published once, kept for late subscribers (map_server, the static broadcaster)
@@ -414,9 +446,7 @@ class EstimateBag:
         p = np.asarray(particles)
         if self.particles_max > 0:
             step = max(1, -(-p.shape[1] // self.particles_max))
-            poses = [b.pose(float(p[0, k]), float(p[1, k]), float(p[2, k])) for k in range(0, p.shape[1], step)]
-            b.write("/particlecloud", "geometry_msgs/msg/PoseArray", t,
-                    b.msg("geometry_msgs/msg/PoseArray", header=b.header(t, "map"), poses=poses))
+            b.write_raw("/particlecloud", b.POSE_ARRAY, t, b.pose_array(t, "map", p[:3, ::step]))
 
     def close(self) -> None:
         self.out.close()
