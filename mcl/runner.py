@@ -423,8 +423,11 @@ def _check_truth_motion(log, truth, name: str, echo) -> None:
              "5 s (a trajectory of another run?): the run is scored against it all the same")
 
 
-def _estimate_bag(cfg: Config, out_dir: Path):
-    """``--write-bag``: an EstimateBag ``estimate.<bag|db3|mcap>`` of the input bag's kind in ``out_dir``."""
+def _estimate_bag(cfg: Config, out_dir: Path, log):
+    """``--write-bag``: an EstimateBag ``estimate.<bag|db3|mcap>`` of the input bag's kind in ``out_dir``. Its
+    ``map -> odom`` names the frame the bag's odometry is in (``BagSource.odom_frame``: robot1/odom, odom_combined,
+    an Odometry's header.frame_id) and is computed from the odometry as the bag records it, so that it joins the
+    bag's own /tf tree; with laser odometry (no such frame), ``frames.odom``."""
     from mcl.datasets.bagwrite import EstimateBag
     from mcl.datasets.rosbag import bag_kind
 
@@ -432,7 +435,9 @@ def _estimate_bag(cfg: Config, out_dir: Path):
         raise ConfigError("--write-bag: needs a bag input (bag)")
     kind = bag_kind(cfg.bag)
     ext = {"bag1": "bag", "db3": "db3", "mcap": "mcap"}[kind]
-    return EstimateBag(out_dir / f"estimate.{ext}", kind, cfg.rerun.particles_max, cfg.frames.odom)
+    frame = getattr(log, "odom_frame", None) or cfg.frames.odom
+    return EstimateBag(out_dir / f"estimate.{ext}", kind, cfg.rerun.particles_max, frame,
+                       odometry=getattr(log, "odom_recorded", None))
 
 
 def _updates(scans: list, marks: list) -> list[tuple]:
@@ -853,7 +858,7 @@ def _run(
     lasers: set = set()  # the scan sources (a bag's topics; a CARMEN log's one kind) seen to update so far
     owed: set = set()  # ... that have not updated since the robot last moved (AMCL's lasers_update_ flags)
     writer = TumWriter(out_dir / "trajectory.tum")
-    bag_out = _estimate_bag(cfg, out_dir) if write_bag else None
+    bag_out = _estimate_bag(cfg, out_dir, log) if write_bag else None
     quality_out = LineWriter(out_dir / "quality.csv", header=QUALITY_HEADER)
     quality_rows: list[tuple] = []  # (match, contradiction, lost) of each filter update, for the summary
     last_mean, last_lost, last_spread = None, False, math.nan

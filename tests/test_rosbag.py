@@ -1029,6 +1029,22 @@ def test_simulated_and_converted_bags_carry_odom_to_base_link_on_tf(world, tmp_p
     assert _odometry_messages(tmp_path / "f.mcap") == ([], tf)
 
 
+def test_write_scans_and_convert_refuse_an_unknown_odom_value(world, scans, tmp_path):
+    # write_scans(odom="odometry") (the API; the command line restricts --odom) wrote a bag without any odometry,
+    # which mcl then read by laser odometry: one line naming the output, the value and the choices, nothing written
+    for bad in ("odometry", "Topic", None):
+        out = tmp_path / "o" / "x.mcap"
+        with pytest.raises(ConfigError) as e:
+            write_scans(out, scans, odom=bad)
+        msg = str(e.value)
+        assert str(out) in msg and repr(bad) in msg and "both, topic, tf" in msg and "\n" not in msg, msg
+        assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+    for ext in ("mcap", "clf"):
+        with pytest.raises(ConfigError, match="odom 'odometry': expected one of both, topic, tf"):
+            convert(world / "log.clf", tmp_path / f"c.{ext}", odom="odometry", echo=_quiet)
+        assert not (tmp_path / f"c.{ext}").exists()
+
+
 def test_a_bag_with_both_odometry_sources_reads_as_the_odom_topic_alone(scans, tmp_path, capsys):
     # The default bag has /odom and /tf odom -> base_link: read from /odom as a bag of /odom alone, the same bytes,
     # with no note or warning about two sources
@@ -1086,6 +1102,208 @@ def test_write_bag_holds_the_estimate(world, scans, tmp_path):
     q = poses[-1].pose.pose.orientation
     want = pose2(last.x, last.y, q.z, q.w)
     assert base[:2] == pytest.approx(want[:2], abs=1e-9) and abs(math.remainder(base[2] - want[2], math.tau)) < 1e-9
+
+
+def _yaw_pose(x, y, qz, qw):
+    return np.array([x, y, 2.0 * math.atan2(qz, qw)])
+
+
+def _recorded_odometry(bag, frame: str, topic: str = "/tf") -> dict:
+    """{(sec, nanosec): (x, y, theta)} of the odometry in ``frame`` the input ``bag`` records: its /tf transforms
+    from ``frame``, or the messages on ``topic`` (Odometry, pose topics) stamped in it."""
+    from rosbags.highlevel import AnyReader
+
+    out = {}
+    with AnyReader([bag]) as r:
+        for c, _, raw in r.messages([c for c in r.connections if c.topic == topic]):
+            m = r.deserialize(raw, c.msgtype)
+            if topic == "/tf":
+                for ts in m.transforms:
+                    if ts.header.frame_id == frame:
+                        tr = ts.transform
+                        out[(ts.header.stamp.sec, ts.header.stamp.nanosec)] = _yaw_pose(
+                            tr.translation.x, tr.translation.y, tr.rotation.z, tr.rotation.w)
+            elif m.header.frame_id == frame:
+                p = m.pose.pose if hasattr(m.pose, "pose") else m.pose
+                out[(m.header.stamp.sec, m.header.stamp.nanosec)] = _yaw_pose(
+                    p.position.x, p.position.y, p.orientation.z, p.orientation.w)
+    return out
+
+
+def _estimate_joins(world, bag, out, *overrides) -> tuple[str, list]:
+    """Run ``bag`` with --write-bag; (the odometry frame of its map -> X on /tf, and for each update the base pose
+    that map -> X composed with the input's odometry pose ``X -> base`` at the update's stamp gives, next to
+    /amcl_pose's pose: [(stamp, composed, amcl)]) — X read from the estimate bag itself."""
+    from rosbags.highlevel import AnyReader
+
+    cfg = load_config(None, ["rerun.mode=off", "filter.particles=300", f"map={world / 'map.yaml'}", "log=null",
+                             f"bag={bag}", "truth=null", *overrides])
+    run(cfg, out, progress=False, echo=_quiet, write_bag=True)
+    est = next(out.glob("estimate.*"))
+    with AnyReader([est]) as r:
+        amcl, m2o = {}, {}
+        for c, _, raw in r.messages([c for c in r.connections if c.topic in ("/amcl_pose", "/tf")]):
+            m = r.deserialize(raw, c.msgtype)
+            if c.topic == "/amcl_pose":
+                assert m.header.frame_id == "map"
+                p = m.pose.pose
+                amcl[(m.header.stamp.sec, m.header.stamp.nanosec)] = _yaw_pose(p.position.x, p.position.y,
+                                                                               p.orientation.z, p.orientation.w)
+            else:
+                (ts,) = m.transforms
+                tr = ts.transform
+                m2o[(ts.header.stamp.sec, ts.header.stamp.nanosec)] = (
+                    ts.header.frame_id, ts.child_frame_id,
+                    _yaw_pose(tr.translation.x, tr.translation.y, tr.rotation.z, tr.rotation.w))
+    assert m2o.keys() == amcl.keys() and len(amcl) > 10
+    assert {v[0] for v in m2o.values()} == {"map"}
+    (frame,) = {v[1] for v in m2o.values()}
+    return frame, [(k, m2o[k][2], amcl[k]) for k in sorted(amcl)]
+
+
+def _joined(rows, odometry: dict) -> int:
+    """How many of ``rows`` (``_estimate_joins``) have the input's odometry at their stamp; each must compose to
+    /amcl_pose within 1e-6."""
+    n = 0
+    for stamp, m2o, amcl in rows:
+        if stamp in odometry:
+            got = compose(m2o, odometry[stamp])
+            assert got[:2] == pytest.approx(amcl[:2], abs=1e-6), stamp
+            assert abs(math.remainder(got[2] - amcl[2], math.tau)) < 1e-6, stamp
+            n += 1
+    return n
+
+
+def _frames_bag(path, scans, case: str) -> tuple[str, str, list]:
+    """A bag whose odometry is not odom -> base_link: (the odometry frame, the topic it is on, config overrides)."""
+    from mcl.datasets.bagwrite import _compose, _inverse
+
+    TF, PWCS = "tf2_msgs/msg/TFMessage", "geometry_msgs/msg/PoseWithCovarianceStamped"
+    if case == "namespaced":
+        _namespaced_bag(path, scans, ["robot1"])
+        return "robot1/odom", "/tf", []
+    mount = (0.2, 0.0, 0.0)
+    with BagOut(path) as b:
+        b.write("/tf_static", TF, scans[0].t, b.msg(TF, transforms=[
+            b.transform(scans[0].t, "base_link" if case == "odometry-topic" else "base_footprint", "laser", mount)]))
+        for k, s in enumerate(scans):
+            base = _compose(tuple(s.odom), _inverse(mount))
+            if case == "nav2":
+                b.write("/tf", TF, s.t, b.msg(TF, transforms=[b.transform(s.t, "odom", "base_footprint", base)]))
+            elif case == "ekf":  # with a localizer's map -> odom_combined above it, as recorded
+                b.write("/tf", TF, s.t, b.msg(TF, transforms=[
+                    b.transform(s.t, "map", "odom_combined", (0.01 * k, 0.0, 0.002 * k)),
+                    b.transform(s.t, "odom_combined", "base_footprint", base)]))
+            elif case == "odometry-topic":
+                _odom(b, s, pose=base, frame="odom_wheel")
+            elif case == "pose-topic":
+                pw = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*base), covariance=np.zeros(36))
+                b.write("/ekf/odom_combined", PWCS, s.t, b.msg(PWCS, header=b.header(s.t, "odom_combined"), pose=pw))
+            _laser(b, "/scan", s, frame="laser")
+    return {"nav2": ("odom", "/tf", []), "ekf": ("odom_combined", "/tf", []),
+            "odometry-topic": ("odom_wheel", "/odom", []),
+            "pose-topic": ("odom_combined", "/ekf/odom_combined", ["topics.odom=/ekf/odom_combined"])}[case]
+
+
+@pytest.mark.parametrize("case", ["namespaced", "nav2", "ekf", "odometry-topic", "pose-topic"])
+def test_write_bag_map_to_odom_names_the_odometry_frame_the_bag_was_read_in(world, scans, tmp_path, case):
+    # The estimate bag's map -> odom was always named frames.odom ("odom"): with a bag whose odometry is
+    # robot1/odom -> robot1/base_link, robot_pose_ekf's odom_combined -> base_footprint, an Odometry in odom_wheel
+    # or a pose topic in odom_combined, RViz playing both bags had two trees, map -> odom and the robot's. Now map ->
+    # the frame the reader read the odometry in; composed with the input's own odometry pose at each update's stamp
+    # (of the frame the odometry moves: base_footprint, robot1/base_link) it places the robot at /amcl_pose.
+    bag = tmp_path / f"{case}.bag"
+    frame, topic, overrides = _frames_bag(bag, scans, case)
+    cfg = load_config(None, overrides)
+    assert open_bag(bag, cfg.topics, cfg.frames).odom_frame == frame
+    got, rows = _estimate_joins(world, bag, tmp_path / "r", *overrides)
+    assert got == frame
+    assert _joined(rows, _recorded_odometry(bag, frame, topic)) == len(rows)
+
+
+def test_write_bag_with_laser_odometry_names_frames_odom(world, scans, tmp_path):
+    # no odometry frame in the bag (scans alone: laser odometry): map -> frames.odom, whatever it is named
+    bag = tmp_path / "scans.mcap"
+    with BagOut(bag) as b:
+        for s in scans:
+            _laser(b, "/scan", s, frame="base_link")
+    assert open_bag(bag).odom_frame is None
+    frame, _ = _estimate_joins(world, bag, tmp_path / "r", "topics.odom=laser", "frames.odom=scan_odom")
+    assert frame == "scan_odom"
+
+
+def test_write_bag_map_to_odom_joins_the_recorded_odometry_after_a_gap(world, scans, tmp_path):
+    # /odom stops for 4 s and the gap is filled by laser odometry, which moves the odometry after it rigidly: map ->
+    # odom taken from those moved poses placed the robot off /amcl_pose by that move (the input bag's /odom is not
+    # moved) for every update after the gap. From the odometry as recorded, they compose.
+    t0 = scans[0].t
+    bag = tmp_path / "gap.mcap"
+    with BagOut(bag) as b:
+        for s in scans:
+            if not 2.0 <= s.t - t0 <= 6.0:
+                _odom(b, s)
+            _laser(b, "/scan", s, frame="base_link")
+    assert any("stops while the scans go on" in w for w in open_bag(bag).warnings)
+    frame, rows = _estimate_joins(world, bag, tmp_path / "r")
+    assert frame == "odom"
+    after = sum(1 for k, _, _ in rows if k[0] + 1e-9 * k[1] - t0 > 6.0)
+    assert after > 3 and _joined(rows, _recorded_odometry(bag, "odom", "/odom")) >= after
+
+
+@pytest.mark.parametrize("ext", ["bag", "mcap", "db3"])
+def test_particlecloud_bytes_built_with_numpy_are_the_serializers(tmp_path, ext):
+    # /particlecloud was a Python object per pose (2.6 ms an update for 1000); built with numpy it must be the very
+    # bytes the rosbags serializer gives for the message of BagOut.pose's: ROS 1 and CDR, frames whose length moves
+    # the CDR alignment of the poses, 0, 1 and many poses, headings of either sign, past pi and -0.0
+    from rosbags.highlevel import AnyReader
+
+    from mcl.datasets.bagwrite import EstimateBag
+
+    PA = "geometry_msgs/msg/PoseArray"
+    rng = np.random.default_rng(5)
+    p = np.vstack([rng.uniform(-50, 50, 5001), rng.uniform(-50, 50, 5001), rng.uniform(-7, 7, 5001)])
+    p[:, 0] = (-0.0, 0.0, -0.0)
+    p[2, 1] = math.pi
+    ref, new = BagOut(tmp_path / f"ref.{ext}"), BagOut(tmp_path / f"new.{ext}")
+    try:
+        for frame in ("map", "m", "ma", "mapx", "world_frame"):
+            for n in (0, 1, 2, 5001):
+                q = p[:, :n]
+                want = ref.serialize(ref.msg(PA, header=ref.header(7.25, frame),
+                                             poses=[ref.pose(*q[:, k]) for k in range(n)]), PA)
+                _same_pose_array(new.pose_array(7.25, frame, q), bytes(want), n, ext)
+    finally:
+        ref.abort()
+        new.abort()
+    # and in the estimate bag: an even stride through the set (5001 particles, at most 2000: every third)
+    kind = {"bag": "bag1", "mcap": "mcap", "db3": "db3"}[ext]
+    e = EstimateBag(tmp_path / f"est.{ext}", kind, 2000)
+    e.update(3.5, (1.0, 2.0, 0.5), np.eye(3) * 0.01, (0.0, 0.0, 0.0), p)
+    e.close()
+    with AnyReader([tmp_path / f"est.{ext}"]) as r:
+        (raw,) = [bytes(raw) for c, _, raw in r.messages([c for c in r.connections if c.topic == "/particlecloud"])]
+    b = BagOut(tmp_path / f"ref2.{ext}")
+    try:
+        b.header(0.0, "")  # the estimate's /amcl_pose and /tf headers came first (ROS 1's seq)
+        b.header(0.0, "")
+        want = b.serialize(b.msg(PA, header=b.header(3.5, "map"), poses=[b.pose(*p[:, k]) for k in range(0, 5001, 3)]),
+                           PA)
+    finally:
+        b.abort()
+    _same_pose_array(raw, bytes(want), len(range(0, 5001, 3)), ext)
+
+
+def _same_pose_array(got: bytes, want: bytes, n: int, ext: str) -> None:
+    """``got`` is ``want`` byte for byte, but for the quaternions' sin and cos of the half yaw, which numpy's
+    vectorised sin/cos and the serializer's math.sin/cos may round apart in the last bit on some CPUs: within 1
+    ulp there (measured on this machine: identical)."""
+    assert len(got) == len(want)
+    k = n * 56  # n poses of 7 float64 at the end of the message
+    assert got[: len(got) - k] == want[: len(want) - k]
+    end = "<" if ext == "bag" or want[1] == 1 else ">"
+    a, b = (np.frombuffer(x[len(x) - k:], dtype=f"{end}f8").reshape(n, 7) for x in (got, want))
+    np.testing.assert_array_equal(a[:, :5], b[:, :5])
+    np.testing.assert_array_max_ulp(a[:, 5:], b[:, 5:], maxulp=1)
 
 
 def test_bag_info_names_what_mcl_would_use(scans, tmp_path, capsys):
@@ -1358,15 +1576,15 @@ def _explode_after(items, n):
 # ----------------------------------------------------------------------------- helpers writing raw messages
 
 
-def _odom(b: BagOut, s, stamp=None, child="base_link", pose=None) -> None:
-    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child``, no velocities."""
+def _odom(b: BagOut, s, stamp=None, child="base_link", pose=None, frame="odom") -> None:
+    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child`` in ``frame``, no velocities."""
     cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*(s.odom if pose is None else pose)),
                 covariance=np.zeros(36))
     v3 = lambda x, z: b.msg("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)  # noqa: E731
     tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
                twist=b.msg("geometry_msgs/msg/Twist", linear=v3(0.0, 0.0), angular=v3(0.0, 0.0)),
                covariance=np.zeros(36))
-    h = b.header(s.t if stamp is None else stamp, "odom")
+    h = b.header(s.t if stamp is None else stamp, frame)
     b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=h,
                                                         child_frame_id=child, pose=cov, twist=tw))
 

@@ -307,6 +307,13 @@ class BagSource:
     # pose and odometry topics a run could score against (--truth-topic): all but the odometry read, the initial pose
     # and the truth topic in use (a simulator's /ground_truth, a motion-capture topic, a localizer's /amcl_pose)
     references: list = field(default_factory=list)
+    # The frame the odometry is in, as the bag names it: the parent of the /tf odometry link read (robot1/odom,
+    # odom_combined), an Odometry's or a pose topic's header.frame_id (odom_wheel); None for laser odometry.
+    odom_frame: str | None = None
+    # The odometry as the bag records it (rows as ``odometry``), before any gap is filled by laser odometry (which
+    # moves the poses after the gap): the pose of the frame the odometry moves in ``odom_frame`` at each stamp, as
+    # the bag's own /tf places it; None for laser odometry.
+    odom_recorded: np.ndarray | None = None
 
     def stamps_checked(self, offset: float = 0.0) -> list[str]:
         """The scans' stamps (plus ``sensor.time_offset``) against the odometry's time span: DataError when none
@@ -819,6 +826,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     truth_rows: list[tuple] = []
     other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
     odom_child = None  # the Odometry topic's child_frame_id
+    odom_parent_frame = None  # the odometry topic's header.frame_id (an Odometry's, a pose topic's)
     several = tp.scan == "auto" and len(scan_topics) > 1  # lasers to choose among by their mountings
     links: dict[str, tuple] = {}  # child -> (parent, (x, y, z, qx, qy, qz, qw)): each link's first transform
     moved: set[str] = set()  # children whose /tf transform changes
@@ -868,6 +876,8 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         elif topic == odom_topic:
             t = stamp_seconds(msg.header.stamp)
             order.see(topic, t)
+            if odom_parent_frame is None:
+                odom_parent_frame = _frame(msg.header.frame_id)
             if hasattr(msg, "twist"):
                 if odom_child is None:
                     odom_child = _frame(msg.child_frame_id)
@@ -1036,6 +1046,13 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     scans = BagScans(path, scan_topics, sum(counts.values()), odometry, offsets, tuple(tp.cloud_z), tp.cloud_beams,
                      has_twist=odom_type == ODOM, mirrored=mirrored, unstamped=unstamped,
                      echo=getattr(tp, "echo", "first"))
+    recorded = None if from_scans else odometry
+    if from_scans:
+        frame_of_odometry = None
+    elif odom_topic is not None:  # a topic's own frame (an empty frame_id: frames.odom)
+        frame_of_odometry = odom_parent_frame or odom_frame
+    else:  # the /tf link read: frames.odom, or the namespaced / other odometry frame found above
+        frame_of_odometry = odom_frame
     gaps = [] if from_scans else odometry_gaps(odometry, np.array(scan_t, dtype=np.float64))
     if gaps:  # the odometry stops for a while, the scans go on: the gaps filled by matching the scans
         mount = offsets[scan_topics[0]] if laser_pose is None else np.asarray(laser_pose, dtype=np.float64)
@@ -1066,6 +1083,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     skipped = {n: i.msgcount for n, i in topics.items() if n not in wanted}
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps,
+                     odom_frame=frame_of_odometry, odom_recorded=recorded,
                      references=sorted(n for n, i in topics.items() if i.msgtype in TRUTH_TYPES
                                        and n not in (src_name.split(" ", 1)[0], init_topic, truth_topic)))
 
