@@ -248,6 +248,9 @@ def _add_suite_options(p) -> None:
                    help="set a keyword of mcl simulate in every generated world of the suite (repeatable), e.g. "
                         "scan_rate=40 or range_max=8: the suite's worlds with your robot's laser (new worlds, cached "
                         "apart; real datasets unchanged)")
+    g.add_argument("--start-offset", nargs=3, type=float, metavar=("DX", "DY", "DTHETA"),
+                   help="move every tracking and kidnapped start pose by DX, DY m (map frame) and DTHETA rad: how "
+                        "the config copes with a start clicked on a map (README, 'How good is your start pose?')")
     g.add_argument("--baseline", action=argparse.BooleanOptionalAction, default=True,
                    help="also run configs/baseline.yaml, the plain fixed-N filter (default on)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")

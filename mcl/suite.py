@@ -410,6 +410,7 @@ class Job:
     kidnap_t: float | None = None  # synthetic kidnap time (from sim.yaml, once generated)
     kidnap_filter: bool = False  # real log: kidnap the filter at mid-truth
     sim_start: bool = False  # track from the synthetic world's start pose (sim.yaml)
+    start_offset: tuple[float, float, float] | None = None  # --start-offset: added to a synthetic world's start pose
     fingerprint: str = ""
 
     @property
@@ -499,9 +500,12 @@ def seed_range(text: str) -> range:
 
 
 def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int | range, out: Path, cache: Path,
-         modes: tuple[str, ...] | None = None, only: list[str] | None = None, baseline: bool = True) -> list[Job]:
+         modes: tuple[str, ...] | None = None, only: list[str] | None = None, baseline: bool = True,
+         start_offset=None) -> list[Job]:
     """Every run of the suite, each with its validated Config (ConfigError naming the suite, the dataset
-    and the key when a dataset's ``set`` or a --set is wrong). ``seeds``: K (seeds 1..K) or a range."""
+    and the key when a dataset's ``set`` or a --set is wrong). ``seeds``: K (seeds 1..K) or a range.
+    ``start_offset`` (dx, dy, dtheta): every tracking and kidnapped start pose moved by it (m, m in the map frame,
+    rad), a start clicked on a map; the runs are scored against the truth as ever."""
     from mcl.config import load_config, shipped
 
     seeds = seeds if isinstance(seeds, range) else range(1, int(seeds) + 1)
@@ -547,6 +551,8 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int | rang
                     overrides.append("filter.global_localization=true")
                 else:
                     p = pose if pose is not None else (0.0, 0.0, 0.0)
+                    if start_offset is not None and pose is not None:
+                        p = _offset(p, start_offset)
                     overrides += [f"filter.initial_pose=[{p[0]!r}, {p[1]!r}, {p[2]!r}]", "filter.global_localization=false"]
                 overrides.append("rerun.mode=off")
                 for seed in seeds:
@@ -557,8 +563,15 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int | rang
                     run_dir = out / "runs" / d.name / mode / clabel / f"seed{seed}"
                     jobs.append(Job(d.name, mode, clabel, seed, cfg, str(run_dir), d.lost_m, world=world,
                                     kidnap_t=kidnap_t, kidnap_filter=(mode == "kidnapped" and d.simulate is None),
-                                    sim_start=pose is None))
+                                    sim_start=pose is None,
+                                    start_offset=start_offset if pose is None and mode != "global" else None))
     return jobs
+
+
+def _offset(pose, offset) -> tuple[float, float, float]:
+    """``pose`` moved by ``offset`` (dx, dy in the map frame, dtheta), the heading wrapped to [-pi, pi)."""
+    x, y, th = (float(a) + float(b) for a, b in zip(pose, offset))
+    return x, y, (th + math.pi) % (2 * math.pi) - math.pi
 
 
 def _finish_plan(jobs: list[Job]) -> None:
@@ -574,7 +587,10 @@ def _finish_plan(jobs: list[Job]) -> None:
         if j.world is not None:
             sim = yaml.safe_load(Path(j.world[0], "sim.yaml").read_text())
             if j.mode != "global" and j.sim_start:
-                f = dataclasses.replace(j.cfg.filter, initial_pose=tuple(float(v) for v in sim["start_pose"]))
+                start = tuple(float(v) for v in sim["start_pose"])
+                if j.start_offset is not None:
+                    start = _offset(start, j.start_offset)
+                f = dataclasses.replace(j.cfg.filter, initial_pose=start)
                 j.cfg = dataclasses.replace(j.cfg, filter=f)
             if j.mode == "kidnapped":
                 j.kidnap_t = float(sim["kidnap"]["t"])
@@ -1037,7 +1053,8 @@ def _stderr(msg: str) -> None:
 
 
 def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=None, cache=None, modes=None,
-                   only=None, baseline=True, world=None, progress=None, echo=print, warn=_stderr) -> int:
+                   only=None, baseline=True, world=None, progress=None, echo=print, warn=_stderr,
+                   start_offset=None) -> int:
     """``mcl eval --suite``: plan, generate the worlds, run what is not finished, write and print the table (and
     ``warn`` the errors). A failed run is a row with its ``error`` (not saved in its folder: a resume runs it
     again), counted as lost. Returns the exit status (0, 130 interrupted, 2 when a run failed)."""
@@ -1051,7 +1068,7 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     out = Path(out) if out else Path.cwd() / "runs" / f"suite-{suite.name}"
     cache = Path(cache) if cache else out / "worlds"
     job_list = plan(suite, config=config, sets=list(sets), seeds=seeds, out=out, cache=cache, modes=modes,
-                    only=only, baseline=baseline)
+                    only=only, baseline=baseline, start_offset=start_offset)
     if not job_list:
         raise ConfigError(f"{suite.path}: no run left (modes {', '.join(modes or ())} not in any selected dataset)")
     missing = [m for m in (modes or ()) if all(j.mode != m for j in job_list)]
@@ -1063,6 +1080,9 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
              f"{BASELINE!r})")
     if suite.world:
         echo(f"every generated world with {_world_text(suite.world)} (--world)")
+    if start_offset is not None:
+        dx, dy, dth = start_offset
+        echo(f"every tracking and kidnapped start moved by {dx:g} m, {dy:g} m, {dth:g} rad (--start-offset)")
     # the inputs are checked: now the folders (--out checked first: the default cache is in it, and a --cache that
     # cannot be made leaves no --out behind)
     from mcl.trajectory import check_writable_folder
@@ -1216,6 +1236,10 @@ def run_from_args(args) -> int:
         modes = _modes([m.strip() for m in args.modes.split(",") if m.strip()], "--modes")
     only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
     world = world_overrides(getattr(args, "world", None))
+    offset = getattr(args, "start_offset", None)
+    if offset is not None and not all(math.isfinite(v) for v in offset):
+        raise MclError(f"--start-offset: expected three finite numbers, got {' '.join(map(str, offset))}")
     return evaluate_suite(args.suite, config=args.config, sets=args.set, seeds=seeds, jobs=args.jobs,
                           out=args.out, cache=args.cache, modes=modes, only=only, baseline=args.baseline, world=world,
-                          progress=False if args.no_progress else None)
+                          progress=False if args.no_progress else None,
+                          start_offset=tuple(offset) if offset is not None else None)

@@ -935,3 +935,29 @@ def test_a_signal_while_the_worlds_are_made_stops_the_workers_and_leaves_no_worl
         time.sleep(0.05)
     assert not [w for w in workers if _alive(w)]
     assert sorted(p.name for p in cache.iterdir()) == []  # neither world finished, no half-made folder left
+
+
+def test_start_offset_moves_every_tracking_and_kidnapped_start_and_not_the_global(tmp_path):
+    # `mcl eval --start-offset DX DY DTHETA`: a real dataset's start (the demo as a map/log/truth dataset, its pose
+    # given) and a generated world's (from sim.yaml once made) are both moved, the heading wrapped; global keeps
+    # its uniform start; the runs are scored against the truth as ever.
+    demo = PROJECT_ROOT / "data" / "demo"
+    start = [2.06, 10.16, 3.0]
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump({"name": "s", "modes": ["tracking", "global", "kidnapped"], "datasets": [
+        {"name": "demo", "map": str(demo / "map.yaml"), "log": str(demo / "log.clf"), "truth": str(demo / "truth.tum"),
+         "initial_pose": start},
+        {"name": "w", "simulate": {"seed": 8, "duration": 12}, "modes": ["tracking"]}]}))
+    suite = load_suite(path)
+    jobs = plan(suite, config=None, sets=[], seeds=1, out=tmp_path / "o", cache=tmp_path / "c", baseline=False,
+                start_offset=(0.7, -0.2, 0.3))
+    poses = {(j.dataset, j.mode): j.cfg.filter.initial_pose for j in jobs}
+    moved = pytest.approx((2.76, 9.96, 3.3 - 2 * np.pi))
+    assert poses[("demo", "tracking")] == moved and poses[("demo", "kidnapped")] == moved
+    assert all(j.cfg.filter.global_localization for j in jobs if j.mode == "global")
+    assert main(["eval", "--suite", str(path), "--only", "w", "--out", str(tmp_path / "o"), "--no-baseline",
+                 "--jobs", "1", "--no-progress", "--start-offset", "0.7", "-0.2", "0.3"]) == 0
+    sim = yaml.safe_load((tmp_path / "o" / "worlds").glob("*/sim.yaml").__next__().read_text())
+    cfg = yaml.safe_load((tmp_path / "o" / "runs" / "w" / "tracking" / "default" / "seed1" / "config.yaml").read_text())
+    x, y, th = sim["start_pose"]
+    assert cfg["filter"]["initial_pose"] == pytest.approx([x + 0.7, y - 0.2, (th + 0.3 + np.pi) % (2 * np.pi) - np.pi])
