@@ -180,6 +180,10 @@ def cmd_run(args) -> int:
     if cfg.filter.global_localization and cfg.filter.initial_pose is not None:
         print(f"mcl: note: filter.global_localization is true, so filter.initial_pose "
               f"{list(cfg.filter.initial_pose)} is not used (--initial-pose X Y THETA tracks from a pose)", file=sys.stderr)
+    if args.initial_std is not None and cfg.bag is None and (cfg.filter.global_localization
+                                                             or cfg.filter.initial_pose is None):
+        print("mcl: note: --initial-std is not used: the run starts globally (--initial-pose X Y THETA tracks from "
+              "a pose)", file=sys.stderr)
     summary = run(cfg, out, progress=False if args.no_progress else None, initial_pose_override=start_given,
                   write_bag=args.write_bag, compile_note=True)
     if args.json:

@@ -467,3 +467,13 @@ def test_a_rough_start_pose_is_corrected_at_once_with_the_initial_std_it_deserve
     import yaml
 
     assert yaml.safe_load((tmp_path / "wide" / "config.yaml").read_text())["filter"]["initial_std"] == [0.3, 0.3, 0.2]
+
+
+def test_an_initial_std_on_a_global_start_is_a_note(tmp_path, capsys):
+    # --initial-std with no start pose: the run is global and the option does nothing, which is said (one line)
+    demo = DEMO
+    assert main(["run", "--map", str(demo / "map.yaml"), "--log", str(demo / "log.clf"), "--initial-std", "0.3",
+                 "0.3", "0.2", "--rerun", "off", "--no-progress", "--out", str(tmp_path / "o"),
+                 "--set", "filter.particles=2000", "--set", "filter.kld=false"]) == 0
+    err = capsys.readouterr().err
+    assert "mcl: note: --initial-std is not used: the run starts globally" in err
