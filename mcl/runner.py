@@ -436,8 +436,9 @@ def _estimate_bag(cfg: Config, out_dir: Path, log):
     kind = bag_kind(cfg.bag)
     ext = {"bag1": "bag", "db3": "db3", "mcap": "mcap"}[kind]
     frame = getattr(log, "odom_frame", None) or cfg.frames.odom
+    tf_topic = getattr(log, "tf_topic", "/tf")
     return EstimateBag(out_dir / f"estimate.{ext}", kind, cfg.rerun.particles_max, frame,
-                       odometry=getattr(log, "odom_recorded", None))
+                       odometry=getattr(log, "odom_recorded", None), namespace=tf_topic[: -len("/tf")])
 
 
 def _updates(scans: list, marks: list) -> list[tuple]:

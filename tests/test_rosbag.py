@@ -394,6 +394,35 @@ def test_transform_topics_remapped_into_a_namespace_are_read(scans, tmp_path, ca
         _same_records(x, y)
     assert main(["bag", "info", str(moved)]) == 0
     assert "frames in /tf: odom -> base_link" in capsys.readouterr().out
+    assert b.tf_topic == "/robot1/tf" and a.tf_topic == "/tf"
+
+
+def test_the_estimate_bag_of_a_namespaced_recording_publishes_in_its_namespace(world, scans, tmp_path):
+    # transforms on /robot1/tf (a multi-robot recording): --write-bag wrote /tf, /amcl_pose and /particlecloud at
+    # the root, where an RViz set up for /robot1/tf sees nothing; a namespaced AMCL publishes them under /robot1
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plain, moved = tmp_path / "plain.mcap", tmp_path / "moved"
+    write_scans(plain, scans, odom="tf", mount=(0.2, 0.0, 0.0))
+    with AnyReader([plain]) as r:
+        w = Writer(moved, version=9, storage_plugin=StoragePlugin.MCAP)
+        w.open()
+        conns = {c.id: w.add_connection("/robot1" + c.topic if c.topic.startswith("/tf") else c.topic, c.msgtype,
+                                        typestore=r.typestore) for c in r.connections}
+        for c, t, raw in r.messages():
+            w.write(conns[c.id], t, raw)
+        w.close()
+    topics = {}
+    for name, bag in (("root", plain), ("ns", moved)):
+        out = tmp_path / name
+        cfg = load_config(None, ["rerun.mode=off", "filter.particles=300", f"map={world / 'map.yaml'}", "log=null",
+                                 f"bag={bag}", "truth=null"])
+        run(cfg, out, progress=False, echo=_quiet, write_bag=True)
+        with AnyReader([next(out.glob("estimate.*"))]) as r:
+            topics[name] = sorted(c.topic for c in r.connections)
+    assert topics["root"] == ["/amcl_pose", "/particlecloud", "/tf"]
+    assert topics["ns"] == ["/robot1/amcl_pose", "/robot1/particlecloud", "/robot1/tf"]
 
 
 def test_among_several_namespaces_transform_topics_the_scan_topics_robot_is_read(scans, tmp_path, capsys):

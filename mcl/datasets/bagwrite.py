@@ -424,29 +424,34 @@ class EstimateBag:
 
     ``odom_frame``: the frame the input's odometry is in. ``odometry``: the input's odometry as recorded (rows t, x,
     y, theta, ...; time-sorted), interpolated at each update's stamp for map -> odom; None: the pose ``update`` is
-    given (the filter's, which differs from the recording's after a gap filled by laser odometry)."""
+    given (the filter's, which differs from the recording's after a gap filled by laser odometry). ``namespace``:
+    the input's robot namespace when its transforms are on ``/robot1/tf`` (a multi-robot recording): the three
+    topics go there too (``/robot1/amcl_pose``, ``/robot1/tf``, ``/robot1/particlecloud``), as a namespaced AMCL
+    publishes them."""
 
-    def __init__(self, path, kind: str, particles_max: int = 2000, odom_frame: str = "odom", odometry=None):
+    def __init__(self, path, kind: str, particles_max: int = 2000, odom_frame: str = "odom", odometry=None,
+                 namespace: str = ""):
         self.out = BagOut(path, kind)
         self.particles_max, self.odom_frame = int(particles_max), odom_frame
+        self.ns = namespace.rstrip("/")
         self.odometry = None if odometry is None else np.asarray(odometry, dtype=np.float64)
 
     def update(self, t: float, mean, cov, odom, particles) -> None:
         b = self.out
         pw = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*mean), covariance=b.cov36(cov))
-        b.write("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t,
+        b.write(f"{self.ns}/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", t,
                 b.msg("geometry_msgs/msg/PoseWithCovarianceStamped", header=b.header(t, "map"), pose=pw))
         if self.odometry is not None:
             from mcl.datasets.rosbag import odometry_at
 
             odom = odometry_at(self.odometry, t)[0]
         m2o = _compose(tuple(float(v) for v in mean), _inverse(tuple(float(v) for v in odom)))
-        b.write("/tf", "tf2_msgs/msg/TFMessage", t,
+        b.write(f"{self.ns}/tf", "tf2_msgs/msg/TFMessage", t,
                 b.msg("tf2_msgs/msg/TFMessage", transforms=[b.transform(t, "map", self.odom_frame, m2o)]))
         p = np.asarray(particles)
         if self.particles_max > 0:
             step = max(1, -(-p.shape[1] // self.particles_max))
-            b.write_raw("/particlecloud", b.POSE_ARRAY, t, b.pose_array(t, "map", p[:3, ::step]))
+            b.write_raw(f"{self.ns}/particlecloud", b.POSE_ARRAY, t, b.pose_array(t, "map", p[:3, ::step]))
 
     def close(self) -> None:
         self.out.close()

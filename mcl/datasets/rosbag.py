@@ -307,6 +307,9 @@ class BagSource:
     # pose and odometry topics a run could score against (--truth-topic): all but the odometry read, the initial pose
     # and the truth topic in use (a simulator's /ground_truth, a motion-capture topic, a localizer's /amcl_pose)
     references: list = field(default_factory=list)
+    # the transform topic read (/tf, or one namespace's /robot1/tf in a multi-robot recording): the estimate bag
+    # publishes in that namespace too
+    tf_topic: str = "/tf"
     # The frame the odometry is in, as the bag names it: the parent of the /tf odometry link read (robot1/odom,
     # odom_combined), an Odometry's or a pose topic's header.frame_id (odom_wheel); None for laser odometry.
     odom_frame: str | None = None
@@ -1084,6 +1087,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     return BagSource(str(path), bag_kind(path), scans, src_name, odometry, offsets, grid, initial, truth,
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps,
                      odom_frame=frame_of_odometry, odom_recorded=recorded,
+                     tf_topic=tf_dyn if tf_dyn in topics else "/tf",
                      references=sorted(n for n, i in topics.items() if i.msgtype in TRUTH_TYPES
                                        and n not in (src_name.split(" ", 1)[0], init_topic, truth_topic)))
 
