@@ -371,14 +371,12 @@ def test_namespaced_frames_of_one_robot_are_found_with_a_note(scans, tmp_path, c
     assert src.odom_source == "/tf robot2/odom -> robot2/base_link"
 
 
-def test_transform_topics_remapped_into_a_namespace_are_read(scans, tmp_path, capsys):
-    # A multi-robot recording remaps /tf and /tf_static into the robot's namespace (/robot1/tf): they were not
-    # read (no odometry, no mounting). One namespace's are read as /tf and /tf_static, with a note.
+def _tf_into_namespace(plain, moved) -> None:
+    """``plain`` copied into the rosbag2 folder ``moved`` with /tf and /tf_static remapped to /robot1/tf and
+    /robot1/tf_static, as a multi-robot recording has them."""
     from rosbags.highlevel import AnyReader
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    plain, moved = tmp_path / "plain.mcap", tmp_path / "moved"
-    write_scans(plain, scans, odom="tf", mount=(0.2, 0.0, 0.0))
     with AnyReader([plain]) as r:
         w = Writer(moved, version=9, storage_plugin=StoragePlugin.MCAP)
         w.open()
@@ -387,6 +385,14 @@ def test_transform_topics_remapped_into_a_namespace_are_read(scans, tmp_path, ca
         for c, t, raw in r.messages():
             w.write(conns[c.id], t, raw)
         w.close()
+
+
+def test_transform_topics_remapped_into_a_namespace_are_read(scans, tmp_path, capsys):
+    # A multi-robot recording remaps /tf and /tf_static into the robot's namespace (/robot1/tf): they were not
+    # read (no odometry, no mounting). One namespace's are read as /tf and /tf_static, with a note.
+    plain, moved = tmp_path / "plain.mcap", tmp_path / "moved"
+    write_scans(plain, scans, odom="tf", mount=(0.2, 0.0, 0.0))
+    _tf_into_namespace(plain, moved)
     a, b = open_bag(plain), open_bag(moved)
     assert b.odom_source == "/robot1/tf odom -> base_link" and a.odom_source == "/tf odom -> base_link"
     assert any("the transforms are on /robot1/tf and /robot1/tf_static" in n for n in b.notes), b.notes
@@ -401,18 +407,10 @@ def test_the_estimate_bag_of_a_namespaced_recording_publishes_in_its_namespace(w
     # transforms on /robot1/tf (a multi-robot recording): --write-bag wrote /tf, /amcl_pose and /particlecloud at
     # the root, where an RViz set up for /robot1/tf sees nothing; a namespaced AMCL publishes them under /robot1
     from rosbags.highlevel import AnyReader
-    from rosbags.rosbag2 import StoragePlugin, Writer
 
     plain, moved = tmp_path / "plain.mcap", tmp_path / "moved"
     write_scans(plain, scans, odom="tf", mount=(0.2, 0.0, 0.0))
-    with AnyReader([plain]) as r:
-        w = Writer(moved, version=9, storage_plugin=StoragePlugin.MCAP)
-        w.open()
-        conns = {c.id: w.add_connection("/robot1" + c.topic if c.topic.startswith("/tf") else c.topic, c.msgtype,
-                                        typestore=r.typestore) for c in r.connections}
-        for c, t, raw in r.messages():
-            w.write(conns[c.id], t, raw)
-        w.close()
+    _tf_into_namespace(plain, moved)
     topics = {}
     for name, bag in (("root", plain), ("ns", moved)):
         out = tmp_path / name
