@@ -860,6 +860,12 @@ def _run(
     owed: set = set()  # ... that have not updated since the robot last moved (AMCL's lasers_update_ flags)
     writer = TumWriter(out_dir / "trajectory.tum")
     bag_out = _estimate_bag(cfg, out_dir, log) if write_bag else None
+    if bag_out is not None:
+        rivals = [p for p, c in getattr(log, "tf_links", []) if c == bag_out.odom_frame]
+        if rivals:  # a localizer ran while the bag was recorded: its map -> odom is in the bag too
+            echo(f"{cfg.bag}: {log.tf_topic} already holds {', '.join(f'{p} -> {bag_out.odom_frame}' for p in rivals)} "
+                 f"(a localizer's, recorded): played beside {bag_out.out.path.name}, "
+                 f"RViz receives two parents of {bag_out.odom_frame} and shows each in turn")
     quality_out = LineWriter(out_dir / "quality.csv", header=QUALITY_HEADER)
     quality_rows: list[tuple] = []  # (match, contradiction, lost) of each filter update, for the summary
     last_mean, last_lost, last_spread = None, False, math.nan

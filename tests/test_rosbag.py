@@ -1726,3 +1726,21 @@ def test_a_ros1_bag_records_nothing_before_ros_time_min(world, tmp_path):
     assert stamp(first["/tf_static"].transforms[0].header) == (0, 0)
     for a, b in zip(log, open_bag(bag).scans):
         _same_records(a, b)
+
+
+@pytest.mark.parametrize("case", ["ekf", "nav2"])
+def test_write_bag_says_when_the_input_holds_a_localizers_map_to_odom_already(world, scans, tmp_path, case):
+    # robot_pose_ekf's bag recorded a localizer's map -> odom_combined on /tf: beside the estimate bag's own
+    # map -> odom_combined, RViz gets two parents of odom_combined. Said in one line; a bag without one says nothing.
+    bag = tmp_path / f"{case}.bag"
+    _frames_bag(bag, scans, case)
+    said = []
+    cfg = load_config(None, ["rerun.mode=off", "filter.particles=300", f"map={world / 'map.yaml'}", "log=null",
+                             f"bag={bag}", "truth=null"])
+    run(cfg, tmp_path / "r", progress=False, echo=said.append, write_bag=True)
+    notes = [m for m in said if "already holds" in m]
+    if case == "ekf":
+        assert notes == [f"{bag}: /tf already holds map -> odom_combined (a localizer's, recorded): played beside "
+                         "estimate.bag, RViz receives two parents of odom_combined and shows each in turn"]
+    else:
+        assert notes == []

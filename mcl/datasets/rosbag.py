@@ -310,6 +310,7 @@ class BagSource:
     # the transform topic read (/tf, or one namespace's /robot1/tf in a multi-robot recording): the estimate bag
     # publishes in that namespace too
     tf_topic: str = "/tf"
+    tf_links: list = field(default_factory=list)  # every (parent, child) on that topic, sorted
     # The frame the odometry is in, as the bag names it: the parent of the /tf odometry link read (robot1/odom,
     # odom_combined), an Odometry's or a pose topic's header.frame_id (odom_wheel); None for laser odometry.
     odom_frame: str | None = None
@@ -1088,6 +1089,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
                      warnings, notes, skipped, scan_stamps=np.array(scan_t, dtype=np.float64), sweeps=sweeps,
                      odom_frame=frame_of_odometry, odom_recorded=recorded,
                      tf_topic=tf_dyn if tf_dyn in topics else "/tf",
+                     tf_links=sorted(tuple(f.split(" -> ", 1)) for f in tf_frames),
                      references=sorted(n for n, i in topics.items() if i.msgtype in TRUTH_TYPES
                                        and n not in (src_name.split(" ", 1)[0], init_topic, truth_topic)))
 
