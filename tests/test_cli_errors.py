@@ -129,6 +129,15 @@ def test_eval_suite_refuses_the_options_of_a_single_trajectory(tmp_path, capsys,
     assert not (tmp_path / "o").exists()
 
 
+def test_eval_suite_refuses_a_start_offset_that_is_not_a_number(tmp_path, capsys):
+    from mcl.config import PROJECT_ROOT
+
+    assert main(["eval", "--suite", str(PROJECT_ROOT / "suites" / "smoke.yaml"), "--start-offset", "nan", "0", "0",
+                 "--out", str(tmp_path / "o")]) == 2
+    assert "--start-offset: expected three finite numbers, got nan 0.0 0.0" in _one_error(capsys)
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("setting,msg", [
     # every scan moved off the odometry's span: the robot would look still (a bag's stamps were checked, a log's not)
     ("sensor.time_offset=2000", "sensor.time_offset: +2000 s moves every scan of"),
