@@ -435,10 +435,8 @@ def _estimate_bag(cfg: Config, out_dir: Path, log):
         raise ConfigError("--write-bag: needs a bag input (bag)")
     kind = bag_kind(cfg.bag)
     ext = {"bag1": "bag", "db3": "db3", "mcap": "mcap"}[kind]
-    frame = getattr(log, "odom_frame", None) or cfg.frames.odom
-    tf_topic = getattr(log, "tf_topic", "/tf")
-    return EstimateBag(out_dir / f"estimate.{ext}", kind, cfg.rerun.particles_max, frame,
-                       odometry=getattr(log, "odom_recorded", None), namespace=tf_topic[: -len("/tf")])
+    return EstimateBag(out_dir / f"estimate.{ext}", kind, cfg.rerun.particles_max, log.odom_frame or cfg.frames.odom,
+                       odometry=log.odom_recorded, namespace=log.tf_topic[: -len("/tf")])
 
 
 def _updates(scans: list, marks: list) -> list[tuple]:
@@ -861,7 +859,7 @@ def _run(
     writer = TumWriter(out_dir / "trajectory.tum")
     bag_out = _estimate_bag(cfg, out_dir, log) if write_bag else None
     if bag_out is not None:
-        rivals = [p for p, c in getattr(log, "tf_links", []) if c == bag_out.odom_frame]
+        rivals = [p for p, c in log.tf_links if c == bag_out.odom_frame]
         if rivals:  # a localizer ran while the bag was recorded: its map -> odom is in the bag too
             echo(f"{cfg.bag}: {log.tf_topic} already holds {', '.join(f'{p} -> {bag_out.odom_frame}' for p in rivals)} "
                  f"(a localizer's, recorded): played beside {bag_out.out.path.name}, "

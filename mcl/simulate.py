@@ -838,6 +838,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              f"PARAM robot_front_laser_max {range_max:g} {0.0:.6f} {host} {0.0:.6f}\n"]
     scan_row = {int(k): i for i, k in enumerate(scan_ticks)}
     # Written as it is formatted, a block of lines at a time: an hour of 2,880-beam scans is 360 MB of text.
+    laser_odom = _mounted(odom, mount) if mounted else None  # the laser's pose in the odometry frame, each tick
     with atomic_writer(out / "log.clf", "w", encoding="utf-8") as f:
         for k in range(n_ticks):
             ts = f"{t[k]:.6f} {host} {t[k]:.6f}"
@@ -849,7 +850,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
                 pose = f"{x:.6f} {y:.6f} {th:.6f}"
                 at = pose  # the laser's pose in the odometry frame, then the robot's (CARMEN's order)
                 if mounted:
-                    lx, ly, lth = _mounted(odom[k : k + 1], mount)[0]
+                    lx, ly, lth = laser_odom[k]
                     at = f"{lx:.6f} {ly:.6f} {math.remainder(lth, 2 * math.pi):.6f}"
                 if flaser:
                     lines.append(f"FLASER {angles.size} {rs} {at} {pose} {ts}\n")
@@ -1057,17 +1058,15 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
     from mcl.kernels.raycast import cast_rays, cast_rays_serial
 
     boxes, people = _unmapped_obstacles(world, poses[:, :2], n, rng) if n else ([], [])
-    robot = poses
-    if cast_from is not None:
-        poses = cast_from
+    laser = poses if cast_from is None else cast_from  # where each scan is cast from
     boxes = boxes + list(furniture)
     res = world.resolution
     ox, oy = world.origin
     h, w = world.occupancy.shape
     sub = (slice(None), slice(None))
     if h * w > 2_000_000:  # a big map: cast inside the box no ray of range_max can leave
-        ix0, iy0 = np.maximum(((poses[:, :2].min(axis=0) - range_max - 1.0 - world.origin) / res).astype(int), 0)
-        ix1, iy1 = ((poses[:, :2].max(axis=0) + range_max + 1.0 - world.origin) / res).astype(int) + 1
+        ix0, iy0 = np.maximum(((laser[:, :2].min(axis=0) - range_max - 1.0 - world.origin) / res).astype(int), 0)
+        ix1, iy1 = ((laser[:, :2].max(axis=0) + range_max + 1.0 - world.origin) / res).astype(int) + 1
         sub = (slice(iy0, iy1), slice(ix0, ix1))
         ox, oy = ox + ix0 * res, oy + iy0 * res
     base = np.ascontiguousarray(world.blocked[sub])
@@ -1077,13 +1076,13 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
     for box in boxes:
         static[_box_cells(box, (ox, oy), res)] = True
     if not people:  # static only: one cast of every scan
-        cast_rays(np.ascontiguousarray(poses.T), angles, np.ascontiguousarray(base | (static & free)), ox, oy, res,
+        cast_rays(np.ascontiguousarray(laser.T), angles, np.ascontiguousarray(base | (static & free)), ox, oy, res,
                   range_max, out)
         return
     yy = oy + (np.arange(h) + 0.5) * res
     xx = ox + (np.arange(w) + 0.5) * res
     for m in range(poses.shape[0]):
-        rx, ry = robot[m, 0], robot[m, 1]
+        rx, ry = poses[m, 0], poses[m, 1]
         grid = base | (static & free)
         for a, b, speed, phase in people:
             length = float(np.hypot(*(b - a)))
@@ -1095,7 +1094,7 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
             i0, i1 = np.searchsorted(yy, [c[1] - 0.25, c[1] + 0.25])
             disc = (xx[None, j0:j1] - c[0]) ** 2 + (yy[i0:i1, None] - c[1]) ** 2 <= 0.25 ** 2
             grid[i0:i1, j0:j1] |= disc & free[i0:i1, j0:j1]
-        cast_rays_serial(np.ascontiguousarray(poses[m : m + 1].T), angles, np.ascontiguousarray(grid), ox, oy, res,
+        cast_rays_serial(np.ascontiguousarray(laser[m : m + 1].T), angles, np.ascontiguousarray(grid), ox, oy, res,
                          range_max, out[m : m + 1])
 
 

@@ -569,9 +569,11 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int | rang
 
 
 def _offset(pose, offset) -> tuple[float, float, float]:
-    """``pose`` moved by ``offset`` (dx, dy in the map frame, dtheta), the heading wrapped to [-pi, pi)."""
+    """``pose`` moved by ``offset`` (dx, dy in the map frame, dtheta), the heading wrapped."""
+    from mcl.estimate import wrap_angle
+
     x, y, th = (float(a) + float(b) for a, b in zip(pose, offset))
-    return x, y, (th + math.pi) % (2 * math.pi) - math.pi
+    return x, y, float(wrap_angle(th))
 
 
 def _finish_plan(jobs: list[Job]) -> None:
