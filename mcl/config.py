@@ -272,6 +272,9 @@ class SensorConfig:
     unmapped_unknown: bool = True  # while tracking, skip beams running over unknown cells only (a region never mapped)
     unmapped_blind: bool = True  # every return off the map and no mapped obstacle in the laser's view: predict only
     laser_pose: tuple[float, float, float] | None = None  # mounting pose in the robot frame; null -> from the log
+    # leave out the beams that read the robot itself (a wheel, a mast: the same short range on every scan, also while
+    # the robot turns), found in the log before the run (mcl.datasets.selfhits) and said in a note
+    self_hit_skip: bool = True
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

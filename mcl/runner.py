@@ -387,6 +387,8 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         echo(note)
     scans = _retime(scans, log, cfg.sensor.time_offset, echo)
     scans = deskew(scans, log, cfg.sensor.sweep_time, echo, timed=cfg.bag is not None)
+    if cfg.sensor.use and cfg.sensor.self_hit_skip:
+        scans = _skip_self_hits(scans, log, cfg.sensor, echo)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
         if not truth.t.size:
@@ -408,6 +410,22 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         else:
             _check_truth_motion(log, truth, cfg.truth or f"{cfg.bag}: {cfg.topics.truth}", echo)
     return log, grid, scans, marks, truth, initial
+
+
+def _skip_self_hits(scans, log, sensor, echo):
+    """``scans`` with the beams that read the robot itself left out (``mcl.datasets.selfhits``), said in one note;
+    as they are when there are none. The scans returned carry the finding as ``self_hits`` (for summary.json)."""
+    from mcl.datasets.selfhits import detect_self_hits, without_self_hits
+
+    hits = detect_self_hits(scans, sensor.range_min, sensor.range_max)
+    if hits is None:
+        return scans
+    kind = next(iter(scans)).kind  # FLASER, or a bag's scan topic
+    echo(f"{log.path}: {kind}: {hits.describe()}: taken as the robot itself in the laser's view and left out "
+         "(sensor.self_hit_skip: false keeps them)")
+    out = ScanMap(scans, functools.partial(without_self_hits, hits=hits))
+    out.self_hits = hits
+    return out
 
 
 def _check_truth_motion(log, truth, name: str, echo) -> None:
@@ -1009,6 +1027,7 @@ def _run(
         **({"odometry_scale": pf.odom_scale.k} if pf.odom_scale is not None else {}),  # motion.scale_window's last
         **({"sweep_order": pf.sweep_order.summary()}
            if pf.sweep_order is not None and pf.sweep_order.scans else {}),
+        **({"self_hits": scans.self_hits.summary()} if getattr(scans, "self_hits", None) is not None else {}),
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / max(n_moved, 1),  # over the updates that predicted: at least 1 when any did
         "rejected_particles": counts["rejected"],

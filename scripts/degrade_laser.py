@@ -8,7 +8,10 @@ A held-out check of the default config on real buildings with a laser or odometr
   lays them) become 0, which no reader takes as a range (``sensor.range_min`` 0: a reading must be > 0);
 * the rest get N(0, ``--sigma``) added (clipped at 0.01 m), except the log's no-return readings (``--no-return``
   m and more: 50.00 and 51.0-51.25 m in ``../shared/data``) and readings of 0 or less, which stay as they are;
-* ``--drop`` of them become 0 too.
+* ``--drop`` of them become 0 too;
+* with ``--body A0:A1@R`` (repeatable) the readings of the beams between A0 and A1 degrees (0 ahead, positive to
+  the left) read R m (with N(0, 0.01 m) noise) before ``--sigma``'s, as where the robot's own frame, a wheel or a mast stands in the laser's
+  view: returns at a fixed short range on every scan, wherever the robot is.
 
 With ``--odom-scale S`` and ``--turn-scale R`` the odometry misreports the motion as wheels of the wrong size or a
 skid-steer base do: every step between consecutive odometry poses (in the robot frame of the first) has its
@@ -33,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -46,15 +50,31 @@ from mcl.datasets.carmen import interpolate_odometry  # noqa: E402
 from mcl.runner import compose, inverse  # noqa: E402
 
 
+BODY_SIGMA = 0.01  # m: the range noise of a body reading (a laser's at short range)
+
+
+def parse_body(text: str) -> tuple[float, float, float]:
+    """``A0:A1@R`` -> (A0, A1, R): a sector of the laser's view (degrees) blocked at R m by the robot itself."""
+    m = re.fullmatch(r"\s*(-?[\d.]+)\s*:\s*(-?[\d.]+)\s*@\s*([\d.]+)\s*", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"--body {text!r}: expected A0:A1@R, degrees and metres (e.g. 80:90@0.2)")
+    a0, a1, r = (float(v) for v in m.groups())
+    return min(a0, a1), max(a0, a1), r
+
+
 def degrade_line(line: str, rng: np.random.Generator, fov: float, sigma: float, drop: float,
-                 no_return: float) -> str:
+                 no_return: float, body=()) -> str:
     """One FLASER line with the laser changed (see the module docstring); any other line as it is."""
-    if not line.startswith("FLASER ") or (fov >= 180.0 and sigma == 0.0 and drop == 0.0):
+    if not line.startswith("FLASER ") or (fov >= 180.0 and sigma == 0.0 and drop == 0.0 and not body):
         return line
     p = line.split()
     n = int(p[1])
     r = np.array([float(x) for x in p[2:2 + n]])
-    keep = np.abs(np.linspace(-90.0, 90.0, n)) <= fov / 2.0
+    angle = np.linspace(-90.0, 90.0, n)
+    for a0, a1, reach in body:
+        hit = (angle >= a0) & (angle <= a1)
+        r[hit] = np.maximum(reach + rng.normal(0.0, BODY_SIGMA, int(hit.sum())), 0.01)
+    keep = np.abs(angle) <= fov / 2.0
     out = np.where((r >= no_return) | (r <= 0.0), r, np.maximum(r + rng.normal(0.0, sigma, n), 0.01))
     out = np.where(keep & (rng.random(n) >= drop), out, 0.0)
     p[2:2 + n] = [f"{x:.2f}" for x in out]
@@ -139,6 +159,8 @@ def main(argv=None) -> int:
     ap.add_argument("--turn-scale", type=float, default=1.0, help="odometry rotation factor (default 1)")
     ap.add_argument("--latency", type=float, default=0.0,
                     help="pair each scan with the odometry this many s after it (default 0)")
+    ap.add_argument("--body", type=parse_body, action="append", default=[], metavar="A0:A1@R",
+                    help="beams between A0 and A1 degrees read R m (the robot's own frame in view); repeatable")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
     suite = yaml.safe_load(a.suite.read_text())
@@ -159,7 +181,8 @@ def main(argv=None) -> int:
         odom, flaser = Rescaled(a.odom_scale, a.turn_scale), Rescaled(a.odom_scale, a.turn_scale)
         with open(log, errors="replace") as fi, open(tmp, "w") as fo:
             for line in fi:
-                fo.write(rescale_line(degrade_line(line, rng, a.fov, a.sigma, a.drop, a.no_return), odom, flaser))
+                fo.write(rescale_line(degrade_line(line, rng, a.fov, a.sigma, a.drop, a.no_return, a.body),
+                                         odom, flaser))
         if a.latency:
             lines = tmp.read_text().splitlines(keepends=True)
             stream = odometry_stream(lines)
@@ -169,7 +192,8 @@ def main(argv=None) -> int:
     suite["root"] = str(a.out.resolve())
     suite["name"] = f"{suite.get('name', 'suite')}-fov{a.fov:g}" + (
         f"-odom{a.odom_scale:g}x{a.turn_scale:g}" if (a.odom_scale, a.turn_scale) != (1.0, 1.0) else "") + (
-        f"-latency{a.latency:g}" if a.latency else "")
+        f"-latency{a.latency:g}" if a.latency else "") + (
+        "-body" if a.body else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")
     return 0
