@@ -637,7 +637,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
-             unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), _check_only: bool = False) -> dict | None:
+             unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(),
+             _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -680,6 +681,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     ``robot_radius`` of it): every scan is cast from truth ∘ laser_pose, the log's FLASER/ROBOTLASER1 lines carry
     the laser's pose beside the robot's (a bag's ``/tf_static`` the mounting), and truth.tum stays the robot's, as a
     real robot's laser sits ahead of, behind or beside ``base_link``. (0, 0, 0) leaves every output byte-identical.
+    ``body`` = [[a0, a1, r], ...] puts the robot itself in the laser's view: every beam between a0 and a1 rad (laser
+    frame, -pi..pi) meets it at r m, on every scan wherever the robot is (a wheel, a bumper's corner, a mast's post),
+    before the noise; sim.yaml lists it. [] leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -745,6 +749,12 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
                    for v in laser_pose)
            and math.hypot(laser_pose[0], laser_pose[1]) <= robot_radius + 1e-12, "laser_pose",
            f"expected [x, y, theta] with the laser within the robot's {robot_radius:g} m radius, got {laser_pose!r}")
+    _check(isinstance(body, (list, tuple)) and all(
+        isinstance(b, (list, tuple)) and len(b) == 3
+        and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v) for v in b)
+        and -math.pi <= b[0] < b[1] <= math.pi and 0.0 < b[2] < range_max for b in body), "body",
+        f"expected [[a0, a1, r], ...] with -pi <= a0 < a1 <= pi rad and 0 < r < range_max ({range_max:g} m), "
+        f"got {body!r}")
     mount = np.array([float(v) for v in laser_pose])
     mounted = bool(np.any(mount != 0.0))
     odom_rate, scan_every, sim_dt = _rates(float(scan_rate))
@@ -799,6 +809,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         # A ninth child stream: the others are unchanged.
         rng_ground = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(9)[8])
         hit_windows = _ground_hits(rng_ground, t[scan_ticks], angles, int(ground_hits), float(duration), exact)
+    for a0, a1, reach in body:  # the robot itself, nearer than anything else along those beams
+        sector = (angles >= a0) & (angles <= a1)
+        exact[:, sector] = np.minimum(exact[:, sector], float(reach))
     ranges = _noisy_ranges(exact, rng_laser, range_sigma, p_short, p_max, range_max)
     lm_obs = None
     if landmarks:
@@ -906,6 +919,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     }
     if reversals:
         params["reversals"] = int(reversals)
+    if body:
+        params["laser"]["body"] = [[float(v) for v in b] for b in body]
     if scan_sweep:
         params["laser"]["sweep_s"] = float(scan_sweep)
     if mounted:
@@ -1166,6 +1181,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "radius), e.g. 0.15 0 0 ahead of the centre or -0.15 0 3.1416 at the back looking back: the "
                         "log carries the laser's pose beside the robot's (a bag: base_link -> laser on /tf_static), "
                         "truth.tum the robot's; default 0 0 0")
+    parser.add_argument("--body", nargs=3, type=float, action="append", default=None, metavar=("A0", "A1", "R"),
+                        help="the robot itself in the laser's view: the beams between A0 and A1 degrees (laser "
+                        "frame, 0 ahead, -180..180) read R m on every scan (a wheel, a bumper's corner, a mast's "
+                        "post); repeatable, e.g. --body -135 -120 0.25 --body 120 135 0.25; default none")
     noise = parser.add_argument_group(
         "noise", "the laser's and the odometry's (default: the values below, as suites/synthetic.yaml's worlds have)")
     noise.add_argument("--range-sigma", type=float, default=None, metavar="M",
@@ -1214,6 +1233,10 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
         except ValueError:
             raise ConfigError(f"--odom-alphas: expected four numbers A1,A2,A3,A4, got {args.odom_alphas!r}") from None
     noise = {k: v for k, v in noise.items() if v is not None}  # the options not given keep simulate()'s defaults
+    for a0, a1, r in getattr(args, "body", None) or []:
+        if not (-180.0 <= a0 < a1 <= 180.0 and 0.0 < r < args.range_max):
+            raise ConfigError(f"--body {a0:g} {a1:g} {r:g}: expected A0 A1 R with -180 <= A0 < A1 <= 180 degrees and "
+                              f"0 < R < the range maximum ({args.range_max:g} m)")
     return simulate(args.outdir, **noise, kind=args.kind, seed=args.seed, duration=args.duration,
                     range_max=args.range_max, n_beams=args.beams, fov=math.radians(args.fov), speed=args.speed,
                     kidnap_at=args.kidnap_at,
@@ -1223,7 +1246,8 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
                     scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
                     unknown_floor=args.unknown_floor,
-                    laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0))
+                    laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
+                    body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])])
 
 
 # What ``mcl simulate`` writes into its folder: an earlier world's are replaced whole, anything else is kept

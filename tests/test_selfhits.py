@@ -169,3 +169,57 @@ def test_a_bag_s_scans_are_looked_at_and_left_out_alike(tmp_path):
             echo=said.append)
     assert s["self_hits"]["beams"] == list(range(16)) and s["self_hits"]["of_beams"] == 181
     assert any(m.startswith(f"{tmp_path / 'demo.mcap'}: /scan: beams 0-15 of 181") for m in said), said
+
+
+def test_simulate_puts_the_robot_in_view_on_those_beams_only(tmp_path):
+    # mcl simulate's body: the beams between a0 and a1 read r (plus the laser's noise) on every scan; every other
+    # reading, the map, the truth and the odometry are those of the same world without it, byte for byte
+    from mcl.simulate import simulate
+
+    body = [[-math.pi / 2, -1.3, 0.22], [2.0, 2.5, 0.3]]  # the second lies past the laser's 180 degrees
+    simulate(tmp_path / "clear", seed=11, duration=20)
+    simulate(tmp_path / "body", seed=11, duration=20, body=body)
+    clear, with_body = read_carmen(tmp_path / "clear" / "log.clf"), read_carmen(tmp_path / "body" / "log.clf")
+    a = np.array([s.ranges for s in clear.scans])
+    b = np.array([s.ranges for s in with_body.scans])
+    angles = clear.scans[0].angles
+    sector = (angles >= -math.pi / 2) & (angles <= -1.3)
+    assert sector.sum() == 16  # -90..-75 degrees, 1 degree apart
+    assert np.array_equal(a[:, ~sector], b[:, ~sector])
+    # the laser's noise (2 cm) on the body's 0.22 m, except its 3 % short and 1 % no-return readings
+    near = np.abs(b[:, sector] - 0.22) < 0.08
+    assert 0.9 < near.mean() < 1.0
+    for f in ("map.pgm", "truth.tum"):
+        assert (tmp_path / "clear" / f).read_bytes() == (tmp_path / "body" / f).read_bytes()
+    import yaml
+
+    assert yaml.safe_load((tmp_path / "body" / "sim.yaml").read_text())["laser"]["body"] == body
+    assert "body" not in yaml.safe_load((tmp_path / "clear" / "sim.yaml").read_text())["laser"]
+    hits = detect_self_hits(with_body.scans, 0.0, 80.0)
+    assert hits is not None and hits.beams.tolist() == np.flatnonzero(sector).tolist()
+
+
+@pytest.mark.parametrize("body", [[[0.5, 0.2, 0.3]], [[-4.0, 0.0, 0.3]], [[0.0, 0.1, 0.0]], [[0.0, 0.1, 50.0]],
+                                  [[0.0, 0.1]], [[0.0, float("nan"), 0.3]]])
+def test_a_bad_body_is_refused_naming_the_keyword(tmp_path, body):
+    from mcl.errors import ConfigError
+    from mcl.simulate import simulate
+
+    with pytest.raises(ConfigError, match="body"):
+        simulate(tmp_path / "w", seed=1, duration=5, body=body)
+    assert not (tmp_path / "w").exists()
+
+
+def test_mcl_simulate_body_takes_degrees_and_says_what_is_wrong_in_them(tmp_path, capsys):
+    from mcl.cli import main
+
+    assert main(["simulate", str(tmp_path / "bad"), "--duration", "5", "--body", "-90", "-95", "0.22"]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        "mcl: error: --body -90 -95 0.22: expected A0 A1 R with -180 <= A0 < A1 <= 180 degrees and 0 < R < the range "
+        "maximum (12 m)")
+    assert not (tmp_path / "bad").exists()
+    assert main(["simulate", str(tmp_path / "w"), "--duration", "5", "--body", "-90", "-80", "0.22"]) == 0
+    import yaml
+
+    assert np.allclose(yaml.safe_load((tmp_path / "w" / "sim.yaml").read_text())["laser"]["body"],
+                       [[-math.pi / 2, math.radians(-80), 0.22]])
