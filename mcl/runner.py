@@ -414,11 +414,20 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
 
 def _skip_self_hits(scans, log, sensor, echo):
     """``scans`` with the beams that read the robot itself left out (``mcl.datasets.selfhits``), said in one note;
-    as they are when there are none. The scans returned carry the finding as ``self_hits`` (for summary.json)."""
-    from mcl.datasets.selfhits import detect_self_hits, without_self_hits
+    as they are when there are none (with a warning when the robot turned too little to tell, but some beams look
+    like it). The scans returned carry the finding as ``self_hits`` (for summary.json)."""
+    from mcl.datasets.selfhits import beam_constancy, self_hits_of, unconfirmed_self_hits, without_self_hits
 
-    hits = detect_self_hits(scans, sensor.range_min, sensor.range_max)
+    c = beam_constancy(scans, sensor.range_min, sensor.range_max)
+    hits = self_hits_of(c)
     if hits is None:
+        maybe = unconfirmed_self_hits(c)
+        if maybe is not None:
+            cut = float(maybe.ranges.max()) + 0.05
+            echo(f"mcl: warning: {log.path}: {next(iter(scans)).kind}: {maybe.describe()}, but the robot turned too "
+                 f"little ({c.turns} turns of 0.5 rad in the first {c.scans:,} scans; 20 needed) to tell the robot "
+                 f"itself from a wall beside it: scored. If it is the robot, --set sensor.range_min={cut:.2f} leaves "
+                 "them out")
         return scans
     kind = next(iter(scans)).kind  # FLASER, or a bag's scan topic
     echo(f"{log.path}: {kind}: {hits.describe()}: taken as the robot itself in the laser's view and left out "

@@ -223,3 +223,29 @@ def test_mcl_simulate_body_takes_degrees_and_says_what_is_wrong_in_them(tmp_path
 
     assert np.allclose(yaml.safe_load((tmp_path / "w" / "sim.yaml").read_text())["laser"]["body"],
                        [[-math.pi / 2, math.radians(-80), 0.22]])
+
+
+def test_a_robot_that_never_turns_gets_a_warning_not_a_mask():
+    # driving straight, the body and a wall beside the robot read alike: no verdict, but beams under 0.5 m read on
+    # 90 % of the scans are named in a warning with the range_min that would drop them; the walls (0.8 m) are not
+    from types import SimpleNamespace
+
+    from mcl.config import load_config as load
+    from mcl.datasets.selfhits import beam_constancy, unconfirmed_self_hits
+    from mcl.runner import _skip_self_hits
+
+    straight = _corridor(turns=False, body=True)
+    maybe = unconfirmed_self_hits(beam_constancy(straight, 0.0, 80.0))
+    assert maybe is not None and maybe.beams.tolist() == [0, 1, 2, 3, 4]
+    assert unconfirmed_self_hits(beam_constancy(_corridor(turns=False, body=False), 0.0, 80.0)) is None
+    assert unconfirmed_self_hits(beam_constancy(_corridor(turns=True, body=True), 0.0, 80.0)) is None  # a verdict
+    said = []
+    sensor = load(None, []).sensor
+    out = _skip_self_hits(straight, SimpleNamespace(path="w.clf"), sensor, said.append)
+    assert out is straight and len(said) == 1
+    assert said[0].startswith("mcl: warning: w.clf: FLASER: beams 0-4 of 181 (-90.0..-86.0 degrees) read 0.25 m on ")
+    assert "turned too little (0 turns of 0.5 rad in the first 400 scans; 20 needed)" in said[0]
+    assert said[0].endswith("--set sensor.range_min=0.30 leaves them out")
+    said.clear()
+    found = _skip_self_hits(_corridor(turns=True, body=True), SimpleNamespace(path="w.clf"), sensor, said.append)
+    assert found.self_hits.beams.tolist() == [0, 1, 2, 3, 4] and "taken as the robot itself" in said[0]

@@ -21,7 +21,9 @@ tell a wall from the robot: the turns do. So, from the scans of one geometry (be
    alike) on at least ``min_share`` of the kept scans *and* at both ends of at least
    ``min_turned`` of the turning pairs;
 4. no verdict (None) without ``min_scans`` kept scans and ``min_turns`` turning pairs, or when the rule would take
-   half the beams or more (a robot parked in a tight spot, not a body).
+   half the beams or more (a robot parked in a tight spot, not a body). A robot that moved but turned too little
+   gets a warning instead when beams read one range under 0.5 m on 90 % of the scans
+   (``unconfirmed_self_hits``): they are left in, and ``sensor.range_min`` can drop them.
 
 Measured (2026-12-01) on 134 logs without a body: the eight shared logs (no beam's median under ``reach``) and 126
 generated worlds (``suites/synthetic.yaml``'s with the laser 0.15 m ahead, ``suites/laser-mount.yaml``'s, the smoke
@@ -42,7 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BeamConstancy", "SelfHits", "beam_constancy", "detect_self_hits", "without_self_hits"]
+__all__ = ["BeamConstancy", "SelfHits", "beam_constancy", "detect_self_hits", "self_hits_of", "unconfirmed_self_hits",
+           "without_self_hits"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,8 +89,9 @@ class SelfHits:
         lo, hi = float(self.ranges.min()), float(self.ranges.max())
         at = f"{lo:.2f} m" if hi - lo < 0.005 else f"{lo:.2f}-{hi:.2f} m"
         word = "beam" if self.beams.size == 1 else "beams"
+        turns = f", also across {self.turns:,} turns" if self.turns >= MIN_TURNS else ""
         return (f"{word} {idx} of {self.n} ({ang} degrees) read {at} on {100.0 * self.share:.0f} % of {self.scans:,} "
-                f"scans or more, also across {self.turns:,} turns")
+                f"scans or more{turns}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,14 +164,37 @@ def beam_constancy(scans, range_min: float, range_max: float, *, step: float = 0
                          turns=int(a.size))
 
 
+MIN_SCANS, MIN_TURNS = 50, 20  # kept scans and turning pairs a verdict needs (step 4)
+
+
 def detect_self_hits(scans, range_min: float, range_max: float, *, reach: float = 1.0, min_share: float = 0.5,
-                     min_turned: float = 0.8, min_scans: int = 50, min_turns: int = 20, **kw) -> SelfHits | None:
+                     min_turned: float = 0.8, min_scans: int = MIN_SCANS, min_turns: int = MIN_TURNS,
+                     **kw) -> SelfHits | None:
     """The beams that read the robot itself in ``scans``, or None (the module docstring's rule; ``kw`` goes to
     ``beam_constancy``)."""
-    c = beam_constancy(scans, range_min, range_max, **kw)
+    return self_hits_of(beam_constancy(scans, range_min, range_max, **kw), reach=reach, min_share=min_share,
+                        min_turned=min_turned, min_scans=min_scans, min_turns=min_turns)
+
+
+def self_hits_of(c: BeamConstancy | None, *, reach: float = 1.0, min_share: float = 0.5, min_turned: float = 0.8,
+                 min_scans: int = MIN_SCANS, min_turns: int = MIN_TURNS) -> SelfHits | None:
+    """Steps 3 and 4 of the rule on ``beam_constancy``'s figures."""
     if c is None or c.scans < min_scans or c.turns < min_turns:
         return None
-    body = (c.median <= reach) & (c.share >= min_share) & (c.turned >= min_turned)
+    return _hits(c, (c.median <= reach) & (c.share >= min_share) & (c.turned >= min_turned))
+
+
+def unconfirmed_self_hits(c: BeamConstancy | None, *, reach: float = 0.5, min_share: float = 0.9,
+                          min_scans: int = MIN_SCANS, min_turns: int = MIN_TURNS) -> SelfHits | None:
+    """When the robot moved (``min_scans``) but turned too little for a verdict (under ``min_turns`` pairs): the
+    beams that look like the robot itself all the same, a median under ``reach`` m read on ``min_share`` of the
+    scans, or None. Left in (a wall beside a robot driving straight reads as steadily), but worth a warning."""
+    if c is None or c.scans < min_scans or c.turns >= min_turns:
+        return None
+    return _hits(c, (c.median <= reach) & (c.share >= min_share))
+
+
+def _hits(c: BeamConstancy, body: np.ndarray) -> SelfHits | None:
     if not body.any() or 2 * int(body.sum()) >= body.size:
         return None
     beams = np.flatnonzero(body)
