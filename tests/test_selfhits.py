@@ -249,3 +249,18 @@ def test_a_robot_that_never_turns_gets_a_warning_not_a_mask():
     said.clear()
     found = _skip_self_hits(_corridor(turns=True, body=True), SimpleNamespace(path="w.clf"), sensor, said.append)
     assert found.self_hits.beams.tolist() == [0, 1, 2, 3, 4] and "taken as the robot itself" in said[0]
+
+
+def test_only_the_first_scans_are_read_however_long_the_robot_stands_still():
+    # a bag's scans are read once more for the rule: a robot parked for an hour must not cost a second full read
+    from mcl.datasets.selfhits import beam_constancy
+
+    read = []
+
+    def stream():
+        for s in _corridor(turns=True, body=True):
+            read.append(s)
+            yield s
+
+    c = beam_constancy(stream(), 0.0, 80.0, max_read=100)
+    assert len(read) == 100 and c.scans == 100

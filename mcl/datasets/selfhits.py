@@ -12,7 +12,7 @@ robot driving straight down a corridor sees its side walls at one range on every
 tell a wall from the robot: the turns do. So, from the scans of one geometry (beam count and angles):
 
 1. keep a scan each time the odometry has moved ``step`` m or turned ``step`` rad since the last one kept (a robot
-   standing still says nothing), up to ``max_scans``;
+   standing still says nothing), up to ``max_scans``, among the first ``max_read`` scans;
 2. *turning pairs*: each kept scan with the first later one whose heading differs by ``turn`` rad or more, the
    robot having driven at most ``turn_travel`` m in between (a turn, not a loop around the building);
 3. a beam is the robot's when its median reading ``m`` is at most ``reach`` m and it reads within
@@ -39,6 +39,7 @@ other two, a corridor world's, turn 0 and 14 times: no verdict).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -108,8 +109,8 @@ class BeamConstancy:
 
 
 def beam_constancy(scans, range_min: float, range_max: float, *, step: float = 0.05, max_scans: int = 1500,
-                   turn: float = 0.5, turn_travel: float = 1.0, tol: float = 0.03, tol_max: float = 0.1,
-                   tol_sigmas: float = 3.0) -> BeamConstancy | None:
+                   max_read: int = 20_000, turn: float = 0.5, turn_travel: float = 1.0, tol: float = 0.03,
+                   tol_max: float = 0.1, tol_sigmas: float = 3.0) -> BeamConstancy | None:
     """Steps 1 and 2 of the module docstring's rule and each beam's shares, from ``scans`` (an iterable of
     ``Scan``: ranges, angle_min, angle_increment, max_range, odom); None without a scan that has odometry. A reading
     counts when it is finite and range_min < r < the no-return range (``range_max``, or the scan's own max_range
@@ -117,7 +118,7 @@ def beam_constancy(scans, range_min: float, range_max: float, *, step: float = 0
     from mcl.sensors import no_return_range
 
     first, rows, poses, last = None, [], [], None
-    for s in scans:
+    for s in itertools.islice(scans, max_read):  # a bag's scans are read again: a robot parked for an hour, not all
         if s.odom is None:
             continue
         if first is None:
