@@ -144,7 +144,8 @@ _BY_KEY = {p.key: p for p in PARAMS}
 class Source:
     """The AMCL parameters found in a file: ``params`` by their names there, flat (nav2's nested ``initial_pose:
     {x: ...}`` as ``initial_pose.x``), ``flavour`` ROS1 or NAV2, ``where`` what held them, ``remaps`` a launch
-    node's topic remappings (from -> to), ``warnings`` what could not be read."""
+    node's topic remappings (from -> to, each ``to`` resolved: absolute, or in ``ns``), ``ns`` the launch node's
+    namespace ("" for the root; its ``<group ns=>`` and ``<node ns=>``), ``warnings`` what could not be read."""
 
     path: Path
     flavour: str
@@ -152,6 +153,7 @@ class Source:
     where: str
     remaps: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    ns: str = ""
 
 
 def _flatten(d: dict, prefix: str = "") -> dict:
@@ -308,12 +310,31 @@ def _from_launch(path: Path, text: str) -> Source:
     # group only), and an <arg>, <group> or <node> whose if= / unless= is false skipped with all it holds (nested
     # groups too): an amcl node in a group whose condition is false is not launched. Only the conditions that can
     # matter are evaluated (another node's, or a group's without an amcl node, would only add warnings).
-    nodes: list[tuple] = []  # (amcl node launched, the args in scope there)
+    nodes: list[tuple] = []  # (amcl node launched, the args, the remaps and the namespace in scope there)
     not_launched = 0
 
-    def walk(parent, args: dict) -> None:
+    def remap_of(el, args: dict, ns: str) -> tuple[str, str] | None:
+        """A <remap> of the scan or map topic as (from, to resolved in ``ns``), else None."""
+        frm = el.get("from", "")
+        if frm.strip("/") not in ("scan", "map") or not el.get("to"):
+            return None
+        to = subst(el.get("to"), "<remap>", args)
+        return None if to is None else (frm.strip("/"), _resolve(to, ns))
+
+    def inner(el, args: dict, ns: str) -> str:
+        """The namespace inside ``el`` (a <group ns=> or <node ns=>, resolved in ``ns``)."""
+        raw = el.get("ns")
+        value = None if raw is None else subst(raw, f"<{el.tag} ns=>", args)
+        return ns if value is None else _resolve(value, ns)
+
+    def walk(parent, args: dict, remaps: dict, ns: str) -> None:
         nonlocal not_launched
         for el in parent:
+            if el.tag == "remap":  # roslaunch: applies to the nodes after it in its scope (the file, a group)
+                r = None if skipped(el, args) else remap_of(el, args, ns)
+                if r is not None:
+                    remaps[r[0]] = r[1]
+                continue
             if el.tag not in ("arg", "group", "node"):
                 continue
             if el.tag != "arg" and not any(n.get("pkg") in _AMCL_PKGS for n in el.iter("node")):
@@ -325,11 +346,11 @@ def _from_launch(path: Path, text: str) -> Source:
                 if value is not None:
                     args.setdefault(el.get("name"), value)
             elif el.tag == "group":
-                walk(el, dict(args))
+                walk(el, dict(args), dict(remaps), inner(el, args, ns))
             elif el.tag == "node" and el.get("pkg") in _AMCL_PKGS:
-                nodes.append((el, dict(args)))
+                nodes.append((el, dict(args), dict(remaps), inner(el, args, ns)))
 
-    walk(root, {})
+    walk(root, {}, {}, "")
     if not nodes:
         includes = [i.get("file", "") for i in root.iter("include")]
         extra = (f"; it includes {', '.join(includes)}: give the included file" if includes else "")
@@ -338,12 +359,11 @@ def _from_launch(path: Path, text: str) -> Source:
                            f"node{'s' if not_launched > 1 else ''} under an if= / unless= that is false (on the node or "
                            f"a <group> around it){extra}")
         raise MclError(f"{path}: no <node pkg=\"amcl\"> in this launch file{extra}")
-    node, args = nodes[0]
+    node, args, remaps, ns = nodes[0]
     if len(nodes) > 1:
         warnings.append(f"{len(nodes)} amcl nodes launched: the first ({node.get('name', 'amcl')}) is read")
     flavour = ROS1 if node.get("pkg") == "amcl" else NAV2
     params: dict = {}
-    remaps: dict = {}
 
     for el in node:
         if skipped(el, args):
@@ -379,11 +399,20 @@ def _from_launch(path: Path, text: str) -> Source:
                 loaded = {el.get("param"): loaded}
             if isinstance(loaded, dict):
                 params.update(_flatten(loaded))
-        elif el.tag == "remap" and el.get("from", "").strip("/") in ("scan", "map") and el.get("to"):
-            to = subst(el.get("to"), "<remap>", args)
-            if to is not None:
-                remaps[el.get("from").strip("/")] = to
-    return Source(path, flavour, params, f"<node name=\"{node.get('name', 'amcl')}\">", remaps, warnings)
+        elif el.tag == "remap":  # the node's own: over its scope's
+            r = remap_of(el, args, ns)
+            if r is not None:
+                remaps[r[0]] = r[1]
+    return Source(path, flavour, params, f"<node name=\"{node.get('name', 'amcl')}\">", remaps, warnings, ns.strip("/"))
+
+
+def _resolve(name: str, ns: str) -> str:
+    """A ROS name resolved in namespace ``ns`` (roslaunch's: absolute names stay, relative ones go under ``ns``;
+    ``~private`` names are not topics here and are left as they are)."""
+    name = name.strip()
+    if name.startswith("/") or name.startswith("~") or not ns.strip("/"):
+        return name
+    return "/" + "/".join(p for p in (*ns.strip("/").split("/"), name) if p)
 
 
 class _LastWins(SAFE_LOADER):
@@ -811,17 +840,16 @@ class _Converter:
         for key, mcl_key in (("odom_frame_id", "frames.odom"), ("base_frame_id", "frames.base")):
             if self.given(key):
                 self.set(mcl_key, str(self.get(key)).lstrip("/"), self.said(key), key)
+        ns = self.src.ns
         topics = []
-        if self.given("scan_topic"):
-            topics.append(("topics.scan", self.get("scan_topic"), self.said("scan_topic"), "scan_topic"))
-        elif "scan" in self.src.remaps:
-            topics.append(("topics.scan", self.src.remaps["scan"], f"<remap from=scan to={self.src.remaps['scan']}>",
-                           None))
-        if self.given("map_topic"):
-            topics.append(("topics.map", self.get("map_topic"), self.said("map_topic"), "map_topic"))
-        elif "map" in self.src.remaps:
-            topics.append(("topics.map", self.src.remaps["map"], f"<remap from=map to={self.src.remaps['map']}>",
-                           None))
+        for topic, key in (("scan", "scan_topic"), ("map", "map_topic")):
+            if self.given(key):
+                topics.append((f"topics.{topic}", _resolve(str(self.get(key)), ns), self.said(key), key))
+            elif topic in self.src.remaps:
+                to = self.src.remaps[topic]
+                topics.append((f"topics.{topic}", to, f"<remap from={topic}>" + (f" in /{ns}" if ns else ""), None))
+            elif ns:
+                topics.append((f"topics.{topic}", _resolve(topic, ns), f"the node's namespace /{ns}", None))
         for mcl_key, topic, said, key in topics:
             name = topic if topic.startswith("/") else "/" + topic
             rel = " (relative: in the root namespace)" if name != topic else ""

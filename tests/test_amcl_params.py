@@ -527,3 +527,42 @@ def test_nested_groups_and_a_nodes_own_condition_decide_whether_it_is_launched(t
     line = _one_error(capsys)
     assert line.startswith(f"mcl: error: {none}: no <node pkg=\"amcl\"> is launched with the args' defaults: 2 amcl "
                            "nodes under an if= / unless= that is false"), line
+
+
+def test_remaps_in_a_group_or_the_file_reach_the_nodes_after_them_and_a_nodes_own_win(tmp_path):
+    # roslaunch applies a <remap> to the nodes declared after it in its scope (the file, a <group>); the node's own
+    # remap comes last. Only the node's were read, so a robot's launch file that remaps scan for a whole group
+    # gave no topics.scan
+    def keys(body: str) -> dict:
+        return convert(_write(tmp_path, "amcl.launch", f"<launch>\n{body}\n</launch>\n")).keys
+
+    node = '<node pkg="amcl" type="amcl" name="amcl"><param name="min_particles" value="300"/></node>'
+    assert keys(f'<remap from="scan" to="base_scan"/>\n{node}')["topics.scan"] == "/base_scan"
+    assert "topics.scan" not in keys(f'{node}\n<remap from="scan" to="base_scan"/>')  # after the node: not its
+    assert keys(f'<group><remap from="scan" to="front_scan"/>{node}</group>')["topics.scan"] == "/front_scan"
+    sibling = f'<group><remap from="scan" to="other"/></group>\n<group>{node}</group>'
+    assert "topics.scan" not in keys(sibling)  # a sibling group's remap stays in it
+    own = ('<remap from="scan" to="base_scan"/>\n<node pkg="amcl" type="amcl" name="amcl">'
+           '<remap from="scan" to="laser/scan"/><param name="min_particles" value="300"/></node>')
+    assert keys(own)["topics.scan"] == "/laser/scan"
+    assert "topics.scan" not in keys(f'<arg name="x" default="false"/><remap from="scan" to="a" if="$(arg x)"/>{node}')
+    k = keys(f'<remap from="map" to="/static_map"/><remap from="scan" to="/robot/scan"/>{node}')
+    assert k["topics.map"] == "/static_map" and k["topics.scan"] == "/robot/scan"
+
+
+def test_a_namespaced_group_puts_the_nodes_topics_in_its_namespace(tmp_path):
+    # <group ns="robot1"> (a multi-robot launch): AMCL there reads /robot1/scan and /robot1/map; a relative remap
+    # resolves in the namespace, an absolute one stays
+    def keys(body: str) -> dict:
+        return convert(_write(tmp_path, "amcl.launch", f"<launch>\n{body}\n</launch>\n")).keys
+
+    node = '<node pkg="amcl" type="amcl" name="amcl"><param name="min_particles" value="300"/></node>'
+    k = keys(f'<arg name="robot" default="robot1"/><group ns="$(arg robot)">{node}</group>')
+    assert k["topics.scan"] == "/robot1/scan" and k["topics.map"] == "/robot1/map"
+    k = keys(f'<group ns="fleet"><group ns="r2"><remap from="scan" to="base_scan"/>'
+             f'<node pkg="amcl" type="amcl" name="amcl"><remap from="map" to="/map"/><param name="min_particles" value="300"/>'
+             '</node></group></group>')
+    assert k["topics.scan"] == "/fleet/r2/base_scan" and k["topics.map"] == "/map"
+    k = keys('<node pkg="amcl" type="amcl" name="amcl" ns="/r3"><param name="min_particles" value="300"/></node>')
+    assert k["topics.scan"] == "/r3/scan" and k["topics.map"] == "/r3/map"
+    assert "topics.scan" not in keys(node)  # the root namespace: mcl's own choice (/scan, else the only one)
