@@ -403,7 +403,8 @@ def _from_launch(path: Path, text: str) -> Source:
             r = remap_of(el, args, ns)
             if r is not None:
                 remaps[r[0]] = r[1]
-    return Source(path, flavour, params, f"<node name=\"{node.get('name', 'amcl')}\">", remaps, warnings, ns.strip("/"))
+    return Source(path, flavour, params, f"<node name=\"{node.get('name', 'amcl')}\">", remaps, warnings,
+                  ns.strip("/"))
 
 
 def _resolve(name: str, ns: str) -> str:

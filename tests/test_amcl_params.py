@@ -559,9 +559,9 @@ def test_a_namespaced_group_puts_the_nodes_topics_in_its_namespace(tmp_path):
     node = '<node pkg="amcl" type="amcl" name="amcl"><param name="min_particles" value="300"/></node>'
     k = keys(f'<arg name="robot" default="robot1"/><group ns="$(arg robot)">{node}</group>')
     assert k["topics.scan"] == "/robot1/scan" and k["topics.map"] == "/robot1/map"
-    k = keys(f'<group ns="fleet"><group ns="r2"><remap from="scan" to="base_scan"/>'
-             f'<node pkg="amcl" type="amcl" name="amcl"><remap from="map" to="/map"/><param name="min_particles" value="300"/>'
-             '</node></group></group>')
+    k = keys('<group ns="fleet"><group ns="r2"><remap from="scan" to="base_scan"/>'
+             '<node pkg="amcl" type="amcl" name="amcl"><remap from="map" to="/map"/>'
+             '<param name="min_particles" value="300"/></node></group></group>')
     assert k["topics.scan"] == "/fleet/r2/base_scan" and k["topics.map"] == "/map"
     k = keys('<node pkg="amcl" type="amcl" name="amcl" ns="/r3"><param name="min_particles" value="300"/></node>')
     assert k["topics.scan"] == "/r3/scan" and k["topics.map"] == "/r3/map"
