@@ -389,6 +389,8 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
     scans = deskew(scans, log, cfg.sensor.sweep_time, echo, timed=cfg.bag is not None)
     if cfg.sensor.use and cfg.sensor.self_hit_skip:
         scans = _skip_self_hits(scans, log, cfg.sensor, echo)
+    if cfg.sensor.use and len(scans) and not str(getattr(log, "odom_source", "")).startswith("laser odometry"):
+        log.odometry_check = _check_odometry(scans, log, cfg.sensor, echo)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
         if not truth.t.size:
@@ -435,6 +437,31 @@ def _skip_self_hits(scans, log, sensor, echo):
     out = ScanMap(scans, functools.partial(without_self_hits, hits=hits))
     out.self_hits = hits
     return out
+
+
+def _check_odometry(scans, log, sensor, echo):
+    """``mcl.odomcheck.check_odometry`` on the run's scans, the laser where the run puts it (``sensor.laser_pose``,
+    else the log's mounting); a warning when the scans point to reversed turns or a laser turned from its
+    mounting. Returns the check (for summary.json)."""
+    from mcl.odomcheck import check_odometry
+
+    first = next(iter(scans))
+    mount = sensor.laser_pose if sensor.laser_pose is not None else getattr(first, "laser_offset", None)
+    mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
+    check = check_odometry(scans, mount)
+    if check.verdict == "reversed":
+        echo(f"mcl: warning: {log.path}: {check.describe()}: the odometry turns the other way from the scans (a "
+             "left-handed odometry frame, or a laser mounted upside down without its mounting saying so), and the "
+             "filter will be lost at every turn; check the odometry's sign or the laser's mounting")
+    elif check.verdict is not None:
+        from mcl.odomcheck import YAW
+
+        where = "sensor.laser_pose" if sensor.laser_pose is not None else "the log's mounting"
+        x, y, th = (round(float(v), 4) + 0.0 for v in compose(mount, np.array([0.0, 0.0, YAW[check.verdict]])))
+        echo(f"mcl: warning: {log.path}: {check.describe()}: the laser seems to look another way than {where} "
+             f"says ({math.degrees(mount[2]):.0f} degrees), and the filter will be lost as soon as the robot moves; "
+             f"if so, --set \"sensor.laser_pose=[{x:g}, {y:g}, {round(wrap_angle(th), 4) + 0.0:g}]\" mounts it there")
+    return check
 
 
 def _check_truth_motion(log, truth, name: str, echo) -> None:
@@ -1037,6 +1064,7 @@ def _run(
         **({"sweep_order": pf.sweep_order.summary()}
            if pf.sweep_order is not None and pf.sweep_order.scans else {}),
         **({"self_hits": scans.self_hits.summary()} if getattr(scans, "self_hits", None) is not None else {}),
+        **({"odometry_check": log.odometry_check.summary()} if getattr(log, "odometry_check", None) else {}),
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / max(n_moved, 1),  # over the updates that predicted: at least 1 when any did
         "rejected_particles": counts["rejected"],
