@@ -275,6 +275,9 @@ class SensorConfig:
     # leave out the beams that read the robot itself (a wheel, a mast: the same short range on every scan, also while
     # the robot turns), found in the log before the run (mcl.datasets.selfhits) and said in a note
     self_hit_skip: bool = True
+    # the laser is mounted upside down and the log or the bag's /tf does not say so: every scan is read mirrored (a
+    # beam at angle a points at -a); mcl.odomcheck's warning of reversed turns is the sign
+    upside_down: bool = False
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

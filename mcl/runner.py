@@ -386,6 +386,13 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
     for note in (*log.notes, *grid.notes):
         echo(note)
     scans = _retime(scans, log, cfg.sensor.time_offset, echo)
+    if cfg.sensor.use and cfg.sensor.upside_down and len(scans):
+        from mcl.datasets import mirrored_scan
+
+        again = sorted(getattr(getattr(log, "scans", None), "mirrored", ()))
+        echo(f"{log.path}: sensor.upside_down: every scan read mirrored (the laser mounted upside down)"
+             + (f"; the bag's /tf already mounts {', '.join(again)} so: mirrored back" if again else ""))
+        scans = ScanMap(scans, mirrored_scan)
     scans = deskew(scans, log, cfg.sensor.sweep_time, echo, timed=cfg.bag is not None)
     if cfg.sensor.use and cfg.sensor.self_hit_skip:
         scans = _skip_self_hits(scans, log, cfg.sensor, echo)
@@ -452,7 +459,9 @@ def _check_odometry(scans, log, sensor, echo):
     if check.verdict == "reversed":
         echo(f"mcl: warning: {log.path}: {check.describe()}: the odometry turns the other way from the scans (a "
              "left-handed odometry frame, or a laser mounted upside down without its mounting saying so), and the "
-             "filter will be lost at every turn; check the odometry's sign or the laser's mounting")
+             "filter will be lost at every turn; check the odometry's sign, or give --set sensor.upside_down="
+             f"{'false' if sensor.upside_down else 'true'} if the laser is "
+             f"{'upright' if sensor.upside_down else 'upside down'}")
     elif check.verdict is not None:
         from mcl.odomcheck import YAW
 

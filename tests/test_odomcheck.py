@@ -91,3 +91,56 @@ def test_a_run_says_so_in_one_warning_and_in_summary_json(tmp_path):
             echo=said.append)
     assert not [m for m in said if "odometry's motion" in m] and s["odometry_check"]["verdict"] is None, said
     assert s["odometry_check"]["pairs"] == 60
+
+
+def _upside_down_log(tmp_path) -> Path:
+    """The demo's log as an upside-down laser would have written it, its mounting not saying so: every FLASER line's
+    readings in reverse order."""
+    out = tmp_path / "log.clf"
+    with open(DEMO / "log.clf") as fi, open(out, "w") as fo:
+        for line in fi:
+            if line.startswith("FLASER "):
+                p = line.split()
+                n = int(p[1])
+                p[2:2 + n] = p[2:2 + n][::-1]
+                line = " ".join(p) + "\n"
+            fo.write(line)
+    return out
+
+
+def test_an_upside_down_laser_is_named_and_sensor_upside_down_reads_it_back(tmp_path):
+    # read as upright, the mirrored scans fit the odometry best with its turns reversed: the warning suggests
+    # sensor.upside_down=true, which mirrors every scan back: no warning, and the run tracks as the demo does
+    log = _upside_down_log(tmp_path)
+    sets = [f"log={log}", "rerun.mode=off", "filter.initial_pose=[2.062007,10.160616,-0.218311]",
+            "filter.particles=2000", "filter.kld=false"]
+    said = []
+    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", sets), tmp_path / "as-read", progress=False,
+            echo=said.append)
+    warn = [m for m in said if "odometry's turns reversed" in m]
+    assert s["odometry_check"]["verdict"] == "reversed" and len(warn) == 1, said
+    assert warn[0].endswith("give --set sensor.upside_down=true if the laser is upside down"), warn[0]
+    said.clear()
+    back = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, "sensor.upside_down=true"]),
+               tmp_path / "back", progress=False, echo=said.append)
+    assert back["odometry_check"]["verdict"] is None
+    assert f"{log}: sensor.upside_down: every scan read mirrored (the laser mounted upside down)" in said
+    demo = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", sets[1:]), tmp_path / "demo", progress=False,
+               echo=lambda *_: None)
+    a = np.loadtxt(tmp_path / "back" / "trajectory.tum")
+    b = np.loadtxt(tmp_path / "demo" / "trajectory.tum")
+    assert a.shape == b.shape and np.allclose(a, b, atol=1e-6), np.abs(a - b).max()
+    assert demo["odometry_check"] == back["odometry_check"]
+
+
+def test_a_mirrored_scan_points_each_beam_the_other_way():
+    from mcl.datasets import mirrored_scan
+
+    s = read_carmen(DEMO / "log.clf").scans[0]
+    s = dataclasses.replace(s, angle_min=-1.0, angle_increment=0.01, beam_t0=0.0, beam_dt=1e-4)
+    m = mirrored_scan(s)
+    n = s.ranges.size
+    assert np.array_equal(m.ranges, s.ranges[::-1])
+    assert np.allclose(m.angles, -s.angles[::-1])  # beam k of m is beam n-1-k of s, seen from the other side
+    assert m.beam_t0 + m.beam_dt * np.arange(n) == pytest.approx((s.beam_t0 + s.beam_dt * np.arange(n))[::-1])
+    assert np.array_equal(mirrored_scan(m).ranges, s.ranges)

@@ -13,3 +13,17 @@ class ScanMap:
 
     def __iter__(self):
         return map(self.fn, self.scans)
+
+
+def mirrored_scan(s):
+    """Scan ``s`` as an upside-down laser's read upright: a beam at angle a points at -a, so its ranges reversed,
+    its angles from -angle_max up by the same increment, and its beam times (a sweep's) reversed with them."""
+    import dataclasses
+
+    import numpy as np
+
+    r = np.asarray(s.ranges)
+    n = r.shape[0]
+    last = s.angle_min + s.angle_increment * (n - 1)
+    return dataclasses.replace(s, ranges=r[::-1].copy(), angle_min=-last,
+                               beam_t0=s.beam_t0 + s.beam_dt * (n - 1), beam_dt=-s.beam_dt)
