@@ -94,13 +94,15 @@ def _score(tree: cKDTree, pts: np.ndarray, m: np.ndarray) -> float:
 def check_odometry(scans, mount=None, *, step: float = 0.2, max_move: float = 1.0, max_turn: float = 1.0,
                    pairs: int = 60, max_read: int = 20_000) -> OdometryCheck:
     """The check of the module docstring on ``scans`` (records with ranges, angles, max_range, odom, in time order;
-    one laser), the laser at ``mount`` (3,) on the robot (None: at its centre)."""
+    the first scan's laser only: another's, fused into the stream, has its own mounting), the laser at ``mount``
+    (3,) on the robot (None: at its centre)."""
     mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
     out = OdometryCheck(0)
-    anchor = None
+    anchor = kind = None
     for s in itertools.islice(scans, max_read):
-        if s.odom is None:
+        if s.odom is None or (kind is not None and getattr(s, "kind", None) != kind):
             continue
+        kind = getattr(s, "kind", None)
         if anchor is None:
             anchor = s
             continue

@@ -144,3 +144,15 @@ def test_a_mirrored_scan_points_each_beam_the_other_way():
     assert np.allclose(m.angles, -s.angles[::-1])  # beam k of m is beam n-1-k of s, seen from the other side
     assert m.beam_t0 + m.beam_dt * np.arange(n) == pytest.approx((s.beam_t0 + s.beam_dt * np.arange(n))[::-1])
     assert np.array_equal(mirrored_scan(m).ranges, s.ranges)
+
+
+def test_another_lasers_scans_fused_into_the_stream_are_left_out():
+    # a bag read with topics.scan: all fuses a rear laser's scans into the stream; laid onto the front laser's with
+    # the front's mounting they would be judged a half turn off. Only the first scan's laser (its kind) is looked at.
+    rng = np.random.default_rng(2)
+    front = read_carmen(DEMO / "log.clf").scans
+    # each rear scan between two front ones, at the next one's odometry pose (so that it can close a pair)
+    rear = [dataclasses.replace(s, kind="/scan_rear", ranges=rng.uniform(0.5, 5.0, s.ranges.size), odom=n.odom,
+                                laser_offset=np.array([-0.2, 0.0, math.pi])) for s, n in zip(front, front[1:])]
+    fused = [s for pair in zip(front, rear) for s in pair]
+    assert check_odometry(fused).summary() == check_odometry(front).summary()

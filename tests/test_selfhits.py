@@ -264,3 +264,17 @@ def test_only_the_first_scans_are_read_however_long_the_robot_stands_still():
 
     c = beam_constancy(stream(), 0.0, 80.0, max_read=100)
     assert len(read) == 100 and c.scans == 100
+
+
+def test_another_lasers_scans_are_neither_looked_at_nor_masked():
+    from mcl.datasets.selfhits import beam_constancy
+
+    rng = np.random.default_rng(4)
+    front = _with_body(read_carmen(DEMO / "log.clf").scans, [(0, 15, 0.22)])
+    rear = [dataclasses.replace(s, kind="/scan_rear", ranges=rng.uniform(0.2, 0.3, s.ranges.size)) for s in front]
+    fused = [s for pair in zip(front, rear) for s in pair]
+    a, b = beam_constancy(fused, 0.0, 80.0), beam_constancy(front, 0.0, 80.0)
+    assert a.scans == b.scans and np.array_equal(a.share, b.share) and np.array_equal(a.turned, b.turned)
+    hits = detect_self_hits(fused, 0.0, 80.0)
+    assert hits.beams.tolist() == list(range(16)) and hits.kind == "FLASER"
+    assert without_self_hits(rear[0], hits) is rear[0]

@@ -62,10 +62,11 @@ class SelfHits:
     share: float  # the least share of the kept scans on which one of the beams read its median
     scans: int  # kept scans looked at
     turns: int  # turning pairs among them
+    kind: str = ""  # the laser's: FLASER, a bag's scan topic
 
     def matches(self, scan) -> bool:
-        """Whether ``scan`` has this geometry (its beams are the same directions)."""
-        return _same_geometry(scan, self.n, self.angle_min, self.angle_increment)
+        """Whether ``scan`` is of this laser and geometry (its beams are the same directions)."""
+        return _same_geometry(scan, self.kind, self.n, self.angle_min, self.angle_increment)
 
     def summary(self) -> dict:
         """For summary.json: the beams (indices and angles in rad), their median readings, the evidence."""
@@ -103,7 +104,7 @@ class BeamConstancy:
     median: np.ndarray  # (n,) m; +inf for a beam with no reading that counts
     share: np.ndarray  # (n,) share of the kept scans reading within the tolerance of the median
     turned: np.ndarray  # (n,) share of the turning pairs reading so at both ends
-    geometry: tuple[int, float, float]  # n, angle_min, angle_increment
+    geometry: tuple[str, int, float, float]  # the laser (kind), n, angle_min, angle_increment
     scans: int
     turns: int
 
@@ -114,7 +115,8 @@ def beam_constancy(scans, range_min: float, range_max: float, *, step: float = 0
     """Steps 1 and 2 of the module docstring's rule and each beam's shares, from ``scans`` (an iterable of
     ``Scan``: ranges, angle_min, angle_increment, max_range, odom); None without a scan that has odometry. A reading
     counts when it is finite and range_min < r < the no-return range (``range_max``, or the scan's own max_range
-    when smaller). Only the scans with the first scan's geometry are looked at."""
+    when smaller). Only the scans of the first scan's laser (its ``kind``: a bag's topic) and geometry are looked
+    at."""
     from mcl.sensors import no_return_range
 
     first, rows, poses, last = None, [], [], None
@@ -122,7 +124,8 @@ def beam_constancy(scans, range_min: float, range_max: float, *, step: float = 0
         if s.odom is None:
             continue
         if first is None:
-            first = (np.asarray(s.ranges).shape[0], float(s.angle_min), float(s.angle_increment))
+            first = (getattr(s, "kind", ""), np.asarray(s.ranges).shape[0], float(s.angle_min),
+                     float(s.angle_increment))
         elif not _same_geometry(s, *first):
             continue
         o = np.asarray(s.odom, dtype=np.float64)
@@ -199,10 +202,10 @@ def _hits(c: BeamConstancy, body: np.ndarray) -> SelfHits | None:
     if not body.any() or 2 * int(body.sum()) >= body.size:
         return None
     beams = np.flatnonzero(body)
-    n, angle_min, angle_increment = c.geometry
+    kind, n, angle_min, angle_increment = c.geometry
     return SelfHits(beams=beams, ranges=c.median[beams].astype(np.float64), n=n, angle_min=angle_min,
                     angle_increment=angle_increment, share=float(c.share[beams].min()), scans=c.scans,
-                    turns=c.turns)
+                    turns=c.turns, kind=kind)
 
 
 def _nanmedian(ranges: np.ndarray) -> np.ndarray:
@@ -213,9 +216,9 @@ def _nanmedian(ranges: np.ndarray) -> np.ndarray:
     return out
 
 
-def _same_geometry(s, n: int, angle_min: float, angle_increment: float) -> bool:
-    """Whether scan ``s`` has ``n`` beams from ``angle_min`` by ``angle_increment``."""
-    return (np.asarray(s.ranges).shape[0] == n and math.isclose(s.angle_min, angle_min, abs_tol=1e-6)
+def _same_geometry(s, kind: str, n: int, angle_min: float, angle_increment: float) -> bool:
+    """Whether scan ``s`` is of laser ``kind`` with ``n`` beams from ``angle_min`` by ``angle_increment``."""
+    return (getattr(s, "kind", "") == kind and np.asarray(s.ranges).shape[0] == n and math.isclose(s.angle_min, angle_min, abs_tol=1e-6)
             and math.isclose(s.angle_increment, angle_increment, rel_tol=1e-6, abs_tol=1e-9))
 
 
