@@ -433,13 +433,12 @@ def _skip_self_hits(scans, log, sensor, echo):
         maybe = unconfirmed_self_hits(c)
         if maybe is not None:
             cut = float(maybe.ranges.max()) + 0.05
-            echo(f"mcl: warning: {log.path}: {next(iter(scans)).kind}: {maybe.describe()}, but the robot turned too "
+            echo(f"mcl: warning: {log.path}: {maybe.kind}: {maybe.describe()}, but the robot turned too "
                  f"little ({c.turns} turns of 0.5 rad in the first {c.scans:,} scans; 20 needed) to tell the robot "
                  f"itself from a wall beside it: scored. If it is the robot, --set sensor.range_min={cut:.2f} leaves "
                  "them out")
         return scans
-    kind = next(iter(scans)).kind  # FLASER, or a bag's scan topic
-    echo(f"{log.path}: {kind}: {hits.describe()}: taken as the robot itself in the laser's view and left out "
+    echo(f"{log.path}: {hits.kind}: {hits.describe()}: taken as the robot itself in the laser's view and left out "
          "(sensor.self_hit_skip: false keeps them)")
     out = ScanMap(scans, functools.partial(without_self_hits, hits=hits))
     out.self_hits = hits
