@@ -446,7 +446,7 @@ def cmd_bag_info(args) -> int:
     from mcl.datasets.rosbag import bag_info, format_info
 
     cfg = _bag_config(args)
-    info = bag_info(args.bag, cfg.topics, cfg.frames)
+    info = bag_info(args.bag, cfg.topics, cfg.frames, cfg.sensor)
     print(json.dumps(info, indent=2) if args.json else format_info(info))
     return 0
 

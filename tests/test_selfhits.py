@@ -169,6 +169,13 @@ def test_a_bag_s_scans_are_looked_at_and_left_out_alike(tmp_path):
             echo=said.append)
     assert s["self_hits"]["beams"] == list(range(16)) and s["self_hits"]["of_beams"] == 181
     assert any(m.startswith(f"{tmp_path / 'demo.mcap'}: /scan: beams 0-15 of 181") for m in said), said
+    # mcl bag info says both checks' findings before any run
+    from mcl.datasets.rosbag import bag_info, format_info
+
+    text = format_info(bag_info(tmp_path / "demo.mcap"))
+    assert "\n  robot itself: /scan: beams 0-15 of 181 (-90.0..-75.0 degrees) read 0.2" in text, text
+    assert "left out (sensor.self_hit_skip)" in text
+    assert "\n  odometry check: the scans fit the odometry as recorded (" in text, text
 
 
 def test_simulate_puts_the_robot_in_view_on_those_beams_only(tmp_path):

@@ -1196,8 +1196,11 @@ def _scan_odometry(path, scans: "BagScans", topic: str, mount, warnings: list, c
 # ----------------------------------------------------------------------------- mcl bag info
 
 
-def bag_info(path, topics=None, frames=None) -> dict:
-    """Topics (type, count), duration, frames in /tf and /tf_static, and what mcl would use (or why not)."""
+def bag_info(path, topics=None, frames=None, sensor=None) -> dict:
+    """Topics (type, count), duration, frames in /tf and /tf_static, and what mcl would use (or why not), with the
+    run's two checks of the scans (``sensor``: a SensorConfig, for range_min/range_max and laser_pose): the beams
+    that read the robot itself (``mcl.datasets.selfhits``) and the odometry's sign and the laser's mounting
+    (``mcl.odomcheck``)."""
     path = Path(path)
     reader = _open_reader(path)
     try:
@@ -1240,10 +1243,29 @@ def bag_info(path, topics=None, frames=None) -> dict:
                              else [round(float(v), 6) for v in src.initial_pose[0]]),
             "references": src.references,
             "notes": src.notes,
+            **_scan_checks(src, sensor),
         }
     except DataError as e:
         info["mcl_uses"] = {"error": str(e)}
     return info
+
+
+def _scan_checks(src: "BagSource", sensor) -> dict:
+    """``bag_info``'s "self_hits" (None: none found) and "odometry_check" (absent for laser odometry) of ``src``."""
+    from mcl.datasets.selfhits import detect_self_hits
+    from mcl.odomcheck import check_odometry
+
+    range_min = 0.0 if sensor is None else float(sensor.range_min)
+    range_max = 80.0 if sensor is None else float(sensor.range_max)
+    hits = detect_self_hits(src.scans, range_min, range_max)
+    out = {"self_hits": None if hits is None else {"topic": hits.kind, "text": hits.describe(), **hits.summary()}}
+    if not src.odom_source.startswith("laser odometry"):  # laser odometry comes from the scans: nothing to check
+        first = next(iter(src.scans), None)
+        mount = None if first is None else (sensor.laser_pose if sensor is not None and sensor.laser_pose is not None
+                                            else first.laser_offset)
+        check = check_odometry(src.scans, mount)
+        out["odometry_check"] = {**check.summary(), **({"text": check.describe()} if check.verdict else {})}
+    return out
 
 
 def format_info(info: dict) -> str:
@@ -1275,6 +1297,15 @@ def format_info(info: dict) -> str:
         refs = [f"{n} ({info['topics'][n]['type']}, {info['topics'][n]['count']})" for n in u["references"]]
         lines.append("  reference:    " + (", ".join(refs) + ": score a run against one with --truth-topic TOPIC" if refs
                                           else "no pose topic besides the odometry (--truth T.tum scores against a file)"))
+        h = u.get("self_hits")
+        lines.append("  robot itself: " + (f"{h['topic']}: {h['text']}: left out (sensor.self_hit_skip)" if h
+                                          else "no beam reads it (sensor.self_hit_skip)"))
+        c = u.get("odometry_check")
+        if c is not None:
+            lines.append("  odometry check: " + (f"{c['text']}: check the odometry's sign or the laser's mounting"
+                                                if c["verdict"] else
+                                                f"the scans fit the odometry as recorded ({c['wins'].get('recorded', 0)} "
+                                                f"of {c['pairs']} pairs of scans)"))
         lines += [f"  note: {n}" for n in u.get("notes", [])]
         lines += [f"  warning: {w}" for w in u["warnings"]]
     return "\n".join(lines)

@@ -92,8 +92,9 @@ class SelfHits:
         at = f"{lo} m" if lo == hi else f"{lo}-{hi} m"
         word = "beam" if self.beams.size == 1 else "beams"
         turns = f", also across {self.turns:,} turns" if self.turns >= MIN_TURNS else ""
-        return (f"{word} {idx} of {self.n} ({ang} degrees) read {at} on at least {100.0 * self.share:.0f} % of "
-                f"{self.scans:,} scans{turns}")
+        on = (f"on all {self.scans:,} scans" if self.share >= 1.0
+              else f"on at least {math.floor(100.0 * self.share)} % of {self.scans:,} scans")
+        return f"{word} {idx} of {self.n} ({ang} degrees) read {at} {on}{turns}"
 
 
 @dataclass(frozen=True, eq=False)
