@@ -461,6 +461,11 @@ def _check_odometry(scans, log, sensor, echo):
              "filter will be lost at every turn; check the odometry's sign, or give --set sensor.upside_down="
              f"{'false' if sensor.upside_down else 'true'} if the laser is "
              f"{'upright' if sensor.upside_down else 'upside down'}")
+    elif check.verdict in ("long", "short"):
+        echo(f"mcl: warning: {log.path}: {check.describe()}: the odometry reports "
+             f"{'more' if check.verdict == 'long' else 'less'} distance than the scans show (a wheel's diameter taken "
+             "for its radius or the other way round, other units), and the filter will be lost as soon as the robot "
+             "drives; check the odometry's wheel size or units")
     elif check.verdict is not None:
         from mcl.odomcheck import YAW
 
