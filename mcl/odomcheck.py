@@ -42,10 +42,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from mcl.estimate import compose, inverse
-from mcl.laser_odometry import scan_points
+from mcl.estimate import compose, inverse, wrap_angle
+from mcl.laser_odometry import _Key, scan_points
 
-__all__ = ["OdometryCheck", "check_odometry"]
+__all__ = ["OdometryCheck", "advice", "check_odometry", "run_mount"]
 
 TRUNCATE = 0.5  # m: a point farther than this from the other scan's counts as this far
 MARGIN = 0.7  # an alternative wins a pair when its score is under this times the recorded motion's
@@ -108,17 +108,15 @@ def _far_points(s) -> np.ndarray:
     return pts[:, pts[0] * pts[0] + pts[1] * pts[1] >= MIN_RANGE * MIN_RANGE]
 
 
-def _along(pts: np.ndarray, m: np.ndarray) -> float:
-    """How much the surfaces of a scan (points ``pts``, in order) face the direction of the laser's translation
-    ``m``: the mean of (n . u)^2 over the points' normals n (``mcl.laser_odometry``'s, from their neighbours), u the
+def _along(key: _Key, m: np.ndarray) -> float:
+    """How much the surfaces of a scan (``key``: ``mcl.laser_odometry``'s key scan, its points' normals from their
+    neighbours) face the direction of the laser's translation ``m``: the mean of (n . u)^2 over the normals n, u the
     unit translation; 0 for a translation under ``MIN_MOVE`` m. Along a corridor's walls it is near 0: there the
     scans cannot tell a distance from twice it."""
-    from mcl.laser_odometry import _Key
-
     t = math.hypot(m[0], m[1])
     if t < MIN_MOVE:
         return 0.0
-    n = _Key(pts).normals
+    n = key.normals
     dot = (n[0] * m[0] + n[1] * m[1]) / t
     dot = dot[np.isfinite(dot)]
     return float(np.mean(dot * dot)) if dot.size else 0.0
@@ -129,6 +127,33 @@ def _score(tree: cKDTree, pts: np.ndarray, m: np.ndarray) -> float:
     moved = np.vstack((c * pts[0] - s * pts[1] + m[0], s * pts[0] + c * pts[1] + m[1]))
     d, _ = tree.query(moved.T, distance_upper_bound=TRUNCATE)
     return float(np.mean(np.minimum(d, TRUNCATE) ** 2))
+
+
+def run_mount(scan, laser_pose=None) -> np.ndarray:
+    """(3,) the laser's pose on the robot as a run takes it: ``sensor.laser_pose`` when given, else ``scan``'s own
+    mounting (a log's, a bag's /tf_static), else the robot's centre."""
+    mount = laser_pose if laser_pose is not None else getattr(scan, "laser_offset", None)
+    return np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
+
+
+def advice(check: OdometryCheck, mount, laser_pose_given: bool, upside_down: bool) -> str:
+    """What a ``check`` with a verdict means and what to do, after its ``describe()``: the laser at ``mount``
+    (``sensor.laser_pose`` when ``laser_pose_given``, else the log's mounting), ``sensor.upside_down`` as set."""
+    if check.verdict == "reversed":
+        return ("the odometry turns the other way from the scans (a left-handed odometry frame, or a laser mounted "
+                "upside down without its mounting saying so), and the filter will be lost at every turn; check the "
+                f"odometry's sign, or give --set sensor.upside_down={'false' if upside_down else 'true'} if the laser "
+                f"is {'upright' if upside_down else 'upside down'}")
+    if check.verdict in _SCALE:
+        return (f"the odometry reports {'more' if check.verdict == 'long' else 'less'} distance than the scans show (a "
+                "wheel's diameter taken for its radius or the other way round, other units), and the filter will be "
+                "lost as soon as the robot drives; check the odometry's wheel size or units")
+    mount = np.asarray(mount, dtype=np.float64)
+    x, y, th = (round(float(v), 4) + 0.0 for v in compose(mount, np.array([0.0, 0.0, YAW[check.verdict]])))
+    where = "sensor.laser_pose" if laser_pose_given else "the log's mounting"
+    return (f"the laser seems to look another way than {where} says ({math.degrees(mount[2]):.0f} degrees), and the "
+            f"filter will be lost as soon as the robot moves; if so, --set \"sensor.laser_pose=[{x:g}, {y:g}, "
+            f"{round(wrap_angle(th), 4) + 0.0:g}]\" mounts it there")
 
 
 def check_odometry(scans, mount=None, *, step: float = 0.2, max_move: float = 1.0, max_turn: float = 1.0,
@@ -153,11 +178,11 @@ def check_odometry(scans, mount=None, *, step: float = 0.2, max_move: float = 1.
         if move <= max_move and turn <= max_turn:
             a, b = _far_points(anchor), _far_points(s)
             if a.shape[1] >= MIN_POINTS and b.shape[1] >= MIN_POINTS:
-                tree = cKDTree(a.T)
+                key = _Key(a)
                 motions = _motions(d, mount)
-                if _along(a, motions["recorded"]) < MIN_ALONG:  # the scene does not pin the distance: no scale
+                if _along(key, motions["recorded"]) < MIN_ALONG:  # the scene does not pin the distance: no scale
                     del motions["long"], motions["short"]
-                score = {k: _score(tree, b, m) for k, m in motions.items()}
+                score = {k: _score(key.tree, b, m) for k, m in motions.items()}
                 best = min(score, key=score.get)
                 if best != "recorded" and score[best] > MARGIN * score["recorded"]:
                     best = "tie"

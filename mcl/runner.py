@@ -396,7 +396,7 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
     scans = deskew(scans, log, cfg.sensor.sweep_time, echo, timed=cfg.bag is not None)
     if cfg.sensor.use and cfg.sensor.self_hit_skip:
         scans = _skip_self_hits(scans, log, cfg.sensor, echo)
-    if cfg.sensor.use and len(scans) and not str(getattr(log, "odom_source", "")).startswith("laser odometry"):
+    if cfg.sensor.use and len(scans) and getattr(log, "wheel_odometry", True):
         log.odometry_check = _check_odometry(scans, log, cfg.sensor, echo)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
@@ -425,7 +425,8 @@ def _skip_self_hits(scans, log, sensor, echo):
     """``scans`` with the beams that read the robot itself left out (``mcl.datasets.selfhits``), said in one note;
     as they are when there are none (with a warning when the robot turned too little to tell, but some beams look
     like it). The scans returned carry the finding as ``self_hits`` (for summary.json)."""
-    from mcl.datasets.selfhits import beam_constancy, self_hits_of, unconfirmed_self_hits, without_self_hits
+    from mcl.datasets.selfhits import (MIN_TURNS, beam_constancy, self_hits_of, unconfirmed_self_hits,
+                                       without_self_hits)
 
     c = beam_constancy(scans, sensor.range_min, sensor.range_max)
     hits = self_hits_of(c)
@@ -433,10 +434,10 @@ def _skip_self_hits(scans, log, sensor, echo):
         maybe = unconfirmed_self_hits(c)
         if maybe is not None:
             cut = float(maybe.ranges.max()) + 0.05
-            echo(f"mcl: warning: {log.path}: {maybe.kind}: {maybe.describe()}, but the robot turned too "
-                 f"little ({c.turns} turns of 0.5 rad in the first {c.scans:,} scans; 20 needed) to tell the robot "
-                 f"itself from a wall beside it: scored. If it is the robot, --set sensor.range_min={cut:.2f} leaves "
-                 "them out")
+            echo(f"mcl: warning: {log.path}: {maybe.kind}: {maybe.describe()}, but the robot turned too little "
+                 f"({c.turns} turns of 0.5 rad in the first {c.scans:,} scans; {MIN_TURNS} needed) to tell the "
+                 f"robot itself from a wall beside it: scored. If it is the robot, --set sensor.range_min={cut:.2f} "
+                 "leaves them out")
         return scans
     echo(f"{log.path}: {hits.kind}: {hits.describe()}: taken as the robot itself in the laser's view and left out "
          "(sensor.self_hit_skip: false keeps them)")
@@ -446,34 +447,16 @@ def _skip_self_hits(scans, log, sensor, echo):
 
 
 def _check_odometry(scans, log, sensor, echo):
-    """``mcl.odomcheck.check_odometry`` on the run's scans, the laser where the run puts it (``sensor.laser_pose``,
-    else the log's mounting); a warning when the scans point to reversed turns or a laser turned from its
-    mounting. Returns the check (for summary.json)."""
-    from mcl.odomcheck import check_odometry
+    """``mcl.odomcheck.check_odometry`` on the run's scans, the laser where the run puts it; a warning when the
+    scans point to a fault (reversed turns, distances off by two, a laser turned from its mounting). Returns the
+    check (for summary.json)."""
+    from mcl.odomcheck import advice, check_odometry, run_mount
 
-    first = next(iter(scans))
-    mount = sensor.laser_pose if sensor.laser_pose is not None else getattr(first, "laser_offset", None)
-    mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
+    mount = run_mount(next(iter(scans)), sensor.laser_pose)
     check = check_odometry(scans, mount)
-    if check.verdict == "reversed":
-        echo(f"mcl: warning: {log.path}: {check.describe()}: the odometry turns the other way from the scans (a "
-             "left-handed odometry frame, or a laser mounted upside down without its mounting saying so), and the "
-             "filter will be lost at every turn; check the odometry's sign, or give --set sensor.upside_down="
-             f"{'false' if sensor.upside_down else 'true'} if the laser is "
-             f"{'upright' if sensor.upside_down else 'upside down'}")
-    elif check.verdict in ("long", "short"):
-        echo(f"mcl: warning: {log.path}: {check.describe()}: the odometry reports "
-             f"{'more' if check.verdict == 'long' else 'less'} distance than the scans show (a wheel's diameter taken "
-             "for its radius or the other way round, other units), and the filter will be lost as soon as the robot "
-             "drives; check the odometry's wheel size or units")
-    elif check.verdict is not None:
-        from mcl.odomcheck import YAW
-
-        where = "sensor.laser_pose" if sensor.laser_pose is not None else "the log's mounting"
-        x, y, th = (round(float(v), 4) + 0.0 for v in compose(mount, np.array([0.0, 0.0, YAW[check.verdict]])))
-        echo(f"mcl: warning: {log.path}: {check.describe()}: the laser seems to look another way than {where} "
-             f"says ({math.degrees(mount[2]):.0f} degrees), and the filter will be lost as soon as the robot moves; "
-             f"if so, --set \"sensor.laser_pose=[{x:g}, {y:g}, {round(wrap_angle(th), 4) + 0.0:g}]\" mounts it there")
+    if check.verdict is not None:
+        echo(f"mcl: warning: {log.path}: {check.describe()}: "
+             f"{advice(check, mount, sensor.laser_pose is not None, sensor.upside_down)}")
     return check
 
 

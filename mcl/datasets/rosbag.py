@@ -319,6 +319,11 @@ class BagSource:
     # the bag's own /tf places it; None for laser odometry.
     odom_recorded: np.ndarray | None = None
 
+    @property
+    def wheel_odometry(self) -> bool:
+        """Whether the odometry is the robot's own (a topic or /tf), not laser odometry made of the scans."""
+        return not self.odom_source.startswith("laser odometry")
+
     def stamps_checked(self, offset: float = 0.0) -> list[str]:
         """The scans' stamps (plus ``sensor.time_offset``) against the odometry's time span: DataError when none
         lies within it (no scan can be paired: two clocks, e.g. a driver stamping with its own), else a warning for
@@ -1252,19 +1257,19 @@ def bag_info(path, topics=None, frames=None, sensor=None) -> dict:
 
 def _scan_checks(src: "BagSource", sensor) -> dict:
     """``bag_info``'s "self_hits" (None: none found) and "odometry_check" (absent for laser odometry) of ``src``."""
+    from mcl.config import SensorConfig
     from mcl.datasets.selfhits import detect_self_hits
-    from mcl.odomcheck import check_odometry
+    from mcl.odomcheck import advice, check_odometry, run_mount
 
-    range_min = 0.0 if sensor is None else float(sensor.range_min)
-    range_max = 80.0 if sensor is None else float(sensor.range_max)
-    hits = detect_self_hits(src.scans, range_min, range_max)
+    sensor = SensorConfig() if sensor is None else sensor
+    hits = detect_self_hits(src.scans, float(sensor.range_min), float(sensor.range_max))
     out = {"self_hits": None if hits is None else {"topic": hits.kind, "text": hits.describe(), **hits.summary()}}
-    if not src.odom_source.startswith("laser odometry"):  # laser odometry comes from the scans: nothing to check
-        first = next(iter(src.scans), None)
-        mount = None if first is None else (sensor.laser_pose if sensor is not None and sensor.laser_pose is not None
-                                            else first.laser_offset)
+    first = next(iter(src.scans), None)
+    if src.wheel_odometry and first is not None:  # laser odometry comes from the scans: nothing to check
+        mount = run_mount(first, sensor.laser_pose)
         check = check_odometry(src.scans, mount)
-        out["odometry_check"] = {**check.summary(), **({"text": check.describe()} if check.verdict else {})}
+        out["odometry_check"] = {**check.summary(), **({"text": f"{check.describe()}: " + advice(
+            check, mount, sensor.laser_pose is not None, sensor.upside_down)} if check.verdict else {})}
     return out
 
 
@@ -1302,10 +1307,10 @@ def format_info(info: dict) -> str:
                                           else "no beam reads it (sensor.self_hit_skip)"))
         c = u.get("odometry_check")
         if c is not None:
-            lines.append("  odometry check: " + (f"{c['text']}: check the odometry's sign or the laser's mounting"
-                                                if c["verdict"] else
-                                                f"the scans fit the odometry as recorded ({c['wins'].get('recorded', 0)} "
-                                                f"of {c['pairs']} pairs of scans)"))
+            kept = c["wins"].get("recorded", 0)
+            lines.append("  odometry check: " + (c["text"] if c["verdict"] else
+                                                f"the scans fit the odometry as recorded ({kept} of {c['pairs']} "
+                                                "pairs of scans)"))
         lines += [f"  note: {n}" for n in u.get("notes", [])]
         lines += [f"  warning: {w}" for w in u["warnings"]]
     return "\n".join(lines)
