@@ -398,6 +398,8 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         scans = _skip_self_hits(scans, log, cfg.sensor, echo)
     if cfg.sensor.use and len(scans) and getattr(log, "wheel_odometry", True):
         log.odometry_check = _check_odometry(scans, log, cfg.sensor, echo)
+        if log.odometry_check.verdict is None:  # the turns' timing means nothing while their sign is in doubt
+            log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, echo)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
         if not truth.t.size:
@@ -457,6 +459,19 @@ def _check_odometry(scans, log, sensor, echo):
     if check.verdict is not None:
         echo(f"mcl: warning: {log.path}: {check.describe()}: "
              f"{advice(check, mount, sensor.laser_pose is not None, sensor.upside_down)}")
+    return check
+
+
+def _check_time_offset(scans, log, sensor, echo):
+    """``mcl.latency.check_time_offset`` on the run's scans against the log's odometry stream; a warning when the
+    scans' turns fit the odometry of another moment than their stamps. Returns the check (for summary.json)."""
+    from mcl.latency import advice, check_time_offset
+    from mcl.odomcheck import run_mount
+
+    odometry, from_scans = _odometry_rows(log, [])  # the log's own stream; without one, the scans' own poses
+    check = check_time_offset(scans, None if from_scans else odometry, run_mount(next(iter(scans)), sensor.laser_pose))
+    if check.verdict:
+        echo(f"mcl: warning: {log.path}: {check.describe()}: {advice(check, sensor.time_offset)}")
     return check
 
 
@@ -1061,6 +1076,8 @@ def _run(
            if pf.sweep_order is not None and pf.sweep_order.scans else {}),
         **({"self_hits": scans.self_hits.summary()} if getattr(scans, "self_hits", None) is not None else {}),
         **({"odometry_check": log.odometry_check.summary()} if getattr(log, "odometry_check", None) else {}),
+        **({"time_offset_check": log.time_offset_check.summary()} if getattr(log, "time_offset_check", None)
+           else {}),
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / max(n_moved, 1),  # over the updates that predicted: at least 1 when any did
         "rejected_particles": counts["rejected"],

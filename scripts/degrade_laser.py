@@ -22,7 +22,12 @@ robot. The defaults, 1 and 1, leave the odometry as it is, byte for byte.
 With ``--latency T`` each scan is paired with the odometry T seconds after it was taken, as a driver that stamps
 its scans T late does: a FLASER line's robot pose becomes the odometry interpolated at its time + T (the ODOM
 lines when the log has them, else the FLASER lines' own poses; ``mcl.datasets.carmen.interpolate_odometry``), its
-laser pose kept on the robot. The rescaled odometry, when asked for too, is the one interpolated.
+laser pose kept on the robot. The rescaled odometry, when asked for too, is the one interpolated. (The ODOM lines
+stay as they were: ``sensor.time_offset``, which pairs each scan with them, cannot undo this.)
+
+With ``--stamp-late T`` each scan is stamped T late and paired with the odometry of its stamp, as a driver that stamps
+late makes a log: a FLASER line's times become its time + T and its robot pose the odometry there (the ODOM lines
+stay as they were). ``sensor.time_offset`` -T undoes it.
 
 The maps and the references are those of the originals (linked, not copied). Writes
 ``OUT/<name>/log.clf`` with links to the rest, and ``OUT/suite.yaml``: the suite with its root at ``OUT``.
@@ -147,6 +152,23 @@ def delay_line(line: str, stream: np.ndarray, latency: float) -> str:
     return _with_robot_pose(p, k, interpolate_odometry(stream, float(p[k + 6]) + latency)[:, 0])
 
 
+def stamped_late(lines: list[str], lag: float) -> str:
+    """A CARMEN log whose FLASER lines are stamped ``lag`` s late, as a driver that stamps its scans late makes
+    them: each line's times (ipc and logger) and robot pose those of ``lag`` s after the scan was taken (its laser
+    kept on the robot); the ODOM lines as they were."""
+    stream = odometry_stream(lines)
+    out = []
+    for line in lines:
+        if line.startswith("FLASER "):
+            p = delay_line(line, stream, lag).split()
+            k = 2 + int(p[1])
+            p[k + 6] = f"{float(p[k + 6]) + lag:.6f}"  # ipc_timestamp
+            p[k + 8] = f"{float(p[k + 8]) + lag:.6f}"  # logger_timestamp
+            line = " ".join(p) + "\n"
+        out.append(line)
+    return "".join(out)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path, help="output folder")
@@ -159,6 +181,8 @@ def main(argv=None) -> int:
     ap.add_argument("--turn-scale", type=float, default=1.0, help="odometry rotation factor (default 1)")
     ap.add_argument("--latency", type=float, default=0.0,
                     help="pair each scan with the odometry this many s after it (default 0)")
+    ap.add_argument("--stamp-late", type=float, default=0.0,
+                    help="stamp each scan this many s late, its robot pose that of its stamp (default 0)")
     ap.add_argument("--body", type=parse_body, action="append", default=[], metavar="A0:A1@R",
                     help="beams between A0 and A1 degrees read R m (the robot's own frame in view); repeatable")
     ap.add_argument("--seed", type=int, default=7)
@@ -187,12 +211,15 @@ def main(argv=None) -> int:
             lines = tmp.read_text().splitlines(keepends=True)
             stream = odometry_stream(lines)
             tmp.write_text("".join(delay_line(line, stream, a.latency) for line in lines))
+        if a.stamp_late:
+            tmp.write_text(stamped_late(tmp.read_text().splitlines(keepends=True), a.stamp_late))
         tmp.replace(folder / log.name)
         d["log"] = f"{d['name']}/{log.name}"
     suite["root"] = str(a.out.resolve())
     suite["name"] = f"{suite.get('name', 'suite')}-fov{a.fov:g}" + (
         f"-odom{a.odom_scale:g}x{a.turn_scale:g}" if (a.odom_scale, a.turn_scale) != (1.0, 1.0) else "") + (
         f"-latency{a.latency:g}" if a.latency else "") + (
+        f"-late{a.stamp_late:g}" if a.stamp_late else "") + (
         "-body" if a.body else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")

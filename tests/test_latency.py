@@ -4,6 +4,7 @@ runs in CI), and ``sensor.time_offset``, which undoes a known lag."""
 
 from __future__ import annotations
 
+import re
 import sys
 import warnings
 
@@ -12,12 +13,14 @@ import pytest
 import numpy as np
 
 from mcl.config import PROJECT_ROOT, load_config
+from mcl.datasets.carmen import read_carmen
+from mcl.latency import check_time_offset
 from mcl.runner import run
 from mcl.simulate import simulate
 from mcl.trajectory import read_tum
 
 sys.path.insert(0, str(PROJECT_ROOT / "scripts"))
-from degrade_laser import delay_line, odometry_stream  # noqa: E402
+from degrade_laser import delay_line, odometry_stream, stamped_late  # noqa: E402
 
 CORRIDOR = PROJECT_ROOT.parent / "shared" / "data" / "infinite_corridor"
 
@@ -54,29 +57,13 @@ def test_a_late_scan_stamp_at_the_junction_does_not_send_the_track_down_the_corr
         assert s["eval"]["ate_max"] <= 1.0, (seed, s["eval"])
 
 
-def _stamped_late(lines: list[str], lag: float) -> str:
-    """A CARMEN log whose FLASER lines are stamped ``lag`` s late: their times and robot poses those of ``lag`` s
-    after the scan was taken (the laser kept on the robot)."""
-    stream = odometry_stream(lines)
-    out = []
-    for line in lines:
-        if line.startswith("FLASER "):
-            p = delay_line(line, stream, lag).split()
-            k = 2 + int(p[1])
-            p[k + 6] = f"{float(p[k + 6]) + lag:.6f}"  # ipc_timestamp
-            p[k + 8] = f"{float(p[k + 8]) + lag:.6f}"  # logger_timestamp
-            line = " ".join(p) + "\n"
-        out.append(line)
-    return "".join(out)
-
-
 @pytest.fixture(scope="module")
 def late_drive(tmp_path_factory):
     """A generated office drive (seed 3, 30 s) and its log with the scans stamped 0.3 s late."""
     world = tmp_path_factory.mktemp("late")
     simulate(world, seed=3, duration=30.0)
     late = world / "late.clf"
-    late.write_text(_stamped_late((world / "log.clf").read_text().splitlines(keepends=True), 0.3))
+    late.write_text(stamped_late((world / "log.clf").read_text().splitlines(keepends=True), 0.3))
     return world, late
 
 
@@ -98,9 +85,22 @@ def test_time_offset_pairs_each_scan_with_the_odometry_of_its_true_time(late_dri
     said = []
     s0, (t0, p0) = _run(world, tmp_path / "original", said, f"log={world / 'log.clf'}")
     s1, (t1, p1) = _run(world, tmp_path / "corrected", said, f"log={late}", "sensor.time_offset=-0.3")
-    s2, _ = _run(world, tmp_path / "late", said, f"log={late}")
+    said_late = []
+    s2, _ = _run(world, tmp_path / "late", said_late, f"log={late}")
     assert any("sensor.time_offset -0.3 s: each scan paired with the odometry at its stamp - 0.3 s" in m
                for m in said), said
+    # the time offset check (mcl.latency) finds the late stamps and says what undoes them; the original and the
+    # corrected run are left alone. Tolerance 0.06 s (a fifth of the lag; measured -0.26: the odometry's noise
+    # pulls the fit towards 0, see the module doc)
+    warned = [m for m in said_late if "sensor.time_offset=" in m]
+    assert len(warned) == 1 and "seem stamped about" in warned[0] and " late " in warned[0], said_late
+    suggested = float(re.search(r"sensor\.time_offset=(-?[0-9.]+)", warned[0]).group(1))
+    assert -0.36 <= suggested <= -0.24, warned
+    assert s2["time_offset_check"]["verdict"] and s2["time_offset_check"]["offset"] == pytest.approx(suggested,
+                                                                                                     abs=0.005)
+    assert not s0["time_offset_check"]["verdict"] and not s1["time_offset_check"]["verdict"], (s0, s1)
+    assert abs(s1["time_offset_check"]["offset"]) < 0.05, s1["time_offset_check"]
+    assert not any("sensor.time_offset=" in m for m in said), said
     assert s1["updates"] == s0["updates"] > 100
     np.testing.assert_allclose(t1, t0, atol=1e-5)
     np.testing.assert_allclose(p1, p0, atol=1e-5)
@@ -155,3 +155,67 @@ def test_people_crowding_a_late_laser_in_a_hall_do_not_hand_the_track_to_a_place
         s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
     assert s["eval"]["scored"] == 601 and s["reseeds"] > 0, s  # people made it lost, and it re-seeded
     assert s["eval"]["ate_max"] <= 0.5, s["eval"]
+
+
+@pytest.fixture(scope="module")
+def drive_20hz(tmp_path_factory):
+    """A generated office drive (seed 3, 30 s) with a 20 Hz laser: its ODOM lines at 20 Hz too."""
+    world = tmp_path_factory.mktemp("drive20")
+    simulate(world, seed=3, duration=30.0, scan_rate=20.0)
+    return world
+
+
+def _check(world, lag: float, odometry: bool = True):
+    """``check_time_offset`` on the drive's log with its scans stamped ``lag`` s late (the ODOM lines as they were;
+    ``odometry`` False: the scans' own poses as the odometry)."""
+    path = world / f"late{lag:g}.clf"
+    path.write_text(stamped_late((world / "log.clf").read_text().splitlines(keepends=True), lag))
+    log = read_carmen(path)
+    return check_time_offset(list(log.laser_stream()), np.asarray(log.odometry).reshape(-1, 6) if odometry else None)
+
+
+@pytest.mark.parametrize("lag, low, high", [(0.1, 0.05, 0.13), (-0.2, -0.26, -0.14)])
+def test_the_time_offset_check_finds_scans_stamped_late_or_early(drive_20hz, lag, low, high):
+    # Stamped 0.1 s late, the scans' turns fit the odometry about 0.1 s before their stamps; 0.2 s early, 0.2 s
+    # after. Tolerances: the fit is pulled towards 0 by the odometry's noise (measured: 0.067 and 0.186 s here; on
+    # 15 generated 20 Hz drives stamped 0.1-0.3 s off, 67-127 % of the lag). The same drive as recorded: no verdict.
+    c = _check(drive_20hz, lag)
+    assert c.verdict and low <= -c.offset <= high, c
+    assert 0.8 <= c.turn_scale <= 1.25 and c.rms < c.rms_at_zero, c
+    clean = _check(drive_20hz, 0.0)
+    assert not clean.verdict and abs(clean.offset) < 0.05, clean
+
+
+def test_the_time_offset_check_keeps_quiet_when_the_odometry_comes_as_seldom_as_the_scans(tmp_path):
+    # A CARMEN log whose only odometry is its scans' own poses at 5 Hz cannot time the scans: between two poses
+    # the turn is a straight line, and the fit prefers the samples' own times (fr079, 0.2 s a scan, fitted 0.11 or
+    # 0.21 s by the pairs' spacing, and mended by neither). Stamped 0.3 s late, the check says why it says nothing.
+    world = tmp_path / "w"
+    simulate(world, seed=3, duration=30.0)
+    c = _check(world, 0.3, odometry=False)
+    assert c.offset is None and not c.verdict and c.interval == pytest.approx(0.2, abs=1e-6), c
+    assert "the odometry comes every 0.200 s" in c.describe()
+    assert _check(world, 0.3).verdict  # its 10 Hz ODOM lines do
+
+
+def test_bag_info_says_when_the_scans_seem_stamped_late(drive_20hz, tmp_path):
+    # The 20 Hz drive as a ROS 2 bag stamped 0.1 s late (/odom one pose per scan, at 20 Hz): `mcl bag info`'s
+    # "scan timing" line gives the check and the offset that undoes it; as recorded, the check and no advice.
+    from mcl.datasets.bagwrite import write_scans
+    from mcl.datasets.rosbag import bag_info, format_info
+
+    lines = (drive_20hz / "log.clf").read_text().splitlines(keepends=True)
+    for lag in (0.1, 0.0):
+        clf = tmp_path / f"late{lag:g}.clf"
+        clf.write_text(stamped_late(lines, lag))
+        bag = tmp_path / f"late{lag:g}.mcap"
+        write_scans(bag, read_carmen(clf).laser_stream())
+        info = bag_info(bag)
+        text = format_info(info)
+        timing = [line for line in text.splitlines() if line.startswith("  scan timing:")]
+        assert len(timing) == 1, text
+        c = info["mcl_uses"]["time_offset_check"]
+        if lag:
+            assert c["verdict"] and "seem stamped about" in timing[0] and "--set sensor.time_offset=-0." in timing[0]
+        else:
+            assert not c["verdict"] and "sensor.time_offset=" not in timing[0] and abs(c["offset"]) < 0.05, timing

@@ -1256,9 +1256,12 @@ def bag_info(path, topics=None, frames=None, sensor=None) -> dict:
 
 
 def _scan_checks(src: "BagSource", sensor) -> dict:
-    """``bag_info``'s "self_hits" (None: none found) and "odometry_check" (absent for laser odometry) of ``src``."""
+    """``bag_info``'s "self_hits" (None: none found), "odometry_check" (absent for laser odometry) and
+    "time_offset_check" (absent for laser odometry, or when the odometry check found a fault) of ``src``."""
     from mcl.config import SensorConfig
     from mcl.datasets.selfhits import detect_self_hits
+    from mcl.latency import advice as time_advice
+    from mcl.latency import check_time_offset
     from mcl.odomcheck import advice, check_odometry, run_mount
 
     sensor = SensorConfig() if sensor is None else sensor
@@ -1270,6 +1273,10 @@ def _scan_checks(src: "BagSource", sensor) -> dict:
         check = check_odometry(src.scans, mount)
         out["odometry_check"] = {**check.summary(), **({"text": f"{check.describe()}: " + advice(
             check, mount, sensor.laser_pose is not None, sensor.upside_down)} if check.verdict else {})}
+        if check.verdict is None:
+            timing = check_time_offset(src.scans, src.odometry, mount)
+            out["time_offset_check"] = {**timing.summary(), "text": timing.describe() + (
+                f": {time_advice(timing)}" if timing.verdict else "")}
     return out
 
 
@@ -1311,6 +1318,9 @@ def format_info(info: dict) -> str:
             lines.append("  odometry check: " + (c["text"] if c["verdict"] else
                                                 f"the scans fit the odometry as recorded ({kept} of {c['pairs']} "
                                                 "pairs of scans)"))
+        c = u.get("time_offset_check")
+        if c is not None:
+            lines.append(f"  scan timing:  {c['text']}" + ("" if c["verdict"] else " (sensor.time_offset)"))
         lines += [f"  note: {n}" for n in u.get("notes", [])]
         lines += [f"  warning: {w}" for w in u["warnings"]]
     return "\n".join(lines)
