@@ -58,6 +58,14 @@ def scan_points(ranges, angles, max_range: float | None) -> np.ndarray:
     return np.vstack((r[idx] * np.cos(a[idx]), r[idx] * np.sin(a[idx])))
 
 
+def far_points(scan, min_range: float) -> np.ndarray:
+    """``scan_points`` of ``scan`` (a record with ranges, angles, max_range) at ``min_range`` m or more from the
+    laser: a robot's own frame in view (``mcl.datasets.selfhits``) stays put from scan to scan and would favour the
+    smallest motion in a match."""
+    pts = scan_points(scan.ranges, scan.angles, scan.max_range)
+    return pts[:, pts[0] * pts[0] + pts[1] * pts[1] >= min_range * min_range]
+
+
 class _Key:
     """A key scan: its points, a k-d tree over them, and unit normals (NaN where the neighbours give none)."""
 

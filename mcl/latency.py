@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcl.estimate import compose, inverse
-from mcl.laser_odometry import _Key, icp, scan_points
+from mcl.laser_odometry import _Key, far_points, icp
 
 __all__ = ["TimeOffsetCheck", "advice", "check_time_offset"]
 
@@ -72,6 +72,7 @@ MIN_RANGE = 0.5  # m: nearer points are left out (the robot's own frame stays pu
 MAX_INTERVAL = 0.1  # s: odometry sampled more sparsely (its median step) cannot time the scans (see the module doc)
 MIN_POINTS = 30  # points a scan needs to take part
 MAX_TURN = 1.0  # rad: pairs that turned more are not matched
+MIN_PAIRED = 0.3  # a match pairing fewer of the second scan's points failed
 TURN_SEARCH = 1.5  # rad: the match starts from the best of the odometry's turn +- this ...
 TURN_STEP = 0.05  # rad ... in steps of this (a late stamp puts the odometry's turn a change of rate x lag away)
 COARSE_POINTS = 90  # the search moves about this many of the points (every k-th)
@@ -128,11 +129,6 @@ def advice(check: TimeOffsetCheck, current: float = 0.0) -> str:
             "when it was taken")
 
 
-def _far_points(s) -> np.ndarray:
-    pts = scan_points(s.ranges, s.angles, s.max_range)
-    return pts[:, pts[0] * pts[0] + pts[1] * pts[1] >= MIN_RANGE * MIN_RANGE]
-
-
 def _coarse_turn(key: _Key, pts: np.ndarray, guess: np.ndarray) -> np.ndarray:
     """``guess`` with its turn replaced by the best of the turns ``TURN_SEARCH`` either side (steps of
     ``TURN_STEP``): the one whose moved points lie nearest ``key``'s (mean squared distance, truncated)."""
@@ -173,7 +169,7 @@ def check_time_offset(scans, odometry=None, mount=None, *, max_read: int = 4000)
     (None: at its centre; it moves the odometry's guess for the match, not the turn). A ``sensor.time_offset``
     already in the stamps: the offset found is what is left."""
     mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
-    t, th, pts = [], [], []
+    t, th, recs = [], [], []
     kind = None
     for s in itertools.islice(scans, max_read):
         if s.odom is None or (kind is not None and getattr(s, "kind", None) != kind):
@@ -183,7 +179,7 @@ def check_time_offset(scans, odometry=None, mount=None, *, max_read: int = 4000)
             continue
         t.append(float(s.t))
         th.append(float(s.odom[2]))
-        pts.append(s)
+        recs.append(s)
     out = TimeOffsetCheck()
     if len(t) < 3:
         return out
@@ -224,17 +220,17 @@ def check_time_offset(scans, odometry=None, mount=None, *, max_read: int = 4000)
     d_scan, ti, tj = [], [], []
     mount_inv = inverse(mount)
     for o in chosen:
-        a, b = _far_points(pts[i[o]]), _far_points(pts[j[o]])
+        a, b = far_points(recs[i[o]], MIN_RANGE), far_points(recs[j[o]], MIN_RANGE)
         if a.shape[1] < MIN_POINTS or b.shape[1] < MIN_POINTS:
             continue
-        d = compose(inverse(np.asarray(pts[i[o]].odom, dtype=np.float64)), np.asarray(pts[j[o]].odom, np.float64))
+        d = compose(inverse(np.asarray(recs[i[o]].odom, dtype=np.float64)), np.asarray(recs[j[o]].odom, np.float64))
         if abs(d[2]) > MAX_TURN:
             continue
         guess = compose(compose(mount_inv, d), mount)
         key = _Key(a)
         start = _coarse_turn(key, b, guess)
         rel, paired, _ = icp(key, b, start)
-        if paired < 0.3 * b.shape[1]:
+        if paired < MIN_PAIRED * b.shape[1]:
             continue
         d_scan.append(rel[2])
         ti.append(t[i[o]])
@@ -256,18 +252,16 @@ def check_time_offset(scans, odometry=None, mount=None, *, max_read: int = 4000)
     if out.pairs < MIN_PAIRS:
         return out
     tau = _best(cost, taus)
-    cost_tau, k_tau, r_tau = _fit(d_scan, heading, ti, tj, np.array([tau]))
-    cost_0 = _fit(d_scan, heading, ti, tj, np.array([0.0]))[0]
     h = 1e-3  # the residual's derivative by tau, numerically
-    g = (_fit(d_scan, heading, ti, tj, np.array([tau + h]))[2][0] - _fit(d_scan, heading, ti, tj,
-                                                                          np.array([tau - h]))[2][0]) / (2 * h)
+    cost_at, k_at, r_at = _fit(d_scan, heading, ti, tj, np.array([tau, 0.0, tau + h, tau - h]))
+    g = (r_at[2] - r_at[3]) / (2 * h)
     n = out.pairs
-    sigma = math.sqrt(float(cost_tau[0]) / max(n - 2, 1))
+    sigma = math.sqrt(float(cost_at[0]) / max(n - 2, 1))
     out.offset = round(tau, 4) + 0.0
     out.se = sigma / math.sqrt(max(float(g @ g), 1e-12))
-    out.turn_scale = float(k_tau[0])
-    out.rms = math.sqrt(float(cost_tau[0]) / n)
-    out.rms_at_zero = math.sqrt(float(cost_0[0]) / n)
+    out.turn_scale = float(k_at[0])
+    out.rms = math.sqrt(float(cost_at[0]) / n)
+    out.rms_at_zero = math.sqrt(float(cost_at[1]) / n)
     out.verdict = (abs(tau) >= max(MIN_OFFSET, out.interval) and abs(tau) >= MIN_SIGMAS * out.se
                    and TURN_SCALE[0] <= out.turn_scale <= TURN_SCALE[1])
     return out

@@ -43,7 +43,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from mcl.estimate import compose, inverse, wrap_angle
-from mcl.laser_odometry import _Key, scan_points
+from mcl.laser_odometry import _Key, far_points
 
 __all__ = ["OdometryCheck", "advice", "check_odometry", "run_mount"]
 
@@ -98,14 +98,6 @@ def _motions(d: np.ndarray, mount: np.ndarray) -> dict:
     for name, k in _SCALE.items():
         out[name] = compose(compose(inverse(mount), np.array([k * d[0], k * d[1], d[2]])), mount)
     return out
-
-
-def _far_points(s) -> np.ndarray:
-    """(2, K) laser-frame points of scan ``s`` (``mcl.laser_odometry.scan_points``) at ``MIN_RANGE`` m or more: a
-    robot's own frame in view (``mcl.datasets.selfhits``; a robot that never turns keeps it) stays put from scan to
-    scan and would favour the smallest motion."""
-    pts = scan_points(s.ranges, s.angles, s.max_range)
-    return pts[:, pts[0] * pts[0] + pts[1] * pts[1] >= MIN_RANGE * MIN_RANGE]
 
 
 def _along(key: _Key, m: np.ndarray) -> float:
@@ -176,7 +168,7 @@ def check_odometry(scans, mount=None, *, step: float = 0.2, max_move: float = 1.
         if move < step and turn < step:
             continue
         if move <= max_move and turn <= max_turn:
-            a, b = _far_points(anchor), _far_points(s)
+            a, b = far_points(anchor, MIN_RANGE), far_points(s, MIN_RANGE)
             if a.shape[1] >= MIN_POINTS and b.shape[1] >= MIN_POINTS:
                 key = _Key(a)
                 motions = _motions(d, mount)
