@@ -66,7 +66,7 @@ def far_points(scan, min_range: float) -> np.ndarray:
     return pts[:, pts[0] * pts[0] + pts[1] * pts[1] >= min_range * min_range]
 
 
-class _Key:
+class Key:
     """A key scan: its points, a k-d tree over them, and unit normals (NaN where the neighbours give none)."""
 
     def __init__(self, pts: np.ndarray):
@@ -84,7 +84,7 @@ class _Key:
         self.normals = n
 
 
-def icp(key: _Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None):
+def icp(key: Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None):
     """(pose (3,) of the scan ``pts`` in the key scan's frame, paired points, cost) by point-to-line ICP from
     ``guess`` (see the module doc); the pose is ``guess`` and the count 0 when fewer than ``MIN_PAIRS`` pair. The
     cost (to compare starts) sums min(r^2, max_pair^2) over the points, an unpaired point counting max_pair^2,
@@ -146,7 +146,7 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
         if key is None:  # no scan with returns enough yet: this one is not matched (and counts so after the first)
             failed += bool(rows)
             if pts.shape[1] >= MIN_PAIRS:
-                key, key_pose = _Key(pts), laser.copy()
+                key, key_pose = Key(pts), laser.copy()
         else:
             # from the last step again (constant velocity); when under GOOD_PAIRS of the points pair, from no
             # motion too, the better match kept (a robot that stopped turning or reversed: the old velocity led
@@ -177,7 +177,7 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
             laser = new
             if pts.shape[1] >= MIN_PAIRS and (math.hypot(rel[0], rel[1]) > KEY_DISTANCE or abs(rel[2]) > KEY_ANGLE
                                              or pairs == 0):
-                key, key_pose = _Key(pts), laser.copy()
+                key, key_pose = Key(pts), laser.copy()
         t_prev = float(scan.t)
         robot = compose(compose(mount, laser), mount_inv)  # the robot's pose, its first at the origin
         rows.append((float(scan.t), *robot, 0.0, 0.0))

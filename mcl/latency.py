@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mcl.estimate import compose, inverse
-from mcl.laser_odometry import _Key, far_points, icp
+from mcl.laser_odometry import Key, far_points, icp
 
 __all__ = ["TimeOffsetCheck", "advice", "check_time_offset"]
 
@@ -129,7 +129,7 @@ def advice(check: TimeOffsetCheck, current: float = 0.0) -> str:
             "when it was taken")
 
 
-def _coarse_turn(key: _Key, pts: np.ndarray, guess: np.ndarray) -> np.ndarray:
+def _coarse_turn(key: Key, pts: np.ndarray, guess: np.ndarray) -> np.ndarray:
     """``guess`` with its turn replaced by the best of the turns ``TURN_SEARCH`` either side (steps of
     ``TURN_STEP``): the one whose moved points lie nearest ``key``'s (mean squared distance, truncated)."""
     dth = np.arange(-TURN_SEARCH, TURN_SEARCH + TURN_STEP / 2, TURN_STEP)
@@ -227,7 +227,7 @@ def check_time_offset(scans, odometry=None, mount=None, *, max_read: int = 4000)
         if abs(d[2]) > MAX_TURN:
             continue
         guess = compose(compose(mount_inv, d), mount)
-        key = _Key(a)
+        key = Key(a)
         start = _coarse_turn(key, b, guess)
         rel, paired, _ = icp(key, b, start)
         if paired < MIN_PAIRED * b.shape[1]:

@@ -43,9 +43,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from mcl.estimate import compose, inverse, wrap_angle
-from mcl.laser_odometry import _Key, far_points
+from mcl.laser_odometry import Key, far_points
 
-__all__ = ["OdometryCheck", "advice", "check_odometry", "run_mount"]
+__all__ = ["OdometryCheck", "advice", "check_each_laser", "check_odometry", "run_mount", "summary_of"]
 
 TRUNCATE = 0.5  # m: a point farther than this from the other scan's counts as this far
 MARGIN = 0.7  # an alternative wins a pair when its score is under this times the recorded motion's
@@ -76,9 +76,11 @@ class OdometryCheck:
     pairs: int
     wins: dict = field(default_factory=dict)
     verdict: str | None = None
+    laser: str = ""  # the laser whose scans were paired (its kind: a bag's topic)
+    mount: tuple = (0.0, 0.0, 0.0)  # its pose on the robot as the check took it
 
     def summary(self) -> dict:
-        return {"pairs": self.pairs, "wins": dict(self.wins), "verdict": self.verdict}
+        return {"laser": self.laser, "pairs": self.pairs, "wins": dict(self.wins), "verdict": self.verdict}
 
     def describe(self) -> str:
         """e.g. 'the scans fit the odometry's motion best with the odometry's turns reversed in 57 of 60 pairs of
@@ -100,7 +102,7 @@ def _motions(d: np.ndarray, mount: np.ndarray) -> dict:
     return out
 
 
-def _along(key: _Key, m: np.ndarray) -> float:
+def _along(key: Key, m: np.ndarray) -> float:
     """How much the surfaces of a scan (``key``: ``mcl.laser_odometry``'s key scan, its points' normals from their
     neighbours) face the direction of the laser's translation ``m``: the mean of (n . u)^2 over the normals n, u the
     unit translation; 0 for a translation under ``MIN_MOVE`` m. Along a corridor's walls it is near 0: there the
@@ -128,10 +130,18 @@ def run_mount(scan, laser_pose=None) -> np.ndarray:
     return np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
 
 
-def advice(check: OdometryCheck, mount, laser_pose_given: bool, upside_down: bool) -> str:
+def advice(check: OdometryCheck, mount, laser_pose_given: bool, upside_down: bool, fused=()) -> str:
     """What a ``check`` with a verdict means and what to do, after its ``describe()``: the laser at ``mount``
-    (``sensor.laser_pose`` when ``laser_pose_given``, else the log's mounting), ``sensor.upside_down`` as set."""
+    (``sensor.laser_pose`` when ``laser_pose_given``, else the log's mounting), ``sensor.upside_down`` as set.
+    ``fused``: every laser of a run that fuses several, when this one alone is at fault (``sensor.laser_pose`` and
+    ``sensor.upside_down`` would apply to them all: the advice reads it alone, or fixes its transform)."""
+    alone = f"--set topics.scan={check.laser} " if len(fused) > 1 else ""
     if check.verdict == "reversed":
+        if alone:
+            return (f"{check.laser} alone turns the other way from the odometry: mounted upside down without its "
+                    f"transform saying so (a roll of half a turn), and its scans pull the cloud the wrong way at every "
+                    f"turn; fix its transform in the bag's /tf, or read it alone: {alone}"
+                    f"--set sensor.upside_down={'false' if upside_down else 'true'}")
         return ("the odometry turns the other way from the scans (a left-handed odometry frame, or a laser mounted "
                 "upside down without its mounting saying so), and the filter will be lost at every turn; check the "
                 f"odometry's sign, or give --set sensor.upside_down={'false' if upside_down else 'true'} if the laser "
@@ -142,26 +152,50 @@ def advice(check: OdometryCheck, mount, laser_pose_given: bool, upside_down: boo
                 "lost as soon as the robot drives; check the odometry's wheel size or units")
     mount = np.asarray(mount, dtype=np.float64)
     x, y, th = (round(float(v), 4) + 0.0 for v in compose(mount, np.array([0.0, 0.0, YAW[check.verdict]])))
-    where = "sensor.laser_pose" if laser_pose_given else "the log's mounting"
+    where = ("sensor.laser_pose" if laser_pose_given else "its transform in the bag's /tf" if alone
+             else "the log's mounting")
+    pose = f"--set \"sensor.laser_pose=[{x:g}, {y:g}, {round(wrap_angle(th), 4) + 0.0:g}]\""
+    fix = (f"fix its transform in the bag's /tf, or read it alone, mounted there: {alone}{pose}" if alone
+           and not laser_pose_given else f"if so, {pose} mounts it there")
     return (f"the laser seems to look another way than {where} says ({math.degrees(mount[2]):.0f} degrees), and the "
-            f"filter will be lost as soon as the robot moves; if so, --set \"sensor.laser_pose=[{x:g}, {y:g}, "
-            f"{round(wrap_angle(th), 4) + 0.0:g}]\" mounts it there")
+            f"filter will be lost as soon as the robot moves; {fix}")
 
 
-def check_odometry(scans, mount=None, *, step: float = 0.2, max_move: float = 1.0, max_turn: float = 1.0,
-                   pairs: int = 60, max_read: int = 20_000) -> OdometryCheck:
-    """The check of the module docstring on ``scans`` (records with ranges, angles, max_range, odom, in time order;
-    the first scan's laser only: another's, fused into the stream, has its own mounting), the laser at ``mount``
-    (3,) on the robot (None: at its centre)."""
-    mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
-    out = OdometryCheck(0)
-    anchor = kind = None
+def summary_of(checks: list[OdometryCheck]) -> dict:
+    """For summary.json and ``mcl bag info``: the first laser's ``OdometryCheck.summary()``, with the other
+    lasers' in ``other_lasers`` when the run fuses several."""
+    return {**checks[0].summary(), **({"other_lasers": [c.summary() for c in checks[1:]]} if len(checks) > 1 else {})}
+
+
+def check_odometry(scans, mount=None, **kw) -> OdometryCheck:
+    """The check of the module docstring on the first laser of ``scans`` (records with ranges, angles, max_range,
+    odom, kind, in time order: the laser of the first scan with odometry), the laser at ``mount`` (3,) on the robot
+    (None: at its centre); ``kw`` as ``check_each_laser``'s."""
+    m = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
+    each = check_each_laser(scans, lambda _s: m, first_only=True, **kw)
+    return next(iter(each.values()), OdometryCheck(0))
+
+
+def check_each_laser(scans, mount_of, *, first_only: bool = False, step: float = 0.2, max_move: float = 1.0,
+                     max_turn: float = 1.0, pairs: int = 60, max_read: int = 20_000) -> dict:
+    """{laser: OdometryCheck}: the check of the module docstring for every laser of ``scans`` (its ``kind``, a bag's
+    topic; fused lasers each have their own mounting, which may be the one at fault), in one pass, in the order the
+    lasers first appear (``first_only``: the first alone). ``mount_of(scan)`` gives the laser's (3,) pose on the
+    robot as the run takes it, from its first scan (``run_mount``). A laser's pairs are its own consecutive scans."""
+    state: dict = {}  # kind -> [check, mount, anchor]
+    done = 0
     for s in itertools.islice(scans, max_read):
-        if s.odom is None or (kind is not None and getattr(s, "kind", None) != kind):
-            continue
         kind = getattr(s, "kind", None)
-        if anchor is None:
-            anchor = s
+        if s.odom is None:
+            continue
+        if kind not in state:
+            if first_only and state:
+                continue
+            mount = np.asarray(mount_of(s), dtype=np.float64)
+            state[kind] = [OdometryCheck(0, laser=kind or "", mount=tuple(float(v) for v in mount)), mount, s]
+            continue
+        out, mount, anchor = state[kind]
+        if out.pairs >= pairs:
             continue
         d = compose(inverse(np.asarray(anchor.odom, dtype=np.float64)), np.asarray(s.odom, dtype=np.float64))
         move, turn = math.hypot(d[0], d[1]), abs(d[2])
@@ -170,7 +204,7 @@ def check_odometry(scans, mount=None, *, step: float = 0.2, max_move: float = 1.
         if move <= max_move and turn <= max_turn:
             a, b = far_points(anchor, MIN_RANGE), far_points(s, MIN_RANGE)
             if a.shape[1] >= MIN_POINTS and b.shape[1] >= MIN_POINTS:
-                key = _Key(a)
+                key = Key(a)
                 motions = _motions(d, mount)
                 if _along(key, motions["recorded"]) < MIN_ALONG:  # the scene does not pin the distance: no scale
                     del motions["long"], motions["short"]
@@ -181,10 +215,13 @@ def check_odometry(scans, mount=None, *, step: float = 0.2, max_move: float = 1.
                 out.wins[best] = out.wins.get(best, 0) + 1
                 out.pairs += 1
                 if out.pairs >= pairs:
-                    break
-        anchor = s
-    recorded = out.wins.get("recorded", 0)
-    lead = max(ALTERNATIVES, key=lambda k: out.wins.get(k, 0))
-    if out.wins.get(lead, 0) >= MIN_WINS and out.wins[lead] >= 2 * recorded:
-        out.verdict = lead
-    return out
+                    done += 1
+                    if done == len(state):
+                        break
+        state[kind][2] = s
+    for out, _, _ in state.values():
+        recorded = out.wins.get("recorded", 0)
+        lead = max(ALTERNATIVES, key=lambda k: out.wins.get(k, 0))
+        if out.wins.get(lead, 0) >= MIN_WINS and out.wins[lead] >= 2 * recorded:
+            out.verdict = lead
+    return {kind: v[0] for kind, v in state.items()}

@@ -397,8 +397,8 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
     if cfg.sensor.use and cfg.sensor.self_hit_skip:
         scans = _skip_self_hits(scans, log, cfg.sensor, echo)
     if cfg.sensor.use and len(scans) and getattr(log, "wheel_odometry", True):
-        log.odometry_check = _check_odometry(scans, log, cfg.sensor, echo)
-        if log.odometry_check.verdict is None:  # the turns' timing means nothing while their sign is in doubt
+        log.odometry_checks = _check_odometry(scans, log, cfg.sensor, echo)
+        if log.odometry_checks[0].verdict is None:  # the turns' timing means nothing while their sign is in doubt
             log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, echo)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
@@ -424,15 +424,21 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
 
 
 def _skip_self_hits(scans, log, sensor, echo):
-    """``scans`` with the beams that read the robot itself left out (``mcl.datasets.selfhits``), said in one note;
-    as they are when there are none (with a warning when the robot turned too little to tell, but some beams look
-    like it). The scans returned carry the finding as ``self_hits`` (for summary.json)."""
-    from mcl.datasets.selfhits import (MIN_TURNS, beam_constancy, self_hits_of, unconfirmed_self_hits,
+    """``scans`` with the beams that read the robot itself left out (``mcl.datasets.selfhits``), each laser's own
+    (fused lasers), said in one note a laser; as they are when there are none (with a warning when the robot turned
+    too little to tell, but some beams look like it). The scans returned carry the findings as ``self_hits`` (a
+    list, for summary.json)."""
+    from mcl.datasets.selfhits import (MIN_TURNS, beam_constancies, self_hits_of, unconfirmed_self_hits,
                                        without_self_hits)
 
-    c = beam_constancy(scans, sensor.range_min, sensor.range_max)
-    hits = self_hits_of(c)
-    if hits is None:
+    found = []
+    for c in beam_constancies(scans, sensor.range_min, sensor.range_max):
+        hits = self_hits_of(c)
+        if hits is not None:
+            echo(f"{log.path}: {hits.kind}: {hits.describe()}: taken as the robot itself in the laser's view and left "
+                 "out (sensor.self_hit_skip: false keeps them)")
+            found.append(hits)
+            continue
         maybe = unconfirmed_self_hits(c)
         if maybe is not None:
             cut = float(maybe.ranges.max()) + 0.05
@@ -440,26 +446,31 @@ def _skip_self_hits(scans, log, sensor, echo):
                  f"({c.turns} turns of 0.5 rad in the first {c.scans:,} scans; {MIN_TURNS} needed) to tell the "
                  f"robot itself from a wall beside it: scored. If it is the robot, --set sensor.range_min={cut:.2f} "
                  "leaves them out")
+    if not found:
         return scans
-    echo(f"{log.path}: {hits.kind}: {hits.describe()}: taken as the robot itself in the laser's view and left out "
-         "(sensor.self_hit_skip: false keeps them)")
-    out = ScanMap(scans, functools.partial(without_self_hits, hits=hits))
-    out.self_hits = hits
+    out = ScanMap(scans, functools.partial(without_self_hits, hits=found))
+    out.self_hits = found
     return out
 
 
 def _check_odometry(scans, log, sensor, echo):
-    """``mcl.odomcheck.check_odometry`` on the run's scans, the laser where the run puts it; a warning when the
-    scans point to a fault (reversed turns, distances off by two, a laser turned from its mounting). Returns the
-    check (for summary.json)."""
-    from mcl.odomcheck import advice, check_odometry, run_mount
+    """``mcl.odomcheck.check_each_laser`` on the run's scans, each laser where the run puts it; a warning when the
+    scans point to a fault (reversed turns, distances off by two, a laser turned from its mounting): one for the
+    odometry when every laser says the same, else one for each laser at fault. Returns the checks, the first
+    laser's first (for summary.json)."""
+    from mcl.odomcheck import OdometryCheck, advice, check_each_laser, run_mount
 
-    mount = run_mount(next(iter(scans)), sensor.laser_pose)
-    check = check_odometry(scans, mount)
-    if check.verdict is not None:
-        echo(f"mcl: warning: {log.path}: {check.describe()}: "
-             f"{advice(check, mount, sensor.laser_pose is not None, sensor.upside_down)}")
-    return check
+    checks = list(check_each_laser(scans, lambda s: run_mount(s, sensor.laser_pose)).values()) or [OdometryCheck(0)]
+    fused = [c.laser for c in checks] if len(checks) > 1 else []
+    if len({c.verdict for c in checks}) == 1:  # the same for all: the odometry's (or every laser's) fault, said once
+        checks_at_fault, fused = checks[:1], []
+    else:
+        checks_at_fault = checks
+    for c in checks_at_fault:
+        if c.verdict is not None:
+            echo(f"mcl: warning: {log.path}: {f'{c.laser}: ' if fused else ''}{c.describe()}: "
+                 f"{advice(c, c.mount, sensor.laser_pose is not None, sensor.upside_down, fused)}")
+    return checks
 
 
 def _check_time_offset(scans, log, sensor, echo):
@@ -782,6 +793,8 @@ def _run(
     # Heavy imports here so `mcl --help` stays fast.
     from tqdm import tqdm
 
+    from mcl.datasets.selfhits import summary_of
+    from mcl.odomcheck import summary_of as odometry_summary
     from mcl.evaluate import evaluate, format_eval
     from mcl.filter import Control, ParticleFilter
     from mcl.motion import velocities_from_odometry
@@ -1074,8 +1087,9 @@ def _run(
         **({"odometry_scale": pf.odom_scale.k} if pf.odom_scale is not None else {}),  # motion.scale_window's last
         **({"sweep_order": pf.sweep_order.summary()}
            if pf.sweep_order is not None and pf.sweep_order.scans else {}),
-        **({"self_hits": scans.self_hits.summary()} if getattr(scans, "self_hits", None) is not None else {}),
-        **({"odometry_check": log.odometry_check.summary()} if getattr(log, "odometry_check", None) else {}),
+        **({"self_hits": summary_of(scans.self_hits)} if getattr(scans, "self_hits", None) else {}),
+        **({"odometry_check": odometry_summary(log.odometry_checks)} if getattr(log, "odometry_checks", None)
+           else {}),
         **({"time_offset_check": log.time_offset_check.summary()} if getattr(log, "time_offset_check", None)
            else {}),
         "resamples": counts["resamples"],

@@ -1,5 +1,6 @@
-"""Message helpers shared by the bag tests (tests/test_rosbag.py, tests/test_laser_odometry.py): a tilted
-laser mounting on /tf and a MultiEchoLaserScan, written with mcl.datasets.bagwrite.BagOut."""
+"""Message helpers shared by the bag tests (tests/test_rosbag.py, tests/test_laser_odometry.py,
+tests/test_fused_checks.py): an Odometry, a LaserScan, a tilted laser mounting on /tf and a MultiEchoLaserScan,
+written with mcl.datasets.bagwrite.BagOut."""
 
 from __future__ import annotations
 
@@ -27,3 +28,29 @@ def multi_echo(b: BagOut, topic: str, s, echoes, *, frame="laser") -> None:
                                  angle_max=s.angle_min + s.angle_increment * (len(beams) - 1),
                                  angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0, range_min=0.0,
                                  range_max=s.max_range, ranges=beams, intensities=[]))
+
+
+def odom(b: BagOut, s, stamp=None, child="base_link", pose=None, frame="odom") -> None:
+    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child`` in ``frame``, no velocities."""
+    cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*(s.odom if pose is None else pose)),
+                covariance=np.zeros(36))
+    v3 = lambda x, z: b.msg("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)  # noqa: E731
+    tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
+               twist=b.msg("geometry_msgs/msg/Twist", linear=v3(0.0, 0.0), angular=v3(0.0, 0.0)),
+               covariance=np.zeros(36))
+    h = b.header(s.t if stamp is None else stamp, frame)
+    b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=h,
+                                                        child_frame_id=child, pose=cov, twist=tw))
+
+
+def laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.0, t=None, stamp=None) -> None:
+    """A LaserScan on ``topic`` of scan ``s``'s geometry and readings (or ``ranges``) in ``frame``, written at ``t``
+    (default ``s.t``) and stamped ``stamp`` (default ``t``)."""
+    r = np.asarray(s.ranges if ranges is None else ranges, dtype=np.float32)
+    t = s.t if t is None else t
+    L = "sensor_msgs/msg/LaserScan"
+    b.write(topic, L, t, b.msg(L, header=b.header(t if stamp is None else stamp, frame), angle_min=s.angle_min,
+                                angle_max=s.angle_min + s.angle_increment * (r.size - 1),
+                                angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0,
+                                range_min=range_min, range_max=s.max_range, ranges=r,
+                                intensities=np.zeros(0, dtype=np.float32)))

@@ -25,7 +25,9 @@ from mcl.maps import load_map
 from mcl.runner import run
 from mcl.simulate import simulate
 from mcl.trajectory import read_tum
+from tests.bagmsgs import laser as _laser
 from tests.bagmsgs import multi_echo as _echoes
+from tests.bagmsgs import odom as _odom
 from tests.bagmsgs import tilted as _tilted
 
 KINDS = {"bag1": "bag", "db3": "db3", "mcap": "mcap"}
@@ -1601,30 +1603,6 @@ def _explode_after(items, n):
 
 
 # ----------------------------------------------------------------------------- helpers writing raw messages
-
-
-def _odom(b: BagOut, s, stamp=None, child="base_link", pose=None, frame="odom") -> None:
-    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child`` in ``frame``, no velocities."""
-    cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*(s.odom if pose is None else pose)),
-                covariance=np.zeros(36))
-    v3 = lambda x, z: b.msg("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)  # noqa: E731
-    tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
-               twist=b.msg("geometry_msgs/msg/Twist", linear=v3(0.0, 0.0), angular=v3(0.0, 0.0)),
-               covariance=np.zeros(36))
-    h = b.header(s.t if stamp is None else stamp, frame)
-    b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=h,
-                                                        child_frame_id=child, pose=cov, twist=tw))
-
-
-def _laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.0, t=None, stamp=None) -> None:
-    r = np.asarray(s.ranges if ranges is None else ranges, dtype=np.float32)
-    t = s.t if t is None else t
-    L = "sensor_msgs/msg/LaserScan"
-    b.write(topic, L, t, b.msg(L, header=b.header(t if stamp is None else stamp, frame), angle_min=s.angle_min,
-                                angle_max=s.angle_min + s.angle_increment * (r.size - 1),
-                                angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0,
-                                range_min=range_min, range_max=s.max_range, ranges=r,
-                                intensities=np.zeros(0, dtype=np.float32)))
 
 
 @pytest.mark.parametrize("suffix", ["mcap", "clf"])

@@ -255,7 +255,7 @@ def test_a_robot_that_never_turns_gets_a_warning_not_a_mask():
     assert said[0].endswith("--set sensor.range_min=0.30 leaves them out")
     said.clear()
     found = _skip_self_hits(_corridor(turns=True, body=True), SimpleNamespace(path="w.clf"), sensor, said.append)
-    assert found.self_hits.beams.tolist() == [0, 1, 2, 3, 4] and "taken as the robot itself" in said[0]
+    assert found.self_hits[0].beams.tolist() == [0, 1, 2, 3, 4] and "taken as the robot itself" in said[0]
 
 
 def test_only_the_first_scans_are_read_however_long_the_robot_stands_still():
@@ -273,15 +273,35 @@ def test_only_the_first_scans_are_read_however_long_the_robot_stands_still():
     assert len(read) == 100 and c.scans == 100
 
 
-def test_another_lasers_scans_are_neither_looked_at_nor_masked():
-    from mcl.datasets.selfhits import beam_constancy
+def test_each_fused_laser_is_looked_at_and_masked_by_its_own_beams():
+    # an AGV's front and rear lasers fused into one stream (interleaved, one pass): the front sees a bumper at beams
+    # 0-15, the rear a cart's posts at beams 100-110. Each laser's beams are found and masked on its own scans only;
+    # the first laser's figures are those of its scans alone (the rear's scans were once skipped: never masked)
+    from types import SimpleNamespace
 
-    rng = np.random.default_rng(4)
+    from mcl.datasets.selfhits import beam_constancies, beam_constancy, self_hits_of, summary_of
+    from mcl.runner import _skip_self_hits
+
     front = _with_body(read_carmen(DEMO / "log.clf").scans, [(0, 15, 0.22)])
-    rear = [dataclasses.replace(s, kind="/scan_rear", ranges=rng.uniform(0.2, 0.3, s.ranges.size)) for s in front]
+    rear = [dataclasses.replace(s, kind="/scan_rear") for s in _with_body(read_carmen(DEMO / "log.clf").scans,
+                                                                          [(100, 110, 0.3)], seed=4)]
     fused = [s for pair in zip(front, rear) for s in pair]
-    a, b = beam_constancy(fused, 0.0, 80.0), beam_constancy(front, 0.0, 80.0)
-    assert a.scans == b.scans and np.array_equal(a.share, b.share) and np.array_equal(a.turned, b.turned)
-    hits = detect_self_hits(fused, 0.0, 80.0)
-    assert hits.beams.tolist() == list(range(16)) and hits.kind == "FLASER"
-    assert without_self_hits(rear[0], hits) is rear[0]
+    each = beam_constancies(fused, 0.0, 80.0)
+    assert [c.geometry[0] for c in each] == ["FLASER", "/scan_rear"]
+    alone = beam_constancy(front, 0.0, 80.0)
+    assert each[0].scans == alone.scans and np.array_equal(each[0].share, alone.share)
+    assert np.array_equal(each[0].turned, alone.turned)
+    hits = [self_hits_of(c) for c in each]
+    assert hits[0].beams.tolist() == list(range(16)) and hits[1].beams.tolist() == list(range(100, 111))
+    assert hits[1].kind == "/scan_rear" and np.allclose(hits[1].ranges, 0.3, atol=0.01)
+    assert without_self_hits(rear[0], hits[0]) is rear[0]  # one laser's mask leaves the other's scans alone
+    masked = without_self_hits(rear[0], hits)
+    assert (masked.ranges[100:111] == 0).all() and (masked.ranges[:16] > 0.5).any()
+    said = []
+    out = _skip_self_hits(fused, SimpleNamespace(path="two"), load_config(None, []).sensor, said.append)
+    assert [m.split(": ")[1] for m in said] == ["FLASER", "/scan_rear"], said
+    got = list(out)
+    assert (got[0].ranges[:16] == 0).all() and (got[1].ranges[100:111] == 0).all() and (got[1].ranges[:16] > 0).all()
+    summary = summary_of(out.self_hits)
+    assert summary["laser"] == "FLASER" and summary["other_lasers"][0]["laser"] == "/scan_rear"
+    assert summary["other_lasers"][0]["beams"] == list(range(100, 111))

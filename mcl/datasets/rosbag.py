@@ -1257,26 +1257,36 @@ def bag_info(path, topics=None, frames=None, sensor=None) -> dict:
 
 def _scan_checks(src: "BagSource", sensor) -> dict:
     """``bag_info``'s "self_hits" (None: none found), "odometry_check" (absent for laser odometry) and
-    "time_offset_check" (absent for laser odometry, or when the odometry check found a fault) of ``src``."""
+    "time_offset_check" (absent for laser odometry, or when the odometry check found a fault) of ``src``, each laser's
+    as a run finds them (``mcl.datasets.selfhits.summary_of``, ``mcl.odomcheck.summary_of``: fused lasers' others in
+    ``other_lasers``), with the line a run would say as "text"."""
     from mcl.config import SensorConfig
-    from mcl.datasets.selfhits import detect_self_hits
+    from mcl.datasets.selfhits import beam_constancies, self_hits_of
+    from mcl.datasets.selfhits import summary_of as hits_summary
     from mcl.latency import advice as time_advice
     from mcl.latency import check_time_offset
-    from mcl.odomcheck import advice, check_odometry, run_mount
+    from mcl.odomcheck import advice, check_each_laser, run_mount
+    from mcl.odomcheck import summary_of as odometry_summary
 
     sensor = SensorConfig() if sensor is None else sensor
-    hits = detect_self_hits(src.scans, float(sensor.range_min), float(sensor.range_max))
-    out = {"self_hits": None if hits is None else {"topic": hits.kind, "text": hits.describe(), **hits.summary()}}
-    first = next(iter(src.scans), None)
-    if src.wheel_odometry and first is not None:  # laser odometry comes from the scans: nothing to check
-        mount = run_mount(first, sensor.laser_pose)
-        check = check_odometry(src.scans, mount)
-        out["odometry_check"] = {**check.summary(), **({"text": f"{check.describe()}: " + advice(
-            check, mount, sensor.laser_pose is not None, sensor.upside_down)} if check.verdict else {})}
-        if check.verdict is None:
-            timing = check_time_offset(src.scans, src.odometry, mount)
-            out["time_offset_check"] = {**timing.summary(), "text": timing.describe() + (
-                f": {time_advice(timing)}" if timing.verdict else "")}
+    hits = [h for h in (self_hits_of(c) for c in beam_constancies(src.scans, float(sensor.range_min),
+                                                                   float(sensor.range_max))) if h is not None]
+    out = {"self_hits": hits_summary(hits)}
+    for h, d in zip(hits, [out["self_hits"], *(out["self_hits"] or {}).get("other_lasers", [])]):
+        d["text"] = h.describe()
+    if src.wheel_odometry:  # laser odometry comes from the scans: nothing to check
+        checks = list(check_each_laser(src.scans, lambda s: run_mount(s, sensor.laser_pose)).values())
+        if checks:
+            out["odometry_check"] = odometry_summary(checks)
+            fused = [c.laser for c in checks] if len({c.verdict for c in checks}) > 1 else []
+            for c, d in zip(checks, [out["odometry_check"], *out["odometry_check"].get("other_lasers", [])]):
+                if c.verdict:
+                    d["text"] = f"{c.describe()}: " + advice(c, c.mount, sensor.laser_pose is not None,
+                                                             sensor.upside_down, fused)
+            if checks[0].verdict is None:
+                timing = check_time_offset(src.scans, src.odometry, np.asarray(checks[0].mount))
+                out["time_offset_check"] = {**timing.summary(), "text": timing.describe() + (
+                    f": {time_advice(timing)}" if timing.verdict else "")}
     return out
 
 
@@ -1310,13 +1320,15 @@ def format_info(info: dict) -> str:
         lines.append("  reference:    " + (", ".join(refs) + ": score a run against one with --truth-topic TOPIC" if refs
                                           else "no pose topic besides the odometry (--truth T.tum scores against a file)"))
         h = u.get("self_hits")
-        lines.append("  robot itself: " + (f"{h['topic']}: {h['text']}: left out (sensor.self_hit_skip)" if h
-                                          else "no beam reads it (sensor.self_hit_skip)"))
+        lines += [f"  robot itself: {d['laser']}: {d['text']}: left out (sensor.self_hit_skip)"
+                  for d in ([h, *h.get("other_lasers", [])] if h else [])] or [
+            "  robot itself: no beam reads it (sensor.self_hit_skip)"]
         c = u.get("odometry_check")
-        if c is not None:
-            kept = c["wins"].get("recorded", 0)
-            lines.append("  odometry check: " + (c["text"] if c["verdict"] else
-                                                f"the scans fit the odometry as recorded ({kept} of {c['pairs']} "
+        each = [c, *c.get("other_lasers", [])] if c is not None else []
+        for d in each:
+            kept = d["wins"].get("recorded", 0)
+            lines.append("  odometry check: " + (f"{d['laser']}: " if len(each) > 1 else "") + (
+                d["text"] if d["verdict"] else f"the scans fit the odometry as recorded ({kept} of {d['pairs']} "
                                                 "pairs of scans)"))
         c = u.get("time_offset_check")
         if c is not None:

@@ -9,7 +9,8 @@ default lost four of eight tracks). ROS users mask them with a laser filter; mcl
 
 A return fixed to the robot keeps its beam and its range while the robot turns; a wall's moves to other beams. A
 robot driving straight down a corridor sees its side walls at one range on every scan, so constancy alone does not
-tell a wall from the robot: the turns do. So, from the scans of one geometry (beam count and angles):
+tell a wall from the robot: the turns do. So, for each laser (fused lasers, an AGV's front and rear, each have
+their own view of the robot) from its scans of one geometry (beam count and angles):
 
 1. keep a scan each time the odometry has moved ``step`` m or turned ``step`` rad since the last one kept (a robot
    standing still says nothing), up to ``max_scans``, among the first ``max_read`` scans;
@@ -45,8 +46,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BeamConstancy", "SelfHits", "beam_constancy", "detect_self_hits", "self_hits_of", "unconfirmed_self_hits",
-           "without_self_hits"]
+__all__ = ["BeamConstancy", "SelfHits", "beam_constancies", "beam_constancy", "detect_self_hits", "self_hits_of",
+           "summary_of", "unconfirmed_self_hits", "without_self_hits"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,8 +70,9 @@ class SelfHits:
         return _same_geometry(scan, self.kind, self.n, self.angle_min, self.angle_increment)
 
     def summary(self) -> dict:
-        """For summary.json: the beams (indices and angles in rad), their median readings, the evidence."""
-        return {"beams": [int(b) for b in self.beams],
+        """For summary.json: the laser, the beams (indices and angles in rad), their median readings, the
+        evidence."""
+        return {"laser": self.kind, "beams": [int(b) for b in self.beams],
                 "angles_rad": [round(self.angle_min + self.angle_increment * int(b), 6) for b in self.beams],
                 "ranges_m": [round(float(r), 4) for r in self.ranges], "of_beams": self.n,
                 "least_share": round(self.share, 4), "scans": self.scans, "turns": self.turns}
@@ -110,41 +112,58 @@ class BeamConstancy:
     turns: int
 
 
-def beam_constancy(scans, range_min: float, range_max: float, *, step: float = 0.05, max_scans: int = 1500,
-                   max_read: int = 20_000, turn: float = 0.5, turn_travel: float = 1.0, tol: float = 0.03,
-                   tol_max: float = 0.1, tol_sigmas: float = 3.0) -> BeamConstancy | None:
-    """Steps 1 and 2 of the module docstring's rule and each beam's shares, from ``scans`` (an iterable of
-    ``Scan``: ranges, angle_min, angle_increment, max_range, odom); None without a scan that has odometry. A reading
-    counts when it is finite and range_min < r < the no-return range (``range_max``, or the scan's own max_range
-    when smaller). Only the scans of the first scan's laser (its ``kind``: a bag's topic) and geometry are looked
-    at."""
+def beam_constancy(scans, range_min: float, range_max: float, **kw) -> BeamConstancy | None:
+    """Steps 1 and 2 of the module docstring's rule and each beam's shares for the first scan's laser (its
+    ``kind``: a bag's topic) and geometry, from ``scans``; None without a scan that has odometry. ``kw`` as
+    ``beam_constancies``'."""
+    each = beam_constancies(scans, range_min, range_max, **kw)
+    return each[0] if each else None
+
+
+def beam_constancies(scans, range_min: float, range_max: float, *, step: float = 0.05, max_scans: int = 1500,
+                     max_read: int = 20_000, turn: float = 0.5, turn_travel: float = 1.0, tol: float = 0.03,
+                     tol_max: float = 0.1, tol_sigmas: float = 3.0) -> list[BeamConstancy]:
+    """Steps 1 and 2 of the module docstring's rule and each beam's shares, for every laser of ``scans`` (an
+    iterable of ``Scan``: ranges, angle_min, angle_increment, max_range, odom, kind), in one pass: fused lasers
+    (an AGV's front and rear) each have their own body in view. A laser is its ``kind`` (a bag's topic) with the
+    geometry of its first scan that has odometry; its scans of another geometry are not looked at. In the order the
+    lasers first appear; empty without a scan that has odometry. A reading counts when it is finite and
+    range_min < r < the no-return range (``range_max``, or the scan's own max_range when smaller)."""
     from mcl.sensors import no_return_range
 
-    first, rows, poses, last = None, [], [], None
+    kept: dict[str, tuple] = {}  # kind -> (geometry, rows, poses, [last pose])
+    full = 0  # lasers with max_scans kept
     for s in itertools.islice(scans, max_read):  # a bag's scans are read again: a robot parked for an hour, not all
         if s.odom is None:
             continue
-        if first is None:
-            first = (getattr(s, "kind", ""), np.asarray(s.ranges).shape[0], float(s.angle_min),
-                     float(s.angle_increment))
-        elif not _same_geometry(s, *first):
+        kind = getattr(s, "kind", "")
+        if kind not in kept:
+            kept[kind] = ((kind, np.asarray(s.ranges).shape[0], float(s.angle_min), float(s.angle_increment)),
+                          [], [], [None])
+        geometry, rows, poses, last = kept[kind]
+        if len(rows) >= max_scans or not _same_geometry(s, *geometry):
             continue
         o = np.asarray(s.odom, dtype=np.float64)
-        if last is not None and math.hypot(o[0] - last[0], o[1] - last[1]) < step \
-                and abs(math.remainder(o[2] - last[2], 2.0 * math.pi)) < step:
+        if last[0] is not None and math.hypot(o[0] - last[0][0], o[1] - last[0][1]) < step \
+                and abs(math.remainder(o[2] - last[0][2], 2.0 * math.pi)) < step:
             continue
         r = np.asarray(s.ranges, dtype=np.float64)
         with np.errstate(invalid="ignore"):
             ok = np.isfinite(r) & (r > range_min) & (r < no_return_range(range_max, s.max_range))
         rows.append(np.where(ok, r, np.nan).astype(np.float32))
         poses.append(o)
-        last = o
-        if len(rows) >= max_scans:
+        last[0] = o
+        full += len(rows) == max_scans
+        if full == len(kept):
             break
-    if not rows:
-        return None
-    ranges = np.stack(rows)  # (K, n), NaN where no reading counts
-    pose = np.stack(poses)
+    return [_constancy(np.stack(rows), np.stack(poses), geometry, turn, turn_travel, tol, tol_max, tol_sigmas)
+            for geometry, rows, poses, _ in kept.values() if rows]
+
+
+def _constancy(ranges: np.ndarray, pose: np.ndarray, geometry, turn: float, turn_travel: float, tol: float,
+               tol_max: float, tol_sigmas: float) -> BeamConstancy:
+    """One laser's shares from its kept scans' ``ranges`` (K, n; NaN where no reading counts) and odometry poses
+    ``pose`` (K, 3)."""
     heading = np.unwrap(pose[:, 2])
     travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(pose[:, 0]), np.diff(pose[:, 1])))])
     # turning pairs: each kept scan with the first later one `turn` rad away in heading, within turn_travel m
@@ -165,7 +184,7 @@ def beam_constancy(scans, range_min: float, range_max: float, *, step: float = 0
         within = np.clip(tol_sigmas * 1.4826 * np.nan_to_num(_nanmedian(off), posinf=tol_max), tol, tol_max)
         near = off <= within  # NaN: False
     turned = (near[a] & near[partner[a]]).mean(axis=0) if a.size else np.zeros(ranges.shape[1])
-    return BeamConstancy(median=median, share=near.mean(axis=0), turned=turned, geometry=first, scans=int(k),
+    return BeamConstancy(median=median, share=near.mean(axis=0), turned=turned, geometry=geometry, scans=int(k),
                          turns=int(a.size))
 
 
@@ -223,11 +242,21 @@ def _same_geometry(s, kind: str, n: int, angle_min: float, angle_increment: floa
             and math.isclose(s.angle_increment, angle_increment, rel_tol=1e-6, abs_tol=1e-9))
 
 
-def without_self_hits(s, hits: SelfHits):
+def without_self_hits(s, hits: SelfHits | list[SelfHits]):
     """Scan ``s`` with the readings of ``hits``' beams made 0 (no reading: every model and reader skips a reading
-    of 0 or less, as a LaserScan's below range_min), when it has their geometry; else ``s`` as it is."""
-    if not hits.matches(s):
-        return s
-    r = np.array(s.ranges, dtype=np.float64)
-    r[hits.beams] = 0.0
-    return dataclasses.replace(s, ranges=r)
+    of 0 or less, as a LaserScan's below range_min), when it has their laser and geometry; else ``s`` as it is.
+    ``hits``: one laser's, or a list of several lasers' (fused lasers: each scan is masked by its own laser's)."""
+    for h in ([hits] if isinstance(hits, SelfHits) else hits):
+        if h.matches(s):
+            r = np.array(s.ranges, dtype=np.float64)
+            r[h.beams] = 0.0
+            return dataclasses.replace(s, ranges=r)
+    return s
+
+
+def summary_of(hits: list[SelfHits]) -> dict | None:
+    """For summary.json and ``mcl bag info``: the first laser's ``SelfHits.summary()``, with the other lasers' in
+    ``other_lasers`` when several lasers read the robot; None when none does."""
+    if not hits:
+        return None
+    return {**hits[0].summary(), **({"other_lasers": [h.summary() for h in hits[1:]]} if len(hits) > 1 else {})}
