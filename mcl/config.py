@@ -275,6 +275,10 @@ class SensorConfig:
     # leave out the beams that read the robot itself (a wheel, a mast: the same short range on every scan, also while
     # the robot turns), found in the log before the run (mcl.datasets.selfhits) and said in a note
     self_hit_skip: bool = True
+    # lasers fused (an AGV's front and rear): one whose scans fit the odometry only turned from its mounting or
+    # mirrored, while another's fit it as recorded (its /tf turned half a turn, upside down), found before the run
+    # (mcl.odomcheck): leave_out (its scans not weighed; a warning) or keep (a warning only)
+    misfit_laser: Literal["leave_out", "keep"] = "leave_out"
     # the laser is mounted upside down and the log or the bag's /tf does not say so: every scan is read mirrored (a
     # beam at angle a points at -a); mcl.odomcheck's warning of reversed turns is the sign
     upside_down: bool = False

@@ -397,7 +397,7 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
     if cfg.sensor.use and cfg.sensor.self_hit_skip:
         scans = _skip_self_hits(scans, log, cfg.sensor, echo)
     if cfg.sensor.use and len(scans) and getattr(log, "wheel_odometry", True):
-        log.odometry_checks = _check_odometry(scans, log, cfg.sensor, echo)
+        log.odometry_checks, log.left_out_lasers = _check_odometry(scans, log, cfg.sensor, echo)
         if log.odometry_checks[0].verdict is None:  # the turns' timing means nothing while their sign is in doubt
             log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, echo)
     if cfg.truth:
@@ -456,21 +456,18 @@ def _skip_self_hits(scans, log, sensor, echo):
 def _check_odometry(scans, log, sensor, echo):
     """``mcl.odomcheck.check_each_laser`` on the run's scans, each laser where the run puts it; a warning when the
     scans point to a fault (reversed turns, distances off by two, a laser turned from its mounting): one for the
-    odometry when every laser says the same, else one for each laser at fault. Returns the checks, the first
-    laser's first (for summary.json)."""
-    from mcl.odomcheck import OdometryCheck, advice, check_each_laser, run_mount
+    odometry when every laser says the same, else one for each laser at fault. Returns (the checks, the first
+    laser's first, for summary.json; the lasers to leave out of the run: ``misfits``)."""
+    from mcl.odomcheck import OdometryCheck, advice, check_each_laser, misfits, run_mount
 
     checks = list(check_each_laser(scans, lambda s: run_mount(s, sensor.laser_pose)).values()) or [OdometryCheck(0)]
-    fused = [c.laser for c in checks] if len(checks) > 1 else []
-    if len({c.verdict for c in checks}) == 1:  # the same for all: the odometry's (or every laser's) fault, said once
-        checks_at_fault, fused = checks[:1], []
-    else:
-        checks_at_fault = checks
-    for c in checks_at_fault:
+    fused = [c.laser for c in checks] if len({c.verdict for c in checks}) > 1 else []
+    left_out = set(misfits(checks)) if sensor.misfit_laser == "leave_out" else set()
+    for c in checks if fused else checks[:1]:  # the same for all: the odometry's (or every laser's) fault, said once
         if c.verdict is not None:
             echo(f"mcl: warning: {log.path}: {f'{c.laser}: ' if fused else ''}{c.describe()}: "
-                 f"{advice(c, c.mount, sensor.laser_pose is not None, sensor.upside_down, fused)}")
-    return checks
+                 f"{advice(c, c.mount, sensor.laser_pose is not None, sensor.upside_down, fused, c.laser in left_out)}")
+    return checks, left_out
 
 
 def _check_time_offset(scans, log, sensor, echo):
@@ -933,6 +930,7 @@ def _run(
     last_odom = None
     last_t = 0.0
     lasers: set = set()  # the scan sources (a bag's topics; a CARMEN log's one kind) seen to update so far
+    left_out = getattr(log, "left_out_lasers", set())  # fused lasers whose mounting misfits (_check_odometry)
     owed: set = set()  # ... that have not updated since the robot last moved (AMCL's lasers_update_ flags)
     writer = TumWriter(out_dir / "trajectory.tum")
     bag_out = _estimate_bag(cfg, out_dir, log) if write_bag else None
@@ -962,9 +960,10 @@ def _run(
                         owed = set(lasers)
                     # Each laser updates once after the robot moved, as AMCL's flags do: fused front and rear
                     # lasers both weigh in (the second, at the first's pose, would otherwise always be gated).
-                    if still and (laser is None or laser in lasers) and laser not in owed:
-                        # Update gating: no filter update, but the trajectory still gets this scan's pose, the
-                        # last estimate moved by the odometry since that update (one pose per scan).
+                    if (still and (laser is None or laser in lasers) and laser not in owed) or laser in left_out:
+                        # Update gating (and a laser left out, sensor.misfit_laser): no filter update, but the
+                        # trajectory still gets this scan's pose, the last estimate moved by the odometry since that
+                        # update (one pose per scan).
                         pose = compose(last_mean, compose(inverse(last_odom), odom))
                         with signals.held():
                             writer.append(scan.t, pose[0], pose[1], pose[2])
@@ -980,7 +979,8 @@ def _run(
                 )
                 frame = plane_sensor.frame_of(scan) if plane_sensor is not None else None
                 no_scan = scan is marks or scan is frame  # an update from a LANDMARK line or a depth frame alone
-                observation = pf.prepare(scan, laser_pose) if not no_scan else None  # None when unusable
+                # None when unusable (or a laser left out: its first scan, before any update, only starts the filter)
+                observation = pf.prepare(scan, laser_pose) if not no_scan and laser not in left_out else None
                 planes = plane_sensor.observe(frame) if frame is not None else None
                 control = None
                 if last_odom is not None:
@@ -1090,6 +1090,7 @@ def _run(
         **({"self_hits": summary_of(scans.self_hits)} if getattr(scans, "self_hits", None) else {}),
         **({"odometry_check": odometry_summary(log.odometry_checks)} if getattr(log, "odometry_checks", None)
            else {}),
+        **({"left_out_lasers": sorted(left_out)} if left_out else {}),
         **({"time_offset_check": log.time_offset_check.summary()} if getattr(log, "time_offset_check", None)
            else {}),
         "resamples": counts["resamples"],
