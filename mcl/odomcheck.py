@@ -183,8 +183,12 @@ def advice(check: OdometryCheck, mount, laser_pose_given: bool, upside_down: boo
     where = ("sensor.laser_pose" if laser_pose_given else "its transform in the bag's /tf" if alone
              else "the log's mounting")
     pose = f"--set \"sensor.laser_pose=[{x:g}, {y:g}, {round(wrap_angle(th), 4) + 0.0:g}]\""
-    fix = (f"fix its transform in the bag's /tf, or read it alone, mounted there: {alone}{pose}" if alone
-           and not laser_pose_given else f"if so, {pose} mounts it there")
+    if alone:  # sensor.laser_pose would mount every fused laser there
+        fix = (("sensor.laser_pose mounts every fused laser alike: leave it unset to mount each by the bag's /tf"
+                if laser_pose_given else "fix its transform in the bag's /tf")
+               + f", or read it alone, mounted there: {alone}{pose}")
+    else:
+        fix = f"if so, {pose} mounts it there"
     lost = "" if left_out else ", and the filter will be lost as soon as the robot moves"
     return (f"{head}the laser seems to look another way than {where} says ({math.degrees(mount[2]):.0f} "
             f"degrees){lost}; {fix}")

@@ -234,3 +234,24 @@ def test_a_laser_looking_back_down_a_corridor_fits_its_mounting(tmp_path):
     assert check.verdict is None and check.wins.get("half", 0) < 10, check.wins
     # (declared looking ahead instead, the corridor cannot tell: "as recorded" wins 31 pairs, and won 29 before the
     # rule; a miss, not a false verdict, and the demo's and the shared logs' half turns are still found)
+
+
+def test_the_advice_for_one_fused_laser_reads_it_alone():
+    # one fused laser at fault: sensor.laser_pose and sensor.upside_down would apply to every laser, so the advice
+    # reads that laser alone (topics.scan) with the mounting that fits, or mends its /tf
+    from mcl.odomcheck import OdometryCheck, advice
+
+    both = ["/front/scan", "/rear/scan"]
+    half = OdometryCheck(60, {"half": 59, "tie": 1}, "half", laser="/rear/scan")
+    text = advice(half, (-0.2, 0.0, 0.0), False, False, both)
+    assert text.endswith("fix its transform in the bag's /tf, or read it alone, mounted there: --set "
+                         'topics.scan=/rear/scan --set "sensor.laser_pose=[-0.2, 0, -3.1416]"'), text
+    given = advice(half, (-0.2, 0.0, 0.0), True, False, both, left_out=True)
+    assert given.startswith("left out of the run (sensor.misfit_laser: keep weighs it); the laser seems to look "
+                            "another way than sensor.laser_pose says (0 degrees); sensor.laser_pose mounts every "
+                            "fused laser alike: leave it unset"), given
+    flip = OdometryCheck(60, {"reversed": 50, "tie": 10}, "reversed", laser="/rear/scan")
+    assert advice(flip, (0.0, 0.0, 0.0), False, False, both).endswith(
+        "read it alone: --set topics.scan=/rear/scan --set sensor.upside_down=true")
+    one = advice(half, (-0.2, 0.0, 0.0), False, False)  # one laser: the mounting that fits, as before
+    assert one.endswith('if so, --set "sensor.laser_pose=[-0.2, 0, -3.1416]" mounts it there'), one
