@@ -421,7 +421,8 @@ class Config:
     log: str | None = None
     bag: str | None = None  # ROS bag (.bag, .db3, .mcap or a rosbag2 folder) instead of a CARMEN log
     truth: str | None = None
-    laser: str = "auto"  # which laser stream of the log: auto, FLASER, RLASER, ROBOTLASER1, RAWLASER1..4
+    # which laser stream of the log: auto, FLASER, RLASER, ROBOTLASER1, RAWLASER1..4, or several fused (FLASER,RLASER)
+    laser: str = "auto"
     seed: int = field(default=1, metadata=_rng(0, 2**63 - 1))
     filter: FilterConfig = field(default_factory=FilterConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
@@ -564,8 +565,11 @@ class _CrossCheckError(ConfigError):
 
 
 def _cross_checks(cfg: Config) -> None:
-    if cfg.laser not in LASER_KINDS:
-        raise _CrossCheckError(f"laser: expected one of {', '.join(LASER_KINDS)}, got {cfg.laser!r}")
+    kinds = str(cfg.laser).split(",")
+    if cfg.laser not in LASER_KINDS and not (len(kinds) > 1 and len(set(kinds)) == len(kinds)
+                                             and all(k in LASER_KINDS[1:] for k in kinds)):
+        raise _CrossCheckError(f"laser: expected one of {', '.join(LASER_KINDS)}, or several of them fused, comma "
+                               f"separated (FLASER,RLASER), got {cfg.laser!r}")
     if cfg.log is not None and cfg.bag is not None:
         raise _CrossCheckError("bag: give a CARMEN log (log) or a ROS bag (bag), not both", "log")
     if cfg.log is not None:

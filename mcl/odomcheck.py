@@ -199,12 +199,24 @@ MOUNTING = ("reversed", "half", "left", "right")  # the verdicts a laser's own m
 
 def misfits(checks: list[OdometryCheck]) -> list[str]:
     """The lasers of a fused run (``checks``: ``check_each_laser``'s) whose scans fit the odometry only with their
-    mounting turned or mirrored (a verdict in ``MOUNTING``) while another laser's fit it as recorded (no verdict, the
-    motion as recorded winning ``MIN_WINS`` pairs or more): the odometry is right and their mounting is not. Empty
-    for a single laser, or when no laser fits as recorded (then the odometry may be the one at fault)."""
-    if len(checks) < 2 or not any(c.verdict is None and c.wins.get("recorded", 0) >= MIN_WINS for c in checks):
+    mounting turned or mirrored (a verdict in ``MOUNTING``) while another laser's fit it as recorded (``_sound``):
+    the odometry is right and their mounting is not. Empty for a single laser, or when no laser fits as recorded
+    (then the odometry may be the one at fault)."""
+    if len(checks) < 2 or not any(_sound(c) for c in checks):
         return []
     return [c.laser for c in checks if c.verdict in MOUNTING]
+
+
+MIN_SOUND = 5  # pairs the motion as recorded must win on a laser that vouches for the odometry ...
+
+
+def _sound(c: OdometryCheck) -> bool:
+    """Whether a laser's scans vouch for the odometry as recorded: no verdict, and the motion as recorded won
+    ``MIN_SOUND`` pairs or more and twice as many as any fault (an open hall's laser ties most pairs: 9 won, 2 for
+    the best fault, 49 ties)."""
+    recorded = c.wins.get("recorded", 0)
+    rival = max((v for k, v in c.wins.items() if k in ALTERNATIVES), default=0)
+    return c.verdict is None and recorded >= MIN_SOUND and recorded >= 2 * rival
 
 
 def summary_of(checks: list[OdometryCheck]) -> dict:

@@ -255,17 +255,21 @@ def small_pages():
 
 
 def _choose_scans(log, laser: str):
+    """The scans of a CARMEN log the run reads (config key ``laser``): ``auto`` (FLASER, else ROBOTLASER1, else
+    RAWLASER1, ...), one stream, or several fused ("FLASER,RLASER": a front and a rear laser, each on its own
+    mounting, in file order; not two formats of one laser, which a log may write both of)."""
     if laser == "auto":
         for kind in ("FLASER", "ROBOTLASER1", "RAWLASER1", "RLASER", "RAWLASER2", "RAWLASER3", "RAWLASER4"):
             scans = log.scans_of(kind)
             if scans:
                 return scans
         raise DataError(f"{log.path}: no laser messages")
-    scans = log.scans_of(laser)
-    if not scans:
-        kinds = sorted({s.kind for s in log.scans})
-        raise ConfigError(f"laser: the log {log.path} has no {laser} messages (it has {', '.join(kinds) or 'none'})")
-    return scans
+    wanted = laser.split(",")
+    for kind in wanted:
+        if not any(s.kind == kind for s in log.scans):
+            kinds = sorted({s.kind for s in log.scans})
+            raise ConfigError(f"laser: the log {log.path} has no {kind} messages (it has {', '.join(kinds) or 'none'})")
+    return [s for s in log.scans if s.kind in wanted] if len(wanted) > 1 else log.scans_of(laser)
 
 
 def _landmark_records(log, cfg: Config) -> list:

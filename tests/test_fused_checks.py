@@ -89,3 +89,51 @@ def test_a_run_leaves_the_laser_at_fault_out_says_so_and_its_advice_mends_it(agv
     assert not [m for m in said if "odometry's motion" in m], said
     assert s["odometry_check"]["laser"] == "/rear/scan" and s["odometry_check"]["verdict"] is None
     assert "other_lasers" not in s["odometry_check"] and s["self_hits"]["laser"] == "/rear/scan"
+
+
+def _fused_log(tmp_path, rear_yaw: float):
+    """The demo's log with each FLASER line repeated as an RLASER line of the same readings, its laser pose the
+    robot's turned by ``rear_yaw`` (pi: declared looking back while its scans look ahead, the mounting at fault)."""
+    import math
+
+    out = []
+    for line in (DEMO / "log.clf").read_text().splitlines(keepends=True):
+        out.append(line)
+        if line.startswith("FLASER"):
+            f = line.split()
+            n = int(f[1])
+            ox, oy, oth = (float(v) for v in f[n + 5:n + 8])
+            th = math.atan2(math.sin(oth + rear_yaw), math.cos(oth + rear_yaw))
+            out.append(" ".join(["RLASER", *f[1:n + 2], f"{ox:.6f}", f"{oy:.6f}", f"{th:.6f}", *f[n + 5:]]) + "\n")
+    path = tmp_path / f"fused-{rear_yaw:g}.clf"
+    path.write_text("".join(out))
+    return path
+
+
+def test_a_carmen_log_s_front_and_rear_lasers_are_fused_by_name(tmp_path):
+    # laser: FLASER,RLASER reads both streams, each on its own mounting (a CARMEN log's RLASER line carries its
+    # laser's pose): the rear laser declared looking back while its scans look ahead is found and left out (the
+    # run then is the front laser's: the demo's 52.8 s); declared as it looks, both update (twice the updates)
+    from mcl.errors import ConfigError
+
+    sets = [f"map={DEMO / 'map.yaml'}", f"truth={DEMO / 'truth.tum'}", "rerun.mode=off", "filter.particles=2000",
+            "filter.kld=false", "filter.initial_pose=[2.062007,10.160616,-0.218311]", "laser=FLASER,RLASER"]
+    said = []
+    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, f"log={_fused_log(tmp_path, np.pi)}"]),
+            tmp_path / "wrong", progress=False, echo=said.append)
+    warn = [m for m in said if "odometry's motion" in m]
+    assert len(warn) == 1 and ": RLASER: the scans fit the odometry's motion best with the laser turned half a turn" \
+        in warn[0] and "left out of the run" in warn[0], said
+    assert s["left_out_lasers"] == ["RLASER"] and s["eval"]["convergence_time"] <= 60.0, s["eval"]
+    front = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets[:-1], f"log={DEMO / 'log.clf'}"]),
+                tmp_path / "front", progress=False, echo=lambda *_: None)
+    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, f"log={_fused_log(tmp_path, 0.0)}"]),
+            tmp_path / "both", progress=False, echo=lambda *_: None)
+    assert "left_out_lasers" not in s and s["odometry_check"]["other_lasers"][0]["laser"] == "RLASER"
+    assert s["updates"] == 2 * front["updates"] and s["scans"] == 2 * front["scans"], (s["updates"], front["updates"])
+    for bad in ("FLASER,FLASER", "FLASER,RLASER2", "auto,RLASER"):
+        with pytest.raises(ConfigError, match="laser: expected one of auto, FLASER"):
+            load_config(None, [f"laser={bad}"])
+    with pytest.raises(ConfigError, match="has no RLASER messages"):
+        run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, f"log={DEMO / 'log.clf'}"]),
+            tmp_path / "none", progress=False, echo=lambda *_: None)

@@ -203,19 +203,23 @@ def test_the_robots_own_frame_in_view_does_not_favour_a_smaller_motion(monkeypat
 
 def test_only_a_fused_laser_whose_mounting_alone_misfits_is_left_out():
     # misfits: a laser is left out only when its verdict is a mounting's (turned, mirrored) and another laser fits
-    # the odometry as recorded (MIN_WINS pairs or more); never a single laser, never when every laser disagrees
-    # with the odometry (then it is the odometry's fault), never for the distances (the odometry's too)
-    from mcl.odomcheck import MIN_WINS, OdometryCheck, misfits
+    # the odometry as recorded (MIN_SOUND pairs or more, twice its best fault's); never a single laser, never when
+    # every laser disagrees with the odometry (then it is the odometry's fault), never for the distances (the
+    # odometry's too)
+    from mcl.odomcheck import MIN_SOUND, OdometryCheck, misfits
 
     good = OdometryCheck(60, {"recorded": 50, "tie": 10}, None, laser="/front")
-    weak = OdometryCheck(60, {"recorded": MIN_WINS - 1, "tie": 60 - MIN_WINS + 1}, None, laser="/front")
+    hall = OdometryCheck(60, {"recorded": 9, "right": 2, "tie": 49}, None, laser="/front")  # an open hall's: sound
+    weak = OdometryCheck(60, {"recorded": MIN_SOUND - 1, "tie": 60 - MIN_SOUND + 1}, None, laser="/front")
+    torn = OdometryCheck(60, {"recorded": 14, "left": 11, "tie": 35}, None, laser="/front")
     half = OdometryCheck(60, {"half": 59, "tie": 1}, "half", laser="/rear")
     flip = OdometryCheck(60, {"reversed": 40, "tie": 20}, "reversed", laser="/rear")
     long = OdometryCheck(60, {"long": 40, "tie": 20}, "long", laser="/rear")
     assert misfits([good, half]) == ["/rear"] and misfits([half, good]) == ["/rear"]
     assert misfits([good, flip]) == ["/rear"]
     assert misfits([half]) == [] and misfits([good]) == []
-    assert misfits([weak, half]) == []  # the other laser says too little to blame the mounting
+    assert misfits([hall, half]) == ["/rear"]
+    assert misfits([weak, half]) == [] and misfits([torn, half]) == []  # too little to blame the mounting
     assert misfits([dataclasses.replace(half, laser="/front"), half]) == []  # both: not one laser's mounting
     assert misfits([good, long]) == []
 
