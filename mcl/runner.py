@@ -255,10 +255,16 @@ def small_pages():
 
 
 def _choose_scans(log, laser: str):
-    """The scans of a CARMEN log the run reads (config key ``laser``): ``auto`` (FLASER, else ROBOTLASER1, else
-    RAWLASER1, ...), one stream, or several fused ("FLASER,RLASER": a front and a rear laser, each on its own
-    mounting, in file order; not two formats of one laser, which a log may write both of)."""
+    """The scans of a CARMEN log the run reads (config key ``laser``): ``auto`` (FLASER with RLASER fused when the log
+    has both, a front and a rear laser, said in a note; else FLASER, else ROBOTLASER1, else RAWLASER1, ...), one
+    stream, or several fused ("FLASER,RLASER": each on its own mounting, in file order; not two formats of one
+    laser, which a log may write both of)."""
     if laser == "auto":
+        kinds = {s.kind for s in log.scans}
+        if {"FLASER", "RLASER"} <= kinds:
+            log.notes.append(f"{log.path}: FLASER and RLASER (a front and a rear laser): fused, each on the mounting "
+                             "its lines give (laser: FLASER reads the front one alone)")
+            return _choose_scans(log, "FLASER,RLASER")
         for kind in ("FLASER", "ROBOTLASER1", "RAWLASER1", "RLASER", "RAWLASER2", "RAWLASER3", "RAWLASER4"):
             scans = log.scans_of(kind)
             if scans:

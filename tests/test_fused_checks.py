@@ -113,7 +113,8 @@ def _fused_log(tmp_path, rear_yaw: float):
 def test_a_carmen_log_s_front_and_rear_lasers_are_fused_by_name(tmp_path):
     # laser: FLASER,RLASER reads both streams, each on its own mounting (a CARMEN log's RLASER line carries its
     # laser's pose): the rear laser declared looking back while its scans look ahead is found and left out (the
-    # run then is the front laser's: the demo's 52.8 s); declared as it looks, both update (twice the updates)
+    # run then is the front laser's: the demo's 52.8 s); declared as it looks, both update (twice the updates),
+    # and laser: auto fuses them too (laser: FLASER reads the front one alone)
     from mcl.errors import ConfigError
 
     sets = [f"map={DEMO / 'map.yaml'}", f"truth={DEMO / 'truth.tum'}", "rerun.mode=off", "filter.particles=2000",
@@ -127,10 +128,17 @@ def test_a_carmen_log_s_front_and_rear_lasers_are_fused_by_name(tmp_path):
     assert s["left_out_lasers"] == ["RLASER"] and s["eval"]["convergence_time"] <= 60.0, s["eval"]
     front = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets[:-1], f"log={DEMO / 'log.clf'}"]),
                 tmp_path / "front", progress=False, echo=lambda *_: None)
-    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, f"log={_fused_log(tmp_path, 0.0)}"]),
-            tmp_path / "both", progress=False, echo=lambda *_: None)
+    said.clear()
+    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets[:-1], f"log={_fused_log(tmp_path, 0.0)}"]),
+            tmp_path / "both", progress=False, echo=said.append)  # laser: auto fuses a log's FLASER and RLASER
+    assert any(m.endswith(": FLASER and RLASER (a front and a rear laser): fused, each on the mounting its lines give "
+                          "(laser: FLASER reads the front one alone)") for m in said), said
     assert "left_out_lasers" not in s and s["odometry_check"]["other_lasers"][0]["laser"] == "RLASER"
     assert s["updates"] == 2 * front["updates"] and s["scans"] == 2 * front["scans"], (s["updates"], front["updates"])
+    alone = run(load_config(PROJECT_ROOT / "configs" / "default.yaml",
+                            [*sets[:-1], f"log={_fused_log(tmp_path, 0.0)}", "laser=FLASER"]),
+                tmp_path / "alone", progress=False, echo=lambda *_: None)
+    assert alone["updates"] == front["updates"] and "other_lasers" not in alone["odometry_check"]
     for bad in ("FLASER,FLASER", "FLASER,RLASER2", "auto,RLASER"):
         with pytest.raises(ConfigError, match="laser: expected one of auto, FLASER"):
             load_config(None, [f"laser={bad}"])
