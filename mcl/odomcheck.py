@@ -51,7 +51,8 @@ from scipy.spatial import cKDTree
 from mcl.estimate import compose, inverse, wrap_angle
 from mcl.laser_odometry import Key, far_points
 
-__all__ = ["OdometryCheck", "advice", "check_each_laser", "check_odometry", "misfits", "run_mount", "summary_of"]
+__all__ = ["OdometryCheck", "advice", "check_each_laser", "check_odometry", "findings", "misfits", "run_mount",
+           "summary_of"]
 
 TRUNCATE = 0.5  # m: a point farther than this from the other scan's counts as this far
 MARGIN = 0.7  # an alternative wins a pair when its score is under this times the recorded motion's
@@ -217,6 +218,19 @@ def _sound(c: OdometryCheck) -> bool:
     recorded = c.wins.get("recorded", 0)
     rival = max((v for k, v in c.wins.items() if k in ALTERNATIVES), default=0)
     return c.verdict is None and recorded >= MIN_SOUND and recorded >= 2 * rival
+
+
+def findings(checks: list[OdometryCheck], sensor) -> tuple[set[str], bool, dict[str, str]]:
+    """What a run does with ``checks`` (``check_each_laser``'s) under ``sensor`` (a SensorConfig: laser_pose,
+    upside_down, misfit_laser): (the lasers it leaves out, ``misfits``; whether the lasers disagree, so that each one
+    at fault is named, else the first one's fault is the odometry's, said once; {laser: ``describe()`` and
+    ``advice``} for every laser with a verdict). ``mcl run`` and ``mcl bag info`` say the same."""
+    fused = [c.laser for c in checks] if len({c.verdict for c in checks}) > 1 else []
+    left_out = set(misfits(checks)) if sensor.misfit_laser == "leave_out" else set()
+    texts = {c.laser: f"{c.describe()}: " + advice(c, c.mount, sensor.laser_pose is not None, sensor.upside_down,
+                                                     fused, c.laser in left_out)
+             for c in checks if c.verdict is not None}
+    return left_out, bool(fused), texts
 
 
 def summary_of(checks: list[OdometryCheck]) -> dict:

@@ -259,9 +259,9 @@ def _choose_scans(log, laser: str):
     has both, a front and a rear laser, said in a note; else FLASER, else ROBOTLASER1, else RAWLASER1, ...), one
     stream, or several fused ("FLASER,RLASER": each on its own mounting, in file order; not two formats of one
     laser, which a log may write both of)."""
+    kinds = log.kinds()
     if laser == "auto":
-        kinds = {s.kind for s in log.scans}
-        if {"FLASER", "RLASER"} <= kinds:
+        if {"FLASER", "RLASER"} <= kinds.keys():
             log.notes.append(f"{log.path}: FLASER and RLASER (a front and a rear laser): fused, each on the mounting "
                              "its lines give (laser: FLASER reads the front one alone)")
             return _choose_scans(log, "FLASER,RLASER")
@@ -272,9 +272,9 @@ def _choose_scans(log, laser: str):
         raise DataError(f"{log.path}: no laser messages")
     wanted = laser.split(",")
     for kind in wanted:
-        if not any(s.kind == kind for s in log.scans):
-            kinds = sorted({s.kind for s in log.scans})
-            raise ConfigError(f"laser: the log {log.path} has no {kind} messages (it has {', '.join(kinds) or 'none'})")
+        if kind not in kinds:
+            raise ConfigError(f"laser: the log {log.path} has no {kind} messages (it has "
+                              f"{', '.join(sorted(kinds)) or 'none'})")
     return [s for s in log.scans if s.kind in wanted] if len(wanted) > 1 else log.scans_of(laser)
 
 
@@ -408,8 +408,9 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         scans = _skip_self_hits(scans, log, cfg.sensor, echo)
     if cfg.sensor.use and len(scans) and getattr(log, "wheel_odometry", True):
         log.odometry_checks, log.left_out_lasers = _check_odometry(scans, log, cfg.sensor, echo)
-        if log.odometry_checks[0].verdict is None:  # the turns' timing means nothing while their sign is in doubt
-            log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, echo)
+        first = log.odometry_checks[0]
+        if first.verdict is None:  # the turns' timing means nothing while their sign is in doubt
+            log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, first.mount, echo)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
         if not truth.t.size:
@@ -466,28 +467,26 @@ def _skip_self_hits(scans, log, sensor, echo):
 def _check_odometry(scans, log, sensor, echo):
     """``mcl.odomcheck.check_each_laser`` on the run's scans, each laser where the run puts it; a warning when the
     scans point to a fault (reversed turns, distances off by two, a laser turned from its mounting): one for the
-    odometry when every laser says the same, else one for each laser at fault. Returns (the checks, the first
-    laser's first, for summary.json; the lasers to leave out of the run: ``misfits``)."""
-    from mcl.odomcheck import OdometryCheck, advice, check_each_laser, misfits, run_mount
+    odometry when every laser says the same, else one for each laser at fault (``mcl.odomcheck.findings``). Returns
+    (the checks, the first laser's first, for summary.json; the lasers to leave out of the run)."""
+    from mcl.odomcheck import OdometryCheck, check_each_laser, findings, run_mount
 
     checks = list(check_each_laser(scans, lambda s: run_mount(s, sensor.laser_pose)).values()) or [OdometryCheck(0)]
-    fused = [c.laser for c in checks] if len({c.verdict for c in checks}) > 1 else []
-    left_out = set(misfits(checks)) if sensor.misfit_laser == "leave_out" else set()
-    for c in checks if fused else checks[:1]:  # the same for all: the odometry's (or every laser's) fault, said once
-        if c.verdict is not None:
-            echo(f"mcl: warning: {log.path}: {f'{c.laser}: ' if fused else ''}{c.describe()}: "
-                 f"{advice(c, c.mount, sensor.laser_pose is not None, sensor.upside_down, fused, c.laser in left_out)}")
+    left_out, disagree, texts = findings(checks, sensor)
+    for c in checks if disagree else checks[:1]:  # the same for all: the odometry's (or every laser's), said once
+        if c.laser in texts:
+            echo(f"mcl: warning: {log.path}: {f'{c.laser}: ' if disagree else ''}{texts[c.laser]}")
     return checks, left_out
 
 
-def _check_time_offset(scans, log, sensor, echo):
-    """``mcl.latency.check_time_offset`` on the run's scans against the log's odometry stream; a warning when the
-    scans' turns fit the odometry of another moment than their stamps. Returns the check (for summary.json)."""
+def _check_time_offset(scans, log, sensor, mount, echo):
+    """``mcl.latency.check_time_offset`` on the run's scans against the log's odometry stream, the first laser at
+    ``mount`` (as the odometry check took it); a warning when the scans' turns fit the odometry of another moment
+    than their stamps. Returns the check (for summary.json)."""
     from mcl.latency import advice, check_time_offset
-    from mcl.odomcheck import run_mount
 
     odometry, from_scans = _odometry_rows(log, [])  # the log's own stream; without one, the scans' own poses
-    check = check_time_offset(scans, None if from_scans else odometry, run_mount(next(iter(scans)), sensor.laser_pose))
+    check = check_time_offset(scans, None if from_scans else odometry, np.asarray(mount, dtype=np.float64))
     if check.verdict:
         echo(f"mcl: warning: {log.path}: {check.describe()}: {advice(check, sensor.time_offset)}")
     return check

@@ -1265,7 +1265,7 @@ def _scan_checks(src: "BagSource", sensor) -> dict:
     from mcl.datasets.selfhits import summary_of as hits_summary
     from mcl.latency import advice as time_advice
     from mcl.latency import check_time_offset
-    from mcl.odomcheck import advice, check_each_laser, misfits, run_mount
+    from mcl.odomcheck import check_each_laser, findings, run_mount
     from mcl.odomcheck import summary_of as odometry_summary
 
     sensor = SensorConfig() if sensor is None else sensor
@@ -1278,12 +1278,10 @@ def _scan_checks(src: "BagSource", sensor) -> dict:
         checks = list(check_each_laser(src.scans, lambda s: run_mount(s, sensor.laser_pose)).values())
         if checks:
             out["odometry_check"] = odometry_summary(checks)
-            fused = [c.laser for c in checks] if len({c.verdict for c in checks}) > 1 else []
-            left_out = misfits(checks) if sensor.misfit_laser == "leave_out" else []
+            _, _, texts = findings(checks, sensor)
             for c, d in zip(checks, [out["odometry_check"], *out["odometry_check"].get("other_lasers", [])]):
-                if c.verdict:
-                    d["text"] = f"{c.describe()}: " + advice(c, c.mount, sensor.laser_pose is not None,
-                                                             sensor.upside_down, fused, c.laser in left_out)
+                if c.laser in texts:
+                    d["text"] = texts[c.laser]
             if checks[0].verdict is None:
                 timing = check_time_offset(src.scans, src.odometry, np.asarray(checks[0].mount))
                 out["time_offset_check"] = {**timing.summary(), "text": timing.describe() + (
