@@ -458,6 +458,9 @@ def _add_convert(sub) -> None:
         "beam geometry, maximum range, odometry (pose and velocities) at each scan, laser mounting pose. A log "
         "becomes /scan (LaserScan), /odom (Odometry) and odom -> base_link on /tf (as a ROS robot records them: "
         "ROS AMCL and RViz need the /tf), base_link -> laser on /tf_static; a bag becomes ROBOTLASER1 + ODOM lines. "
+        "Fused lasers are each kept, on their own mountings: a log's front and rear lasers (FLASER and RLASER, or "
+        "ROBOTLASER1 and ROBOTLASER2) become /front/scan and /rear/scan; a bag's (two level lasers, or "
+        "--scan-topic all) keep their topics, or become ROBOTLASER1 and ROBOTLASER2 in a log, which holds no more. "
         "The output appears only when complete.",
         epilog="examples:\n  mcl convert run.mcap run.clf\n  mcl convert log.clf log.mcap --odom topic\n"
         "  mcl convert log.clf log.bag --map map.yaml --initial-pose 1 2 0.5",

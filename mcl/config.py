@@ -421,8 +421,8 @@ class Config:
     log: str | None = None
     bag: str | None = None  # ROS bag (.bag, .db3, .mcap or a rosbag2 folder) instead of a CARMEN log
     truth: str | None = None
-    # which laser stream of the log: auto (FLASER, with RLASER fused when both), FLASER, RLASER, ROBOTLASER1,
-    # RAWLASER1..4, or several fused (FLASER,RLASER)
+    # which laser stream of the log: auto (FLASER, with RLASER fused when both; else ROBOTLASER1, with ROBOTLASER2
+    # fused when both), FLASER, RLASER, ROBOTLASER1, ROBOTLASER2, RAWLASER1..4, or several fused (FLASER,RLASER)
     laser: str = "auto"
     seed: int = field(default=1, metadata=_rng(0, 2**63 - 1))
     filter: FilterConfig = field(default_factory=FilterConfig)
@@ -437,7 +437,8 @@ class Config:
     frames: FramesConfig = field(default_factory=FramesConfig)
 
 
-LASER_KINDS = ("auto", "FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
+LASER_KINDS = ("auto", "FLASER", "RLASER", "ROBOTLASER1", "ROBOTLASER2", "RAWLASER1", "RAWLASER2", "RAWLASER3",
+               "RAWLASER4")
 PATH_KEYS = ("map", "log", "bag", "truth")
 
 

@@ -255,27 +255,16 @@ def small_pages():
 
 
 def _choose_scans(log, laser: str):
-    """The scans of a CARMEN log the run reads (config key ``laser``): ``auto`` (FLASER with RLASER fused when the log
-    has both, a front and a rear laser, said in a note; else FLASER, else ROBOTLASER1, else RAWLASER1, ...), one
-    stream, or several fused ("FLASER,RLASER": each on its own mounting, in file order; not two formats of one
-    laser, which a log may write both of)."""
-    kinds = log.kinds()
-    if laser == "auto":
-        if {"FLASER", "RLASER"} <= kinds.keys():
-            log.notes.append(f"{log.path}: FLASER and RLASER (a front and a rear laser): fused, each on the mounting "
-                             "its lines give (laser: FLASER reads the front one alone)")
-            return _choose_scans(log, "FLASER,RLASER")
-        for kind in ("FLASER", "ROBOTLASER1", "RAWLASER1", "RLASER", "RAWLASER2", "RAWLASER3", "RAWLASER4"):
-            scans = log.scans_of(kind)
-            if scans:
-                return scans
-        raise DataError(f"{log.path}: no laser messages")
-    wanted = laser.split(",")
-    for kind in wanted:
-        if kind not in kinds:
-            raise ConfigError(f"laser: the log {log.path} has no {kind} messages (it has "
-                              f"{', '.join(sorted(kinds)) or 'none'})")
-    return [s for s in log.scans if s.kind in wanted] if len(wanted) > 1 else log.scans_of(laser)
+    """The scans of a CARMEN log the run reads (config key ``laser``): :meth:`mcl.datasets.carmen.Log.laser_stream`
+    (``auto``: a front and a rear laser fused, said in a note; else FLASER, else ROBOTLASER1, ...), a stream the log
+    lacks named by the config key."""
+    if laser != "auto":
+        kinds = log.kinds()
+        for kind in laser.split(","):
+            if kind not in kinds:
+                raise ConfigError(f"laser: the log {log.path} has no {kind} messages (it has "
+                                  f"{', '.join(sorted(kinds)) or 'none'})")
+    return log.laser_stream(laser)
 
 
 def _landmark_records(log, cfg: Config) -> list:

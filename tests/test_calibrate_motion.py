@@ -253,4 +253,4 @@ def test_odom_lines_alone_are_a_log_to_fit(tmp_path, capsys):
     assert alone["alphas"] == whole["alphas"] and alone["pairs"] == whole["pairs"] == 350
     (tmp_path / "none.clf").write_text("PARAM robot_front_laser_max 30\n")
     assert main(["calibrate", "motion", "--log", str(tmp_path / "none.clf"), "--truth", str(demo / "truth.tum")]) == 2
-    assert "no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4) and no ODOM lines" in capsys.readouterr().err
+    assert "no laser messages (FLASER, RLASER, ROBOTLASER1, ROBOTLASER2, RAWLASER1..4) and no ODOM lines" in capsys.readouterr().err

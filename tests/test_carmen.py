@@ -75,15 +75,15 @@ def test_every_message_type(tmp_path):
 
 def test_a_damaged_message_name_is_a_warning_naming_its_line(tmp_path):
     # FLASR, flaser and bytes that are no name at all are damaged lines, not another sensor's messages: skipped as
-    # before (counted), and one warning names the first; CARMEN's own other messages (a rear ROBOTLASER2, SYNC,
-    # PARAM) are skipped without one.
-    log = read_carmen(write(tmp_path, [FLASER, "SYNC 1 2 3", "ROBOTLASER2 0 0", FLASER.replace("FLASER", "FLASR"),
+    # before (counted), and one warning names the first; CARMEN's own other messages (a fifth laser's RAWLASER5,
+    # SYNC, PARAM) are skipped without one.
+    log = read_carmen(write(tmp_path, [FLASER, "SYNC 1 2 3", "RAWLASER5 0 0", FLASER.replace("FLASER", "FLASR"),
                                        FLASER, FLASER.lower(), "\x01\x7fJ 1 2", FLASER]))
     assert len(log.scans) == 3
     damaged = [w for w in log.warnings if "looks damaged" in w]
     assert damaged == [f"{tmp_path / 'log.clf'}:4: 3 lines skipped whose message name looks damaged (the first: "
                        "'FLASR'; a known one misspelt or not a name at all)"]
-    assert log.skipped["FLASR"] == log.skipped["ROBOTLASER2"] == 1
+    assert log.skipped["FLASR"] == log.skipped["RAWLASER5"] == 1
 
 
 def test_rawlaser_odometry_interpolation(tmp_path):
@@ -222,6 +222,29 @@ def test_default_stream(tmp_path):
     only_raw2 = read_carmen(write(tmp_path, [ODOM_A, RAWLASER.format(k=2, t=11)], name="r.clf"))
     with pytest.raises(DataError, match=r"r\.clf: .*RAWLASER2"):
         only_raw2.default_kind()
+    assert [s.kind for s in only_raw2.laser_stream()] == ["RAWLASER2"]  # auto: the one laser it has
+    assert not any("fused" in n for n in only_raw2.notes + log.notes)  # RLASER with ROBOTLASER1: not a pair
+
+
+def test_a_front_and_a_rear_laser_are_fused_by_auto(tmp_path):
+    # CARMEN's second laser: RLASER (old format) or ROBOTLASER2 (ROBOTLASER1's fields). auto fuses a log's front and
+    # rear lasers when it has both, in file order, with a note; a list names the streams; one reads that alone
+    rear = ROBOTLASER1.replace("ROBOTLASER1", "ROBOTLASER2")
+    log = read_carmen(write(tmp_path, [ODOM_A, ROBOTLASER1, rear, RAWLASER.format(k=1, t=11)]))
+    s = log.scans_of("ROBOTLASER2")[0]
+    one = log.scans_of("ROBOTLASER1")[0]
+    assert np.array_equal(s.ranges, one.ranges) and s.max_range == one.max_range and s.angle_min == one.angle_min
+    assert np.array_equal(s.laser_offset, one.laser_offset) and s.line == 3
+    assert [s.kind for s in log.laser_stream()] == ["ROBOTLASER1", "ROBOTLASER2"]
+    assert log.notes == [f"{tmp_path / 'log.clf'}: ROBOTLASER1 and ROBOTLASER2 (a front and a rear laser): fused, "
+                         "each on the mounting its lines give (laser: ROBOTLASER1 reads the front one alone)"]
+    assert [s.kind for s in log.laser_stream("ROBOTLASER2")] == ["ROBOTLASER2"]
+    assert [s.kind for s in log.laser_stream("RAWLASER1,ROBOTLASER2")] == ["ROBOTLASER2", "RAWLASER1"]
+    # FLASER and RLASER come first: a log with both pairs (one laser in two formats) reads the old pair
+    both = read_carmen(write(tmp_path, [ODOM_A, FLASER, RLASER, ROBOTLASER1, rear], name="b.clf"))
+    assert [s.kind for s in both.laser_stream()] == ["FLASER", "RLASER"]
+    with pytest.raises(DataError, match=r"log\.clf: no FLASER messages"):
+        log.laser_stream("ROBOTLASER1,FLASER")
 
 
 # --- real logs ---------------------------------------------------------------------

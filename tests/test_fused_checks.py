@@ -145,3 +145,82 @@ def test_a_carmen_log_s_front_and_rear_lasers_are_fused_by_name(tmp_path):
     with pytest.raises(ConfigError, match="has no RLASER messages"):
         run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, f"log={DEMO / 'log.clf'}"]),
             tmp_path / "none", progress=False, echo=lambda *_: None)
+
+
+def _same_laser(a, b, kind: str) -> None:
+    """``b`` is ``a`` as written by mcl convert and read back: its stamp, readings (a LaserScan's float32), beam
+    geometry, odometry pose (to 1e-9: text and quaternion round trips differ by 1e-16) and laser mounting (to 2e-6: the
+    log's lines give it to 6 decimals, 1e-6 apart from line to line; a bag has one per laser, its first line's), its
+    laser named ``kind``."""
+    assert b.kind == kind and b.t == a.t
+    assert np.array_equal(np.float32(a.ranges), np.float32(b.ranges))
+    assert abs(a.angle_min - b.angle_min) < 1e-6 and abs(a.angle_increment - b.angle_increment) < 1e-7
+    assert np.allclose(a.odom, b.odom, rtol=0, atol=1e-9)
+    assert np.allclose(a.laser_offset, b.laser_offset, rtol=0, atol=2e-6), (a.laser_offset, b.laser_offset)
+
+
+def test_convert_keeps_each_fused_laser(tmp_path):
+    # mcl convert wrote a CARMEN log's FLASER alone (its RLASER, which a run fuses, was lost) and a fused bag's lasers
+    # as one /scan on the first laser's mounting (the rear scans put ahead). Now each laser keeps its stream and its
+    # mounting: a log's on /front/scan and /rear/scan (none on /scan: topics.scan: auto reads both back, fused),
+    # back to a log as ROBOTLASER1 and ROBOTLASER2 (auto fuses those too)
+    from mcl.datasets.bagwrite import convert
+    from mcl.datasets.rosbag import open_bag
+
+    src = _fused_log(tmp_path, 2.5)  # the rear laser's lines pose it turned 2.5 rad from the robot
+    want = read_carmen(src).laser_stream()
+    said = []
+    assert convert(src, tmp_path / "f.mcap", echo=said.append) == len(want) == 2 * sum(s.kind == "FLASER" for s in want)
+    assert any(m.endswith(": FLASER and RLASER (a front and a rear laser): fused, each on the mounting its lines give "
+                          "(laser: FLASER reads the front one alone)") for m in said), said
+    bag = open_bag(tmp_path / "f.mcap")
+    assert bag.scans.topics == ["/front/scan", "/rear/scan"] and any("fused" in n for n in bag.notes), bag.notes
+    got = list(bag.scans)
+    assert len(got) == len(want)
+    for a, b in zip(want, got):
+        _same_laser(a, b, {"FLASER": "/front/scan", "RLASER": "/rear/scan"}[a.kind])
+    assert convert(tmp_path / "f.mcap", tmp_path / "f.clf") == len(want)
+    back = read_carmen(tmp_path / "f.clf")
+    assert back.kinds() == {"ROBOTLASER1": len(want) // 2, "ROBOTLASER2": len(want) // 2}
+    for a, b in zip(want, back.laser_stream()):
+        _same_laser(a, b, {"FLASER": "ROBOTLASER1", "RLASER": "ROBOTLASER2"}[a.kind])
+    # --mount: the front laser at (0.1, 0.05, 0.2) in a new base; the rear one where it is on the robot; every
+    # laser's pose in the odometry frame unchanged (to 2e-6, the mountings of the log's lines)
+    from mcl.datasets.bagwrite import _compose
+
+    assert convert(src, tmp_path / "m.db3", mount=(0.1, 0.05, 0.2), echo=lambda m: None) == len(want)
+    moved = list(open_bag(tmp_path / "m.db3").scans)
+    assert np.allclose(moved[0].laser_offset, (0.1, 0.05, 0.2), rtol=0, atol=1e-12)
+    assert not np.allclose(moved[1].laser_offset, want[1].laser_offset, rtol=0, atol=0.05)  # the base moved
+    for a, b in zip(want, moved):
+        assert np.allclose(_compose(a.odom, a.laser_offset), _compose(b.odom, b.laser_offset), rtol=0, atol=2e-6)
+        assert b.kind == {"FLASER": "/front/scan", "RLASER": "/rear/scan"}[a.kind]
+
+
+def test_convert_of_more_lasers_than_a_carmen_log_holds_is_refused(tmp_path):
+    # three lasers fused (topics.scan: all) cannot become ROBOTLASER1 and ROBOTLASER2: one line naming them and how
+    # to choose, and nothing written
+    from mcl.datasets.bagwrite import convert
+    from mcl.errors import DataError
+
+    scans = read_carmen(DEMO / "log.clf").scans[:20]
+    bag = tmp_path / "three.mcap"
+    with BagOut(bag) as b:
+        b.write("/tf_static", TF, scans[0].t, b.msg(TF, transforms=[
+            b.transform(scans[0].t, "base_link", name, (0.0, 0.0, yaw)) for name, yaw in (("a", 0), ("b", 2), ("c", 4))]))
+        for s in scans:
+            odom(b, s)
+            for name in "abc":
+                laser(b, f"/{name}/scan", s, frame=name)
+    topics = load_config(None, ["topics.scan=all"]).topics
+    with pytest.raises(DataError, match=r"three\.mcap: 3 lasers fused \(/a/scan, /b/scan, /c/scan\); a CARMEN log "
+                                        r"holds two \(ROBOTLASER1, ROBOTLASER2\): choose them with --scan-topic"):
+        convert(bag, tmp_path / "three.clf", topics=topics)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["three.mcap"]
+    # into a bag, all three kept, each on its own topic and mounting
+    assert convert(bag, tmp_path / "three.bag", topics=topics, echo=lambda m: None) == 60
+    from mcl.datasets.rosbag import open_bag
+
+    back = open_bag(tmp_path / "three.bag", topics)
+    assert back.scans.topics == ["/a/scan", "/b/scan", "/c/scan"]
+    assert [round(float(o[2]), 9) for o in back.laser_offsets.values()] == [0.0, 2.0, -2.283185307]

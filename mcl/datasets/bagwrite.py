@@ -7,7 +7,8 @@ is never left: the writers work in a temporary file or folder next to it). :func
 as a ROS robot's bag has them, REP 105: ROS AMCL and RViz place the laser through /tf; or either alone), the laser
 mounting ``base_link -> laser`` on ``/tf_static``, and optionally ``/map``, ``/initialpose`` and a truth topic.
 :func:`convert` turns a bag into a CARMEN log (ROBOTLASER1 + ODOM lines, every number in round-trip precision)
-and a CARMEN log into a bag.
+and a CARMEN log into a bag. A fused stream's lasers are each kept: a bag's two as ROBOTLASER1 and ROBOTLASER2 (a
+CARMEN log holds no more), a log's front and rear lasers on ``/front/scan`` and ``/rear/scan``.
 """
 
 from __future__ import annotations
@@ -236,6 +237,42 @@ def _inverse(a):
     return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
 
 
+def _lasers_of(scans) -> tuple[list[str], dict]:
+    """The lasers of a scan stream in order (``Scan.kind``: a bag's topic, a CARMEN message type) and each one's
+    mounting (its first scan's ``laser_offset``; None: unknown). A bag's stream says them (``topics``,
+    ``offsets``) without a pass over its messages."""
+    if hasattr(scans, "topics") and hasattr(scans, "offsets"):
+        return list(scans.topics), {t: scans.offsets.get(t) for t in scans.topics}
+    offsets: dict = {}
+    for s in scans:
+        offsets.setdefault(s.kind, s.laser_offset)
+    return list(offsets), offsets
+
+
+_FRONT, _REAR = ("FLASER", "ROBOTLASER1"), ("RLASER", "ROBOTLASER2")
+
+
+def laser_names(lasers: list[str]) -> dict[str, tuple[str, str]]:
+    """Each laser's (topic, frame) in a bag written. One laser: ``/scan`` in frame ``laser``. Several (fused): a
+    bag's own topics; a CARMEN log's front laser (FLASER, ROBOTLASER1) on ``/front/scan`` in ``front_laser``, its
+    rear one (RLASER, ROBOTLASER2) on ``/rear/scan`` in ``rear_laser``, RAWLASERk on ``/rawlaserk/scan``; none on
+    /scan, which ``topics.scan: auto`` would read alone. Each frame is named after its topic (``/rear/scan``:
+    ``rear_laser``)."""
+    if len(lasers) == 1:
+        return {lasers[0]: ("/scan", "laser")}
+    out: dict[str, tuple[str, str]] = {}
+    for k in lasers:
+        topic = k if k.startswith("/") else (
+            "/front/scan" if k in _FRONT else "/rear/scan" if k in _REAR else f"/{k.lower()}/scan")
+        name = topic.strip("/")
+        frame = (name[:-len("/scan")] if name.endswith("/scan") else name).replace("/", "_") + "_laser"
+        i = 2
+        while topic in (t for t, _ in out.values()) or frame in (f for _, f in out.values()):  # two formats of one
+            topic, frame, i = f"{topic.rstrip('0123456789_')}_{i}", f"{frame}_{i}", i + 1     # laser (a list's)
+        out[k] = (topic, frame)
+    return out
+
+
 ODOM_CHOICES = ("both", "topic", "tf")  # write_scans / convert ``odom``: where the odometry goes
 
 
@@ -252,13 +289,26 @@ def write_scans(out, scans, *, odom: str = "both", mount=None, grid=None, initia
     odom: ``both`` (default: /odom, and odom -> base_link on /tf at the same stamps with the same poses, as a ROS
     robot records them), ``topic`` (/odom only) or ``tf`` (/tf only); another value is a ConfigError. mount:
     (x, y, theta) of the laser in a new base frame: the odometry is then that of base = robot ∘ laser_offset ∘
-    mount⁻¹ (same laser poses, a laser off the base's centre). grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for
-    /initialpose (in ``initial_frame``); truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``, each
+    mount⁻¹ (same laser poses, a laser off the base's centre; with several lasers, the first one's, the others kept
+    where they are on the robot). Several lasers (a fused stream: ``Scan.kind`` tells them apart) go on topics and
+    frames of their own (:func:`laser_names`), their mountings in the one ``/tf_static`` message.
+    grid: an OccupancyGrid for /map; initial: ((x, y, theta), 3x3 cov) for /initialpose (in ``initial_frame``); truth: (t (K,), poses (3, K)) as PoseStamped on ``truth_topic``, each
     recorded at its time among the scans. Each LaserScan's time_increment is the scan's own beam time step
     (``Scan.beam_dt``, when its first beam is at the stamp), else ``sweep`` / (beams - 1): s from the first beam to
     the last (0: none).
     """
     _check_odom(out, odom)  # an unknown value wrote no odometry at all
+    if not (isinstance(scans, list) or hasattr(scans, "topics")):
+        scans = list(scans)  # a one-pass iterable: read twice below
+    lasers, offsets = _lasers_of(scans)
+    names = laser_names(lasers) if lasers else {}
+    zero = (0.0, 0.0, 0.0)
+    offsets = {k: zero if o is None else tuple(float(v) for v in o) for k, o in offsets.items()}
+    # each laser's pose on base_link: as recorded; with ``mount``, in the new base B = robot ∘ T with
+    # T = first laser's offset ∘ mount⁻¹ (the first laser at ``mount``, the others where they are on the robot)
+    mnt = None if mount is None else tuple(float(v) for v in mount)
+    T = None if mnt is None or not lasers else _compose(offsets[lasers[0]], _inverse(mnt))
+    static = {k: o if T is None else _compose(_inverse(T), o) for k, o in offsets.items()}
     n = 0
     if truth is not None:  # in time order, each written among the scans at its own time (a bag's record times only
         tt, pp = truth     # go forward: written after the scans, every pose was recorded at the bag's end)
@@ -280,7 +330,6 @@ def write_scans(out, scans, *, odom: str = "both", mount=None, grid=None, initia
             truth_until(b, s.t)
             if first_t is None:
                 first_t = s.t
-                static_t = s.t
                 if grid is not None:
                     _write_grid(b, grid, s.t)
                 if initial is not None:
@@ -289,12 +338,17 @@ def write_scans(out, scans, *, odom: str = "both", mount=None, grid=None, initia
                     b.write("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", s.t,
                             b.msg("geometry_msgs/msg/PoseWithCovarianceStamped", header=b.header(s.t, initial_frame),
                                   pose=pw))
-                off0 = (0.0, 0.0, 0.0) if s.laser_offset is None else tuple(float(v) for v in s.laser_offset)
-                mnt = off0 if mount is None else tuple(float(v) for v in mount)
-                b.write("/tf_static", "tf2_msgs/msg/TFMessage", static_t,
-                        b.msg("tf2_msgs/msg/TFMessage", transforms=[b.transform(static_t, "base_link", "laser", mnt)]))
-            off = (0.0, 0.0, 0.0) if s.laser_offset is None else tuple(float(v) for v in s.laser_offset)
-            base = tuple(float(v) for v in s.odom) if mount is None else _compose(_compose(s.odom, off), _inverse(mnt))
+                # one message with every laser: a latched topic keeps the last message only
+                b.write("/tf_static", "tf2_msgs/msg/TFMessage", s.t, b.msg(
+                    "tf2_msgs/msg/TFMessage",
+                    transforms=[b.transform(s.t, "base_link", names[las][1], static[las]) for las in lasers]))
+            topic, frame = names[s.kind]
+            off = zero if s.laser_offset is None else tuple(float(v) for v in s.laser_offset)
+            # one laser: each scan's own mounting (its laser pose kept exactly); several: one rigid base for all
+            # (the odometry at one stamp is one pose, whichever laser's scan it comes with)
+            base = (tuple(float(v) for v in s.odom) if T is None else
+                    _compose(_compose(s.odom, off), _inverse(static[s.kind])) if len(lasers) == 1 else
+                    _compose(s.odom, T))
             if odom in ("topic", "both"):
                 cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*base), covariance=np.zeros(36))
                 tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
@@ -311,8 +365,8 @@ def write_scans(out, scans, *, odom: str = "both", mount=None, grid=None, initia
             r = np.asarray(s.ranges, dtype=np.float32)
             ti = float(s.beam_dt) if s.beam_dt and s.beam_t0 == 0.0 else (sweep / (r.size - 1) if r.size > 1 else 0.0)
             rmax = float(s.max_range) if s.max_range is not None else math.inf
-            b.write("/scan", L, s.t, b.msg(
-                L, header=b.header(s.t, "laser"), angle_min=float(s.angle_min),
+            b.write(topic, L, s.t, b.msg(
+                L, header=b.header(s.t, frame), angle_min=float(s.angle_min),
                 angle_max=float(s.angle_min + s.angle_increment * max(r.size - 1, 0)),
                 angle_increment=float(s.angle_increment), time_increment=ti, scan_time=0.0, range_min=0.0,
                 range_max=rmax, ranges=r, intensities=np.zeros(0, dtype=np.float32)))
@@ -346,8 +400,9 @@ def _write_grid(b: BagOut, grid, t: float) -> None:
                   data=np.ascontiguousarray(grid.occupancy, dtype=np.int8).ravel()))
 
 
-def _clf_line_of(s) -> str:
-    """One scan as ROBOTLASER1 + ODOM lines (numbers in shortest round-trip form)."""
+def _clf_line_of(s, name: str = "ROBOTLASER1") -> str:
+    """One scan as ``name`` (ROBOTLASER1, a second laser's ROBOTLASER2) + ODOM lines (numbers in shortest round-trip
+    form)."""
     r = np.asarray(s.ranges, dtype=np.float64)
     off = (0.0, 0.0, 0.0) if s.laser_offset is None else tuple(float(v) for v in s.laser_offset)
     robot = tuple(float(v) for v in s.odom)
@@ -359,7 +414,7 @@ def _clf_line_of(s) -> str:
     rs = " ".join(map(repr, r.tolist()))
     pose = lambda p: " ".join(repr(float(v)) for v in p)  # noqa: E731
     return (f"ODOM {pose(robot)} {float(s.tv)!r} {float(s.rv)!r} 0.0 {ts}\n"
-            f"ROBOTLASER1 0 {float(s.angle_min)!r} {fov!r} {float(s.angle_increment)!r} {rmax} 0.01 0 {n} {rs} 0 "
+            f"{name} 0 {float(s.angle_min)!r} {fov!r} {float(s.angle_increment)!r} {rmax} 0.01 0 {n} {rs} 0 "
             f"{pose(laser)} {pose(robot)} {float(s.tv)!r} {float(s.rv)!r} 0.0 0.0 0.0 {ts}\n")
 
 
@@ -390,6 +445,8 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "both", mount=Non
         for w in log.warnings:
             echo(f"mcl: warning: {w}")
         scans = _with_odometry_velocities(log.laser_stream(laser), log.odometry)
+        for note in log.notes:
+            echo(note)
     if truth is not None and isinstance(scans, list) and scans and len(truth[0]):  # a log's scans (a bag's: mcl run)
         t0, t1 = scans[0].t, scans[-1].t
         if not np.any((truth[0] >= t0) & (truth[0] <= t1)):  # written, it would score nothing: another clock
@@ -400,11 +457,17 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "both", mount=Non
     if out_kind != "clf":
         return write_scans(out, scans, odom=odom, mount=mount, grid=grid, initial=initial, truth=truth,
                            kind=out_kind, sweep=sweep)
-    w = LineWriter(out, header=f"# mcl convert {src.name}: ROBOTLASER1 + ODOM per scan; poses in the odometry frame")
+    lasers = _lasers_of(scans)[0]
+    if len(lasers) > 2:  # before anything is written
+        raise DataError(f"{src}: {len(lasers)} lasers fused ({', '.join(lasers)}); a CARMEN log holds two "
+                        "(ROBOTLASER1, ROBOTLASER2): choose them with --scan-topic (topics.scan)")
+    line_of = dict(zip(lasers, ("ROBOTLASER1", "ROBOTLASER2")))
+    w = LineWriter(out, header=f"# mcl convert {src.name}: {' and '.join(line_of.values())} + ODOM per scan; poses "
+                   "in the odometry frame")
     n = 0
     try:
         for s in scans:
-            w.write_line(_clf_line_of(s).rstrip("\n"))
+            w.write_line(_clf_line_of(s, line_of[s.kind]).rstrip("\n"))
             n += 1
     except BaseException:
         try:

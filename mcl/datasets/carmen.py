@@ -14,7 +14,8 @@ Messages read (everything else is skipped and counted in ``Log.skipped``):
   RLASER) when it has one, else None: the config's ``sensor.range_max`` decides.
 * ``ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode
   n r_1..r_n n_rem rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta
-  tv rv forward_safety side_safety turn_axis ipc_timestamp hostname logger_timestamp``
+  tv rv forward_safety side_safety turn_axis ipc_timestamp hostname logger_timestamp``;
+  ``ROBOTLASER2`` the same for CARMEN's second (rear) laser
 * ``RAWLASER1``..``RAWLASER4``: as ROBOTLASER1 without the poses and the velocities.
 * ``LANDMARK n id_1 range_1 bearing_1 ... id_n range_n bearing_n ipc_timestamp hostname logger_timestamp``
   (an mcl extension, not a CARMEN message): n >= 0 range-bearing observations of
@@ -45,11 +46,14 @@ import numpy as np
 
 from mcl.errors import DataError
 
-__all__ = ["Scan", "Landmarks", "Log", "read_carmen", "interpolate_odometry", "flaser_angle_increment", "LASER_KINDS"]
+__all__ = ["Scan", "Landmarks", "Log", "read_carmen", "interpolate_odometry", "flaser_angle_increment", "LASER_KINDS",
+           "FRONT_REAR"]
 
-LASER_KINDS = ("FLASER", "RLASER", "ROBOTLASER1", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
+LASER_KINDS = ("FLASER", "RLASER", "ROBOTLASER1", "ROBOTLASER2", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4")
 _USED = (*LASER_KINDS, "ODOM", "LANDMARK")  # the messages mcl reads
-_OTHERS = ("ROBOTLASER2", "RAWLASER5")  # other CARMEN messages one character off those (a rear laser)
+_OTHERS = ("RAWLASER5",)  # another CARMEN message one character off those (a fifth laser)
+# a front laser's stream and its rear laser's, in the two formats: ``laser_stream("auto")`` fuses each pair
+FRONT_REAR = (("FLASER", "RLASER"), ("ROBOTLASER1", "ROBOTLASER2"))
 
 
 def _one_edit(a: str, b: str) -> bool:
@@ -156,14 +160,29 @@ class Log:
                         f"(found: {found}); choose the laser stream explicitly")
 
     def laser_stream(self, kind: str = "auto") -> list[Scan]:
-        """Scans of ``kind`` (``"auto"``: see :meth:`default_kind`); DataError if there are none."""
+        """The scans a run reads (config key ``laser``), in file order; DataError if there are none.
+
+        ``kind``: one message type; several fused, comma-separated (``"FLASER,RLASER"``: each on the mounting its
+        lines give; not one laser written in two formats, which a log may hold both of); or ``"auto"``: a front and a
+        rear laser fused when the log has both (FLASER and RLASER, else ROBOTLASER1 and ROBOTLASER2; said in
+        ``notes``), else :meth:`default_kind`, else the first laser stream the log has (a rear one alone, RAWLASER2)."""
+        kinds = self.kinds()
         if kind == "auto":
-            kind = self.default_kind()
-        scans = self.scans_of(kind)
-        if not scans:
-            found = ", ".join(sorted(self.kinds())) or "none"
-            raise DataError(f"{self.path}: no {kind} messages (found: {found})")
-        return scans
+            pair = next((p for p in FRONT_REAR if p[0] in kinds and p[1] in kinds), None)
+            if pair is None:
+                first = next((k for k in (*_AUTO_ORDER, *LASER_KINDS) if k in kinds), None)
+                if first is None:
+                    raise DataError(f"{self.path}: no laser messages")
+                return self.scans_of(first)
+            self.notes.append(f"{self.path}: {pair[0]} and {pair[1]} (a front and a rear laser): fused, each on the "
+                              f"mounting its lines give (laser: {pair[0]} reads the front one alone)")
+            kind = ",".join(pair)
+        wanted = kind.split(",")
+        for k in wanted:
+            if k not in kinds:
+                found = ", ".join(sorted(kinds)) or "none"
+                raise DataError(f"{self.path}: no {k} messages (found: {found})")
+        return [s for s in self.scans if s.kind in wanted]
 
 
 def flaser_angle_increment(n: int) -> float:
@@ -334,6 +353,7 @@ _PARSERS = {
     "FLASER": _parse_flaser,
     "RLASER": _parse_flaser,
     "ROBOTLASER1": _parse_robotlaser,
+    "ROBOTLASER2": _parse_robotlaser,
     "RAWLASER1": _parse_rawlaser,
     "RAWLASER2": _parse_rawlaser,
     "RAWLASER3": _parse_rawlaser,
@@ -447,7 +467,7 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
                         f"message name looks damaged (the first: {_printable_word(word)!r}; a known one misspelt or "
                         "not a name at all)")
     if not scans and not landmarks and (need_laser or not odom_rows):
-        raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, RAWLASER1..4)"
+        raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, ROBOTLASER2, RAWLASER1..4)"
                         + ("" if need_laser else " and no ODOM lines"))
     odometry = np.array(odom_rows, dtype=np.float64).reshape(-1, 6)
     scans = _fill_odom(scans, odometry, name)
