@@ -442,9 +442,45 @@ def _bag_config(args):
     return load_config(args.config, overrides)
 
 
-def cmd_bag_info(args) -> int:
-    from mcl.datasets.rosbag import bag_info, format_info
+def _add_log(sub) -> None:
+    lsub = _group(sub, "log", help="look into a CARMEN log: messages, lasers, and what mcl would use",
+                  description="CARMEN logs (plain or gzip): the messages mcl reads and those it skips.")
+    p = lsub.add_parser("info", help="messages, lasers, duration, and what mcl would use",
+                        description="Count a CARMEN log's messages (those mcl skips too), give its duration and each "
+                        "laser stream (scans, beams, field of view, maximum range, mounting pose), and what a run "
+                        "would read (the laser streams, the odometry) with the checks a run makes before it starts: "
+                        "the beams that read the robot itself, the odometry and each laser's mounting, the scans' "
+                        "stamps against the odometry's.",
+                        epilog="examples:\n  mcl log info log.clf\n  mcl log info log.clf.gz --laser FLASER --json",
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("log", help="the CARMEN log (.clf, .log, .gz)")
+    p.add_argument("--config", help="config whose laser: and sensor: settings apply (default: the defaults)")
+    p.add_argument("--laser", metavar="KIND",
+                   help="laser stream(s) to read: auto, FLASER, RLASER, ROBOTLASER1, ... or several fused, "
+                   "comma-separated (laser; default: auto)")
+    p.add_argument("--json", action="store_true", help="print as JSON")
+    p.set_defaults(func=cmd_log_info)
 
+
+def cmd_log_info(args) -> int:
+    from mcl.config import load_config
+    from mcl.datasets.loginfo import format_log_info, log_info
+    from mcl.datasets.rosbag import is_bag
+
+    if is_bag(args.log):
+        raise MclError(f"{args.log}: a ROS bag, not a CARMEN log: mcl bag info {args.log}")
+    cfg = load_config(args.config, [f"laser={args.laser}"] if args.laser else [])
+    info = log_info(args.log, cfg.laser, cfg.sensor)
+    print(json.dumps(info, indent=2) if args.json else format_log_info(info))
+    return 0
+
+
+def cmd_bag_info(args) -> int:
+    from mcl.datasets.rosbag import bag_info, format_info, is_bag
+
+    if not is_bag(args.bag) and Path(args.bag).is_file():
+        raise MclError(f"{args.bag}: not a ROS bag (.bag, .db3, .mcap or a rosbag2 folder); a CARMEN log? "
+                       f"mcl log info {args.bag}")
     cfg = _bag_config(args)
     info = bag_info(args.bag, cfg.topics, cfg.frames, cfg.sensor)
     print(json.dumps(info, indent=2) if args.json else format_info(info))
@@ -651,6 +687,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_explore(sub)
     _add_tune(sub)
     _add_bag(sub)
+    _add_log(sub)
     _add_convert(sub)
     _add_config(sub)
     return parser

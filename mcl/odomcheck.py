@@ -163,14 +163,17 @@ def advice(check: OdometryCheck, mount, laser_pose_given: bool, upside_down: boo
     ``fused``: every laser of a run that fuses several, when this one alone is at fault (``sensor.laser_pose`` and
     ``sensor.upside_down`` would apply to them all: the advice reads it alone, or fixes its transform);
     ``left_out``: the run leaves that laser out (``misfits``), which it says first."""
-    alone = f"--set topics.scan={check.laser} " if len(fused) > 1 else ""
+    bag = check.laser.startswith("/")  # a bag's topic, else a CARMEN log's stream (RLASER)
+    alone = (f"--set {'topics.scan' if bag else 'laser'}={check.laser} " if len(fused) > 1 else "")
+    source = "its transform in the bag's /tf" if bag else "its lines' laser pose"
     head = "left out of the run (sensor.misfit_laser: keep weighs it); " if left_out else ""
     if check.verdict == "reversed":
         if alone:
             lost = "" if left_out else ", and its scans pull the cloud the wrong way at every turn"
+            fix = "fix its transform in the bag's /tf, or read it alone" if bag else "read it alone"
             return (f"{head}{check.laser} alone turns the other way from the odometry: mounted upside down without "
-                    f"its transform saying so (a roll of half a turn){lost}; fix its transform in the bag's /tf, or "
-                    f"read it alone: {alone}--set sensor.upside_down={'false' if upside_down else 'true'}")
+                    f"its {'transform' if bag else 'lines'} saying so (a roll of half a turn){lost}; {fix}: "
+                    f"{alone}--set sensor.upside_down={'false' if upside_down else 'true'}")
         return ("the odometry turns the other way from the scans (a left-handed odometry frame, or a laser mounted "
                 "upside down without its mounting saying so), and the filter will be lost at every turn; check the "
                 f"odometry's sign, or give --set sensor.upside_down={'false' if upside_down else 'true'} if the laser "
@@ -181,12 +184,11 @@ def advice(check: OdometryCheck, mount, laser_pose_given: bool, upside_down: boo
                 "lost as soon as the robot drives; check the odometry's wheel size or units")
     mount = np.asarray(mount, dtype=np.float64)
     x, y, th = (round(float(v), 4) + 0.0 for v in compose(mount, np.array([0.0, 0.0, YAW[check.verdict]])))
-    where = ("sensor.laser_pose" if laser_pose_given else "its transform in the bag's /tf" if alone
-             else "the log's mounting")
+    where = "sensor.laser_pose" if laser_pose_given else source if alone else "the log's mounting"
     pose = f"--set \"sensor.laser_pose=[{x:g}, {y:g}, {round(wrap_angle(th), 4) + 0.0:g}]\""
     if alone:  # sensor.laser_pose would mount every fused laser there
-        fix = (("sensor.laser_pose mounts every fused laser alike: leave it unset to mount each by the bag's /tf"
-                if laser_pose_given else "fix its transform in the bag's /tf")
+        fix = ((f"sensor.laser_pose mounts every fused laser alike: leave it unset to mount each by "
+                f"{'the bag' + chr(39) + 's /tf' if bag else 'its lines'}" if laser_pose_given else f"fix {source}")
                + f", or read it alone, mounted there: {alone}{pose}")
     else:
         fix = f"if so, {pose} mounts it there"

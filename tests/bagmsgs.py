@@ -1,14 +1,17 @@
 """Message helpers shared by the bag tests (tests/test_rosbag.py, tests/test_laser_odometry.py,
 tests/test_fused_checks.py): an Odometry, a LaserScan, a tilted laser mounting on /tf and a MultiEchoLaserScan,
-written with mcl.datasets.bagwrite.BagOut."""
+written with mcl.datasets.bagwrite.BagOut; and the demo as a CARMEN log of a front and a rear laser."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
 from mcl.datasets.bagwrite import BagOut
+
+DEMO = Path(__file__).resolve().parents[1] / "data" / "demo"
 
 
 def tilted(b: BagOut, t: float, parent: str, child: str, xyz, pitch: float):
@@ -54,3 +57,20 @@ def laser(b: BagOut, topic: str, s, *, frame="laser", ranges=None, range_min=0.0
                                 angle_increment=s.angle_increment, time_increment=0.0, scan_time=0.0,
                                 range_min=range_min, range_max=s.max_range, ranges=r,
                                 intensities=np.zeros(0, dtype=np.float32)))
+
+
+def fused_log(tmp_path, rear_yaw: float):
+    """The demo's log with each FLASER line repeated as an RLASER line of the same readings, its laser pose the
+    robot's turned by ``rear_yaw`` (pi: declared looking back while its scans look ahead, the mounting at fault)."""
+    out = []
+    for line in (DEMO / "log.clf").read_text().splitlines(keepends=True):
+        out.append(line)
+        if line.startswith("FLASER"):
+            f = line.split()
+            n = int(f[1])
+            ox, oy, oth = (float(v) for v in f[n + 5:n + 8])
+            th = math.atan2(math.sin(oth + rear_yaw), math.cos(oth + rear_yaw))
+            out.append(" ".join(["RLASER", *f[1:n + 2], f"{ox:.6f}", f"{oy:.6f}", f"{th:.6f}", *f[n + 5:]]) + "\n")
+    path = tmp_path / f"fused-{rear_yaw:g}.clf"
+    path.write_text("".join(out))
+    return path

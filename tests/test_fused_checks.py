@@ -14,7 +14,7 @@ from mcl.datasets.bagwrite import BagOut
 from mcl.datasets.carmen import read_carmen
 from mcl.datasets.rosbag import bag_info, format_info
 from mcl.runner import run
-from tests.bagmsgs import laser, odom
+from tests.bagmsgs import fused_log, laser, odom
 
 DEMO = PROJECT_ROOT / "data" / "demo"
 TF = "tf2_msgs/msg/TFMessage"
@@ -91,25 +91,6 @@ def test_a_run_leaves_the_laser_at_fault_out_says_so_and_its_advice_mends_it(agv
     assert "other_lasers" not in s["odometry_check"] and s["self_hits"]["laser"] == "/rear/scan"
 
 
-def _fused_log(tmp_path, rear_yaw: float):
-    """The demo's log with each FLASER line repeated as an RLASER line of the same readings, its laser pose the
-    robot's turned by ``rear_yaw`` (pi: declared looking back while its scans look ahead, the mounting at fault)."""
-    import math
-
-    out = []
-    for line in (DEMO / "log.clf").read_text().splitlines(keepends=True):
-        out.append(line)
-        if line.startswith("FLASER"):
-            f = line.split()
-            n = int(f[1])
-            ox, oy, oth = (float(v) for v in f[n + 5:n + 8])
-            th = math.atan2(math.sin(oth + rear_yaw), math.cos(oth + rear_yaw))
-            out.append(" ".join(["RLASER", *f[1:n + 2], f"{ox:.6f}", f"{oy:.6f}", f"{th:.6f}", *f[n + 5:]]) + "\n")
-    path = tmp_path / f"fused-{rear_yaw:g}.clf"
-    path.write_text("".join(out))
-    return path
-
-
 def test_a_carmen_log_s_front_and_rear_lasers_are_fused_by_name(tmp_path):
     # laser: FLASER,RLASER reads both streams, each on its own mounting (a CARMEN log's RLASER line carries its
     # laser's pose): the rear laser declared looking back while its scans look ahead is found and left out (the
@@ -120,7 +101,7 @@ def test_a_carmen_log_s_front_and_rear_lasers_are_fused_by_name(tmp_path):
     sets = [f"map={DEMO / 'map.yaml'}", f"truth={DEMO / 'truth.tum'}", "rerun.mode=off", "filter.particles=2000",
             "filter.kld=false", "filter.initial_pose=[2.062007,10.160616,-0.218311]", "laser=FLASER,RLASER"]
     said = []
-    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, f"log={_fused_log(tmp_path, np.pi)}"]),
+    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, f"log={fused_log(tmp_path, np.pi)}"]),
             tmp_path / "wrong", progress=False, echo=said.append)
     warn = [m for m in said if "odometry's motion" in m]
     assert len(warn) == 1 and ": RLASER: the scans fit the odometry's motion best with the laser turned half a turn" \
@@ -129,14 +110,14 @@ def test_a_carmen_log_s_front_and_rear_lasers_are_fused_by_name(tmp_path):
     front = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets[:-1], f"log={DEMO / 'log.clf'}"]),
                 tmp_path / "front", progress=False, echo=lambda *_: None)
     said.clear()
-    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets[:-1], f"log={_fused_log(tmp_path, 0.0)}"]),
+    s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets[:-1], f"log={fused_log(tmp_path, 0.0)}"]),
             tmp_path / "both", progress=False, echo=said.append)  # laser: auto fuses a log's FLASER and RLASER
     assert any(m.endswith(": FLASER and RLASER (a front and a rear laser): fused, each on the mounting its lines give "
                           "(laser: FLASER reads the front one alone)") for m in said), said
     assert "left_out_lasers" not in s and s["odometry_check"]["other_lasers"][0]["laser"] == "RLASER"
     assert s["updates"] == 2 * front["updates"] and s["scans"] == 2 * front["scans"], (s["updates"], front["updates"])
     alone = run(load_config(PROJECT_ROOT / "configs" / "default.yaml",
-                            [*sets[:-1], f"log={_fused_log(tmp_path, 0.0)}", "laser=FLASER"]),
+                            [*sets[:-1], f"log={fused_log(tmp_path, 0.0)}", "laser=FLASER"]),
                 tmp_path / "alone", progress=False, echo=lambda *_: None)
     assert alone["updates"] == front["updates"] and "other_lasers" not in alone["odometry_check"]
     for bad in ("FLASER,FLASER", "FLASER,RLASER2", "auto,RLASER"):
@@ -167,7 +148,7 @@ def test_convert_keeps_each_fused_laser(tmp_path):
     from mcl.datasets.bagwrite import convert
     from mcl.datasets.rosbag import open_bag
 
-    src = _fused_log(tmp_path, 2.5)  # the rear laser's lines pose it turned 2.5 rad from the robot
+    src = fused_log(tmp_path, 2.5)  # the rear laser's lines pose it turned 2.5 rad from the robot
     want = read_carmen(src).laser_stream()
     said = []
     assert convert(src, tmp_path / "f.mcap", echo=said.append) == len(want) == 2 * sum(s.kind == "FLASER" for s in want)

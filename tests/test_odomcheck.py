@@ -259,3 +259,16 @@ def test_the_advice_for_one_fused_laser_reads_it_alone():
         "read it alone: --set topics.scan=/rear/scan --set sensor.upside_down=true")
     one = advice(half, (-0.2, 0.0, 0.0), False, False)  # one laser: the mounting that fits, as before
     assert one.endswith('if so, --set "sensor.laser_pose=[-0.2, 0, -3.1416]" mounts it there'), one
+    # a CARMEN log's rear laser (its stream's name, no /): its lines give its pose, and `laser` reads it alone (the
+    # advice named the bag's /tf and topics.scan, which a log has not)
+    rl = ["FLASER", "RLASER"]
+    text = advice(OdometryCheck(60, {"half": 59, "tie": 1}, "half", laser="RLASER"), (-0.2, 0.0, 0.0), False, False, rl)
+    assert text.endswith("the laser seems to look another way than its lines' laser pose says (0 degrees), and the "
+                         "filter will be lost as soon as the robot moves; fix its lines' laser pose, or read it alone, "
+                         'mounted there: --set laser=RLASER --set "sensor.laser_pose=[-0.2, 0, -3.1416]"'), text
+    given = advice(OdometryCheck(60, {"half": 59}, "half", laser="RLASER"), (-0.2, 0.0, 0.0), True, False, rl)
+    assert "leave it unset to mount each by its lines, or read it alone, mounted there: --set laser=RLASER" in given
+    text = advice(OdometryCheck(60, {"reversed": 50}, "reversed", laser="RLASER"), (0.0, 0.0, 0.0), False, False, rl)
+    assert text.endswith("mounted upside down without its lines saying so (a roll of half a turn), and its scans pull "
+                         "the cloud the wrong way at every turn; read it alone: --set laser=RLASER --set "
+                         "sensor.upside_down=true"), text

@@ -57,6 +57,7 @@ import numpy as np
 import yaml
 
 from mcl.datasets.carmen import Scan
+from mcl.datasets.loginfo import check_lines, scan_checks
 from mcl.errors import DataError
 
 __all__ = ["BAG_SUFFIXES", "is_bag", "bag_kind", "open_bag", "BagSource", "BagScans", "bag_info", "format_info",
@@ -1256,37 +1257,9 @@ def bag_info(path, topics=None, frames=None, sensor=None) -> dict:
 
 
 def _scan_checks(src: "BagSource", sensor) -> dict:
-    """``bag_info``'s "self_hits" (None: none found), "odometry_check" (absent for laser odometry) and
-    "time_offset_check" (absent for laser odometry, or when the odometry check found a fault) of ``src``, each laser's
-    as a run finds them (``mcl.datasets.selfhits.summary_of``, ``mcl.odomcheck.summary_of``: fused lasers' others in
-    ``other_lasers``), with the line a run would say as "text"."""
-    from mcl.config import SensorConfig
-    from mcl.datasets.selfhits import beam_constancies, self_hits_of
-    from mcl.datasets.selfhits import summary_of as hits_summary
-    from mcl.latency import advice as time_advice
-    from mcl.latency import check_time_offset
-    from mcl.odomcheck import check_each_laser, findings, run_mount
-    from mcl.odomcheck import summary_of as odometry_summary
-
-    sensor = SensorConfig() if sensor is None else sensor
-    hits = [h for h in (self_hits_of(c) for c in beam_constancies(src.scans, float(sensor.range_min),
-                                                                   float(sensor.range_max))) if h is not None]
-    out = {"self_hits": hits_summary(hits)}
-    for h, d in zip(hits, [out["self_hits"], *(out["self_hits"] or {}).get("other_lasers", [])]):
-        d["text"] = h.describe()
-    if src.wheel_odometry:  # laser odometry comes from the scans: nothing to check
-        checks = list(check_each_laser(src.scans, lambda s: run_mount(s, sensor.laser_pose)).values())
-        if checks:
-            out["odometry_check"] = odometry_summary(checks)
-            _, _, texts = findings(checks, sensor)
-            for c, d in zip(checks, [out["odometry_check"], *out["odometry_check"].get("other_lasers", [])]):
-                if c.laser in texts:
-                    d["text"] = texts[c.laser]
-            if checks[0].verdict is None:
-                timing = check_time_offset(src.scans, src.odometry, np.asarray(checks[0].mount))
-                out["time_offset_check"] = {**timing.summary(), "text": timing.describe() + (
-                    f": {time_advice(timing)}" if timing.verdict else "")}
-    return out
+    """``bag_info``'s checks of the scans (``mcl.datasets.loginfo.scan_checks``): the bag's odometry stream, none
+    for laser odometry."""
+    return scan_checks(src.scans, src.odometry, sensor, src.wheel_odometry)
 
 
 def format_info(info: dict) -> str:
@@ -1318,20 +1291,7 @@ def format_info(info: dict) -> str:
         refs = [f"{n} ({info['topics'][n]['type']}, {info['topics'][n]['count']})" for n in u["references"]]
         lines.append("  reference:    " + (", ".join(refs) + ": score a run against one with --truth-topic TOPIC" if refs
                                           else "no pose topic besides the odometry (--truth T.tum scores against a file)"))
-        h = u.get("self_hits")
-        lines += [f"  robot itself: {d['laser']}: {d['text']}: left out (sensor.self_hit_skip)"
-                  for d in ([h, *h.get("other_lasers", [])] if h else [])] or [
-            "  robot itself: no beam reads it (sensor.self_hit_skip)"]
-        c = u.get("odometry_check")
-        each = [c, *c.get("other_lasers", [])] if c is not None else []
-        for d in each:
-            kept = d["wins"].get("recorded", 0)
-            lines.append("  odometry check: " + (f"{d['laser']}: " if len(each) > 1 else "") + (
-                d["text"] if d["verdict"] else f"the scans fit the odometry as recorded ({kept} of {d['pairs']} "
-                                                "pairs of scans)"))
-        c = u.get("time_offset_check")
-        if c is not None:
-            lines.append(f"  scan timing:  {c['text']}" + ("" if c["verdict"] else " (sensor.time_offset)"))
+        lines += check_lines(u)
         lines += [f"  note: {n}" for n in u.get("notes", [])]
         lines += [f"  warning: {w}" for w in u["warnings"]]
     return "\n".join(lines)

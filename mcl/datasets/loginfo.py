@@ -1,0 +1,161 @@
+"""``mcl log info``: what a CARMEN log holds and what a run would take from it, with the checks a run makes before
+it starts; and those checks for ``mcl bag info`` too (:func:`scan_checks`, :func:`check_lines`).
+
+The checks are the run's own, on the scans it would read: the beams that read the robot itself
+(``mcl.datasets.selfhits``), the odometry's sign and scale and the laser's mounting (``mcl.odomcheck``), each laser
+of a fused stream on its own, and the scans' stamps against the odometry's (``mcl.latency``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mcl.errors import DataError
+
+__all__ = ["scan_checks", "check_lines", "log_info", "format_log_info"]
+
+
+def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
+    """"self_hits" (None: none found), "odometry_check" (absent for laser odometry, ``wheel_odometry`` False) and
+    "time_offset_check" (absent for laser odometry, or when the odometry check found a fault) of ``scans``, each
+    laser's as a run finds them (``mcl.datasets.selfhits.summary_of``, ``mcl.odomcheck.summary_of``: fused lasers'
+    others in ``other_lasers``), with the line a run would say as "text". ``odometry``: rows (t, x, y, theta, ...)
+    of the odometry stream the scans' turns are timed against; None: the scans' own poses (a CARMEN log without
+    ODOM lines). ``sensor``: a SensorConfig (range_min, range_max, laser_pose, upside_down, misfit_laser); None:
+    the defaults."""
+    from mcl.config import SensorConfig
+    from mcl.datasets.selfhits import beam_constancies, self_hits_of
+    from mcl.datasets.selfhits import summary_of as hits_summary
+    from mcl.latency import advice as time_advice
+    from mcl.latency import check_time_offset
+    from mcl.odomcheck import check_each_laser, findings, run_mount
+    from mcl.odomcheck import summary_of as odometry_summary
+
+    sensor = SensorConfig() if sensor is None else sensor
+    hits = [h for h in (self_hits_of(c) for c in beam_constancies(scans, float(sensor.range_min),
+                                                                   float(sensor.range_max))) if h is not None]
+    out = {"self_hits": hits_summary(hits)}
+    for h, d in zip(hits, [out["self_hits"], *(out["self_hits"] or {}).get("other_lasers", [])]):
+        d["text"] = h.describe()
+    if wheel_odometry:  # laser odometry comes from the scans: nothing to check
+        checks = list(check_each_laser(scans, lambda s: run_mount(s, sensor.laser_pose)).values())
+        if checks:
+            out["odometry_check"] = odometry_summary(checks)
+            _, _, texts = findings(checks, sensor)
+            for c, d in zip(checks, [out["odometry_check"], *out["odometry_check"].get("other_lasers", [])]):
+                if c.laser in texts:
+                    d["text"] = texts[c.laser]
+            if checks[0].verdict is None:
+                timing = check_time_offset(scans, odometry, np.asarray(checks[0].mount))
+                out["time_offset_check"] = {**timing.summary(), "text": timing.describe() + (
+                    f": {time_advice(timing)}" if timing.verdict else "")}
+    return out
+
+
+def check_lines(u: dict) -> list[str]:
+    """The lines of :func:`scan_checks`' findings in ``u``, as ``mcl bag info`` and ``mcl log info`` print them."""
+    lines = []
+    h = u.get("self_hits")
+    lines += [f"  robot itself: {d['laser']}: {d['text']}: left out (sensor.self_hit_skip)"
+              for d in ([h, *h.get("other_lasers", [])] if h else [])] or [
+        "  robot itself: no beam reads it (sensor.self_hit_skip)"]
+    c = u.get("odometry_check")
+    each = [c, *c.get("other_lasers", [])] if c is not None else []
+    for d in each:
+        kept = d["wins"].get("recorded", 0)
+        lines.append("  odometry check: " + (f"{d['laser']}: " if len(each) > 1 else "") + (
+            d["text"] if d["verdict"] else f"the scans fit the odometry as recorded ({kept} of {d['pairs']} "
+                                            "pairs of scans)"))
+    c = u.get("time_offset_check")
+    if c is not None:
+        lines.append(f"  scan timing:  {c['text']}" + ("" if c["verdict"] else " (sensor.time_offset)"))
+    return lines
+
+
+def _round(v, nd: int = 6):
+    return None if v is None else round(float(v), nd) + 0.0  # no -0.0
+
+
+def log_info(path, laser: str = "auto", sensor=None) -> dict:
+    """A CARMEN log's messages (each type's count, the skipped ones too), its time span, each laser stream (scans,
+    beams, field of view, maximum range, mounting), and what a run with ``laser`` (the config key) and ``sensor``
+    would use, with the checks of :func:`scan_checks` (or why it cannot). A log that cannot be read at all (a
+    malformed line) raises DataError, as a run does."""
+    from mcl.datasets.carmen import read_carmen
+
+    log = read_carmen(path)
+    kinds = log.kinds()
+    odo = np.asarray(log.odometry, dtype=np.float64).reshape(-1, 6)
+    stamps = [s.t for s in log.scans] + odo[:, 0].tolist() + [m.t for m in log.landmarks]
+    messages = {**kinds, **({"ODOM": int(odo.shape[0])} if odo.shape[0] else {}),
+                **({"LANDMARK": len(log.landmarks)} if log.landmarks else {}),
+                **{k: v for k, v in sorted(log.skipped.items()) if k != "#"}}
+    lasers = {}
+    for kind in kinds:
+        scans = log.scans_of(kind)
+        beams = sorted({int(s.ranges.size) for s in scans})
+        s = scans[0]
+        off = s.laser_offset
+        lasers[kind] = {
+            "scans": len(scans),
+            "beams": beams if len(beams) > 1 else beams[0],
+            "fov_deg": round(math.degrees(float(s.angle_increment) * max(int(s.ranges.size) - 1, 0)), 3),
+            "angle_min_deg": round(math.degrees(float(s.angle_min)), 3),
+            "max_range": _round(s.max_range, 3),
+            "laser_pose": None if off is None else [_round(v) for v in off],
+        }
+    info = {"path": str(path), "messages": messages,
+            "duration_s": float(max(stamps) - min(stamps)) if stamps else 0.0,
+            "time_span_s": [_round(min(stamps)), _round(max(stamps))] if stamps else None,
+            "lasers": lasers, "warnings": list(log.warnings)}
+    try:
+        if laser != "auto":
+            for kind in laser.split(","):
+                if kind not in kinds:
+                    raise DataError(f"laser: the log {log.path} has no {kind} messages (it has "
+                                    f"{', '.join(sorted(kinds)) or 'none'})")
+        scans = log.laser_stream(laser) if kinds else []
+        if not scans:
+            raise DataError(f"{log.path}: no laser messages")
+        t = np.array([s.t for s in scans])
+        info["mcl_uses"] = {
+            "lasers": list(dict.fromkeys(s.kind for s in scans)),
+            "scans": len(scans),
+            "odometry": (f"ODOM lines ({odo.shape[0]})" if odo.shape[0] else
+                         "the laser lines' own poses (no ODOM lines)"),
+            "scan_span_s": [_round(t.min()), _round(t.max())],
+            "notes": list(log.notes),
+            **scan_checks(scans, odo if odo.shape[0] else None, sensor),
+        }
+    except DataError as e:
+        info["mcl_uses"] = {"error": str(e)}
+    return info
+
+
+def format_log_info(info: dict) -> str:
+    n = sum(info["messages"].values())
+    lines = [f"{info['path']}: CARMEN log, {n} messages, {info['duration_s']:.1f} s"]
+    lines.append("messages:")
+    w = max((len(k) for k in info["messages"]), default=0)
+    lines += [f"  {k:<{w}}  {v:>8}" for k, v in info["messages"].items()]
+    for kind, d in info["lasers"].items():
+        rmax = "none given (sensor.range_max)" if d["max_range"] is None else f"{d['max_range']:g} m"
+        pose = "not given (sensor.laser_pose)" if d["laser_pose"] is None else str(d["laser_pose"])
+        beams = d["beams"] if isinstance(d["beams"], int) else f"{d['beams'][0]}..{d['beams'][-1]}"
+        lines.append(f"laser {kind}: {d['scans']} scans, {beams} beams over {d['fov_deg']:g} degrees from "
+                     f"{d['angle_min_deg']:g}, maximum range {rmax}, laser pose {pose}")
+    u = info["mcl_uses"]
+    lines.append("mcl would use:")
+    if "error" in u:
+        lines.append(f"  nothing: {u['error']}")
+    else:
+        lines.append(f"  scans:        {', '.join(u['lasers'])} ({u['scans']} scans)")
+        lines.append(f"  odometry:     {u['odometry']}")
+        a, b = u["scan_span_s"]
+        lines.append(f"  stamps:       scans {a:.3f}..{b:.3f} s")
+        lines += check_lines(u)
+        lines += [f"  note: {m}" for m in u["notes"]]
+    lines += [f"  warning: {m}" for m in info["warnings"]]
+    return "\n".join(lines)
