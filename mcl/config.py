@@ -279,6 +279,9 @@ class SensorConfig:
     # mirrored, while another's fit it as recorded (its /tf turned half a turn, upside down), found before the run
     # (mcl.odomcheck): leave_out (its scans not weighed; a warning) or keep (a warning only)
     misfit_laser: Literal["leave_out", "keep"] = "leave_out"
+    # the laser's scans fit the odometry best with it turned a few degrees from its mounting (2 or more, and 4 standard
+    # errors; found before the run, mcl.odomcheck): fit (the run mounts it so; a warning) or keep (a warning only)
+    mount_yaw: Literal["fit", "keep"] = "fit"
     # the laser is mounted upside down and the log or the bag's /tf does not say so: every scan is read mirrored (a
     # beam at angle a points at -a); mcl.odomcheck's warning of reversed turns is the sign
     upside_down: bool = False

@@ -84,12 +84,13 @@ class Key:
         self.normals = n
 
 
-def icp(key: Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None):
+def icp(key: Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None, weight: float = PRIOR):
     """(pose (3,) of the scan ``pts`` in the key scan's frame, paired points, cost) by point-to-line ICP from
     ``guess`` (see the module doc); the pose is ``guess`` and the count 0 when fewer than ``MIN_PAIRS`` pair. The
     cost (to compare starts) sums min(r^2, max_pair^2) over the points, an unpaired point counting max_pair^2,
     and the prior's term.
-    ``prior``: where the weak prior sits (default ``guess``)."""
+    ``prior``: where the weak prior sits (default ``guess``); ``weight``: how many pairs it weighs (a measurement of
+    the guess's error wants next to none: the prior pulls the match towards the guess)."""
     x, y, th = (float(v) for v in guess)
     gx, gy, gth = (float(v) for v in (guess if prior is None else prior))
     pairs = 0
@@ -114,13 +115,13 @@ def icp(key: Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None):
         nx, ny, ax, ay, r = nx[keep], ny[keep], ax[keep], ay[keep], r[keep]
         jac = np.vstack((nx, ny, nx * -(ay - y) + ny * (ax - x)))  # d r / d (x, y, theta)
         # a weak prior at the guess (PRIOR pairs' worth): it decides only where the scene does not
-        h = jac @ jac.T + PRIOR * np.eye(3)
-        g = jac @ r + PRIOR * np.array([x - gx, y - gy, math.remainder(th - gth, 2.0 * math.pi)])
+        h = jac @ jac.T + weight * np.eye(3)
+        g = jac @ r + weight * np.array([x - gx, y - gy, math.remainder(th - gth, 2.0 * math.pi)])
         step = np.linalg.solve(h, -g)
         x, y, th = x + step[0], y + step[1], th + step[2]
         pairs = int(r.size)
         cost = (float(np.sum(np.minimum(r * r, max_pair ** 2))) + max_pair ** 2 * (pts.shape[1] - pairs)
-                + PRIOR * ((x - gx) ** 2 + (y - gy) ** 2 + math.remainder(th - gth, 2.0 * math.pi) ** 2))
+                + weight * ((x - gx) ** 2 + (y - gy) ** 2 + math.remainder(th - gth, 2.0 * math.pi) ** 2))
         if it >= 2 and abs(step[0]) + abs(step[1]) < 1e-6 and abs(step[2]) < 1e-6:
             break
     return np.array([x, y, math.atan2(math.sin(th), math.cos(th))]), pairs, cost

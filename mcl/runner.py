@@ -396,10 +396,11 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
     if cfg.sensor.use and cfg.sensor.self_hit_skip:
         scans = _skip_self_hits(scans, log, cfg.sensor, echo)
     if cfg.sensor.use and len(scans) and getattr(log, "wheel_odometry", True):
-        log.odometry_checks, log.left_out_lasers = _check_odometry(scans, log, cfg.sensor, echo)
+        log.odometry_checks, log.left_out_lasers, log.turned_lasers = _check_odometry(scans, log, cfg.sensor, echo)
         first = log.odometry_checks[0]
         if first.verdict is None:  # the turns' timing means nothing while their sign is in doubt
-            log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, first.mount, echo)
+            mount = compose(np.asarray(first.mount), np.array([0.0, 0.0, log.turned_lasers.get(first.laser, 0.0)]))
+            log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, mount, echo)
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
         if not truth.t.size:
@@ -461,11 +462,14 @@ def _check_odometry(scans, log, sensor, echo):
     from mcl.odomcheck import OdometryCheck, check_each_laser, findings, run_mount
 
     checks = list(check_each_laser(scans, lambda s: run_mount(s, sensor.laser_pose)).values()) or [OdometryCheck(0)]
-    left_out, disagree, texts = findings(checks, sensor)
+    left_out, disagree, texts, turned = findings(checks, sensor)
     for c in checks if disagree else checks[:1]:  # the same for all: the odometry's (or every laser's), said once
         if c.laser in texts:
             echo(f"mcl: warning: {log.path}: {f'{c.laser}: ' if disagree else ''}{texts[c.laser]}")
-    return checks, left_out
+    for c in checks[1:] if not disagree else []:  # no verdict anywhere: a fused laser turned a little, named
+        if c.laser in texts and c.verdict is None:
+            echo(f"mcl: warning: {log.path}: {c.laser}: {texts[c.laser]}")
+    return checks, left_out, turned
 
 
 def _check_time_offset(scans, log, sensor, mount, echo):
@@ -929,6 +933,7 @@ def _run(
     last_t = 0.0
     lasers: set = set()  # the scan sources (a bag's topics; a CARMEN log's one kind) seen to update so far
     left_out = getattr(log, "left_out_lasers", set())  # fused lasers whose mounting misfits (_check_odometry)
+    turned = getattr(log, "turned_lasers", {})  # lasers mounted at the yaw their scans fit (_check_odometry)
     owed: set = set()  # ... that have not updated since the robot last moved (AMCL's lasers_update_ flags)
     writer = TumWriter(out_dir / "trajectory.tum")
     bag_out = _estimate_bag(cfg, out_dir, log) if write_bag else None
@@ -975,6 +980,8 @@ def _run(
                     if cfg.sensor.laser_pose is not None
                     else (getattr(scan, "laser_offset", None) if getattr(scan, "laser_offset", None) is not None else np.zeros(3))
                 )
+                if laser in turned:  # sensor.mount_yaw: fit (_check_odometry): the yaw the scans fit best
+                    laser_pose = compose(laser_pose, np.array([0.0, 0.0, turned[laser]]))
                 frame = plane_sensor.frame_of(scan) if plane_sensor is not None else None
                 no_scan = scan is marks or scan is frame  # an update from a LANDMARK line or a depth frame alone
                 # None when unusable (or a laser left out: its first scan, before any update, only starts the filter)
@@ -1089,6 +1096,8 @@ def _run(
         **({"odometry_check": odometry_summary(log.odometry_checks)} if getattr(log, "odometry_checks", None)
            else {}),
         **({"left_out_lasers": sorted(left_out)} if left_out else {}),
+        **({"mount_yaw_fitted_deg": {k: round(math.degrees(v), 2) for k, v in sorted(turned.items())}} if turned
+           else {}),
         **({"time_offset_check": log.time_offset_check.summary()} if getattr(log, "time_offset_check", None)
            else {}),
         "resamples": counts["resamples"],

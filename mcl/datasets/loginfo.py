@@ -43,7 +43,7 @@ def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
         checks = list(check_each_laser(scans, lambda s: run_mount(s, sensor.laser_pose)).values())
         if checks:
             out["odometry_check"] = odometry_summary(checks)
-            _, _, texts = findings(checks, sensor)
+            _, _, texts, _ = findings(checks, sensor)
             for c, d in zip(checks, [out["odometry_check"], *out["odometry_check"].get("other_lasers", [])]):
                 if c.laser in texts:
                     d["text"] = texts[c.laser]
@@ -66,8 +66,7 @@ def check_lines(u: dict) -> list[str]:
     for d in each:
         kept = d["wins"].get("recorded", 0)
         lines.append("  odometry check: " + (f"{d['laser']}: " if len(each) > 1 else "") + (
-            d["text"] if d["verdict"] else f"the scans fit the odometry as recorded ({kept} of {d['pairs']} "
-                                            "pairs of scans)"))
+            d.get("text") or f"the scans fit the odometry as recorded ({kept} of {d['pairs']} pairs of scans)"))
     c = u.get("time_offset_check")
     if c is not None:
         lines.append(f"  scan timing:  {c['text']}" + ("" if c["verdict"] else " (sensor.time_offset)"))
