@@ -246,6 +246,9 @@ class SensorConfig:
     range_min: float = field(default=0.0, metadata=_rng(0.0))
     range_max: float = field(default=80.0, metadata=_rng(0.0, lo_open=True))  # readings >= this: no return
     time_offset: float = field(default=0.0, metadata=_rng(-1e10, 1e10))  # s added to each scan's stamp
+    # the scans' stamps late or early by an offset the check before the run finds (mcl.latency): fit (each scan
+    # paired with the odometry at the time found, on top of time_offset; a warning) or keep (a warning only)
+    stamp_offset: Literal["fit", "keep"] = "fit"
     # deskewing: s from a scan's first beam to its last (beams in array order, the first at the stamp); each endpoint
     # is moved by the robot's motion (from the odometry) since the stamp. auto: the input's own beam times (a bag's
     # LaserScan time_increment; a CARMEN log gives none); 0: off

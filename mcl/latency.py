@@ -119,14 +119,19 @@ class TimeOffsetCheck:
                 f"s, {self.pairs} pairs of scans; RMS {self.rms:.4f} rad against {self.rms_at_zero:.4f} as stamped)")
 
 
-def advice(check: TimeOffsetCheck, current: float = 0.0) -> str:
+def advice(check: TimeOffsetCheck, current: float = 0.0, fitted: bool = False) -> str:
     """What a ``check`` with a verdict means and what to do, after its ``describe()``; ``current``: the run's
-    ``sensor.time_offset`` (already in the stamps the check saw)."""
+    ``sensor.time_offset`` (already in the stamps the check saw); ``fitted``: the run pairs each scan with the
+    odometry at the time found (``sensor.stamp_offset: fit``)."""
     late = check.offset < 0
-    return (f"the scans seem stamped about {abs(check.offset):.2f} s {'late' if late else 'early'} (a laser driver's "
-            "time_offset or buffering, two clocks), and the filter's heading will lag in every turn; if so, --set "
-            f"sensor.time_offset={round(current + check.offset, 2) + 0.0:g} pairs each scan with the odometry of "
-            "when it was taken")
+    head = (f"the scans seem stamped about {abs(check.offset):.2f} s {'late' if late else 'early'} (a laser driver's "
+            "time_offset or buffering, two clocks)")
+    total = f"sensor.time_offset={round(current + check.offset, 2) + 0.0:g}"
+    if fitted:
+        return (f"{head}: each scan paired with the odometry of when it was taken for this run (sensor.stamp_offset: "
+                f"keep leaves the stamps as they are); to do so for good, --set {total}")
+    return (f"{head}, and the filter's heading will lag in every turn; if so, --set {total} pairs each scan with the "
+            "odometry of when it was taken")
 
 
 def _coarse_turn(key: Key, pts: np.ndarray, guess: np.ndarray) -> np.ndarray:

@@ -401,6 +401,11 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         if first.verdict is None:  # the turns' timing means nothing while their sign is in doubt
             mount = compose(np.asarray(first.mount), np.array([0.0, 0.0, log.turned_lasers.get(first.laser, 0.0)]))
             log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, mount, echo)
+            if log.time_offset_check.verdict and cfg.sensor.stamp_offset == "fit":  # said in the warning
+                hits = getattr(scans, "self_hits", None)
+                scans = _retime(scans, log, log.time_offset_check.offset, lambda *_: None)
+                if hits is not None:
+                    scans.self_hits = hits
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
         if not truth.t.size:
@@ -481,7 +486,8 @@ def _check_time_offset(scans, log, sensor, mount, echo):
     odometry, from_scans = _odometry_rows(log, [])  # the log's own stream; without one, the scans' own poses
     check = check_time_offset(scans, None if from_scans else odometry, np.asarray(mount, dtype=np.float64))
     if check.verdict:
-        echo(f"mcl: warning: {log.path}: {check.describe()}: {advice(check, sensor.time_offset)}")
+        echo(f"mcl: warning: {log.path}: {check.describe()}: "
+             f"{advice(check, sensor.time_offset, sensor.stamp_offset == 'fit')}")
     return check
 
 
@@ -1098,6 +1104,9 @@ def _run(
         **({"left_out_lasers": sorted(left_out)} if left_out else {}),
         **({"mount_yaw_fitted_deg": {k: round(math.degrees(v), 2) for k, v in sorted(turned.items())}} if turned
            else {}),
+        **({"stamp_offset_fitted_s": round(log.time_offset_check.offset, 4)}
+           if getattr(log, "time_offset_check", None) is not None and log.time_offset_check.verdict
+           and cfg.sensor.stamp_offset == "fit" else {}),
         **({"time_offset_check": log.time_offset_check.summary()} if getattr(log, "time_offset_check", None)
            else {}),
         "resamples": counts["resamples"],

@@ -50,7 +50,8 @@ def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
             if checks[0].verdict is None:
                 timing = check_time_offset(scans, odometry, np.asarray(checks[0].mount))
                 out["time_offset_check"] = {**timing.summary(), "text": timing.describe() + (
-                    f": {time_advice(timing)}" if timing.verdict else "")}
+                    f": {time_advice(timing, sensor.time_offset, sensor.stamp_offset == 'fit')}" if timing.verdict
+                    else "")}
     return out
 
 
