@@ -345,11 +345,13 @@ def _add_simulate(sub) -> None:
 
 
 def _add_calibrate(sub) -> None:
-    from mcl import calibrate_motion, calibrate_sensor
+    from mcl import calibrate_motion, calibrate_mount, calibrate_sensor
 
     csub = _group(sub, "calibrate",
-                  help="fit model parameters from a log with reference poses; print YAML to paste into a config",
-                  description="Learn model parameters from a logged dataset whose reference trajectory is known.")
+                  help="fit model parameters from a log (with reference poses, or for the mounting without); print "
+                  "YAML to paste into a config",
+                  description="Learn model parameters from a logged dataset: the sensor and motion models from one "
+                  "whose reference trajectory is known, the laser's mounting from the odometry and the scans alone.")
     _command(
         csub, "sensor", calibrate_sensor,
         help="EM fit of the range sensor mixture (Prob. Rob. Table 6.2): beam or likelihood field",
@@ -369,6 +371,19 @@ def _add_calibrate(sub) -> None:
             "the odometry error over the reference spacing. Prints a motion: block ready to paste into a config."
         ),
         epilog="example:\n  mcl calibrate motion --log data/demo/log.clf --truth data/demo/truth.tum",
+    )
+    _command(
+        csub, "mount", calibrate_mount,
+        help="the laser's pose on the robot (x, y, yaw) from the odometry and the scans (hand-eye, no reference)",
+        description=(
+            "Fit the laser's mounting on the robot from the log alone: the odometry check's 60 pairs of scans, each "
+            "matched by ICP, set against the odometry's motion (planar hand-eye calibration: R(yaw) t_laser = "
+            "t_robot + (R(turn) - I) m). The yaw needs the robot to drive, x and y need it to turn; the standard "
+            "errors say how well each is pinned. Prints a sensor: block ready to paste into a config (each laser's "
+            "fit, for fused lasers). mcl run fits the yaw by itself (sensor.mount_yaw), never x and y."
+        ),
+        epilog="examples:\n  mcl calibrate mount --log data/demo/log.clf\n"
+        "  mcl calibrate mount --bag robot.mcap --set topics.scan=/front/scan",
     )
 
 

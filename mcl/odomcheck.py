@@ -100,6 +100,9 @@ class OdometryCheck:
     yaw: float | None = None
     yaw_se: float = math.inf
     yaw_pairs: int = 0
+    # (the robot's motion d from the odometry, the laser's L from the scans by ICP) of each pair matched: what
+    # ``mcl calibrate mount`` fits the whole mounting to
+    motions: list = field(default_factory=list, repr=False)
 
     @property
     def turned(self) -> float | None:
@@ -146,17 +149,23 @@ def _motions(d: np.ndarray, mount: np.ndarray) -> dict:
     return out
 
 
-def _yaw_of(key: Key, pts: np.ndarray, d: np.ndarray, mount: np.ndarray) -> float | None:
-    """The laser's yaw from its ``mount`` (rad) one pair measures (see ``YAW_WEIGHT``): the second scan ``pts``
-    matched to the first (``key``) from the odometry's motion ``d``; None when the match fails or the laser or the
-    lever-corrected robot moves under ``YAW_MIN_MOVE`` (a turn on the spot says nothing of the yaw)."""
+def _laser_motion(key: Key, pts: np.ndarray, d: np.ndarray, mount: np.ndarray) -> np.ndarray | None:
+    """The laser's motion (3,) between two scans, the second (``pts``) matched to the first (``key``) by ICP from
+    the odometry's motion ``d`` with next to no prior (``YAW_WEIGHT``); None when the match fails."""
     pose, paired, _ = icp(key, pts, compose(compose(inverse(mount), d), mount), weight=YAW_WEIGHT)
+    return pose if paired else None
+
+
+def _yaw_of(d: np.ndarray, laser: np.ndarray, mount: np.ndarray) -> float | None:
+    """The laser's yaw from its ``mount`` (rad) one pair measures (see ``YAW_WEIGHT``): the laser's motion
+    ``laser`` against the robot's ``d``; None when the laser or the lever-corrected robot moves under
+    ``YAW_MIN_MOVE`` (a turn on the spot says nothing of the yaw)."""
     c, s = math.cos(d[2]), math.sin(d[2])
     vx = d[0] + c * mount[0] - s * mount[1] - mount[0]
     vy = d[1] + s * mount[0] + c * mount[1] - mount[1]
-    if not paired or math.hypot(pose[0], pose[1]) < YAW_MIN_MOVE or math.hypot(vx, vy) < YAW_MIN_MOVE:
+    if math.hypot(laser[0], laser[1]) < YAW_MIN_MOVE or math.hypot(vx, vy) < YAW_MIN_MOVE:
         return None
-    psi = math.atan2(pose[0] * vy - pose[1] * vx, pose[0] * vx + pose[1] * vy)
+    psi = math.atan2(laser[0] * vy - laser[1] * vx, laser[0] * vx + laser[1] * vy)
     return float(wrap_angle(psi - mount[2]))
 
 
@@ -364,9 +373,12 @@ def check_each_laser(scans, mount_of, *, first_only: bool = False, step: float =
                     best = "tie"
                 out.wins[best] = out.wins.get(best, 0) + 1
                 out.pairs += 1
-                yaw = _yaw_of(key, b, d, mount)
-                if yaw is not None:
-                    state[kind][3].append(yaw)
+                laser = _laser_motion(key, b, d, mount)
+                if laser is not None:
+                    out.motions.append((d, laser))
+                    yaw = _yaw_of(d, laser, mount)
+                    if yaw is not None:
+                        state[kind][3].append(yaw)
                 if out.pairs >= pairs:
                     done += 1
                     if done == len(state):

@@ -1,0 +1,82 @@
+"""``mcl calibrate mount``: the laser's pose on the robot from the odometry and the scans alone (planar hand-eye,
+mcl.calibrate_mount)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from mcl.calibrate_mount import calibrate, hand_eye
+from mcl.cli import main
+from mcl.datasets.carmen import read_carmen
+from mcl.errors import DataError
+from mcl.estimate import compose, inverse
+from tests.bagmsgs import DEMO
+
+# Tolerances: 0.03 m and 1 degree, three times the fit's standard errors on the demo (0.010 m, 0.45 degrees)
+
+
+def _moved(scans, mount):
+    """The demo as a robot whose laser sits at ``mount`` on its base: the same laser poses, the odometry the base's
+    (laser pose ∘ mount⁻¹), each scan's own mounting ``mount``."""
+    m = np.asarray(mount, dtype=np.float64)
+    return [dataclasses.replace(s, odom=compose(np.asarray(s.odom), inverse(m)), laser_offset=m) for s in scans]
+
+
+def test_the_demo_s_laser_is_found_at_the_centre_whatever_the_mounting_given():
+    scans = read_carmen(DEMO / "log.clf").scans
+    for given in (None, (0.2, 0.1, 0.1)):
+        (check, fit), = calibrate(scans, given).values()
+        x, y, th = fit["laser_pose"]
+        assert abs(x) < 0.03 and abs(y) < 0.03 and abs(math.degrees(th)) < 1.0, (given, fit)
+        assert fit["pairs"] >= 40 and abs(fit["scale"] - 1.0) < 0.02 and max(fit["se"][:2]) < 0.02, fit
+
+
+def test_a_laser_off_the_centre_and_turned_is_found_where_it_is():
+    # the laser 0.2 m ahead, 0.1 m to the right, turned 0.15 rad; the run told it sits at the centre
+    mount = (0.2, -0.1, 0.15)
+    (check, fit), = calibrate(_moved(read_carmen(DEMO / "log.clf").scans, mount), (0.0, 0.0, 0.0)).values()
+    assert check.mount == (0.0, 0.0, 0.0)
+    got = fit["laser_pose"]
+    assert abs(got[0] - 0.2) < 0.03 and abs(got[1] + 0.1) < 0.03 and abs(math.degrees(got[2] - 0.15)) < 1.0, fit
+
+
+def test_the_command_prints_a_config_block_and_json(tmp_path, capsys):
+    moved = _moved(read_carmen(DEMO / "log.clf").scans, (0.15, 0.0, -0.1))
+    from mcl.datasets.bagwrite import write_scans
+
+    bag = tmp_path / "moved.mcap"
+    write_scans(bag, moved)  # /tf_static says base_link -> laser (0.15, 0, -0.1): the run's guess is right
+    assert main(["calibrate", "mount", "--bag", str(bag), "--set", "sensor.laser_pose=[0, 0, 0]"]) == 0
+    text = capsys.readouterr().out
+    pose = yaml.safe_load(text)["sensor"]["laser_pose"]
+    assert abs(pose[0] - 0.15) < 0.03 and abs(pose[1]) < 0.03 and abs(math.degrees(pose[2] + 0.1)) < 1.0, text
+    assert text.startswith(f"# mcl calibrate mount: {bag}; the laser's pose on the robot") and \
+        "\n# /scan: given [0.0, 0.0, 0.0]; fitted x 0.1" in text, text
+    assert main(["calibrate", "mount", "--log", str(DEMO / "log.clf"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert list(out) == ["FLASER"] and out["FLASER"]["given"] == [0.0, 0.0, 0.0] and out["FLASER"]["pairs"] >= 40
+
+
+def test_a_robot_that_never_moves_gives_no_fit(tmp_path, capsys):
+    still = tmp_path / "still.clf"
+    lines = [ln for ln in (DEMO / "log.clf").read_text().splitlines(True) if not ln.startswith("ODOM")]
+    out = []
+    for ln in lines:  # every laser line's two poses at the origin
+        f = ln.split()
+        if f and f[0] == "FLASER":
+            n = int(f[1])
+            f[n + 2:n + 8] = ["0"] * 6
+        out.append(" ".join(f) + "\n")
+    still.write_text("".join(out))
+    assert main(["calibrate", "mount", "--log", str(still)]) == 1
+    cap = capsys.readouterr()
+    assert "# FLASER: no fit: 0 pairs of scans matched, 20 needed: the robot must drive and turn" in cap.out, cap.out
+    assert cap.err.strip() == f"mcl: error: {still}: no laser's mounting could be fitted"
+    with pytest.raises(DataError, match="5 pairs of scans matched, 20 needed"):  # the fit itself refuses
+        hand_eye([(np.zeros(3), np.zeros(3))] * 5)
