@@ -470,7 +470,8 @@ def _check_odometry(scans, log, sensor, echo):
     left_out, disagree, texts, turned = findings(checks, sensor)
     for c in checks if disagree else checks[:1]:  # the same for all: the odometry's (or every laser's), said once
         if c.laser in texts:
-            echo(f"mcl: warning: {log.path}: {f'{c.laser}: ' if disagree else ''}{texts[c.laser]}")
+            named = disagree or (len(checks) > 1 and c.verdict is None)  # a fused laser's own turn: named
+            echo(f"mcl: warning: {log.path}: {f'{c.laser}: ' if named else ''}{texts[c.laser]}")
     for c in checks[1:] if not disagree else []:  # no verdict anywhere: a fused laser turned a little, named
         if c.laser in texts and c.verdict is None:
             echo(f"mcl: warning: {log.path}: {c.laser}: {texts[c.laser]}")
