@@ -56,7 +56,7 @@ import numpy as np
 from mcl.estimate import compose, inverse
 from mcl.laser_odometry import Key, far_points, icp
 
-__all__ = ["TimeOffsetCheck", "advice", "check_time_offset"]
+__all__ = ["TimeOffsetCheck", "advice", "check_each_laser", "check_time_offset", "findings", "summary_of"]
 
 GAP = 0.8  # s between the two scans of a pair
 SPAN = 1.0  # s: offsets tried, -SPAN..SPAN ...
@@ -94,10 +94,11 @@ class TimeOffsetCheck:
     rms: float = math.nan
     rms_at_zero: float = math.nan
     verdict: bool = False
+    laser: str = ""  # the laser whose scans were timed (its kind: a bag's topic)
 
     def summary(self) -> dict:
-        out = {"pairs": self.pairs, "odometry_interval": round(self.interval, 4), "offset": self.offset,
-               "verdict": self.verdict}
+        out = {"laser": self.laser, "pairs": self.pairs, "odometry_interval": round(self.interval, 4),
+               "offset": self.offset, "verdict": self.verdict}
         if self.offset is not None:
             out.update(se=round(self.se, 4), turn_scale=round(self.turn_scale, 4), rms=round(self.rms, 5),
                        rms_at_zero=round(self.rms_at_zero, 5))
@@ -132,6 +133,52 @@ def advice(check: TimeOffsetCheck, current: float = 0.0, fitted: bool = False) -
                 f"keep leaves the stamps as they are); to do so for good, --set {total}")
     return (f"{head}, and the filter's heading will lag in every turn; if so, --set {total} pairs each scan with the "
             "odometry of when it was taken")
+
+
+AGREE = 0.02  # s: fused lasers' offsets agree within this plus three standard errors of their difference
+
+
+def check_each_laser(scans, odometry, mounts: dict) -> list[TimeOffsetCheck]:
+    """``check_time_offset`` for each laser of ``mounts`` ({laser: its mount (3,)}, in order; the lasers of a fused
+    stream, ``Scan.kind``), each on its own scans (a pass of ``scans`` per laser)."""
+    out = []
+    for laser, mount in mounts.items():
+        own = scans if len(mounts) == 1 else (s for s in scans if getattr(s, "kind", None) == laser)
+        check = check_time_offset(own, odometry, np.asarray(mount, dtype=np.float64))
+        check.laser = laser or ""
+        out.append(check)
+    return out
+
+
+def findings(checks: list[TimeOffsetCheck], current: float = 0.0, fit: bool = True) -> tuple[float | None, dict]:
+    """What a run does with ``checks`` (``check_each_laser``'s): (the offset it pairs every scan at, when
+    ``fit`` and the lasers agree, else None; {laser: the line to say}). One laser, or fused lasers that all find
+    the same offset (within ``AGREE`` s and three standard errors): that offset, said once (under the first laser).
+    Fused lasers that disagree (one late, another not; two offsets): each laser's own line, naming it, and no offset
+    fitted (``sensor.time_offset`` moves every laser alike: read one alone to set it)."""
+    judged = [c for c in checks if c.verdict]
+    if not judged:
+        return None, {}
+    first = checks[0]
+
+    def agree(c: TimeOffsetCheck) -> bool:
+        return c.verdict and abs(c.offset - first.offset) <= AGREE + 3.0 * math.hypot(c.se, first.se)
+
+    if all(agree(c) for c in checks):
+        return (first.offset if fit else None), {first.laser: f"{first.describe()}: {advice(first, current, fit)}"}
+    texts = {}
+    for c in judged:
+        total = round(current + c.offset, 2) + 0.0
+        texts[c.laser] = (f"{c.laser}: {c.describe()}: the fused lasers' stamps disagree, and no offset is fitted "
+                          f"(sensor.time_offset moves every laser alike); read it alone: --set "
+                          f"{'topics.scan' if c.laser.startswith('/') else 'laser'}={c.laser} --set "
+                          f"sensor.time_offset={total:g}")
+    return None, texts
+
+
+def summary_of(checks: list[TimeOffsetCheck]) -> dict:
+    """For summary.json and ``mcl bag info``: the first laser's ``summary()``, the others' in ``other_lasers``."""
+    return {**checks[0].summary(), **({"other_lasers": [c.summary() for c in checks[1:]]} if len(checks) > 1 else {})}
 
 
 def _coarse_turn(key: Key, pts: np.ndarray, guess: np.ndarray) -> np.ndarray:

@@ -399,11 +399,12 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         log.odometry_checks, log.left_out_lasers, log.turned_lasers = _check_odometry(scans, log, cfg.sensor, echo)
         first = log.odometry_checks[0]
         if first.verdict is None:  # the turns' timing means nothing while their sign is in doubt
-            mount = compose(np.asarray(first.mount), np.array([0.0, 0.0, log.turned_lasers.get(first.laser, 0.0)]))
-            log.time_offset_check = _check_time_offset(scans, log, cfg.sensor, mount, echo)
-            if log.time_offset_check.verdict and cfg.sensor.stamp_offset == "fit":  # said in the warning
+            mounts = {c.laser: compose(np.asarray(c.mount), np.array([0.0, 0.0, log.turned_lasers.get(c.laser, 0.0)]))
+                      for c in log.odometry_checks if c.verdict is None and c.laser not in log.left_out_lasers}
+            log.time_offset_checks, log.stamp_offset = _check_time_offset(scans, log, cfg.sensor, mounts, echo)
+            if log.stamp_offset is not None:  # sensor.stamp_offset: fit, said in the warning
                 hits = getattr(scans, "self_hits", None)
-                scans = _retime(scans, log, log.time_offset_check.offset, lambda *_: None)
+                scans = _retime(scans, log, log.stamp_offset, lambda *_: None)
                 if hits is not None:
                     scans.self_hits = hits
     if cfg.truth:
@@ -478,18 +479,19 @@ def _check_odometry(scans, log, sensor, echo):
     return checks, left_out, turned
 
 
-def _check_time_offset(scans, log, sensor, mount, echo):
-    """``mcl.latency.check_time_offset`` on the run's scans against the log's odometry stream, the first laser at
-    ``mount`` (as the odometry check took it); a warning when the scans' turns fit the odometry of another moment
-    than their stamps. Returns the check (for summary.json)."""
-    from mcl.latency import advice, check_time_offset
+def _check_time_offset(scans, log, sensor, mounts: dict, echo):
+    """``mcl.latency.check_each_laser`` on the run's scans against the log's odometry stream, each laser of
+    ``mounts`` ({laser: mount}, as the odometry check took it) on its own; a warning when the scans' turns fit the
+    odometry of another moment than their stamps (``mcl.latency.findings``). Returns (the checks, for summary.json;
+    the offset to pair every scan at, with ``sensor.stamp_offset: fit``, else None)."""
+    from mcl.latency import check_each_laser, findings
 
     odometry, from_scans = _odometry_rows(log, [])  # the log's own stream; without one, the scans' own poses
-    check = check_time_offset(scans, None if from_scans else odometry, np.asarray(mount, dtype=np.float64))
-    if check.verdict:
-        echo(f"mcl: warning: {log.path}: {check.describe()}: "
-             f"{advice(check, sensor.time_offset, sensor.stamp_offset == 'fit')}")
-    return check
+    checks = check_each_laser(scans, None if from_scans else odometry, mounts)
+    offset, texts = findings(checks, sensor.time_offset, sensor.stamp_offset == "fit")
+    for text in texts.values():
+        echo(f"mcl: warning: {log.path}: {text}")
+    return checks, offset
 
 
 def _check_truth_motion(log, truth, name: str, echo) -> None:
@@ -801,6 +803,7 @@ def _run(
 
     from mcl.datasets.selfhits import summary_of
     from mcl.odomcheck import summary_of as odometry_summary
+    from mcl.latency import summary_of as time_summary
     from mcl.evaluate import evaluate, format_eval
     from mcl.filter import Control, ParticleFilter
     from mcl.motion import velocities_from_odometry
@@ -1105,10 +1108,9 @@ def _run(
         **({"left_out_lasers": sorted(left_out)} if left_out else {}),
         **({"mount_yaw_fitted_deg": {k: round(math.degrees(v), 2) for k, v in sorted(turned.items())}} if turned
            else {}),
-        **({"stamp_offset_fitted_s": round(log.time_offset_check.offset, 4)}
-           if getattr(log, "time_offset_check", None) is not None and log.time_offset_check.verdict
-           and cfg.sensor.stamp_offset == "fit" else {}),
-        **({"time_offset_check": log.time_offset_check.summary()} if getattr(log, "time_offset_check", None)
+        **({"stamp_offset_fitted_s": round(log.stamp_offset, 4)} if getattr(log, "stamp_offset", None) is not None
+           else {}),
+        **({"time_offset_check": time_summary(log.time_offset_checks)} if getattr(log, "time_offset_checks", None)
            else {}),
         "resamples": counts["resamples"],
         "mean_tries": tries_sum / max(n_moved, 1),  # over the updates that predicted: at least 1 when any did

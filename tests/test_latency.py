@@ -233,3 +233,44 @@ def test_bag_info_says_when_the_scans_seem_stamped_late(drive_20hz, tmp_path):
             assert c["verdict"] and "seem stamped about" in timing[0] and "--set sensor.time_offset=-0." in timing[0]
         else:
             assert not c["verdict"] and "sensor.time_offset=" not in timing[0] and abs(c["offset"]) < 0.05, timing
+
+
+def test_fused_lasers_are_timed_each_and_fitted_only_when_they_agree(drive_20hz, tmp_path):
+    # The 20 Hz drive as an AGV's bag: /front/scan and /rear/scan, the same laser's readings twice, each scan with
+    # the odometry at its own stamp (/odom at 40 Hz). Both stamped 0.3 s late: one offset, said once and fitted.
+    # Only the rear one late: each laser timed on its own scans; the rear's offset named, the lasers said to
+    # disagree, nothing fitted (one sensor.time_offset would mis-time the front laser).
+    import dataclasses
+
+    from mcl.datasets.bagwrite import write_scans
+
+    lines = (drive_20hz / "log.clf").read_text().splitlines(keepends=True)
+    (tmp_path / "late.clf").write_text(stamped_late(lines, 0.3))
+    on_time = read_carmen(drive_20hz / "log.clf").laser_stream()
+    late = read_carmen(tmp_path / "late.clf").laser_stream()
+    start = [float(v) for v in read_tum(drive_20hz / "truth.tum")[1][:, 0]]
+    runs = {}
+    for name, front in (("both", late), ("rear", on_time)):
+        scans = sorted([*(dataclasses.replace(s, kind="/front/scan") for s in front),
+                        *(dataclasses.replace(s, kind="/rear/scan") for s in late)], key=lambda s: s.t)
+        bag = tmp_path / f"{name}.mcap"
+        write_scans(bag, scans)
+        said = []
+        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+            f"map={drive_20hz / 'map.yaml'}", f"bag={bag}", "log=null", f"truth={drive_20hz / 'truth.tum'}",
+            "rerun.mode=off", f"filter.initial_pose={start}", "filter.particles=2000", "filter.kld=false"])
+        runs[name] = (run(cfg, tmp_path / name, progress=False, echo=said.append), said)
+    s, said = runs["both"]
+    warned = [m for m in said if "seem stamped about" in m]
+    assert len(warned) == 1 and "each scan paired with the odometry of when it was taken" in warned[0], said
+    c = s["time_offset_check"]
+    assert c["laser"] == "/front/scan" and c["verdict"] and c["other_lasers"][0]["verdict"], c
+    assert -0.36 <= s["stamp_offset_fitted_s"] <= -0.24, s["stamp_offset_fitted_s"]
+    s, said = runs["rear"]
+    warned = [m for m in said if "stamps disagree" in m]
+    assert len(warned) == 1 and warned[0].startswith(f"mcl: warning: {tmp_path / 'rear.mcap'}: /rear/scan: the scans' "
+                                                     "turns fit the odometry's 0."), said
+    assert "--set topics.scan=/rear/scan --set sensor.time_offset=-0." in warned[0], warned
+    c = s["time_offset_check"]
+    assert not c["verdict"] and abs(c["offset"]) < 0.05 and c["other_lasers"][0]["verdict"], c
+    assert "stamp_offset_fitted_s" not in s

@@ -28,8 +28,10 @@ def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
     from mcl.config import SensorConfig
     from mcl.datasets.selfhits import beam_constancies, self_hits_of
     from mcl.datasets.selfhits import summary_of as hits_summary
-    from mcl.latency import advice as time_advice
-    from mcl.latency import check_time_offset
+    from mcl.estimate import compose
+    from mcl.latency import check_each_laser as check_times
+    from mcl.latency import findings as time_findings
+    from mcl.latency import summary_of as time_summary
     from mcl.odomcheck import check_each_laser, findings, run_mount
     from mcl.odomcheck import summary_of as odometry_summary
 
@@ -48,10 +50,14 @@ def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
                 if c.laser in texts:
                     d["text"] = texts[c.laser]
             if checks[0].verdict is None:
-                timing = check_time_offset(scans, odometry, np.asarray(checks[0].mount))
-                out["time_offset_check"] = {**timing.summary(), "text": timing.describe() + (
-                    f": {time_advice(timing, sensor.time_offset, sensor.stamp_offset == 'fit')}" if timing.verdict
-                    else "")}
+                left_out, _, _, turned = findings(checks, sensor)
+                mounts = {c.laser: compose(np.asarray(c.mount), np.array([0.0, 0.0, turned.get(c.laser, 0.0)]))
+                          for c in checks if c.verdict is None and c.laser not in left_out}
+                timing = check_times(scans, odometry, mounts)
+                _, said = time_findings(timing, sensor.time_offset, sensor.stamp_offset == "fit")
+                out["time_offset_check"] = time_summary(timing)
+                for c, d in zip(timing, [out["time_offset_check"], *out["time_offset_check"].get("other_lasers", [])]):
+                    d["text"] = said.get(c.laser, c.describe())
     return out
 
 
@@ -69,8 +75,10 @@ def check_lines(u: dict) -> list[str]:
         lines.append("  odometry check: " + (f"{d['laser']}: " if len(each) > 1 else "") + (
             d.get("text") or f"the scans fit the odometry as recorded ({kept} of {d['pairs']} pairs of scans)"))
     c = u.get("time_offset_check")
-    if c is not None:
-        lines.append(f"  scan timing:  {c['text']}" + ("" if c["verdict"] else " (sensor.time_offset)"))
+    each = [c, *c.get("other_lasers", [])] if c is not None else []
+    for d in each:
+        lines.append("  scan timing:  " + (f"{d['laser']}: " if len(each) > 1 and not d["text"].startswith(d["laser"])
+                                            else "") + d["text"] + ("" if d["verdict"] else " (sensor.time_offset)"))
     return lines
 
 
