@@ -78,8 +78,7 @@ def test_what_mcl_log_info_refuses_or_cannot_use(tmp_path, capsys):
     # a bag: sent to mcl bag info; a log given to mcl bag info: sent here; a malformed line: file:line
     assert main(["log", "info", str(DEMO / "log.clf"), "--laser", "RLASER"]) == 0
     text = capsys.readouterr().out
-    assert text.endswith(f"mcl would use:\n  nothing: laser: the log {DEMO / 'log.clf'} has no RLASER messages "
-                         "(it has FLASER)\n"), text
+    assert text.endswith(f"mcl would use:\n  nothing: {DEMO / 'log.clf'}: no RLASER messages (found: FLASER)\n"), text
     assert "\nlaser FLASER: 351 scans" in text
     assert main(["bag", "info", str(DEMO / "log.clf")]) == 2
     assert capsys.readouterr().err.strip() == (f"mcl: error: {DEMO / 'log.clf'}: not a ROS bag (.bag, .db3, .mcap "
@@ -88,6 +87,11 @@ def test_what_mcl_log_info_refuses_or_cannot_use(tmp_path, capsys):
     bag.write_bytes(b"")
     assert main(["log", "info", str(bag)]) == 2
     assert capsys.readouterr().err.strip() == f"mcl: error: {bag}: a ROS bag, not a CARMEN log: mcl bag info {bag}"
+    odo = tmp_path / "odo.clf"  # ODOM lines alone (a log for mcl calibrate motion): described, nothing to run
+    odo.write_text("ODOM 0 0 0 0 0 0 1.0 host 1.0\nODOM 1 0 0 0 0 0 2.0 host 2.0\n")
+    assert main(["log", "info", str(odo)]) == 0
+    text = capsys.readouterr().out
+    assert "\n  ODOM         2\n" in text and text.endswith(f"  nothing: {odo}: no laser messages\n"), text
     bad = tmp_path / "bad.clf"
     bad.write_text("ODOM 0 0 0 0 0 0 1.0 host 1.0\nFLASER 3 1 2\n")
     assert main(["log", "info", str(bad)]) == 2
