@@ -223,9 +223,9 @@ def advice(check: OdometryCheck, mount, laser_pose_given: bool, upside_down: boo
     ``fused``: every laser of a run that fuses several, when this one alone is at fault (``sensor.laser_pose`` and
     ``sensor.upside_down`` would apply to them all: the advice reads it alone, or fixes its transform);
     ``left_out``: the run leaves that laser out (``misfits``), which it says first."""
-    bag = check.laser.startswith("/")  # a bag's topic, else a CARMEN log's stream (RLASER)
+    bag = check.laser.startswith("/")
     alone = (f"--set {'topics.scan' if bag else 'laser'}={check.laser} " if len(fused) > 1 else "")
-    source = "its transform in the bag's /tf" if bag else "its lines' laser pose"
+    source = _source(check.laser)
     head = "left out of the run (sensor.misfit_laser: keep weighs it); " if left_out else ""
     if check.verdict == "reversed":
         if alone:
@@ -295,23 +295,26 @@ def findings(checks: list[OdometryCheck], sensor) -> tuple[set[str], bool, dict[
                                                      fused, c.laser in left_out)
              for c in checks if c.verdict is not None}
     turned = {c.laser: c.turned for c in checks if c.turned is not None}
-    for c in checks:
-        if c.laser in turned:
-            texts[c.laser] = f"{c.describe_turn()}: " + turn_advice(c, sensor.laser_pose is not None, len(checks) > 1,
-                                                                    sensor.mount_yaw == "fit")
+    texts.update({c.laser: f"{c.describe_turn()}: " + turn_advice(c, sensor.laser_pose is not None, len(checks) > 1,
+                                                                  sensor.mount_yaw == "fit")
+                  for c in checks if c.laser in turned})
     return left_out, bool(fused), texts, (turned if sensor.mount_yaw == "fit" else {})
+
+
+def _source(laser: str) -> str:
+    """Where a laser's mounting comes from: a bag's topic (/rear/scan) its transform, a CARMEN log's stream (RLASER)
+    the laser pose its lines give."""
+    return "its transform in the bag's /tf" if laser.startswith("/") else "its lines' laser pose"
 
 
 def turn_advice(check: OdometryCheck, laser_pose_given: bool, fused: bool, fitted: bool) -> str:
     """What a laser turned a few degrees from its mounting (``check.turned``) means and what to do, after its
     ``describe_turn()``; ``fused``: the run fuses several lasers (``sensor.laser_pose`` would mount them all);
     ``fitted``: the run mounts it so (``sensor.mount_yaw: fit``)."""
-    bag = check.laser.startswith("/")
     x, y, th = (round(float(v), 4) + 0.0 for v in check.mount)
     th = round(float(wrap_angle(th + check.turned)), 4) + 0.0
     pose = f"--set \"sensor.laser_pose=[{x:g}, {y:g}, {th:g}]\""
-    source = ("sensor.laser_pose" if laser_pose_given else "its transform in the bag's /tf" if bag
-              else "its lines' laser pose")
+    source = "sensor.laser_pose" if laser_pose_given else _source(check.laser)
     fix = f"fix {source}" + ("" if fused and not laser_pose_given else f" ({pose})")
     if fitted:
         return f"mounted so for this run (sensor.mount_yaw: keep takes the mounting as given); to mount it so, {fix}"
@@ -340,7 +343,7 @@ def check_each_laser(scans, mount_of, *, first_only: bool = False, step: float =
     topic; fused lasers each have their own mounting, which may be the one at fault), in one pass, in the order the
     lasers first appear (``first_only``: the first alone). ``mount_of(scan)`` gives the laser's (3,) pose on the
     robot as the run takes it, from its first scan (``run_mount``). A laser's pairs are its own consecutive scans."""
-    state: dict = {}  # kind -> [check, mount, anchor, the pairs' yaws]
+    state: dict = {}  # kind -> [check, mount, anchor]
     done = 0
     for s in itertools.islice(scans, max_read):
         kind = getattr(s, "kind", None)
@@ -350,9 +353,9 @@ def check_each_laser(scans, mount_of, *, first_only: bool = False, step: float =
             if first_only and state:
                 continue
             mount = np.asarray(mount_of(s), dtype=np.float64)
-            state[kind] = [OdometryCheck(0, laser=kind or "", mount=tuple(float(v) for v in mount)), mount, s, []]
+            state[kind] = [OdometryCheck(0, laser=kind or "", mount=tuple(float(v) for v in mount)), mount, s]
             continue
-        out, mount, anchor, _ = state[kind]
+        out, mount, anchor = state[kind]
         if out.pairs >= pairs:
             continue
         d = compose(inverse(np.asarray(anchor.odom, dtype=np.float64)), np.asarray(s.odom, dtype=np.float64))
@@ -376,15 +379,13 @@ def check_each_laser(scans, mount_of, *, first_only: bool = False, step: float =
                 laser = _laser_motion(key, b, d, mount)
                 if laser is not None:
                     out.motions.append((d, laser))
-                    yaw = _yaw_of(d, laser, mount)
-                    if yaw is not None:
-                        state[kind][3].append(yaw)
                 if out.pairs >= pairs:
                     done += 1
                     if done == len(state):
                         break
         state[kind][2] = s
-    for out, _, _, yaws in state.values():
+    for out, mount, _ in state.values():
+        yaws = [y for d, laser in out.motions if (y := _yaw_of(d, laser, mount)) is not None]
         if len(yaws) >= YAW_MIN_PAIRS:
             y = np.asarray(yaws)
             out.yaw = float(np.median(y))

@@ -174,8 +174,10 @@ class Log:
                 if first is None:
                     raise DataError(f"{self.path}: no laser messages")
                 return self.scans_of(first)
-            self.notes.append(f"{self.path}: {pair[0]} and {pair[1]} (a front and a rear laser): fused, each on the "
-                              f"mounting its lines give (laser: {pair[0]} reads the front one alone)")
+            note = (f"{self.path}: {pair[0]} and {pair[1]} (a front and a rear laser): fused, each on the mounting "
+                    f"its lines give (laser: {pair[0]} reads the front one alone)")
+            if note not in self.notes:  # said once, however often the stream is read
+                self.notes.append(note)
             kind = ",".join(pair)
         wanted = kind.split(",")
         for k in wanted:
