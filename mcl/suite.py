@@ -1067,8 +1067,9 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     from tqdm import tqdm
 
     suite = with_world(load_suite(suite_path), world or {})
-    out = Path(out) if out else Path.cwd() / "runs" / f"suite-{suite.name}"
-    cache = Path(cache) if cache else out / "worlds"
+    # absolute: the runs' configs name the worlds' files, and a config's relative paths are its own folder's
+    out = Path(out).absolute() if out else Path.cwd() / "runs" / f"suite-{suite.name}"
+    cache = Path(cache).absolute() if cache else out / "worlds"
     job_list = plan(suite, config=config, sets=list(sets), seeds=seeds, out=out, cache=cache, modes=modes,
                     only=only, baseline=baseline, start_offset=start_offset)
     if not job_list:

@@ -631,6 +631,18 @@ def test_suite_resumes_and_skips_finished_runs(evaluated, tmp_path, capsys):
 
 
 
+def test_relative_out_and_cache_folders_are_the_working_directorys(evaluated, tmp_path, capsys, monkeypatch):
+    # `--out o --cache worlds` from the shell, the worlds not made yet: every run failed reading
+    # worlds/<world>/map.yaml against the folder of its config (configs/) instead of the working directory
+    monkeypatch.chdir(tmp_path)
+    assert main(["eval", "--suite", str(evaluated["suite"]), "--out", "o", "--cache", "worlds", "--seeds", "1",
+                 "--jobs", "1", "--only", "good", "--no-baseline", "--set", "filter.particles=2000",
+                 "--no-progress"]) == 0
+    (row,) = _rows(tmp_path / "o")
+    assert not row.get("error") and row["rmse"] < 0.2, row
+    assert "generating 1 synthetic world(s) into" in capsys.readouterr().out and list(tmp_path.glob("worlds/good-*"))
+
+
 def test_a_mode_in_no_dataset_is_said_not_dropped(evaluated, tmp_path, capsys):
     # --modes tracking,kidnapped on a tracking-only suite ran the tracking runs and dropped kidnapped without a word
     out = tmp_path / "out"
