@@ -15,8 +15,9 @@ The mapping follows AMCL's sources, not its documentation alone (ros-planning/na
   deviation ``sqrt(alpha1 rot^2 + alpha2 trans^2)``: the book's variance form, mcl's ``motion.noise_form:
   variance``, alpha for alpha. ROS 1's ``diff`` (its default) passes ``alpha1 rot^2 + alpha2 trans^2`` itself as the
   standard deviation (ros-planning/navigation#20): no mcl form has that; the alphas are kept and a warning says how
-  much wider mcl's noise is then. The ``omni`` models have no mcl counterpart (a warning; the alphas are kept);
-  ``alpha5`` is theirs alone.
+  much wider mcl's noise is then. The ``omni`` models are mcl's ``motion.model: omni``, their alpha1 and alpha4 swapped
+  into mcl's roles and ``alpha5`` its ``motion.alpha_strafe`` (ROS 1's uncorrected ``omni`` has ``diff``'s bug: a
+  warning).
 - KLD sampling: AMCL's ``kld_z``/``pf_z`` is the normal quantile z itself in ``pf_resample_limit``, so mcl's
   ``kld_delta`` = 1 - Phi(z) (the 0.99 default: delta = 0.161); ``kld_err``/``pf_err`` is ``kld_epsilon``.
 - Range finder weights. AMCL's Gaussian is unnormalised (``z_hit * exp(-d^2 / 2 sigma^2)``), mcl's (the book's) is
@@ -674,19 +675,17 @@ class _Converter:
                       f"(ros-planning/navigation#20), mcl as the variance (as diff-corrected and nav2 do); the alphas "
                       f"are kept{wider}: retune them (mcl calibrate motion)")
         elif "omni" in kind:
-            how = ("no omnidirectional model in mcl: the alphas go to the differential one by their roles (AMCL's "
-                   "omni alpha4 is rotation noise from rotation, alpha1 translation and strafe noise from rotation)")
-            uncorrected = ("; and ROS 1's uncorrected omni takes alpha3 trans^2 + alpha1 rot^2 itself as the std "
-                           "(ros-planning/navigation#20), mcl as the variance: retune them (mcl calibrate motion)"
-                           if kind == "omni" and self.flavour == ROS1 else "")
-            self.warn(f"{said}: mcl has no omnidirectional motion model (no sideways noise); AMCL's omni alpha1 "
-                      "(translation noise from rotation) and alpha4 (rotation noise from rotation) go to mcl's "
-                      f"motion.alpha4 and motion.alpha1, the others alpha for alpha{uncorrected}")
+            how = ("ROS AMCL's omni model (mcl.motion.OmniMotionModel): its alpha1 (translation and strafe noise from "
+                   "rotation) and alpha4 (rotation noise from rotation) are mcl's motion.alpha4 and motion.alpha1")
+            if kind == "omni" and self.flavour == ROS1:
+                self.warn(f"{said}: ROS 1's uncorrected omni takes alpha3 trans^2 + alpha1 rot^2 itself as the std "
+                          "(ros-planning/navigation#20), mcl as the variance (as omni-corrected and nav2 do): the "
+                          "alphas are kept, retune them")
         else:
             how = "not an AMCL motion model: the alphas are kept for the differential one"
             self.warn(f"{said}: not an AMCL motion model (diff, diff-corrected, omni, omni-corrected; nav2: "
                       "nav2_amcl::DifferentialMotionModel, nav2_amcl::OmniMotionModel): read as differential")
-        self.set("motion.model", "odometry", f"{said}: {how}", "robot_model_type")
+        self.set("motion.model", "omni" if "omni" in kind else "odometry", f"{said}: {how}", "robot_model_type")
         self.set("motion.noise_form", "variance", "sigma^2 = alpha1 rot^2 + alpha2 trans^2 (Table 5.6)")
         what = {"alpha1": "rotation noise from rotation", "alpha2": "rotation noise from translation",
                 "alpha3": "translation noise from translation", "alpha4": "translation noise from rotation"}
@@ -696,7 +695,10 @@ class _Converter:
         for a in alphas:
             src = source.get(a, a)
             self.set(f"motion.{a}", self.get(src), f"{self.said(src)}: {what[a]}", src)
-        if self.given("alpha5"):
+        if "omni" in kind:
+            self.set("motion.alpha_strafe", self.get("alpha5"), f"{self.said('alpha5')}: strafe noise from "
+                     "translation", "alpha5")
+        elif self.given("alpha5"):
             self.note(f"{self.said('alpha5')}: AMCL's omni models only (mcl's motion.alpha5 is the velocity model's, "
                       "another thing): not used", "alpha5")
 

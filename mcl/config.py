@@ -132,8 +132,9 @@ class FilterConfig:
 class MotionConfig:
     """Odometry motion model (Prob. Rob. Table 5.6, sample_motion_model_odometry)."""
 
-    # odometry: sample_motion_model_odometry (Table 5.6); velocity: sample_motion_model_velocity (Table 5.3)
-    model: Literal["odometry", "velocity"] = "odometry"
+    # odometry: sample_motion_model_odometry (Table 5.6); velocity: sample_motion_model_velocity (Table 5.3);
+    # omni: the odometry of an omnidirectional base (ROS AMCL's omni model, mcl.motion.OmniMotionModel)
+    model: Literal["odometry", "velocity", "omni"] = "odometry"
     # variance: sigma^2 = alpha1*drot1^2 + alpha2*dtrans^2 (the book's Table 5.6 and AMCL);
     # std: sigma = alpha1*|drot1| + alpha2*|dtrans| (the lecture slides' form).
     noise_form: Literal["variance", "std"] = "variance"
@@ -144,6 +145,12 @@ class MotionConfig:
     # velocity model only (Table 5.3): the final rotation gamma; variance form sigma_g^2 = alpha5 v^2 + alpha6 w^2
     alpha5: float = field(default=0.01, metadata=_rng(0.0))  # final-rotation noise from translational velocity
     alpha6: float = field(default=0.01, metadata=_rng(0.0))  # final-rotation noise from rotational velocity
+    # omni model only: the noise across the direction of travel from translation (AMCL's omni alpha5); variance
+    # form sigma_strafe^2 = alpha_strafe trans^2 + alpha4 rot^2
+    alpha_strafe: float = field(default=0.05, metadata=_rng(0.0))
+    # with model odometry: "omni" runs an odometry whose travel goes across the robot's heading (an omnidirectional
+    # base: mcl.motion.sideways_share >= SIDEWAYS_OMNI) with the omni model, with a warning; "keep" warns only
+    sideways: Literal["omni", "keep"] = "omni"
     # the noise's distribution (mcl.noise), all with the std above: normal (NumPy's exact normal),
     # normal_twelve (sum of twelve uniforms) or triangular (two uniforms)
     noise: Literal["normal", "normal_twelve", "triangular"] = "normal"

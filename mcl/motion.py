@@ -262,10 +262,129 @@ class OdometryMotionModel:
         return result
 
 
+def omni_deltas(odom_prev, odom_now) -> tuple[float, float, float]:
+    """(bearing, trans, rot) of an odometry step of an omnidirectional base: the direction of travel in the robot's
+    frame at ``odom_prev`` (0 when it moved less than 1 cm, as rot1), the distance and the turn, wrapped."""
+    x0, y0, t0 = (float(v) for v in odom_prev[:3])
+    x1, y1, t1 = (float(v) for v in odom_now[:3])
+    dx, dy = x1 - x0, y1 - y0
+    trans = math.hypot(dx, dy)
+    bearing = 0.0 if trans < ROT1_MIN_TRANS else angle_diff(math.atan2(dy, dx), t0)
+    return bearing, trans, angle_diff(t1, t0)
+
+
+def omni_sigmas(trans, rot, cfg):
+    """Stds (sigma_trans, sigma_strafe, sigma_rot) of the omni model's noise (floats, or arrays of like shape).
+
+    variance form: sigma_trans^2 = alpha3 trans^2 + alpha4 rot^2, sigma_strafe^2 = alpha_strafe trans^2 +
+    alpha4 rot^2, sigma_rot^2 = alpha1 rot^2 + alpha2 trans^2; std form: the same sums of alpha |delta|. These are
+    ROS AMCL's omni model's with the book's names (AMCL's omni swaps alpha1 and alpha4, and calls alpha_strafe
+    alpha5). ``rot`` is the whole turn: a strafing step turns nothing, whatever its direction.
+    """
+    a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
+    a_s = float(cfg.alpha_strafe)
+    t = np.abs(np.asarray(trans, dtype=np.float64))
+    r = np.abs(np.asarray(rot, dtype=np.float64))
+    if cfg.noise_form == "variance":
+        out = (np.sqrt(a3 * t * t + a4 * r * r), np.sqrt(a_s * t * t + a4 * r * r), np.sqrt(a1 * r * r + a2 * t * t))
+    elif cfg.noise_form == "std":
+        out = (a3 * t + a4 * r, a_s * t + a4 * r, a1 * r + a2 * t)
+    else:
+        raise ValueError(f"motion.noise_form: unknown value {cfg.noise_form!r} (expected 'variance' or 'std')")
+    return tuple(float(v) for v in out) if t.ndim == 0 and r.ndim == 0 else out
+
+
+class OmniMotionModel(OdometryMotionModel):
+    """The odometry motion model of an omnidirectional base (mecanum wheels, a PR2, a Ridgeback): ROS AMCL's omni
+    model (``OmniMotionModel``, the corrected form of nav2), in the book's names.
+
+    Table 5.6 moves a particle along its own heading turned by rot1, and rot1's noise grows with rot1: right for a
+    differential drive, whose steps go along its heading (rot1 near 0 or pi). A base that strafes makes steps at any
+    rot1, and a step sideways (rot1 = pi/2) would turn the particle by 0.35 rad of noise each way. Here the step
+    keeps its direction in the robot's frame (``omni_deltas``' bearing, noise-free); the travel, a drift across it
+    and the turn are noisy (``omni_sigmas``)::
+
+        b = theta + bearing
+        x' = x + (trans + e_trans) cos b + e_strafe sin b
+        y' = y + (trans + e_trans) sin b - e_strafe cos b
+        theta' = theta + rot + e_rot
+
+    ``cfg`` as ``OdometryMotionModel``'s, and ``alpha_strafe``.
+    """
+
+    def sample(self, particles, odom_prev, odom_now, rng: np.random.Generator,
+               allowed=None, grid=None, out=None, fault: FaultProposal | None = None, log_weight=None,
+               fallback=None):
+        """``OdometryMotionModel.sample`` with this model's step (same arguments and results)."""
+        p, out = _particles_and_out(particles, out)
+        n = p.shape[1]
+        bearing, trans, rot = omni_deltas(odom_prev, odom_now)
+        st, ss, sr = omni_sigmas(trans, rot, self.cfg)
+        noise, idx_all = self._buffers(n)
+        kind = getattr(self.cfg, "noise", "normal")
+        standard_noise(kind, rng, out=noise)
+        k = fault.scales((st, ss, sr), turns=(2,), shifts=(0, 1)) if fault is not None else None
+        scales = fault_scales(n, fault, k, rng)
+        if scales is not None:
+            noise *= scales
+
+        def move(nz, o):
+            _k.sample_omni(p, nz, bearing, trans, rot, st, ss, sr, o)
+
+        def move_map(nz, idx, mask, ox, oy, inv_res, o, ok):
+            return _k.sample_omni_map(p, nz, idx, bearing, trans, rot, st, ss, sr, mask, ox, oy, inv_res, o, ok)
+
+        result = _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, self.max_tries, allowed, grid, out,
+                                  scales, fallback)
+        if fault is not None and log_weight is not None:
+            log_weight[:] = fault_log_weights(noise, (st, ss, sr), kind, fault, k)
+        return result
+
+
+SIDEWAYS_OMNI = 0.1  # share of the odometry's travel across the heading above which the base is omnidirectional
+SIDEWAYS_MIN_TRAVEL = 5.0  # m of odometry travel the share needs
+SIDEWAYS_CHORD = 0.05  # m: the odometry is read in chords this long (a 50 Hz /odom moves millimetres a message)
+
+
+def sideways_share(poses) -> tuple[float, float]:
+    """(share, travel): how much of the odometry's travel goes across the robot's heading, and the travel (m).
+
+    ``poses``: (M, 3) odometry poses (x, y, theta) in time order, read in chords of ``SIDEWAYS_CHORD`` m of path.
+    A differential drive's chord lies between the headings at its ends, forwards or backwards, whatever it turned
+    in between; each chord's angle outside that interval (its ``deviation``) weighs by |sin(deviation)| times its
+    length. The shared logs read 0.002-0.014, and omnidirectional bases crabbing within 20 degrees of their
+    travel read 0.19 or more (``mcl simulate --holonomic``): over ``SIDEWAYS_OMNI`` a run takes the omni model
+    (``motion.sideways``). An odometry frame off the axle reads a turn on the spot as a short sideways chord (0.2 m
+    ahead: 0.6 m a full turn). Share 0 under ``SIDEWAYS_MIN_TRAVEL`` m of travel or 2 poses."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if p.shape[0] < 2:
+        return 0.0, 0.0
+    path = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))))
+    if path[-1] < SIDEWAYS_MIN_TRAVEL:
+        return 0.0, float(path[-1])
+    keep = np.unique(np.searchsorted(path, np.arange(0.0, path[-1], SIDEWAYS_CHORD)))
+    q = p[np.append(keep, p.shape[0] - 1)]
+    d = np.diff(q, axis=0)
+    chord = np.hypot(d[:, 0], d[:, 1])
+    turn = _wrap_np(d[:, 2])
+    lo, hi = np.minimum(turn, 0.0), np.maximum(turn, 0.0)
+
+    def outside(direction):  # the chord's angle outside [theta0 + lo, theta0 + hi], 0 inside
+        rel = _wrap_np(direction - q[:-1, 2])
+        return np.where(rel < lo, lo - rel, np.where(rel > hi, rel - hi, 0.0))
+
+    ahead = np.arctan2(d[:, 1], d[:, 0])
+    deviation = np.minimum(np.abs(_wrap_np(outside(ahead))), np.abs(_wrap_np(outside(ahead + np.pi))))
+    return float((chord * np.sin(np.minimum(deviation, 0.5 * np.pi))).sum() / chord.sum()), float(path[-1])
+
+
 def make_motion_model(cfg):
     """The motion model named by ``motion.model``."""
     if cfg.model == "odometry":
         return OdometryMotionModel(cfg)
+    if cfg.model == "omni":
+        return OmniMotionModel(cfg)
     if cfg.model == "velocity":
         return VelocityMotionModel(cfg)
     raise ValueError(f"motion.model: unknown model {cfg.model!r}")
@@ -424,6 +543,33 @@ def _noise_log_density(kind: str, residuals, sigmas, fault: FaultProposal | None
     if fault is None or fault.prob <= 0.0:
         return log_f((1.0, 1.0, 1.0))
     return _mixture_log(log_f((1.0, 1.0, 1.0)), log_f(fault.scales(sigmas, **caps)), fault.prob)
+
+
+def log_motion_model_omni(x_new, u, x_prev, cfg, *, fault: FaultProposal | None = None) -> np.ndarray:
+    """log p(x_new | u, x_prev) of the omni model (``OmniMotionModel``), (N,): the density its sampler draws from.
+
+    Each hypothesis' displacement is read in the frame of the odometry's direction of travel at x_prev (heading
+    theta_prev + bearing): its part along that direction less trans, its part across it, and its turn less rot
+    (wrapped) are the three noises, with the odometry's stds (``omni_sigmas``). That map from the noises to the pose
+    is a rotation and a shift, so this is a density over poses (x', y', theta') without a Jacobian. ``fault``: the
+    odometry-fault mixture, as for ``log_motion_model_odometry``.
+    """
+    bearing, trans, rot = omni_deltas(*_odometry_pair(u))
+    a, b = _poses(x_prev, "x_prev"), _poses(x_new, "x_new")
+    head = a[2] + bearing
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    along = dx * np.cos(head) + dy * np.sin(head)
+    across = dx * np.sin(head) - dy * np.cos(head)
+    turn = _wrap_np(_wrap_np(b[2] - a[2]) - rot)
+    shape = np.broadcast_shapes(along.shape, turn.shape)
+    sig = tuple(np.full(shape, s) for s in omni_sigmas(trans, rot, cfg))
+    return _noise_log_density(getattr(cfg, "noise", "normal"), (along - trans, across, turn), sig, fault,
+                              turns=(2,), shifts=(0, 1))
+
+
+def motion_model_omni(x_new, u, x_prev, cfg, **kw) -> np.ndarray:
+    """p(x_new | u, x_prev) of the omni model, (N,): exp of ``log_motion_model_omni``."""
+    return np.exp(log_motion_model_omni(x_new, u, x_prev, cfg, **kw))
 
 
 def motion_model_odometry(x_new, u, x_prev, cfg, **kw) -> np.ndarray:
@@ -677,13 +823,15 @@ def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np
     candidates (the constant p(x|m) and the continuous normaliser cancel). It is
     the book's approximation, good for motions shorter than about half the
     robot's size: it checks the end pose only, not the path. The free-space
-    density is ``motion_model_odometry`` or ``motion_model_velocity`` by
+    density is ``motion_model_odometry``, ``motion_model_omni`` or ``motion_model_velocity`` by
     ``cfg.model`` (keyword options go through). When no hypothesis is
     allowed, the result is all zeros (eta is undefined).
     """
     xn = _poses(x_new, "x_new")
     if cfg.model == "velocity":
         logp = log_motion_model_velocity(xn, u, x_prev, cfg, **kw)
+    elif cfg.model == "omni":
+        logp = log_motion_model_omni(xn, u, x_prev, cfg, **kw)
     else:
         logp = log_motion_model_odometry(xn, u, x_prev, cfg, **kw)
     if allowed is None:

@@ -460,6 +460,30 @@ def _skip_self_hits(scans, log, sensor, echo):
     return out
 
 
+def _choose_motion_model(cfg: Config, log, scans, echo) -> tuple[Config, float | None]:
+    """(the config to run, the odometry's sideways share or None when not measured): with ``motion.model:
+    odometry`` and ``motion.sideways: omni``, an odometry whose travel goes across the robot's heading
+    (``mcl.motion.sideways_share`` at or over ``SIDEWAYS_OMNI``: an omnidirectional base) is run with the omni
+    model, with a warning that names the settings."""
+    from dataclasses import replace
+
+    from mcl.motion import SIDEWAYS_OMNI, sideways_share
+
+    if cfg.motion.model != "odometry":
+        return cfg, None
+    share, travel = sideways_share(_odometry_rows(log, scans)[0][:, 1:4])
+    if share < SIDEWAYS_OMNI or cfg.motion.sideways != "omni":
+        if share >= SIDEWAYS_OMNI:
+            echo(f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's "
+                 "heading (an omnidirectional base?), and motion.sideways: keep leaves the odometry model on it: "
+                 "its rot1 noise turns every particle on a step sideways (--set motion.model=omni)")
+        return cfg, share
+    echo(f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's heading: "
+         "an omnidirectional base, run with motion.model omni (the odometry model's rot1 noise would turn every "
+         "particle on a step sideways). --set motion.model=omni says so; motion.sideways: keep keeps odometry")
+    return replace(cfg, motion=replace(cfg.motion, model="omni")), share
+
+
 def _check_odometry(scans, log, sensor, echo):
     """``mcl.odomcheck.check_each_laser`` on the run's scans, each laser where the run puts it; a warning when the
     scans point to a fault (reversed turns, distances off by two, a laser turned from its mounting): one for the
@@ -812,6 +836,7 @@ def _run(
     echo = echo or (lambda msg: print(msg, file=sys.stderr))
     wall0 = time.perf_counter()
     log, grid, scans, marks_all, truth, bag_initial = _open_source(cfg, echo, progress)
+    cfg, sideways = _choose_motion_model(cfg, log, scans, echo)
     if not grid.free.any():
         raise DataError(f"{grid.path}: no free cell (occupied_thresh and free_thresh leave every cell occupied or "
                         "unknown): nowhere to localize")
@@ -1109,6 +1134,8 @@ def _run(
         **({"mount_yaw_fitted_deg": {k: round(math.degrees(v), 2) for k, v in sorted(turned.items())}} if turned
            else {}),
         **({"stamp_offset_fitted_s": round(log.stamp_offset, 4)} if getattr(log, "stamp_offset", None) is not None
+           else {}),
+        **({"odometry_sideways": round(sideways, 4), "motion_model": cfg.motion.model} if sideways is not None
            else {}),
         **({"time_offset_check": time_summary(log.time_offset_checks)} if getattr(log, "time_offset_checks", None)
            else {}),

@@ -502,6 +502,45 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6, odom_ra
     return odom, tv, rv
 
 
+def _holonomic_offsets(rng, t: np.ndarray, amplitude: float) -> np.ndarray:
+    """The heading's offset from the direction of travel at times ``t`` (s) of an omnidirectional base:
+    ``amplitude`` (rad) times 0.6 sin(2 pi t / 23 s + p1) + 0.4 sin(2 pi t / 9 s + p2), random phases; it turns at
+    most 0.44 ``amplitude`` rad/s on top of the path's own turns."""
+    p1, p2 = rng.uniform(0.0, 2.0 * math.pi, 2)
+    return amplitude * (0.6 * np.sin(2.0 * math.pi * t / 23.0 + p1) + 0.4 * np.sin(2.0 * math.pi * t / 9.0 + p2))
+
+
+def _odometry_omni(truth, pre, rng, alphas, scale, yaw_drift, odom_rate=_ODOM_RATE):
+    """``_odometry`` of an omnidirectional base: each step's travel (trans, in its own direction), its drift
+    across that direction (strafe, nominally 0) and its turn each get independent noise, the variance form of ROS
+    AMCL's omni model: sigma_trans^2 = sigma_strafe^2 = a3 trans^2 + a4 turn^2, sigma_turn^2 = a1 turn^2 + a2
+    trans^2. The heading does not enter the noise of the travel (a strafing step is no turn)."""
+    a1, a2, a3, a4 = alphas
+    n = truth.shape[0]
+    z = rng.standard_normal((n, 3))
+    odom = np.zeros((n, 3))
+    tv = np.zeros(n)
+    rv = np.zeros(n)
+    dt = 1.0 / odom_rate
+    for k in range(1, n):
+        x0, y0, t0 = truth[k - 1]
+        x1, y1, t1 = pre[k]
+        trans = math.hypot(x1 - x0, y1 - y0)
+        bearing = _wrap(math.atan2(y1 - y0, x1 - x0) - t0) if trans > 1e-6 else 0.0
+        turn = _wrap(t1 - t0)
+        s_tr = math.sqrt(a3 * trans ** 2 + a4 * turn ** 2)
+        tr = (trans - z[k, 0] * s_tr) * scale
+        strafe = -z[k, 1] * s_tr
+        rot = turn - z[k, 2] * math.sqrt(a1 * turn ** 2 + a2 * trans ** 2) + yaw_drift * trans
+        ox, oy, ot = odom[k - 1]
+        b = ot + bearing
+        odom[k] = (ox + tr * math.cos(b) + strafe * math.sin(b), oy + tr * math.sin(b) - strafe * math.cos(b),
+                   _wrap(ot + rot))
+        tv[k] = tr * math.cos(bearing) / dt  # the body's forward speed (a bag's twist.linear.x)
+        rv[k] = rot / dt
+    return odom, tv, rv
+
+
 def beam_angles(n_beams: int, fov: float) -> np.ndarray:
     """Beam i at -fov/2 + i*fov/(n-1), counter-clockwise from the robot's heading."""
     return -fov / 2 + np.arange(n_beams) * (fov / (n_beams - 1))
@@ -637,7 +676,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              landmark_fp: float = 0.03, depth: bool = False, depth_every: int = 1, depth_camera=None,
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
-             unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(),
+             unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
              _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
@@ -684,6 +723,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     ``body`` = [[a0, a1, r], ...] puts the robot itself in the laser's view: every beam between a0 and a1 rad (laser
     frame, -pi..pi) meets it at r m, on every scan wherever the robot is (a wheel, a bumper's corner, a mast's post),
     before the noise; sim.yaml lists it. [] leaves every output byte-identical.
+    ``holonomic`` = A (rad, 0..pi) drives an omnidirectional base (mecanum wheels, a Ridgeback, a PR2): the robot
+    keeps to the same path, but its heading leaves the direction of travel by up to A (``_holonomic_offsets``: two
+    slow sinusoids), so it strafes and crabs, and its odometry is noisy along the travel, across it and in the turn
+    (``_odometry_omni``: the omni model of ROS AMCL) instead of in rot1, trans, rot2. 0 leaves every output
+    byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -755,6 +799,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         and -math.pi <= b[0] < b[1] <= math.pi and 0.0 < b[2] < range_max for b in body), "body",
         f"expected [[a0, a1, r], ...] with -pi <= a0 < a1 <= pi rad and 0 < r < range_max ({range_max:g} m), "
         f"got {body!r}")
+    _check(isinstance(holonomic, (int, float, np.number)) and not isinstance(holonomic, bool)
+           and math.isfinite(holonomic) and 0.0 <= holonomic <= math.pi, "holonomic",
+           f"expected 0..pi rad, got {holonomic!r}")
     mount = np.array([float(v) for v in laser_pose])
     mounted = bool(np.any(mount != 0.0))
     odom_rate, scan_every, sim_dt = _rates(float(scan_rate))
@@ -779,8 +826,20 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     clear = _clear(truth[:, :2], world).min()
     if clear < robot_radius + world.resolution:
         raise RuntimeError(f"simulate: seed {seed}: the drive came {clear:.3f} m close to a wall (a bug)")
-    odom, tv, rv = _odometry(truth, pre, rng_odom, tuple(map(float, odom_alphas)),
-                             odom_scale, odom_yaw_drift, odom_rate=odom_rate)
+    if holonomic:
+        # A ninth child stream: the others are unchanged.
+        rng_hol = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(9)[8])
+        off = _holonomic_offsets(rng_hol, np.arange(n_ticks) / odom_rate, float(holonomic))
+        truth[:, 2] = _wrap(truth[:, 2] + off)
+        pre[:, 2] = _wrap(pre[:, 2] + off)
+        start = truth[0].copy()
+        if kidnap is not None:
+            kidnap["from"], kidnap["to"] = _pose_list(pre[kidnap_tick]), _pose_list(truth[kidnap_tick])
+        odom, tv, rv = _odometry_omni(truth, pre, rng_odom, tuple(map(float, odom_alphas)),
+                                      odom_scale, odom_yaw_drift, odom_rate=odom_rate)
+    else:
+        odom, tv, rv = _odometry(truth, pre, rng_odom, tuple(map(float, odom_alphas)),
+                                 odom_scale, odom_yaw_drift, odom_rate=odom_rate)
 
     # --- laser
     t = np.round(np.arange(n_ticks) / odom_rate, 6)
@@ -919,6 +978,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     }
     if reversals:
         params["reversals"] = int(reversals)
+    if holonomic:
+        params["holonomic"] = float(holonomic)
+        params["odometry"]["model"] = "omni (ROS AMCL's omni model, variance form: along, across, turn)"
     if body:
         params["laser"]["body"] = [[float(v) for v in b] for b in body]
     if scan_sweep:
@@ -1158,6 +1220,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reversals", type=int, default=0, metavar="R",
                         help="back the robot up R times over the run, 0.5-3 m along its own track each time "
                         "(its odometry then reads steps backwards); default 0")
+    parser.add_argument("--holonomic", type=float, default=0.0, metavar="DEG",
+                        help="an omnidirectional base: its heading leaves the direction of travel by up to DEG "
+                        "degrees (0-180), so it strafes, and its odometry is noisy along, across and in the turn "
+                        "(AMCL's omni model); default 0 (a differential drive)")
     parser.add_argument("--scan-rate", type=float, default=5.0, metavar="HZ",
                         help="laser scans per second, 0.5-100; default 5. The odometry's ODOM lines run at 10 Hz "
                         "or at the scan rate when that is higher (ROS robots' lasers: 10-40 Hz); a bag's /odom, /tf "
@@ -1247,7 +1313,8 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
                     unknown_floor=args.unknown_floor,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
-                    body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])])
+                    body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
+                    holonomic=math.radians(getattr(args, "holonomic", 0.0) or 0.0))
 
 
 # What ``mcl simulate`` writes into its folder: an earlier world's are replaced whole, anything else is kept

@@ -230,16 +230,16 @@ def test_a_launch_file_with_args_remaps_and_a_rosparam_block(tmp_path):
     assert "5.6 times AMCL's" in diff  # 1 / (sqrt(0.8) * 0.2)
 
 
-@pytest.mark.parametrize("model,line", [
-    ("omni-corrected", "odom_model_type omni-corrected: mcl has no omnidirectional motion model"),
-    ("omni", "odom_model_type omni: mcl has no omnidirectional motion model"),
-])
-def test_omni_models_are_one_warning_and_keep_the_alphas(tmp_path, model, line):
+@pytest.mark.parametrize("model", ["omni-corrected", "omni"])
+def test_omni_models_are_mcl_omni_model_with_alpha5_the_strafe_noise(tmp_path, model):
+    # before mcl had an omni model: a warning, motion.model odometry and alpha5 left out
     text = ROS1.replace("diff-corrected", model) + "  odom_alpha5: 0.1\n"
     r = convert(_write(tmp_path, "amcl.yaml", text))
-    assert len(r.warnings) == 1 and line in r.warnings[0]
-    assert r.keys["motion.alpha3"] == 0.01 and "motion.alpha5" not in r.keys
-    assert "odom_alpha5 0.1: AMCL's omni models only" in r.text
+    assert r.keys["motion.model"] == "omni"
+    assert r.keys["motion.alpha3"] == 0.01 and r.keys["motion.alpha_strafe"] == 0.1 and "motion.alpha5" not in r.keys
+    assert "odom_alpha5 0.1: strafe noise from translation" in r.text
+    # ROS 1's uncorrected omni alone is warned of (diff's std-for-variance bug)
+    assert len(r.warnings) == (1 if model == "omni" else 0)
 
 
 def test_beam_model_weights_are_made_to_sum_to_one(tmp_path):
@@ -389,9 +389,9 @@ def test_omni_alphas_go_by_their_roles(tmp_path, model):
     assert r.keys["motion.alpha1"] == 0.2 and r.keys["motion.alpha4"] == 0.3  # swapped
     assert r.keys["motion.alpha2"] == 0.2 and r.keys["motion.alpha3"] == 0.8
     assert "odom_alpha4 0.2: rotation noise from rotation" in r.text
-    (w,) = r.warnings
     # ROS 1's uncorrected omni has diff's bug: the alpha expression is the std
-    assert ("uncorrected omni takes alpha3 trans^2 + alpha1 rot^2 itself as the std" in w) == (model == "omni")
+    assert [("uncorrected omni takes alpha3 trans^2 + alpha1 rot^2 itself as the std" in w) for w in r.warnings] == (
+        [True] if model == "omni" else [])
 
 
 # ZebraDevs/fetch_ros fetch_navigation/launch/include/amcl.launch.xml and config/amcl.yaml (trimmed)

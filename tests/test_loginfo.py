@@ -25,13 +25,16 @@ def test_the_demo_log_s_messages_laser_and_checks(capsys):
     assert "\nlaser FLASER: 351 scans, 181 beams over 180 degrees from -90, maximum range 5 m, laser pose " \
            "[0.0, 0.0, 0.0]\n" in text, text
     assert "\n  scans:        FLASER (351 scans)\n  odometry:     ODOM lines (701)\n  stamps:       scans " \
-           "0.000..70.000 s\n  robot itself: no beam reads it (sensor.self_hit_skip)\n  odometry check: the scans " \
+           "0.000..70.000 s\n  robot itself: no beam reads it (sensor.self_hit_skip)\n  sideways:     0.1% of the " \
+           "odometry's 30.6 m goes across the robot's heading: a differential drive's (motion.model odometry)\n" \
+           "  odometry check: the scans " \
            "fit the odometry as recorded (52 of 60 pairs of scans); the laser's yaw +0.4 +- 0.3 degrees from its " \
            "mounting (sensor.mount_yaw fits 2 or more)\n  scan timing:  " in text, text
     assert "warning" not in text
     assert main(["log", "info", str(DEMO / "log.clf"), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["mcl_uses"]["odometry_check"]["verdict"] is None and info["mcl_uses"]["self_hits"] is None
+    assert info["mcl_uses"]["odometry_sideways"] == {"share": 0.0013, "travel_m": 30.6, "omni": False}
     assert info["lasers"]["FLASER"]["max_range"] == 5.0 and info["duration_s"] == 70.0
 
 

@@ -27,7 +27,7 @@ CONFIGS = PROJECT_ROOT / "configs"
 BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.estimate", "motion.map_rejection",
                  "filter.search_exponent", "filter.global_density", "sensor.likelihood_field.interior",
                  "motion.fault_prob", "sensor.unmapped_skip", "filter.search_refine", "sensor.self_hit_skip",
-                 "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset"}
+                 "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset", "motion.sideways"}
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -51,7 +51,7 @@ def test_baseline_differs_from_default_only_in_the_plain_filter_keys():
     assert baseline["sensor.beam_skip"] is False and baseline["motion.map_rejection"] is False
     assert baseline["sensor.unmapped_skip"] is False and baseline["sensor.self_hit_skip"] is False
     assert baseline["sensor.misfit_laser"] == "keep" and baseline["sensor.mount_yaw"] == "keep"
-    assert baseline["sensor.stamp_offset"] == "keep"
+    assert baseline["sensor.stamp_offset"] == "keep" and baseline["motion.sideways"] == "keep"
     assert baseline["filter.search_exponent"] == 1.0 and baseline["filter.global_density"] == 0
     assert baseline["sensor.likelihood_field.interior"] == "zero" and baseline["motion.fault_prob"] == 0
 

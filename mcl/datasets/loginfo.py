@@ -18,7 +18,8 @@ __all__ = ["scan_checks", "check_lines", "log_info", "format_log_info"]
 
 
 def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
-    """"self_hits" (None: none found), "odometry_check" (absent for laser odometry, ``wheel_odometry`` False) and
+    """"self_hits" (None: none found), "odometry_sideways" (``mcl.motion.sideways_share``: share, travel_m, omni),
+    "odometry_check" (absent for laser odometry, ``wheel_odometry`` False) and
     "time_offset_check" (absent for laser odometry, or when the odometry check found a fault) of ``scans``, each
     laser's as a run finds them (``mcl.datasets.selfhits.summary_of``, ``mcl.odomcheck.summary_of``: fused lasers'
     others in ``other_lasers``), with the line a run would say as "text". ``odometry``: rows (t, x, y, theta, ...)
@@ -35,10 +36,16 @@ def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
     from mcl.odomcheck import check_each_laser, findings, run_mount
     from mcl.odomcheck import summary_of as odometry_summary
 
+    from mcl.motion import SIDEWAYS_OMNI, sideways_share
+
     sensor = SensorConfig() if sensor is None else sensor
+    poses = (np.asarray(odometry, dtype=np.float64).reshape(-1, 6)[:, 1:4] if odometry is not None
+             else np.array([s.odom for s in scans if s.odom is not None], dtype=np.float64).reshape(-1, 3))
+    share, travel = sideways_share(poses)
+    sideways = {"share": round(share, 4), "travel_m": round(travel, 1), "omni": share >= SIDEWAYS_OMNI}
     hits = [h for h in (self_hits_of(c) for c in beam_constancies(scans, float(sensor.range_min),
                                                                    float(sensor.range_max))) if h is not None]
-    out = {"self_hits": hits_summary(hits)}
+    out = {"self_hits": hits_summary(hits), "odometry_sideways": sideways}
     for h, d in zip(hits, [out["self_hits"], *(out["self_hits"] or {}).get("other_lasers", [])]):
         d["text"] = h.describe()
     if wheel_odometry:  # laser odometry comes from the scans: nothing to check
@@ -67,6 +74,11 @@ def check_lines(u: dict) -> list[str]:
     lines += [f"  robot itself: {d['laser']}: {d['text']}: left out (sensor.self_hit_skip)"
               for d in ([h, *h.get("other_lasers", [])] if h else [])] or [
         "  robot itself: no beam reads it (sensor.self_hit_skip)"]
+    w = u.get("odometry_sideways")
+    if w is not None:
+        lines.append(f"  sideways:     {w['share']:.1%} of the odometry's {w['travel_m']:g} m goes across the robot's "
+                     "heading: " + ("an omnidirectional base (a run takes motion.model omni: motion.sideways)"
+                                    if w["omni"] else "a differential drive's (motion.model odometry)"))
     c = u.get("odometry_check")
     each = [c, *c.get("other_lasers", [])] if c is not None else []
     for d in each:

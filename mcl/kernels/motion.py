@@ -1,4 +1,4 @@
-"""Numba kernels of the odometry motion model (Prob. Rob. Table 5.6).
+"""Numba kernels of the odometry motion model (Prob. Rob. Table 5.6) and of its omnidirectional variant.
 
 Pure functions over arrays. The caller draws the standard normal noise with
 its ``numpy.random.Generator`` and passes it in, so a kernel's result does not
@@ -86,6 +86,56 @@ def sample_odometry_map(particles, noise, idx, drot1, dtrans, drot2, s_rot1, s_t
         out[0, i] = x
         out[1, i] = y
         out[2, i] = wrap(h + r2)
+        good = allowed_at(allowed, x, y, ox, oy, inv_res)
+        ok[i] = good
+        if good:
+            n_ok += 1
+    return n_ok
+
+
+@njit(cache=True)
+def sample_omni(particles, noise, bearing, dtrans, drot, s_trans, s_strafe, s_rot, out):
+    """Apply one noisy step of the omnidirectional odometry model (ROS AMCL's omni model) to every particle.
+
+    particles, out: (3, N) float64; out may not alias particles. noise: (3, N) standard normals (rows trans,
+    strafe, rot). The step leaves each particle's heading at the odometry's ``bearing`` (its direction of travel in
+    the robot's frame, noise-free); the travel along it, the drift across it and the turn are noisy:
+        b = theta + bearing
+        x' = x + trans_hat cos(b) + strafe_hat sin(b)
+        y' = y + trans_hat sin(b) - strafe_hat cos(b)
+        theta' = wrap(theta + rot_hat)
+    """
+    n = particles.shape[1]
+    for i in range(n):
+        tr = dtrans + s_trans * noise[0, i]
+        st = s_strafe * noise[1, i]
+        b = particles[2, i] + bearing
+        c = math.cos(b)
+        s = math.sin(b)
+        out[0, i] = particles[0, i] + tr * c + st * s
+        out[1, i] = particles[1, i] + tr * s - st * c
+        out[2, i] = wrap(particles[2, i] + drot + s_rot * noise[2, i])
+
+
+@njit(cache=True)
+def sample_omni_map(particles, noise, idx, bearing, dtrans, drot, s_trans, s_strafe, s_rot,
+                    allowed, ox, oy, inv_res, out, ok):
+    """``sample_omni`` for the particles idx (noise[:, j] for particle idx[j]) plus the map check, in one pass;
+    the contract of ``sample_odometry_map``. Returns how many landed in an allowed cell."""
+    m = idx.shape[0]
+    n_ok = 0
+    for j in range(m):
+        i = idx[j]
+        tr = dtrans + s_trans * noise[0, j]
+        st = s_strafe * noise[1, j]
+        b = particles[2, i] + bearing
+        c = math.cos(b)
+        s = math.sin(b)
+        x = particles[0, i] + tr * c + st * s
+        y = particles[1, i] + tr * s - st * c
+        out[0, i] = x
+        out[1, i] = y
+        out[2, i] = wrap(particles[2, i] + drot + s_rot * noise[2, j])
         good = allowed_at(allowed, x, y, ox, oy, inv_res)
         ok[i] = good
         if good:
