@@ -46,12 +46,12 @@ def sample_clouds(pose, *, model: str, odom=None, velocity=None, alphas_list=((N
         p = np.tile(pose[:, None], (1, samples))
         clouds = []
         for _ in range(steps):
-            if model == "odometry":
+            if model != "velocity":  # odometry, omni: the odometry pair
                 p, _, _ = m.sample(p, np.asarray(odom[:3]), np.asarray(odom[3:]), rng)
             else:
                 p, _, _ = m.sample(p, velocity[0], velocity[1], velocity[2], rng)
             clouds.append(p)
-        a = [getattr(cfg, f"alpha{k}") for k in range(1, 5 if model == "odometry" else 7)]
+        a = [getattr(cfg, f"alpha{k}") for k in range(1, 5 if model != "velocity" else 7)]
         out.append(("alphas: " + ", ".join(f"{x:g}" for x in a), clouds))
     return out
 
@@ -110,7 +110,7 @@ def render_png(path, pose, panels, title: str = "") -> None:
 def _parse_alphas(texts, model: str):
     if not texts:
         return [None]
-    need = 4 if model == "odometry" else 6
+    need = 6 if model == "velocity" else 4
     out = []
     for t in texts:
         try:
@@ -129,12 +129,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="start pose (m, m, rad); default 0 0 0")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--odom", nargs=6, type=float, metavar=("X0", "Y0", "TH0", "X1", "Y1", "TH1"),
-                   help="odometry pair (model odometry); default a 1 m step turning 0.5 rad")
+                   help="odometry pair (models odometry and omni); default a 1 m step turning 0.5 rad")
     g.add_argument("--velocity", nargs=3, type=float, metavar=("V", "W", "DT"),
                    help="velocity command and duration (model velocity); default 1 m/s, 0.5 rad/s, 1 s")
-    p.add_argument("--model", choices=["odometry", "velocity"], help="default: velocity with --velocity, else odometry")
+    p.add_argument("--model", choices=["odometry", "omni", "velocity"],
+                   help="default: velocity with --velocity, else odometry; omni: an omnidirectional base's odometry "
+                   "(its strafe noise from motion.alpha_strafe)")
     p.add_argument("--alphas", action="append", default=[], metavar="A1,A2,...",
-                   help="alpha1..alpha4 (odometry) or alpha1..alpha6 (velocity); repeat for panels side by side")
+                   help="alpha1..alpha4 (odometry, omni) or alpha1..alpha6 (velocity); repeat for panels side by side")
     p.add_argument("--samples", type=int, default=1000, help="samples per step (default 1000)")
     p.add_argument("--steps", type=int, default=1, help="apply the model this many times in a row (default 1)")
     p.add_argument("--config", help="config whose motion section gives the defaults (noise form, noise, alphas)")
@@ -147,10 +149,10 @@ def run_from_args(args) -> int:
     from mcl.config import load_config
 
     model = args.model or ("velocity" if args.velocity else "odometry")
-    if model == "odometry" and args.velocity:
+    if model != "velocity" and args.velocity:
         raise MclError("--velocity needs --model velocity")
     if model == "velocity" and args.odom:
-        raise MclError("--odom needs --model odometry")
+        raise MclError("--odom needs --model odometry or omni")
     if not 1 <= args.samples <= 10_000_000 or not 1 <= args.steps <= 1000:
         raise MclError("--samples must be 1..1e7 and --steps 1..1000")
     cfg = load_config(args.config, list(args.set))
@@ -170,7 +172,7 @@ def run_from_args(args) -> int:
                            samples=args.samples, steps=args.steps, motion_cfg=cfg.motion, seed=args.seed)
     pose = np.asarray(args.pose, dtype=np.float64)
     control = (f"odom ({', '.join(f'{v:.4g}' for v in odom[:3])}) -> ({', '.join(f'{v:.4g}' for v in odom[3:])})"
-               if model == "odometry" else f"v={vel[0]:g} w={vel[1]:g} dt={vel[2]:g}")
+               if model != "velocity" else f"v={vel[0]:g} w={vel[1]:g} dt={vel[2]:g}")
     title = f"{model} model, {control}, noise {cfg.motion.noise} ({cfg.motion.noise_form}), {args.samples} samples x {args.steps}"
     try:
         if out.name.lower().endswith(".rrd"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from mcl.cli import main
@@ -59,6 +60,27 @@ def test_explore_motion_needs_a_finite_pose_and_odometry(tmp_path, capsys, args,
     assert main(["explore", "motion", *args, "--out", str(tmp_path / "m.png")]) == 2
     assert msg in _one_error(capsys)
     assert not (tmp_path / "m.png").exists()
+
+
+def test_explore_omni_takes_an_odometry_pair_and_refuses_a_velocity(tmp_path, capsys):
+    assert main(["explore", "motion", "--model", "omni", "--velocity", "1", "0.5", "1", "--out",
+                 str(tmp_path / "m.png")]) == 2
+    assert "--velocity needs --model velocity" in _one_error(capsys) and not (tmp_path / "m.png").exists()
+    assert main(["explore", "motion", "--model", "velocity", "--odom", "0", "0", "0", "0", "0.5", "0", "--out",
+                 str(tmp_path / "m.png")]) == 2
+    assert "--odom needs --model odometry or omni" in _one_error(capsys)
+    # a step of 0.5 m sideways (default alphas): the omni cloud's std is 0.11 m across it and 0.11 rad in heading,
+    # Table 5.6's 0.25 m and 0.52 rad (rot1 = pi/2 and its noise); 2,000 samples: 3 % sampling error
+    from mcl.explore import sample_clouds
+
+    spans = {}
+    for model in ("omni", "odometry"):
+        ((_, (cloud,)),) = sample_clouds((0.0, 0.0, 0.0), model=model, odom=(0, 0, 0, 0, 0.5, 0), samples=2000)
+        spans[model] = (float(np.std(cloud[0])), float(np.std(cloud[2])))
+    (ox, oh), (dx, dh) = spans["omni"], spans["odometry"]
+    assert ox < 0.13 and oh < 0.13 and dx > 0.22 and dh > 0.45, spans
+    assert main(["explore", "motion", "--model", "omni", "--odom", "0", "0", "0", "0", "0.5", "0", "--samples", "200",
+                 "--out", str(tmp_path / "m.png")]) == 0 and (tmp_path / "m.png").stat().st_size > 0
 
 
 @pytest.mark.parametrize("name", ["m.png", "m.rrd"])
