@@ -1,4 +1,5 @@
-"""``mcl calibrate motion``: fit the odometry model's alpha1..alpha4 by maximum likelihood.
+"""``mcl calibrate motion``: fit the odometry model's alpha1..alpha4 by maximum likelihood (with ``motion.model:
+omni``, the omni model's alpha1..alpha4 and alpha_strafe: ``fit_omni_alphas``).
 
 The seeds ask "how can we determine the model parameters?". With reference
 poses (a truth trajectory) and the log's odometry, each pair of consecutive
@@ -185,8 +186,6 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     translation (odometry or reference) rot1 = 0 and rot2 carries the turn:
     the pair is scored on its turn and translation only.
     """
-    from scipy.optimize import minimize
-
     check_min_trans(min_trans)
     op, on, xp, xn = (np.asarray(a, dtype=np.float64) for a in (odom_prev, odom_now, x_prev, x_now))
     still = _still(xp, xn) & _still(op, on)
@@ -195,7 +194,7 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     m = op.shape[1]
     if m < 4:
         raise DataError(f"calibrate motion: only {m} pairs with motion; need at least 4")
-    lo, hi = (math.log(b) for b in ALPHA_BOUNDS)
+    hi = math.log(ALPHA_BOUNDS[1])
     fit_p = p_turn is None
 
     def unpack(z):  # log-alphas, and p_turn = P_TURN_MAX * logistic(z[4])
@@ -228,57 +227,128 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
                 f"({r[0]:.4f}, {r[1]:.4f}, {r[2]:.4f}) ({bad.size} such pairs); fit with motion.noise=normal")
         while nll(z0) >= 1e300 and z0[:4].max() < hi:
             z0[:4] += math.log(2.0)
-    # Nelder-Mead first (robust to the flat start), then L-BFGS-B to polish.
-    r0 = minimize(nll, z0, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-10, "maxiter": 8000})
-    r = minimize(nll, r0.x, method="L-BFGS-B", bounds=[(lo, hi)] * 4 + [(-12.0, 12.0)])
-    best = r if r.fun <= r0.fun else r0
-    z_best = best.x.copy()
-    z_best[:4] = np.clip(z_best[:4], lo, hi)  # Nelder-Mead is unbounded: keep the documented bounds
+    best, z_best, converged, loose, notes = _maximise(lls, nll, z0, 4, [(-12.0, 12.0)], ALPHA_NAMES)
     alphas, p = unpack(z_best)
     alphas = np.clip(alphas, *ALPHA_BOUNDS)  # exp(log(100)) is 100.00000000000004
+    return {"alphas": [float(a) for a in alphas], "p_turn": float(p), "log_likelihood": float(-best.fun * m),
+            "pairs": int(m), "skipped": int(np.count_nonzero(still)), "converged": converged,
+            "message": str(best.message), "undetermined": [ALPHA_NAMES[k] for k in loose], "noise_form": noise_form,
+            "noise": noise, "warnings": notes}
+
+
+ALPHA_NAMES = ("alpha1", "alpha2", "alpha3", "alpha4", "alpha_strafe")
+
+
+def _maximise(lls, nll, z0, n_alpha: int, extra_bounds: list, names) -> tuple:
+    """(best result, its parameters, converged, the undetermined alphas' indices, the warnings said) of the fit of
+    ``nll`` over z0 (log-alphas first, ``n_alpha`` of them, then parameters bounded by ``extra_bounds``): Nelder-Mead
+    first (robust to the flat start), then L-BFGS-B to polish. ``lls(z)``: the pairs' log-likelihoods."""
+    from scipy.optimize import minimize
+
+    lo, hi = (math.log(b) for b in ALPHA_BOUNDS)
+    r0 = minimize(nll, z0, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-10, "maxiter": 8000})
+    r = minimize(nll, r0.x, method="L-BFGS-B", bounds=[(lo, hi)] * n_alpha + list(extra_bounds))
+    best = r if r.fun <= r0.fun else r0
+    z_best = best.x.copy()
+    z_best[:n_alpha] = np.clip(z_best[:n_alpha], lo, hi)  # Nelder-Mead is unbounded: keep the documented bounds
     notes = []
     # An alpha the data do not constrain (no turn: alpha1, alpha4; no translation: alpha2, alpha3) drifts anywhere
     # on a flat likelihood: say so instead of printing it as a fit.
     base = float(np.sum(lls(z_best)))
     loose = []
-    for k in range(4):
+    for k in range(n_alpha):
         zk = z_best.copy()
         zk[k] = min(z_best[k] + math.log(4.0), hi) if z_best[k] < hi - 1e-9 else z_best[k] - math.log(4.0)
         if abs(float(np.sum(lls(zk))) - base) < 2.0:  # a 4x change moves the log-likelihood by < 2: undetermined
             loose.append(k)
     if loose:
-        notes.append(f"calibrate motion: {', '.join(f'alpha{k + 1}' for k in loose)} not determined by this log "
+        notes.append(f"calibrate motion: {', '.join(names[k] for k in loose)} not determined by this log "
                      f"(a 4x change moves the log-likelihood by less than 2: the reference hardly turns or "
                      f"translates); keep your config's value")
-    big = [f"alpha{k + 1} = {a:.3g}" for k, a in enumerate(alphas) if a > ALPHA_PLAUSIBLE and k not in loose]
+    alphas = np.clip(np.exp(z_best[:n_alpha]), *ALPHA_BOUNDS)
+    big = [f"{names[k]} = {a:.3g}" for k, a in enumerate(alphas) if a > ALPHA_PLAUSIBLE and k not in loose]
     if big:
         notes.append(f"calibrate motion: {', '.join(big)} above {ALPHA_PLAUSIBLE:g} is implausible (a noise as large "
                      f"as the motion itself): check that the reference is this log's, in step with its odometry")
     for n in notes:
-        warnings.warn(n, MclWarning, stacklevel=2)
-    return {"alphas": [float(a) for a in alphas], "p_turn": float(p), "log_likelihood": float(-best.fun * m),
-            "pairs": int(m), "skipped": int(np.count_nonzero(still)),
-            "converged": bool((r.success or r0.success) and best.fun < 1e300), "message": str(best.message),
-            "undetermined": [f"alpha{k + 1}" for k in loose], "noise_form": noise_form, "noise": noise,
-            "warnings": notes}
+        warnings.warn(n, MclWarning, stacklevel=3)
+    return best, z_best, bool((r.success or r0.success) and best.fun < 1e300), loose, notes
+
+
+def omni_pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_form="variance", noise="normal",
+                              sigma_floor=SIGMA_FLOOR) -> np.ndarray:
+    """(M,) log p(x_now | (odom_prev, odom_now), x_prev) of each pair under the omni model (``mcl.motion``'s
+    ``log_motion_model_omni``, each pair with its own odometry), the noise stds from the reference's motion (as
+    Table 5.5 takes them from the hypothesis). ``alphas``: alpha1..alpha4, alpha_strafe."""
+    from mcl.motion import ROT1_MIN_TRANS, SIGMA_MIN, _wrap_np, omni_sigmas
+    from mcl.noise import log_density
+
+    cfg = SimpleNamespace(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
+                          alpha_strafe=alphas[4], noise_form=noise_form)
+    f = max(float(sigma_floor), SIGMA_MIN)
+    d = odom_now - odom_prev
+    trans = np.hypot(d[0], d[1])
+    bearing = np.where(trans < ROT1_MIN_TRANS, 0.0, _wrap_np(np.arctan2(d[1], d[0]) - odom_prev[2]))
+    rot = _wrap_np(d[2])
+    head = x_prev[2] + bearing
+    e = x_now - x_prev
+    along = e[0] * np.cos(head) + e[1] * np.sin(head)
+    across = e[0] * np.sin(head) - e[1] * np.cos(head)
+    st, ss, sr = omni_sigmas(np.hypot(e[0], e[1]), _wrap_np(e[2]), cfg)
+    return sum(log_density(noise, r, np.maximum(sg, f))
+               for r, sg in ((along - trans, st), (across, ss), (_wrap_np(_wrap_np(e[2]) - rot), sr)))
+
+
+def fit_omni_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance", noise="normal",
+                    x0=(0.05, 0.05, 0.05, 0.05, 0.05)) -> dict:
+    """Maximum-likelihood alpha1..alpha4 and alpha_strafe of the omni model (``mcl.motion.OmniMotionModel``) from
+    matched pairs, as ``fit_odometry_alphas`` (its "alphas" hold the five; no p_turn: the omni model does not split
+    a step's turn). Normal noise only (a bounded support needs the odometry model's start search)."""
+    op, on, xp, xn = (np.asarray(a, dtype=np.float64) for a in (odom_prev, odom_now, x_prev, x_now))
+    if noise != "normal":
+        raise ConfigError(f"calibrate motion: the omni model is fitted with motion.noise=normal, not {noise}")
+    still = _still(xp, xn) & _still(op, on)
+    op, on, xp, xn = op[:, ~still], on[:, ~still], xp[:, ~still], xn[:, ~still]
+    m = op.shape[1]
+    if m < 5:
+        raise DataError(f"calibrate motion: only {m} pairs with motion; need at least 5")
+
+    def lls(z):
+        return omni_pair_log_likelihoods(np.exp(z), op, on, xp, xn, noise_form, noise)
+
+    def nll(z):
+        v = -float(np.sum(lls(z))) / m
+        return v if np.isfinite(v) else 1e300
+
+    best, z_best, converged, loose, notes = _maximise(lls, nll, np.log(np.asarray(x0, dtype=np.float64)), 5, [],
+                                                      ALPHA_NAMES)
+    alphas = np.clip(np.exp(z_best), *ALPHA_BOUNDS)
+    return {"alphas": [float(a) for a in alphas], "log_likelihood": float(-best.fun * m), "pairs": int(m),
+            "skipped": int(np.count_nonzero(still)), "converged": converged, "message": str(best.message),
+            "undetermined": [ALPHA_NAMES[k] for k in loose], "noise_form": noise_form, "noise": noise,
+            "model": "omni", "warnings": notes}
 
 
 def format_yaml(result: dict, noise_form: str, noise: str, source: str = "") -> str:
-    """The fitted alphas as a YAML block ready to paste into a config."""
+    """The fitted alphas as a YAML block ready to paste into a config (the odometry model's, or the omni model's
+    with alpha_strafe)."""
     a = result["alphas"]
+    omni = result.get("model") == "omni"
     head = f"# mcl calibrate motion{': ' + source if source else ''}\n" \
            f"# {result['pairs']} pairs ({result['skipped']} still pairs skipped), " \
-           f"log-likelihood {result['log_likelihood']:.1f}{'' if result['converged'] else ', NOT converged'}; " \
-           f"turn split not observed in a share p_turn = {result.get('p_turn', 0.0):.3f} of the pairs\n"
+           f"log-likelihood {result['log_likelihood']:.1f}{'' if result['converged'] else ', NOT converged'}" + \
+           ("\n" if omni else f"; turn split not observed in a share p_turn = {result.get('p_turn', 0.0):.3f} of the "
+            "pairs\n")
     und = set(result.get("undetermined", ()))
 
     def line(k):  # an undetermined alpha is left out (commented), so pasting keeps the config's own value
-        if f"alpha{k + 1}" in und:
-            return f"  # alpha{k + 1}: not determined by this log (the fit drifted to {a[k]:.3g}); keep your own\n"
-        return f"  alpha{k + 1}: {a[k]:.6g}{'  # implausible (> 1)' if a[k] > ALPHA_PLAUSIBLE else ''}\n"
+        name = ALPHA_NAMES[k]
+        if name in und:
+            return f"  # {name}: not determined by this log (the fit drifted to {a[k]:.3g}); keep your own\n"
+        return f"  {name}: {a[k]:.6g}{'  # implausible (> 1)' if a[k] > ALPHA_PLAUSIBLE else ''}\n"
     # model: odometry -- the alphas are the odometry model's (a velocity config's alpha1..4 mean something else)
-    body = "motion:\n  model: odometry\n" f"  noise_form: {noise_form}\n" f"  noise: {noise}\n" + \
-        "".join(line(k) for k in range(4))
+    body = f"motion:\n  model: {'omni' if omni else 'odometry'}\n" f"  noise_form: {noise_form}\n" \
+        f"  noise: {noise}\n" + "".join(line(k) for k in range(len(a)))
     return head + body
 
 
@@ -286,7 +356,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``mcl calibrate motion``."""
     p.add_argument("--log", required=True, help="CARMEN log with the odometry (ODOM lines or scan poses)")
     p.add_argument("--truth", required=True, help="reference trajectory (TUM) at (a subset of) the log's times")
-    p.add_argument("--config", help="config whose motion.noise_form and motion.noise the fit uses (default: the defaults)")
+    p.add_argument("--config", help="config whose motion.model (odometry or omni), motion.noise_form and motion.noise "
+                   "the fit uses (default: the defaults)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override, e.g. motion.noise_form=std")
     p.add_argument("--min-trans", type=float, default=None, metavar="M",
                    help="below this step (m, >= 0) rot1 = 0 for odometry and reference and the pair is scored on its "
@@ -301,12 +372,15 @@ def run_from_args(args) -> int:
 
     check_min_trans(args.min_trans)
     cfg = load_config(args.config, list(args.set))
-    if cfg.motion.model != "odometry":
-        warnings.warn(f"calibrate motion: fits the odometry model only, not motion.model={cfg.motion.model}: the "
-                      f"block sets model: odometry", MclWarning, stacklevel=2)
+    if cfg.motion.model == "velocity":
+        warnings.warn("calibrate motion: fits the odometry and omni models, not motion.model=velocity: the "
+                      "block sets model: odometry", MclWarning, stacklevel=2)
     pairs = pairs_from_log(args.log, args.truth)
-    res = fit_odometry_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise,
-                              min_trans=args.min_trans, t=pairs[4])
+    if cfg.motion.model == "omni":
+        res = fit_omni_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise)
+    else:
+        res = fit_odometry_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise,
+                                  min_trans=args.min_trans, t=pairs[4])
     if args.json:
         print(json.dumps(res, indent=2))
     else:

@@ -254,3 +254,26 @@ def test_odom_lines_alone_are_a_log_to_fit(tmp_path, capsys):
     (tmp_path / "none.clf").write_text("PARAM robot_front_laser_max 30\n")
     assert main(["calibrate", "motion", "--log", str(tmp_path / "none.clf"), "--truth", str(demo / "truth.tum")]) == 2
     assert "no laser messages (FLASER, RLASER, ROBOTLASER1, ROBOTLASER2, RAWLASER1..4) and no ODOM lines" in capsys.readouterr().err
+
+
+def test_the_omni_models_alphas_are_recovered_from_an_omnidirectional_drive(tmp_path, capsys):
+    # A generated office (150 s, seed 11) driven by an omnidirectional base (heading up to 60 degrees off its travel)
+    # whose odometry has the omni model's noise with (alpha1..alpha4) = (0.05, 0.05, 0.05, 0.02) per 10 Hz tick, the
+    # strafe's from alpha3 and alpha4 as the travel's, no scale or drift. The reference is at the 5 Hz scans, two
+    # ticks a pair: variances add over the ticks, so the fit reads half of each (0.025, 0.025, 0.025, 0.01, strafe
+    # 0.025). 750 pairs: within 25 % of those (the 300 s drive reads 0.027, 0.024, 0.024, 0.011, 0.025).
+    from mcl.cli import main
+    from mcl.simulate import simulate
+
+    simulate(tmp_path / "w", kind="office", seed=11, duration=150, holonomic=math.radians(60),
+             odom_alphas=(0.05, 0.05, 0.05, 0.02), odom_scale=1.0, odom_yaw_drift=0.0)
+    assert main(["calibrate", "motion", "--log", str(tmp_path / "w" / "log.clf"), "--truth",
+                 str(tmp_path / "w" / "truth.tum"), "--set", "motion.model=omni", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["model"] == "omni" and res["converged"] and res["undetermined"] == []
+    np.testing.assert_allclose(res["alphas"], [0.025, 0.025, 0.025, 0.01, 0.025], rtol=0.25)
+    # the block pastes into a config as the omni model's
+    from mcl.calibrate_motion import format_yaml
+
+    text = format_yaml(res, "variance", "normal")
+    assert "  model: omni\n" in text and "  alpha_strafe: " in text and "p_turn" not in text
