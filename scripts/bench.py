@@ -62,7 +62,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from mcl.motion import OdometryMotionModel, allowed_mask  # noqa: E402
+from mcl.motion import OdometryMotionModel, OmniMotionModel, allowed_mask  # noqa: E402
 from mcl.resampling import normalize_log_weights, resample  # noqa: E402
 from mcl.sensors import LikelihoodField, beam_endpoints  # noqa: E402
 
@@ -470,7 +470,9 @@ def bench_kernels(args) -> None:
     mcfg = motion_cfg()
     mask = allowed_mask(grid, mcfg.robot_radius)
     model = OdometryMotionModel(mcfg)
+    omni = OmniMotionModel(mcfg)
     odom_prev, odom_now = (0.0, 0.0, 0.0), (0.2 * math.cos(0.1), 0.2 * math.sin(0.1), 0.2)  # one AMCL-sized step
+    strafe = (0.05, 0.2, 0.1)  # an omnidirectional base's step: mostly sideways
     beams = {b: endpoints_for(b, ranges, angles, max_range, laser_pose) for b in (60, 360)}
     fields = {b: LikelihoodField(grid, sensor_cfg(b)) for b in beams}
     max_threads = numba.config.NUMBA_NUM_THREADS
@@ -486,6 +488,7 @@ def bench_kernels(args) -> None:
     # warm-up: compile (or load from cache) every kernel once
     p0 = particles_near_centre(grid, mask, 1000, rng)
     model.sample(p0, odom_prev, odom_now, rng, allowed=mask, grid=grid)
+    omni.sample(p0, odom_prev, strafe, rng, allowed=mask, grid=grid)
     fields[60].log_likelihood(p0, beams[60])
     resample("systematic", np.zeros(1000), rng)
     print(f"# threading layer: {numba.threading_layer()}")
@@ -511,7 +514,11 @@ def bench_kernels(args) -> None:
                     _, ok, t = model.sample(p, odom_prev, odom_now, rng, allowed=mask, grid=grid, out=out)
                     tries.append(t)
 
-                rows = [("predict+map", None, predict)]
+                def predict_omni():
+                    _, ok, t = omni.sample(p, odom_prev, strafe, rng, allowed=mask, grid=grid, out=out)
+                    tries.append(t)
+
+                rows = [("predict+map", None, predict), ("predict+map (omni)", None, predict_omni)]
                 for b, e in beams.items():
                     ll = np.empty(n)
                     rows.append(("likelihood", b, lambda f=fields[b], e=e, ll=ll: f.log_likelihood(p, e, out=ll)))
