@@ -239,27 +239,33 @@ class OdometryMotionModel:
         """
         p, out = _particles_and_out(particles, out)
         n = p.shape[1]
-        rot1, trans, rot2 = odometry_deltas(odom_prev, odom_now)
-        s1, st, s2 = noise_sigmas(rot1, trans, rot2, self.cfg)
+        deltas, sigmas, dims, kernel, kernel_map = self._step(odom_prev, odom_now)
         noise, idx_all = self._buffers(n)
         kind = getattr(self.cfg, "noise", "normal")
         standard_noise(kind, rng, out=noise)  # normal: rng.standard_normal
-        k = fault.scales((s1, st, s2)) if fault is not None else None
+        k = fault.scales(sigmas, **dims) if fault is not None else None
         scales = fault_scales(n, fault, k, rng)
         if scales is not None:
             noise *= scales
 
         def move(nz, o):
-            _k.sample_odometry(p, nz, rot1, trans, rot2, s1, st, s2, o)
+            kernel(p, nz, *deltas, *sigmas, o)
 
         def move_map(nz, idx, mask, ox, oy, inv_res, o, ok):
-            return _k.sample_odometry_map(p, nz, idx, rot1, trans, rot2, s1, st, s2, mask, ox, oy, inv_res, o, ok)
+            return kernel_map(p, nz, idx, *deltas, *sigmas, mask, ox, oy, inv_res, o, ok)
 
         result = _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, self.max_tries, allowed, grid, out,
                                   scales, fallback)
         if fault is not None and log_weight is not None:
-            log_weight[:] = fault_log_weights(noise, (s1, st, s2), kind, fault, k)
+            log_weight[:] = fault_log_weights(noise, sigmas, kind, fault, k)
         return result
+
+    def _step(self, odom_prev, odom_now):
+        """(the step's deltas, their noise stds, the fault caps' dimensions for ``FaultProposal.scales``, the kernel,
+        the kernel with the map check): Table 5.6's rot1, trans, rot2 (heading noise in rot1 and rot2)."""
+        rot1, trans, rot2 = odometry_deltas(odom_prev, odom_now)
+        return ((rot1, trans, rot2), noise_sigmas(rot1, trans, rot2, self.cfg), {}, _k.sample_odometry,
+                _k.sample_odometry_map)
 
 
 def omni_deltas(odom_prev, odom_now) -> tuple[float, float, float]:
@@ -312,33 +318,12 @@ class OmniMotionModel(OdometryMotionModel):
     ``cfg`` as ``OdometryMotionModel``'s, and ``alpha_strafe``.
     """
 
-    def sample(self, particles, odom_prev, odom_now, rng: np.random.Generator,
-               allowed=None, grid=None, out=None, fault: FaultProposal | None = None, log_weight=None,
-               fallback=None):
-        """``OdometryMotionModel.sample`` with this model's step (same arguments and results)."""
-        p, out = _particles_and_out(particles, out)
-        n = p.shape[1]
+    def _step(self, odom_prev, odom_now):
+        """``OdometryMotionModel._step`` of this model: bearing, trans, rot; the heading's noise is the turn's, the
+        travel's and the strafe's are translations."""
         bearing, trans, rot = omni_deltas(odom_prev, odom_now)
-        st, ss, sr = omni_sigmas(trans, rot, self.cfg)
-        noise, idx_all = self._buffers(n)
-        kind = getattr(self.cfg, "noise", "normal")
-        standard_noise(kind, rng, out=noise)
-        k = fault.scales((st, ss, sr), turns=(2,), shifts=(0, 1)) if fault is not None else None
-        scales = fault_scales(n, fault, k, rng)
-        if scales is not None:
-            noise *= scales
-
-        def move(nz, o):
-            _k.sample_omni(p, nz, bearing, trans, rot, st, ss, sr, o)
-
-        def move_map(nz, idx, mask, ox, oy, inv_res, o, ok):
-            return _k.sample_omni_map(p, nz, idx, bearing, trans, rot, st, ss, sr, mask, ox, oy, inv_res, o, ok)
-
-        result = _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, self.max_tries, allowed, grid, out,
-                                  scales, fallback)
-        if fault is not None and log_weight is not None:
-            log_weight[:] = fault_log_weights(noise, (st, ss, sr), kind, fault, k)
-        return result
+        return ((bearing, trans, rot), omni_sigmas(trans, rot, self.cfg), {"turns": (2,), "shifts": (0, 1)},
+                _k.sample_omni, _k.sample_omni_map)
 
 
 SIDEWAYS_OMNI = 0.1  # share of the odometry's travel across the heading above which the base is omnidirectional
