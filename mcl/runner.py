@@ -461,17 +461,23 @@ def _skip_self_hits(scans, log, sensor, echo):
 
 
 def _choose_motion_model(cfg: Config, log, scans, echo) -> tuple[Config, float | None]:
-    """(the config to run, the odometry's sideways share or None when not measured): with ``motion.model:
-    odometry`` and ``motion.sideways: omni``, an odometry whose travel goes across the robot's heading
+    """(the config to run, the odometry's sideways share or None when not measured: ``motion.model: omni``): with
+    ``motion.model: odometry`` and ``motion.sideways: omni``, an odometry whose travel goes across the robot's heading
     (``mcl.motion.sideways_share`` at or over ``SIDEWAYS_OMNI``: an omnidirectional base) is run with the omni
-    model, with a warning that names the settings."""
+    model, with a warning that names the settings; with ``sideways: keep`` or the velocity model, a warning."""
     from dataclasses import replace
 
     from mcl.motion import SIDEWAYS_OMNI, sideways_share
 
-    if cfg.motion.model != "odometry":
+    if cfg.motion.model == "omni":
         return cfg, None
     share, travel = sideways_share(_odometry_rows(log, scans)[0][:, 1:4])
+    if cfg.motion.model == "velocity":  # (v, w) along the heading: a strafe is not in it
+        if share >= SIDEWAYS_OMNI:
+            echo(f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's "
+                 "heading (an omnidirectional base?): the velocity model moves along the heading and has no strafe "
+                 "(--set motion.model=omni reads the odometry's steps as they are)")
+        return cfg, share
     if share < SIDEWAYS_OMNI or cfg.motion.sideways != "omni":
         if share >= SIDEWAYS_OMNI:
             echo(f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's "
@@ -1135,8 +1141,8 @@ def _run(
            else {}),
         **({"stamp_offset_fitted_s": round(log.stamp_offset, 4)} if getattr(log, "stamp_offset", None) is not None
            else {}),
-        **({"odometry_sideways": round(sideways, 4), "motion_model": cfg.motion.model} if sideways is not None
-           else {}),
+        "motion_model": cfg.motion.model,  # as run: motion.sideways may have chosen omni
+        **({"odometry_sideways": round(sideways, 4)} if sideways is not None else {}),
         **({"time_offset_check": time_summary(log.time_offset_checks)} if getattr(log, "time_offset_checks", None)
            else {}),
         "resamples": counts["resamples"],

@@ -199,6 +199,11 @@ def test_a_run_takes_the_omni_model_for_an_odometry_that_moves_sideways(tmp_path
     keep = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, "motion.sideways=keep"]),
                tmp_path / "keep", progress=False, echo=lambda *_: None)
     assert keep["motion_model"] == "odometry"
+    said = []
+    run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, "motion.model=velocity", "filter.particles=500",
+                                                                 "filter.kld=false"]),
+        tmp_path / "velocity", progress=False, echo=said.append)
+    assert any("the velocity model moves along the heading and has no strafe" in m for m in said), said
     assert omni["eval"]["ate_rmse"] < 0.25 and omni["eval"]["ate_max"] < 0.6, omni["eval"]
     assert keep["eval"]["ate_rmse"] > 1.0, keep["eval"]
     # the same drive as a bag (its /odom at the scans): the same choice
