@@ -329,6 +329,7 @@ class OmniMotionModel(OdometryMotionModel):
 SIDEWAYS_OMNI = 0.1  # share of the odometry's travel across the heading above which the base is omnidirectional
 SIDEWAYS_MIN_TRAVEL = 5.0  # m of odometry travel the share needs
 SIDEWAYS_CHORD = 0.05  # m: the odometry is read in chords this long (a 50 Hz /odom moves millimetres a message)
+SIDEWAYS_JUMP = 2.0  # m: a step between two odometry readings longer than this is a reset or a glitch, not travel
 
 
 def sideways_share(poses) -> tuple[float, float]:
@@ -340,23 +341,31 @@ def sideways_share(poses) -> tuple[float, float]:
     length. The shared logs read 0.002-0.014, and omnidirectional bases crabbing within 20 degrees of their
     travel read 0.19 or more (``mcl simulate --holonomic``): over ``SIDEWAYS_OMNI`` a run takes the omni model
     (``motion.sideways``). An odometry frame off the axle reads a turn on the spot as a short sideways chord (0.2 m
-    ahead: 0.6 m a full turn). Share 0 under ``SIDEWAYS_MIN_TRAVEL`` m of travel or 2 poses."""
+    ahead: 0.6 m a full turn). A step over ``SIDEWAYS_JUMP`` between two readings (the odometry reset, a glitch)
+    counts as no travel, and no chord spans it. Share 0 under ``SIDEWAYS_MIN_TRAVEL`` m of travel or 2 poses."""
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     p = p[np.all(np.isfinite(p), axis=1)]
     if p.shape[0] < 2:
         return 0.0, 0.0
-    path = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))))
+    steps = np.hypot(*np.diff(p[:, :2], axis=0).T)
+    jump = steps > SIDEWAYS_JUMP  # an odometry reset or glitch: no travel, and no chord across it
+    path = np.concatenate(([0.0], np.cumsum(np.where(jump, 0.0, steps))))
     if path[-1] < SIDEWAYS_MIN_TRAVEL:
         return 0.0, float(path[-1])
-    keep = np.unique(np.searchsorted(path, np.arange(0.0, path[-1], SIDEWAYS_CHORD)))
-    q = p[np.append(keep, p.shape[0] - 1)]
+    keep = np.unique(np.append(np.searchsorted(path, np.arange(0.0, path[-1], SIDEWAYS_CHORD)), p.shape[0] - 1))
+    piece = np.concatenate(([0], np.cumsum(jump)))[keep]
+    q = p[keep]
     d = np.diff(q, axis=0)
+    d = d[piece[1:] == piece[:-1]]
+    q = q[:-1][piece[1:] == piece[:-1]]
     chord = np.hypot(d[:, 0], d[:, 1])
+    if not chord.sum() > 0.0:
+        return 0.0, float(path[-1])
     turn = _wrap_np(d[:, 2])
     lo, hi = np.minimum(turn, 0.0), np.maximum(turn, 0.0)
 
     def outside(direction):  # the chord's angle outside [theta0 + lo, theta0 + hi], 0 inside
-        rel = _wrap_np(direction - q[:-1, 2])
+        rel = _wrap_np(direction - q[:, 2])
         return np.where(rel < lo, lo - rel, np.where(rel > hi, rel - hi, 0.0))
 
     ahead = np.arctan2(d[:, 1], d[:, 0])

@@ -164,6 +164,10 @@ def test_sideways_share_tells_a_differential_drive_from_an_omnidirectional_base(
     side = np.zeros((3000, 3))
     side[:, 1] = np.arange(3000) * 0.002
     assert sideways_share(side)[0] == pytest.approx(1.0)
+    # an odometry reset (back to 0, 0, 0 from 30 m away) or a glitch is no travel, and no chord spans it
+    reset = np.vstack([diff, diff])  # the same drive again from the origin
+    assert np.hypot(*(diff[-1, :2] - diff[0, :2])) > 5.0
+    assert sideways_share(reset)[0] < 0.01 and sideways_share(reset)[1] == pytest.approx(2 * travel, rel=0.01)
     # too little travel to tell: 0
     assert sideways_share(side[:1000]) == (0.0, pytest.approx(1.998))
 
