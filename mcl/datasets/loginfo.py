@@ -18,7 +18,8 @@ __all__ = ["scan_checks", "check_lines", "log_info", "format_log_info"]
 
 
 def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
-    """"self_hits" (None: none found), "odometry_sideways" (``mcl.motion.sideways_share``: share, travel_m, omni),
+    """"self_hits" (None: none found), "odometry_sideways" (``mcl.motion.sideways_share``: share, travel_m, omni;
+    None for laser odometry),
     "odometry_check" (absent for laser odometry, ``wheel_odometry`` False) and
     "time_offset_check" (absent for laser odometry, or when the odometry check found a fault) of ``scans``, each
     laser's as a run finds them (``mcl.datasets.selfhits.summary_of``, ``mcl.odomcheck.summary_of``: fused lasers'
@@ -42,7 +43,8 @@ def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
     poses = (np.asarray(odometry, dtype=np.float64).reshape(-1, 6)[:, 1:4] if odometry is not None
              else np.array([s.odom for s in scans if s.odom is not None], dtype=np.float64).reshape(-1, 3))
     share, travel = sideways_share(poses)
-    sideways = {"share": round(share, 4), "travel_m": round(travel, 1), "omni": share >= SIDEWAYS_OMNI}
+    sideways = ({"share": round(share, 4), "travel_m": round(travel, 1), "omni": share >= SIDEWAYS_OMNI}
+                if wheel_odometry else None)  # laser odometry's jitter reads sideways: not measured (mcl.runner)
     hits = [h for h in (self_hits_of(c) for c in beam_constancies(scans, float(sensor.range_min),
                                                                    float(sensor.range_max))) if h is not None]
     out = {"self_hits": hits_summary(hits), "odometry_sideways": sideways}
