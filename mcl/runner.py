@@ -488,8 +488,9 @@ def _choose_motion_model(cfg: Config, log, scans, echo) -> tuple[Config, float |
                  "its rot1 noise turns every particle on a step sideways (--set motion.model=omni)")
         return cfg, share
     echo(f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's heading: "
-         "an omnidirectional base, run with motion.model omni (the odometry model's rot1 noise would turn every "
-         "particle on a step sideways). --set motion.model=omni says so; motion.sideways: keep keeps odometry")
+         "an omnidirectional base (or an odometry that jitters across it, as laser or visual odometry does), run "
+         "with motion.model omni (the odometry model's rot1 noise would turn every particle on a step sideways). "
+         "--set motion.model=omni says so; motion.sideways: keep keeps odometry")
     return replace(cfg, motion=replace(cfg.motion, model="omni")), share
 
 

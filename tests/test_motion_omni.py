@@ -196,8 +196,9 @@ def test_a_run_takes_the_omni_model_for_an_odometry_that_moves_sideways(tmp_path
                echo=said.append)
     warn = [m for m in said if "goes across the robot's heading" in m]
     assert len(warn) == 1 and warn[0].startswith(f"mcl: warning: {tmp_path / 'w' / 'log.clf'}: 54% of the odometry's "
-                                                 "33 m goes across the robot's heading: an omnidirectional base, run "
-                                                 "with motion.model omni"), said
+                                                 "33 m goes across the robot's heading: an omnidirectional base (or an "
+                                                 "odometry that jitters across it, as laser or visual odometry does), "
+                                                 "run with motion.model omni"), said
     assert omni["motion_model"] == "omni" and omni["odometry_sideways"] > 0.5
     assert "model: omni" in (tmp_path / "omni" / "config.yaml").read_text()  # the run as it was made
     keep = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, "motion.sideways=keep"]),
