@@ -475,22 +475,20 @@ def _choose_motion_model(cfg: Config, log, scans, echo) -> tuple[Config, float |
         # scans matched at 20 Hz along a corridor: 0.19), so it tells nothing of the base
         return cfg, None
     share, travel = sideways_share(_odometry_rows(log, scans)[0][:, 1:4])
+    if share < SIDEWAYS_OMNI:
+        return cfg, share
+    said = f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's heading"
     if cfg.motion.model == "velocity":  # (v, w) along the heading: a strafe is not in it
-        if share >= SIDEWAYS_OMNI:
-            echo(f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's "
-                 "heading (an omnidirectional base?): the velocity model moves along the heading and has no strafe "
-                 "(--set motion.model=omni reads the odometry's steps as they are)")
+        echo(f"{said} (an omnidirectional base?): the velocity model moves along the heading and has no strafe "
+             "(--set motion.model=omni reads the odometry's steps as they are)")
         return cfg, share
-    if share < SIDEWAYS_OMNI or cfg.motion.sideways != "omni":
-        if share >= SIDEWAYS_OMNI:
-            echo(f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's "
-                 "heading (an omnidirectional base?), and motion.sideways: keep leaves the odometry model on it: "
-                 "its rot1 noise turns every particle on a step sideways (--set motion.model=omni)")
+    if cfg.motion.sideways != "omni":
+        echo(f"{said} (an omnidirectional base?), and motion.sideways: keep leaves the odometry model on it: its rot1 "
+             "noise turns every particle on a step sideways (--set motion.model=omni)")
         return cfg, share
-    echo(f"mcl: warning: {log.path}: {share:.0%} of the odometry's {travel:.0f} m goes across the robot's heading: "
-         "an omnidirectional base (or an odometry that jitters across it, as laser or visual odometry does), run "
-         "with motion.model omni (the odometry model's rot1 noise would turn every particle on a step sideways). "
-         "--set motion.model=omni says so; motion.sideways: keep keeps odometry")
+    echo(f"{said}: an omnidirectional base (or an odometry that jitters across it, as laser or visual odometry "
+         "does), run with motion.model omni (the odometry model's rot1 noise would turn every particle on a step "
+         "sideways). --set motion.model=omni says so; motion.sideways: keep keeps odometry")
     return replace(cfg, motion=replace(cfg.motion, model="omni")), share
 
 

@@ -19,8 +19,7 @@ __all__ = ["scan_checks", "check_lines", "log_info", "format_log_info"]
 
 def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
     """"self_hits" (None: none found), "odometry_sideways" (``mcl.motion.sideways_share``: share, travel_m, omni;
-    None for laser odometry),
-    "odometry_check" (absent for laser odometry, ``wheel_odometry`` False) and
+    None for laser odometry), "odometry_check" (absent for laser odometry, ``wheel_odometry`` False) and
     "time_offset_check" (absent for laser odometry, or when the odometry check found a fault) of ``scans``, each
     laser's as a run finds them (``mcl.datasets.selfhits.summary_of``, ``mcl.odomcheck.summary_of``: fused lasers'
     others in ``other_lasers``), with the line a run would say as "text". ``odometry``: rows (t, x, y, theta, ...)
@@ -34,17 +33,17 @@ def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
     from mcl.latency import check_each_laser as check_times
     from mcl.latency import findings as time_findings
     from mcl.latency import summary_of as time_summary
+    from mcl.motion import SIDEWAYS_OMNI, sideways_share
     from mcl.odomcheck import check_each_laser, findings, run_mount
     from mcl.odomcheck import summary_of as odometry_summary
 
-    from mcl.motion import SIDEWAYS_OMNI, sideways_share
-
     sensor = SensorConfig() if sensor is None else sensor
-    poses = (np.asarray(odometry, dtype=np.float64).reshape(-1, 6)[:, 1:4] if odometry is not None
-             else np.array([s.odom for s in scans if s.odom is not None], dtype=np.float64).reshape(-1, 3))
-    share, travel = sideways_share(poses)
-    sideways = ({"share": round(share, 4), "travel_m": round(travel, 1), "omni": share >= SIDEWAYS_OMNI}
-                if wheel_odometry else None)  # laser odometry's jitter reads sideways: not measured (mcl.runner)
+    sideways = None  # laser odometry's jitter reads as sideways travel: not measured (mcl.runner._choose_motion_model)
+    if wheel_odometry:
+        poses = (np.asarray(odometry, dtype=np.float64).reshape(-1, 6)[:, 1:4] if odometry is not None
+                 else np.array([s.odom for s in scans if s.odom is not None], dtype=np.float64).reshape(-1, 3))
+        share, travel = sideways_share(poses)
+        sideways = {"share": round(share, 4), "travel_m": round(travel, 1), "omni": share >= SIDEWAYS_OMNI}
     hits = [h for h in (self_hits_of(c) for c in beam_constancies(scans, float(sensor.range_min),
                                                                    float(sensor.range_max))) if h is not None]
     out = {"self_hits": hits_summary(hits), "odometry_sideways": sideways}
