@@ -280,23 +280,14 @@ def omni_pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_
     """(M,) log p(x_now | (odom_prev, odom_now), x_prev) of each pair under the omni model (``mcl.motion``'s
     ``log_motion_model_omni``, each pair with its own odometry), the noise stds from the reference's motion (as
     Table 5.5 takes them from the hypothesis). ``alphas``: alpha1..alpha4, alpha_strafe."""
-    from mcl.motion import ROT1_MIN_TRANS, SIGMA_MIN, _wrap_np, omni_sigmas
+    from mcl.motion import SIGMA_MIN, omni_residuals, omni_sigmas
     from mcl.noise import log_density
 
     cfg = SimpleNamespace(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
                           alpha_strafe=alphas[4], noise_form=noise_form)
     f = max(float(sigma_floor), SIGMA_MIN)
-    d = odom_now - odom_prev
-    trans = np.hypot(d[0], d[1])
-    bearing = np.where(trans < ROT1_MIN_TRANS, 0.0, _wrap_np(np.arctan2(d[1], d[0]) - odom_prev[2]))
-    rot = _wrap_np(d[2])
-    head = x_prev[2] + bearing
-    e = x_now - x_prev
-    along = e[0] * np.cos(head) + e[1] * np.sin(head)
-    across = e[0] * np.sin(head) - e[1] * np.cos(head)
-    st, ss, sr = omni_sigmas(np.hypot(e[0], e[1]), _wrap_np(e[2]), cfg)
-    return sum(log_density(noise, r, np.maximum(sg, f))
-               for r, sg in ((along - trans, st), (across, ss), (_wrap_np(_wrap_np(e[2]) - rot), sr)))
+    residuals, _, (trans, turn) = omni_residuals(odom_prev, odom_now, x_prev, x_now)
+    return sum(log_density(noise, r, np.maximum(sg, f)) for r, sg in zip(residuals, omni_sigmas(trans, turn, cfg)))
 
 
 def fit_omni_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance", noise="normal",

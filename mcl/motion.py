@@ -548,17 +548,30 @@ def log_motion_model_omni(x_new, u, x_prev, cfg, *, fault: FaultProposal | None 
     is a rotation and a shift, so this is a density over poses (x', y', theta') without a Jacobian. ``fault``: the
     odometry-fault mixture, as for ``log_motion_model_odometry``.
     """
-    bearing, trans, rot = omni_deltas(*_odometry_pair(u))
+    odom_prev, odom_now = _odometry_pair(u)
+    residuals, (trans, rot), _ = omni_residuals(odom_prev, odom_now, x_prev, x_new)
+    shape = np.broadcast_shapes(*(r.shape for r in residuals))
+    sig = tuple(np.full(shape, s) for s in omni_sigmas(trans.item(), rot.item(), cfg))  # one odometry step
+    return _noise_log_density(getattr(cfg, "noise", "normal"), residuals, sig, fault, turns=(2,), shifts=(0, 1))
+
+
+def omni_residuals(odom_prev, odom_now, x_prev, x_new):
+    """(the three noises (along - trans, across, turn - rot), the odometry's (trans, rot), the hypotheses' (trans,
+    turn)) of the omni model, vectorised: each hypothesis' displacement read in the frame of the odometry's direction
+    of travel at x_prev (heading theta_prev + bearing, ``omni_deltas``' rule: bearing 0 under 1 cm). The odometry
+    poses are (3,) or (3, N) (one reading per hypothesis, ``mcl calibrate motion``), as are the hypotheses."""
+    op, on = _poses(odom_prev, "odom_prev"), _poses(odom_now, "odom_now")
     a, b = _poses(x_prev, "x_prev"), _poses(x_new, "x_new")
+    d = on - op
+    trans = np.hypot(d[0], d[1])
+    bearing = np.where(trans < ROT1_MIN_TRANS, 0.0, _wrap_np(np.arctan2(d[1], d[0]) - op[2]))
+    rot = _wrap_np(d[2])
     head = a[2] + bearing
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    along = dx * np.cos(head) + dy * np.sin(head)
-    across = dx * np.sin(head) - dy * np.cos(head)
-    turn = _wrap_np(_wrap_np(b[2] - a[2]) - rot)
-    shape = np.broadcast_shapes(along.shape, turn.shape)
-    sig = tuple(np.full(shape, s) for s in omni_sigmas(trans, rot, cfg))
-    return _noise_log_density(getattr(cfg, "noise", "normal"), (along - trans, across, turn), sig, fault,
-                              turns=(2,), shifts=(0, 1))
+    e = b - a
+    turn = _wrap_np(e[2])
+    along = e[0] * np.cos(head) + e[1] * np.sin(head)
+    across = e[0] * np.sin(head) - e[1] * np.cos(head)
+    return (along - trans, across, _wrap_np(turn - rot)), (trans, rot), (np.hypot(e[0], e[1]), turn)
 
 
 def motion_model_omni(x_new, u, x_prev, cfg, **kw) -> np.ndarray:

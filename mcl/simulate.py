@@ -469,6 +469,32 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6, odom_ra
     direction, and the direction of such a step, taken for rot1, would give it a rotation's noise it never made
     (it passes ``mcl.motion.ROT1_MIN_TRANS``, 1 cm: the filter's and AMCL's rule)."""
     a1, a2, a3, a4 = alphas
+
+    def step(z, x0, y0, t0, x1, y1, t1, trans, odom):
+        rot1 = 0.0 if trans < min_trans else _wrap(math.atan2(y1 - y0, x1 - x0) - t0)
+        rot2 = _wrap(t1 - t0 - rot1)
+        # the noise scales with the rotation the robot really made: a backward step reads rot1 ~ pi, rot2 ~ -pi
+        # (the filter's motion model folds them the same way, mcl.motion.noise_angle)
+        n1, n2 = noise_angle(rot1), noise_angle(rot2)
+        r1 = rot1 - z[0] * math.sqrt(a1 * n1 ** 2 + a2 * trans ** 2)
+        tr = trans - z[1] * math.sqrt(a3 * trans ** 2 + a4 * (n1 ** 2 + n2 ** 2))
+        r2 = rot2 - z[2] * math.sqrt(a1 * n2 ** 2 + a2 * trans ** 2)
+        tr *= scale
+        r1 += 0.5 * yaw_drift * trans
+        r2 += 0.5 * yaw_drift * trans
+        ox, oy, ot = odom
+        # the wheels' velocities: negative tv on a step backwards (rot1 ~ pi), and the heading change itself
+        # (rot1 + rot2 is it only up to 2 pi then)
+        return ((ox + tr * math.cos(ot + r1), oy + tr * math.sin(ot + r1), _wrap(ot + r1 + r2)),
+                -tr if abs(rot1) > 0.5 * math.pi else tr, _wrap(r1 + r2))
+
+    return _odometry_chain(truth, pre, rng, odom_rate, step)
+
+
+def _odometry_chain(truth, pre, rng, odom_rate, step):
+    """(odometry poses (n, 3) from (0, 0, 0), tv, rv (n,)) of a drive: ``step(z, x0, y0, t0, x1, y1, t1, trans,
+    odom)`` gives each tick's odometry pose, its travel and its turn from the truth's step (truth[k - 1] to
+    pre[k], ``trans`` long), three standard normals ``z`` (all drawn first, one row a tick) and the last pose."""
     n = truth.shape[0]
     z = rng.standard_normal((n, 3))
     odom = np.zeros((n, 3))
@@ -478,27 +504,9 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6, odom_ra
     for k in range(1, n):
         x0, y0, t0 = truth[k - 1]
         x1, y1, t1 = pre[k]
-        trans = math.hypot(x1 - x0, y1 - y0)
-        if trans < min_trans:
-            rot1 = 0.0
-        else:
-            rot1 = _wrap(math.atan2(y1 - y0, x1 - x0) - t0)
-        rot2 = _wrap(t1 - t0 - rot1)
-        # the noise scales with the rotation the robot really made: a backward step reads rot1 ~ pi, rot2 ~ -pi
-        # (the filter's motion model folds them the same way, mcl.motion.noise_angle)
-        n1, n2 = noise_angle(rot1), noise_angle(rot2)
-        r1 = rot1 - z[k, 0] * math.sqrt(a1 * n1 ** 2 + a2 * trans ** 2)
-        tr = trans - z[k, 1] * math.sqrt(a3 * trans ** 2 + a4 * (n1 ** 2 + n2 ** 2))
-        r2 = rot2 - z[k, 2] * math.sqrt(a1 * n2 ** 2 + a2 * trans ** 2)
-        tr *= scale
-        r1 += 0.5 * yaw_drift * trans
-        r2 += 0.5 * yaw_drift * trans
-        ox, oy, ot = odom[k - 1]
-        odom[k] = (ox + tr * math.cos(ot + r1), oy + tr * math.sin(ot + r1), _wrap(ot + r1 + r2))
-        # the wheels' velocities: negative tv on a step backwards (rot1 ~ pi), and the heading change itself
-        # (rot1 + rot2 is it only up to 2 pi then)
-        tv[k] = (-tr if abs(rot1) > 0.5 * math.pi else tr) / dt
-        rv[k] = _wrap(r1 + r2) / dt
+        odom[k], travel, turn = step(z[k], x0, y0, t0, x1, y1, t1, math.hypot(x1 - x0, y1 - y0), odom[k - 1])
+        tv[k] = travel / dt
+        rv[k] = turn / dt
     return odom, tv, rv
 
 
@@ -516,29 +524,21 @@ def _odometry_omni(truth, pre, rng, alphas, scale, yaw_drift, odom_rate=_ODOM_RA
     AMCL's omni model: sigma_trans^2 = sigma_strafe^2 = a3 trans^2 + a4 turn^2, sigma_turn^2 = a1 turn^2 + a2
     trans^2. The heading does not enter the noise of the travel (a strafing step is no turn)."""
     a1, a2, a3, a4 = alphas
-    n = truth.shape[0]
-    z = rng.standard_normal((n, 3))
-    odom = np.zeros((n, 3))
-    tv = np.zeros(n)
-    rv = np.zeros(n)
-    dt = 1.0 / odom_rate
-    for k in range(1, n):
-        x0, y0, t0 = truth[k - 1]
-        x1, y1, t1 = pre[k]
-        trans = math.hypot(x1 - x0, y1 - y0)
+
+    def step(z, x0, y0, t0, x1, y1, t1, trans, odom):
         bearing = _wrap(math.atan2(y1 - y0, x1 - x0) - t0) if trans > 1e-6 else 0.0
         turn = _wrap(t1 - t0)
         s_tr = math.sqrt(a3 * trans ** 2 + a4 * turn ** 2)
-        tr = (trans - z[k, 0] * s_tr) * scale
-        strafe = -z[k, 1] * s_tr
-        rot = turn - z[k, 2] * math.sqrt(a1 * turn ** 2 + a2 * trans ** 2) + yaw_drift * trans
-        ox, oy, ot = odom[k - 1]
+        tr = (trans - z[0] * s_tr) * scale
+        strafe = -z[1] * s_tr
+        rot = turn - z[2] * math.sqrt(a1 * turn ** 2 + a2 * trans ** 2) + yaw_drift * trans
+        ox, oy, ot = odom
         b = ot + bearing
-        odom[k] = (ox + tr * math.cos(b) + strafe * math.sin(b), oy + tr * math.sin(b) - strafe * math.cos(b),
-                   _wrap(ot + rot))
-        tv[k] = tr * math.cos(bearing) / dt  # the body's forward speed (a bag's twist.linear.x)
-        rv[k] = rot / dt
-    return odom, tv, rv
+        # tv: the body's forward speed (a bag's twist.linear.x)
+        return ((ox + tr * math.cos(b) + strafe * math.sin(b), oy + tr * math.sin(b) - strafe * math.cos(b),
+                 _wrap(ot + rot)), tr * math.cos(bearing), rot)
+
+    return _odometry_chain(truth, pre, rng, odom_rate, step)
 
 
 def beam_angles(n_beams: int, fov: float) -> np.ndarray:
@@ -1299,6 +1299,9 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
         except ValueError:
             raise ConfigError(f"--odom-alphas: expected four numbers A1,A2,A3,A4, got {args.odom_alphas!r}") from None
     noise = {k: v for k, v in noise.items() if v is not None}  # the options not given keep simulate()'s defaults
+    holonomic = getattr(args, "holonomic", 0.0) or 0.0
+    if not 0.0 <= holonomic <= 180.0:  # said in the option's degrees, not simulate()'s radians
+        raise ConfigError(f"--holonomic: expected 0..180 degrees, got {holonomic:g}")
     for a0, a1, r in getattr(args, "body", None) or []:
         if not (-180.0 <= a0 < a1 <= 180.0 and 0.0 < r < args.range_max):
             raise ConfigError(f"--body {a0:g} {a1:g} {r:g}: expected A0 A1 R with -180 <= A0 < A1 <= 180 degrees and "
@@ -1314,7 +1317,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     unknown_floor=args.unknown_floor,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
-                    holonomic=math.radians(getattr(args, "holonomic", 0.0) or 0.0))
+                    holonomic=math.radians(holonomic))
 
 
 # What ``mcl simulate`` writes into its folder: an earlier world's are replaced whole, anything else is kept
