@@ -127,7 +127,8 @@ def test_suite_lost_m_is_every_datasets_default(tmp_path):
 @pytest.mark.parametrize("name, worlds", [("synthetic", 43), ("heldout", 42), ("heldout2", 26), ("heldout3", 12),
                                          ("heldout4", 12), ("heldout5", 12), ("ground-hits", 15), ("fast-laser", 12),
                                          ("sparse-laser", 4), ("sparse-hall", 6),
-                                         ("stale-map", 8), ("unknown-floor", 12), ("holonomic", 30), ("smoke", None)])
+                                         ("stale-map", 8), ("unknown-floor", 12), ("holonomic", 30), ("depth-laser", 12),
+                                         ("smoke", None)])
 def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(name, worlds):
     # load_suite checks every key and every simulate keyword (a typo stops `mcl eval` before any run); a world seed
     # used twice in a suite would count one world twice, and across the corpora it would leak a world the
@@ -173,7 +174,7 @@ def test_a_suites_header_names_the_world_seeds_it_holds(name):
     claimed |= {int(a) for a in re.findall(r"\bx(\d\d)\b", re.sub(r"\bx\d\d-x\d\d\b", "", text))}
     if claimed:
         assert {s % 100 for s in seeds} == claimed, name
-    for a, b in re.findall(r"\bseeds (\d{3})-(\d{3})\b", text):
+    for a, b in re.findall(r"\bseeds (\d{3,5})-(\d{3,5})\b", text):
         assert seeds == set(range(int(a), int(b) + 1)), name
 
 
