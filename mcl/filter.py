@@ -338,6 +338,7 @@ class ParticleFilter:
             return None
         self._laser_pose = np.asarray(laser_pose, dtype=np.float64)
         self._prepared_scan = scan  # the quality signal's missing test reads its readings (_with_missing)
+        self.quality.view(scan.angles)  # a narrow view's occlusion thresholds (quality.narrow_view)
         self._sweep_candidates = None
         if self.sweep_order is not None and sweep_of(scan) is not None:
             # a deskewed scan (mcl.deskew): as read until the beams' timing is decided, three readings weighed

@@ -285,6 +285,30 @@ def test_a_scan_short_of_the_map_but_through_no_wall_is_bad_only_below_occluded_
     assert _feed(off, [good] * 5 + [crowded] * 3)[-1] is True
 
 
+@pytest.mark.parametrize("fov_deg, share", [(59.0, 59.0 / 180.0), (90.0, 0.5), (180.0, 1.0), (270.0, 1.0),
+                                             (360.0, 1.0)])
+def test_a_narrow_view_scales_the_occlusion_thresholds_by_its_field_of_view(fov_deg, share):
+    # quality.narrow_view: scaled (the default). A person a metre away fills a third of a depth camera's 59-degree
+    # view: people crowding it left a correct track at match 0.29-0.43 with no beam through a wall
+    # (suites/depth-laser.yaml clutter-kinect), which a 180-degree laser's 0.4 would call bad and 0.45 refute.
+    # Scaled, the thresholds are 0.4 and 0.45 times 59 / 180 (0.131 and 0.148); 180 degrees and wider as given.
+    cfg = SimpleNamespace(**{**vars(QCFG), "occluded_below": 0.4, "occlusion_match": 0.45, "narrow_view": "scaled"})
+    q = ScanQuality(_box_grid(), cfg)
+    q.view(np.linspace(-np.radians(fov_deg) / 2, np.radians(fov_deg) / 2, 640))
+    assert q.view_share == pytest.approx(share)
+    assert q.occluded_below == pytest.approx(0.4 * share) and q.occlusion_match == pytest.approx(0.45 * share)
+    crowded = Fit(60, 0.35, 0.0)  # no beam through a wall: occlusion
+    assert q.bad(crowded) is (share == 1.0) and q.refutes(crowded) is (share == 1.0)
+    # a wrong place's scan, beams through walls, is bad and refutes at any width (lost_below, contradiction_above
+    # are not scaled); nor a scan matching under the scaled share
+    wrong = Fit(60, 0.35, 0.05)
+    assert q.bad(wrong) is True
+    assert q.bad(Fit(60, 0.1, 0.0)) is True and q.refutes(Fit(60, 0.1, 0.0)) is True
+    same = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(cfg), "narrow_view": "same"}))
+    same.view(np.linspace(-np.radians(fov_deg) / 2, np.radians(fov_deg) / 2, 640))
+    assert same.view_share == 1.0 and same.bad(crowded) is True and same.refutes(crowded) is True
+
+
 def test_near_misses_through_a_wall_count_as_occlusion_with_occluded_depth():
     # clutter-03 driven at 1.5 m/s (mcl eval --world speed=1.5): people hide half the walls for 5 s and pull the
     # estimate 0.2-0.3 m off; 2-8 % of its beams then end 0.35-0.55 m past a wall. With no such near miss exempt the
