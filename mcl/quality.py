@@ -116,6 +116,8 @@ class ScanQuality:
     lost_after).
     """
 
+    view_share = 1.0  # the scans' field of view over 180 degrees, at most 1 (view); 1 until a scan says
+
     def __init__(self, grid, cfg):
         self.cfg = cfg
         self.dist = np.ascontiguousarray(grid.distance, dtype=np.float32)
@@ -130,7 +132,6 @@ class ScanQuality:
         self._held: deque[float] = deque(maxlen=DOUBT_HISTORY)  # scores of the updates held (not lost, no doubt)
         self._before: float | None = None  # the held track's median score when the last lost episode began
         self._since_episode = 0  # updates since that episode began
-        self.view_share = 1.0  # the scan's field of view over 180 degrees, at most 1 (view)
 
     def view(self, angles) -> None:
         """Take the field of view of the scans to come from their beam ``angles`` (laser frame, rad).
