@@ -146,8 +146,10 @@ class ScanQuality:
         share = 1.0
         if getattr(self.cfg, "narrow_view", "same") == "scaled":
             a = np.asarray(angles, dtype=np.float64)
-            fov = float(np.max(a) - np.min(a)) if a.size > 1 else math.nan
-            if 0.0 < fov < math.pi:  # NaN too: as given
+            # each beam covers one increment: 180 beams 1 degree apart (aces, intel_lab: 179 degrees first to last)
+            # see 180 degrees, as 181 over 180 do
+            fov = float(np.max(a) - np.min(a)) * a.size / (a.size - 1) if a.size > 1 else math.nan
+            if 0.0 < fov < math.pi * (1.0 - 1e-9):  # NaN too: as given
                 share = fov / math.pi
         self.view_share = share
 

@@ -285,17 +285,22 @@ def test_a_scan_short_of_the_map_but_through_no_wall_is_bad_only_below_occluded_
     assert _feed(off, [good] * 5 + [crowded] * 3)[-1] is True
 
 
-@pytest.mark.parametrize("fov_deg, share", [(59.0, 59.0 / 180.0), (90.0, 0.5), (180.0, 1.0), (270.0, 1.0),
-                                             (360.0, 1.0)])
-def test_a_narrow_view_scales_the_occlusion_thresholds_by_its_field_of_view(fov_deg, share):
+@pytest.mark.parametrize("fov_deg, beams, share", [
+    (59.0, 640, 59.0 / 180.0 * 640 / 639),  # each beam covers one increment: 59.09 degrees
+    (90.0, 640, 90.0 / 180.0 * 640 / 639),
+    (179.0, 180, 1.0),  # aces, intel_lab, infinite_corridor: 180 beams 1 degree apart see 180 degrees, not 179
+    (179.5, 360, 1.0),  # fr079, fr101
+    (180.0, 181, 1.0), (270.0, 1081, 1.0), (360.0, 720, 1.0)])
+def test_a_narrow_view_scales_the_occlusion_thresholds_by_its_field_of_view(fov_deg, beams, share):
     # quality.narrow_view: scaled (the default). A person a metre away fills a third of a depth camera's 59-degree
     # view: people crowding it left a correct track at match 0.29-0.43 with no beam through a wall
     # (suites/depth-laser.yaml clutter-kinect), which a 180-degree laser's 0.4 would call bad and 0.45 refute.
     # Scaled, the thresholds are 0.4 and 0.45 times 59 / 180 (0.131 and 0.148); 180 degrees and wider as given.
     cfg = SimpleNamespace(**{**vars(QCFG), "occluded_below": 0.4, "occlusion_match": 0.45, "narrow_view": "scaled"})
     q = ScanQuality(_box_grid(), cfg)
-    q.view(np.linspace(-np.radians(fov_deg) / 2, np.radians(fov_deg) / 2, 640))
+    q.view(np.linspace(-np.radians(fov_deg) / 2, np.radians(fov_deg) / 2, beams))
     assert q.view_share == pytest.approx(share)
+    assert share < 1.0 or q.view_share == 1.0  # exactly: a wide laser's thresholds as given
     assert q.occluded_below == pytest.approx(0.4 * share) and q.occlusion_match == pytest.approx(0.45 * share)
     crowded = Fit(60, 0.35, 0.0)  # no beam through a wall: occlusion
     assert q.bad(crowded) is (share == 1.0) and q.refutes(crowded) is (share == 1.0)
@@ -305,7 +310,7 @@ def test_a_narrow_view_scales_the_occlusion_thresholds_by_its_field_of_view(fov_
     assert q.bad(wrong) is True
     assert q.bad(Fit(60, 0.1, 0.0)) is True and q.refutes(Fit(60, 0.1, 0.0)) is True
     same = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(cfg), "narrow_view": "same"}))
-    same.view(np.linspace(-np.radians(fov_deg) / 2, np.radians(fov_deg) / 2, 640))
+    same.view(np.linspace(-np.radians(fov_deg) / 2, np.radians(fov_deg) / 2, beams))
     assert same.view_share == 1.0 and same.bad(crowded) is True and same.refutes(crowded) is True
 
 
@@ -391,8 +396,8 @@ def test_a_narrow_view_exempts_near_misses_without_waiting_for_the_fit_to_sink()
     q = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(cfg), "contradiction_above": 0.1}))
     q.view(np.linspace(-0.5, 0.5, 181))
     assert _feed(q, held + [Fit(60, 0.57, 0.07, 0.02)] * 3)[-1] is True
-    assert _feed(ScanQuality(_box_grid(), SimpleNamespace(**{**vars(cfg), "contradiction_above": 0.1})),
-                 held + [Fit(60, 0.57, 0.12, 0.0)] * 3)[-1] is True
+    wide = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(cfg), "contradiction_above": 0.1}))  # no view: 180
+    assert _feed(wide, held + [Fit(60, 0.57, 0.12, 0.0)] * 3)[-1] is True
     q.reset(lost=False)
     assert _feed(q, held + [Fit(60, 0.57, 0.12, 0.0)] * 3)[-1] is True
     # nor within doubt_updates of a lost belief (a place a search just settled on)
