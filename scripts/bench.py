@@ -6,7 +6,8 @@ Sections (``--section``, default all):
 ``kernels``
 
 Stages: prediction with map rejection (noise drawing included), likelihood
-field, normalisation + systematic resampling, and the whole update
+field, normalisation + systematic resampling, the estimate's clusters (a
+12 m-wide cloud and one over the whole map), and the whole update
 (predict + correct + normalise + resample). For 1k, 10k and 100k particles,
 60 and 360 beams, and 1 and 2 numba threads.
 
@@ -62,6 +63,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from mcl.clusters import cluster_labels  # noqa: E402
 from mcl.motion import OdometryMotionModel, OmniMotionModel, allowed_mask  # noqa: E402
 from mcl.resampling import normalize_log_weights, resample  # noqa: E402
 from mcl.sensors import LikelihoodField, beam_endpoints  # noqa: E402
@@ -533,6 +535,11 @@ def bench_kernels(args) -> None:
                     resample("systematic", logw, rng)
 
                 rows.append(("normalise+resample", None, resamp))
+                # the estimate's clusters (mcl.clusters, serial): this cloud (a 12 m disc, any heading: a spreading
+                # or lost cloud) and one over the whole map's free space (a global search)
+                everywhere = particles_near_centre(grid, mask, n, rng, radius=math.inf)
+                rows.append(("clusters", None, lambda: cluster_labels(p, 0.5, math.pi / 6)))
+                rows.append(("clusters (map)", None, lambda q=everywhere: cluster_labels(q, 0.5, math.pi / 6)))
                 for b, e in beams.items():
                     state = {"p": p.copy(), "logw": np.full(n, -math.log(n))}
 

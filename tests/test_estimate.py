@@ -90,30 +90,51 @@ def test_labels_match_a_numpy_flood_fill_oracle():
         n = int(rng.integers(5, 200))
         p = np.vstack([rng.uniform(-3, 3, n), rng.uniform(-3, 3, n), rng.uniform(-math.pi, math.pi, n)])
         labels, n_c = cluster_labels(p, 0.5, math.pi / 6)
-        n_th = 12
-        cells = np.stack([np.floor(p[0] / 0.5), np.floor(p[1] / 0.5),
-                          np.floor((p[2] + math.pi) / (2 * math.pi / n_th)) % n_th]).astype(int).T
-        occ = {tuple(c) for c in cells}
-        comp, k = {}, 0
-        for c in sorted(occ):
-            if c in comp:
-                continue
-            stack, comp[c] = [c], k
-            while stack:
-                x, y, t = stack.pop()
-                for dx in (-1, 0, 1):
-                    for dy in (-1, 0, 1):
-                        for dt in (-1, 0, 1):
-                            q = (x + dx, y + dy, (t + dt) % n_th)
-                            if q in occ and q not in comp:
-                                comp[q] = k
-                                stack.append(q)
-            k += 1
+        oracle, k = _flood_fill_labels(p, 0.5, 12)
         assert n_c == k, trial
-        oracle = np.array([comp[tuple(c)] for c in cells])
         # same partition (label numbering may differ)
         pairs = set(zip(labels.tolist(), oracle.tolist()))
         assert len(pairs) == k == len({a for a, _ in pairs}) == len({b for _, b in pairs}), trial
+
+
+def _flood_fill_labels(p, cell_xy, n_th):
+    """Each particle's component among the occupied (x, y, theta) cells (26-neighbourhood, theta periodic), by a
+    breadth-first search over a set of cells, numbered in the order of each component's first cell (x, y, theta)."""
+    cells = np.stack([np.floor(p[0] / cell_xy), np.floor(p[1] / cell_xy),
+                      np.floor((p[2] + math.pi) / (2 * math.pi / n_th)) % n_th]).astype(int).T
+    occ = {tuple(c) for c in cells}
+    comp, k = {}, 0
+    for c in sorted(occ):
+        if c in comp:
+            continue
+        stack, comp[c] = [c], k
+        while stack:
+            x, y, t = stack.pop()
+            for dx in (-1, 0, 1):
+                for dy in (-1, 0, 1):
+                    for dt in (-1, 0, 1):
+                        q = (x + dx, y + dy, (t + dt) % n_th)
+                        if q in occ and q not in comp:
+                            comp[q] = k
+                            stack.append(q)
+        k += 1
+    return np.array([comp[tuple(c)] for c in cells]), k
+
+
+@pytest.mark.parametrize("n_th", [1, 2, 3, 12, 63])
+@pytest.mark.parametrize("span", [1.5, 4.0, 12.0])
+def test_labels_are_the_flood_fills_numbered_alike_at_any_theta_resolution(n_th, span):
+    # mcl.kernels.clusters.label_cells walks each neighbouring row of the sorted cells with a pointer (only the rows
+    # after a cell's own; theta + 1 in its own row, wrapping): the components and their numbering must be the flood
+    # fill's for one theta cell (every heading one), two (theta - 1 = theta + 1), three, and fine ones, in clouds
+    # dense enough that most cells have neighbours in every direction (1.5 m) and sparse ones (12 m).
+    rng = np.random.default_rng(n_th * 100 + int(span))
+    n = 3000
+    p = np.vstack([rng.uniform(-span, span, n), rng.uniform(-span, span, n), rng.uniform(-math.pi, math.pi, n)])
+    labels, n_c = cluster_labels(p, 0.5, 2 * math.pi / n_th)
+    oracle, k = _flood_fill_labels(p, 0.5, n_th)
+    assert n_c == k
+    np.testing.assert_array_equal(labels, oracle)
 
 
 def test_occupied_cells_counted_or_sorted_equal_numpys_unique():

@@ -3,7 +3,7 @@
 Only the occupied cells exist (at most one per particle), sorted by their
 key, so the cost grows with the number of particles and never with the map
 or with the spread of the cloud. Pure function over arrays; serial (a
-union-find is sequential, and at 100,000 particles it takes a few ms).
+union-find is sequential).
 """
 
 import numpy as np
@@ -19,6 +19,16 @@ def _find(parent, a):
 
 
 @njit(cache=True)
+def _union(parent, a, b):
+    ra = _find(parent, a)
+    rb = _find(parent, b)
+    if ra < rb:
+        parent[rb] = ra
+    elif rb < ra:
+        parent[ra] = rb
+
+
+@njit(cache=True)
 def label_cells(keys, ny, n_th, out):
     """Label the 26-connected components of occupied cells, theta periodic; return their number.
 
@@ -28,30 +38,42 @@ def label_cells(keys, ny, n_th, out):
     out: (M,) int64, receives each cell's component, numbered 0, 1, ... in
     the order of each component's first cell (the order ``scipy.ndimage.label``
     meets them in a C-order scan).
+
+    A "row" is one (ix, iy) column of theta cells: keys row * n_th .. row * n_th + n_th - 1. Each cell is joined
+    to its neighbours in its own row (theta + 1, wrapping) and in the four rows after it in key order,
+    (ix, iy + 1), (ix + 1, iy - 1), (ix + 1, iy) and (ix + 1, iy + 1), at theta - 1, theta or theta + 1; the
+    other neighbours are joined from their side. The keys are sorted, so the start of each of those rows in
+    ``keys`` only moves forward as the cell does: one pointer per row offset walks the keys once, instead of a
+    binary search for each of the 26 neighbours (spread clouds of 76,000 cells: 120 ms).
     """
     m = keys.shape[0]
     parent = np.arange(m)
+    offsets = np.array([1, ny - 1, ny, ny + 1], dtype=np.int64)  # ny >= 3: distinct rows after the cell's own
+    start = np.zeros(4, dtype=np.int64)  # per offset: index of the first key at or after that row's first
+    own = 0  # index of the first key of the cell's own row
     for a in range(m):
         k = keys[a]
         it = k % n_th
-        row = k // n_th  # ix * ny + iy
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                nrow = row + dx * ny + dy
-                for dt in range(-1, 2):
-                    if dx == 0 and dy == 0 and dt == 0:
-                        continue
-                    nt = (it + dt) % n_th
-                    nk = nrow * n_th + nt
-                    b = np.searchsorted(keys, nk)
-                    if b < m and keys[b] == nk:
-                        ra = _find(parent, a)
-                        rb = _find(parent, b)
-                        if ra != rb:
-                            if ra < rb:
-                                parent[rb] = ra
-                            else:
-                                parent[ra] = rb
+        row = k // n_th
+        while keys[own] < row * n_th:
+            own += 1
+        if n_th > 1:  # theta + 1 in the same row: the next key, or the row's first when it wraps to 0
+            if it + 1 < n_th:
+                if a + 1 < m and keys[a + 1] == k + 1:
+                    _union(parent, a, a + 1)
+            elif keys[own] == row * n_th:
+                _union(parent, a, own)
+        for j in range(4):
+            lo = (row + offsets[j]) * n_th
+            b = start[j]
+            while b < m and keys[b] < lo:
+                b += 1
+            start[j] = b
+            while b < m and keys[b] < lo + n_th:
+                d = abs(keys[b] - lo - it)
+                if d <= 1 or d == n_th - 1:  # theta - 1, theta, theta + 1 (periodic)
+                    _union(parent, a, b)
+                b += 1
     count = 0
     label_of_root = np.full(m, -1, dtype=np.int64)
     for a in range(m):
