@@ -11,7 +11,8 @@ over (x, y, theta): cells of ``cell_xy`` metres by ``cell_theta`` radians,
 periodic (the first and last theta slices are neighbours). Only the occupied
 cells are stored (``np.unique`` of the particles' cell keys, at most N), and
 a union-find over them (``mcl.kernels.clusters``) joins neighbours found by
-binary search, so the cost grows with N alone: never with the map's size or
+walking the sorted cells (a pointer for each neighbouring row), so the cost
+grows with N alone: never with the map's size or
 the cloud's spread (a dense grid over the cloud's bounding box took 30 ms per
 update on a 250 m map once recovery had spread particles over it).
 """
