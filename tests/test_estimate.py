@@ -152,6 +152,19 @@ def test_occupied_cells_counted_or_sorted_equal_numpys_unique():
         assert np.array_equal(cells, u) and np.array_equal(inverse, inv.ravel()), (n, span)
 
 
+@pytest.mark.parametrize("span", [1, 2, 2048, 2049, 1 << 22, (1 << 22) + 1, 10**12])
+def test_the_radix_sort_of_cell_keys_is_numpys_stable_argsort(span):
+    # A spread cloud's keys are sorted by 11-bit digits (mcl.kernels.clusters._radix_order), a pass a digit: the
+    # order, ties included, must be NumPy's stable argsort's, for key ranges of one pass, one pass and a bit, two
+    # passes and a bit, and four (repeated keys, so ties matter).
+    from mcl.kernels.clusters import _radix_order
+
+    rng = np.random.default_rng(span % 1000)
+    keys = rng.integers(0, span, 20_000).astype(np.int64)
+    keys[:5] = span - 1  # the largest key, so every digit pass is needed
+    np.testing.assert_array_equal(_radix_order(keys, span), np.argsort(keys, kind="stable"))
+
+
 def test_huge_spread_keeps_full_resolution_without_a_dense_grid():
     # 1,000 particles over 10 km: 200,000 x 200,000 x 63 cells at full resolution (a dense grid could not be
     # allocated); only the occupied cells are stored, so every particle is its own cluster, and two particles

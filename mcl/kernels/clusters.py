@@ -117,12 +117,44 @@ def cell_keys(particles, cell_xy, n_th, keys):
 
 
 @njit(cache=True)
+def _radix_order(keys, n_keys):
+    """The indices that sort ``keys`` (N,) int64, each in [0, n_keys): a least-significant-digit radix sort, 11 bits
+    a pass (two passes up to 4 million key values: a 250 m map's cells), stable, so the order of
+    ``np.argsort(kind="mergesort")``; the keys are carried along so that each pass reads in order. 200,000 keys over
+    a 150 m building's 1.1 million: 6 ms, where the merge sort took 34."""
+    n = keys.shape[0]
+    order = np.arange(n)
+    ks = keys.copy()
+    order2 = np.empty(n, dtype=np.int64)
+    ks2 = np.empty(n, dtype=np.int64)
+    count = np.empty(2049, dtype=np.int64)
+    shift = 0
+    while True:
+        count[:] = 0
+        for i in range(n):
+            count[((ks[i] >> shift) & 0x7FF) + 1] += 1
+        for d in range(2048):
+            count[d + 1] += count[d]
+        for i in range(n):
+            d = (ks[i] >> shift) & 0x7FF
+            c = count[d]
+            order2[c] = order[i]
+            ks2[c] = ks[i]
+            count[d] = c + 1
+        order, order2 = order2, order
+        ks, ks2 = ks2, ks
+        shift += 11
+        if (n_keys - 1) >> shift <= 0:
+            return order
+
+
+@njit(cache=True)
 def occupied_cells(keys, n_keys, cells, inverse):
     """``np.unique(keys, return_inverse=True)`` into ``cells`` (the sorted distinct keys, first m entries) and
     ``inverse`` (N,) (each key's index among them); return m.
 
     Keys spanning at most ``4 N + 4096`` values (a tracked cloud: a few cells) are counted, O(N + n_keys); wider
-    ones are sorted, O(N log N) (a spread cloud's range would not fit in a count).
+    ones are radix-sorted, O(N) a pass (a spread cloud's range would not fit in a count).
     """
     n = keys.shape[0]
     if n_keys <= 4 * n + 4096:
@@ -138,7 +170,7 @@ def occupied_cells(keys, n_keys, cells, inverse):
         for i in range(n):
             inverse[i] = rank[keys[i]]
         return m
-    order = np.argsort(keys, kind="mergesort")
+    order = _radix_order(keys, n_keys)
     m = 0
     for j in range(n):
         i = order[j]
