@@ -646,7 +646,7 @@ def test_a_run_past_its_recording_budget_logs_the_cloud_on_fewer_updates(tmp_pat
     start = yaml.safe_load((tmp_path / "w" / "sim.yaml").read_text())["start_pose"]
 
     def go(name, *sets):
-        # tracking from the start pose: 5,000 particles, each cloud logged as 1,000 (a global search's 100,000 took 4x
+        # tracking from the start pose: 5,000 particles, each cloud logged as 1,000 (a global search's 100,000 took twice
         # the time for the same recording)
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
             f"map={tmp_path / 'w' / 'map.yaml'}", f"log={tmp_path / 'w' / 'log.clf'}", "rerun.mode=save",
