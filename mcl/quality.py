@@ -144,7 +144,7 @@ class ScanQuality:
         with walls, took it (suites/depth-laser.yaml clutter-kinect, every seed of 6: docs/measurements.md,
         "Fifty-first session")."""
         share = 1.0
-        if getattr(self.cfg, "narrow_view", "same") == "scaled":
+        if self.cfg.narrow_view == "scaled":
             a = np.asarray(angles, dtype=np.float64)
             # each beam covers one increment: 180 beams 1 degree apart (aces, intel_lab: 179 degrees first to last)
             # see 180 degrees, as 181 over 180 do

@@ -39,7 +39,7 @@ def _scan_from(pose, grid, n=90):
 T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
 QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5, doubt_margin=0.0, doubt_updates=50,
                        contradiction_above=0.0, lost_at_once_below=-2.0, occluded_below=1.0, occluded_missing=-1.0,
-                       occluded_depth=0.0, occluded_prior=2.0, collapse_from=2.0)
+                       occluded_depth=0.0, occluded_prior=2.0, collapse_from=2.0, narrow_view="same")
 
 
 def test_fit_is_high_at_the_true_pose_and_low_away_from_it():
