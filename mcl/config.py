@@ -195,6 +195,9 @@ class LikelihoodFieldConfig:
     interior: Literal["zero", "depth"] = "depth"
     # null: 0.05 m or one cell of the map, whichever is more (mcl.sensors.DEPTH_TOLERANCE)
     interior_tolerance: float | None = field(default=None, metadata=_rng(0.0))  # m
+    # depth only: an endpoint deeper than this inside an obstacle scores as this deep (a return from behind furniture
+    # moved since the map was made); null (the default): no bound (mcl.sensors._depth_cap)
+    interior_cap: float | None = field(default=None, metadata=_rng(0.0))  # m
     # the same choice while the laser is tempered (a global search, or lost recovery spreading poses)
     search_interior: Literal["zero", "depth"] = "zero"
     # where a wall's surface lies in its cells: centre (a SLAM map marks the cell its returns fall in: d from cell

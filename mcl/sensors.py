@@ -7,8 +7,9 @@ A scan is turned once into beam endpoints in the robot frame
 
 where d_k = min(distance from endpoint k (seen from pose x) to the nearest
 occupied cell centre, likelihood_max_dist). On an occupied cell d is the
-cell's depth (``interior: depth``, the default, ``field_distance``) or 0
-(``interior: zero``, AMCL's field and the book's as printed); while the filter
+cell's depth (``interior: depth``, the default, ``field_distance``; at most
+``interior_cap``) or 0 (``interior: zero``, AMCL's field and the book's as
+printed); while the filter
 searches or is lost, ``search_interior`` chooses (default zero). The per-cell term
 is tabulated once per map as float32, so scoring is one rotation per particle and one
 table gather per beam (``mcl.kernels.likelihood``).
@@ -234,13 +235,15 @@ def field_distance(grid, cfg, interior: str | None = None) -> np.ndarray:
     """The d the likelihood field scores, per cell: ``grid.distance`` (``interior: zero``: 0 on every occupied
     cell, AMCL's field and the book's as printed) or ``grid.surface_distance(interior_tolerance)`` (``interior:
     depth``: on an occupied cell its depth less the tolerance, as a map draws its walls a cell or so thicker than
-    the surface the laser sees); with ``surface: face`` a new array measured to the cells' faces (``field_rows``).
+    the surface the laser sees, and at most ``interior_cap``); with ``surface: face`` or a cap, a new array
+    (``field_rows``).
     ``cfg``: a SensorConfig or a flat namespace; ``interior`` overrides its ``interior`` (the search field passes
     ``search_interior``)."""
     from mcl.config import sensor_model_view
 
     view = sensor_model_view(cfg, "likelihood_field")
-    if surface_at_faces(view):
+    tolerance = _depth_tolerance(view, interior, grid)
+    if surface_at_faces(view) or (tolerance is not None and _depth_cap(view) is not None):
         rows, patches = field_rows(grid, view, interior)
         d = np.empty(np.shape(grid.distance), dtype=np.float32)
         step = max(1, (1 << 20) // max(d.shape[1], 1))
@@ -249,7 +252,6 @@ def field_distance(grid, cfg, interior: str | None = None) -> np.ndarray:
         for y0, y1, x0, x1, mine, metres in patches:
             d[y0:y1, x0:x1][mine] = metres
         return d
-    tolerance = _depth_tolerance(view, interior, grid)
     return grid.distance if tolerance is None else grid.surface_distance(tolerance)
 
 
@@ -259,11 +261,13 @@ def field_rows(grid, cfg, interior: str | None = None):
     (y0, y1, x0, x1, mine, metres) per tile, ``mine`` the tile's bool mask of cells set to ``metres`` (the cells
     deeper than one cell under ``interior: depth``, ``grid.surface_patches``). The likelihood field's tables and
     the recording's field layer are made from these (a 144 M-cell map: 576 MB per whole copy). A grid without
-    ``surface_patches`` (tests' stand-ins) gives rows of its ``surface_distance`` and no patches."""
+    ``surface_patches`` (tests' stand-ins) gives rows of its ``surface_distance`` and no patches. ``interior_cap``
+    bounds the depths (the patches'; the rows' occupied cells are at most half a cell deep, face, or 0, centre)."""
     from mcl.config import sensor_model_view
 
     view = sensor_model_view(cfg, "likelihood_field")
     tolerance = _depth_tolerance(view, interior, grid)
+    cap = np.float32(np.inf if tolerance is None or _depth_cap(view) is None else _depth_cap(view))
     surface_patches = getattr(grid, "surface_patches", None)
     dist = grid.distance
     if surface_at_faces(view):
@@ -280,17 +284,21 @@ def field_rows(grid, cfg, interior: str | None = None):
             base = dist[r0:r1]
             d = np.maximum(base - half, np.float32(0.0))
             occ = occupied[r0:r1]
-            d[occ] = 0.0 if lift is None else np.maximum(base[occ] + lift, np.float32(0.0))
+            d[occ] = 0.0 if lift is None else np.clip(base[occ] + lift, np.float32(0.0), cap)
             return d
 
         patches = ([] if lift is None or surface_patches is None else
-                   [(y0, y1, x0, x1, mine, np.maximum(metres + lift, np.float32(0.0)))
+                   [(y0, y1, x0, x1, mine, np.clip(metres + lift, np.float32(0.0), cap))
                     for y0, y1, x0, x1, mine, metres in surface_patches(0.0)])
         return face_rows, patches
     if tolerance is not None and surface_patches is None:
         dist, patches = grid.surface_distance(tolerance), []
+        if np.isfinite(cap):  # a stand-in's whole depth field: capped on its occupied cells, in a copy
+            dist = np.where(grid.occupied, np.minimum(dist, cap), dist).astype(np.float32)
     else:
         patches = [] if tolerance is None else surface_patches(tolerance)
+        if np.isfinite(cap):
+            patches = [(y0, y1, x0, x1, mine, np.minimum(metres, cap)) for y0, y1, x0, x1, mine, metres in patches]
     return (lambda r0, r1: dist[r0:r1]), patches
 
 
@@ -302,6 +310,20 @@ def surface_at_faces(cfg) -> bool:
 
 
 DEPTH_TOLERANCE = 0.05  # m: ``interior_tolerance: null`` is this or one cell of the map, whichever is more
+
+
+def _depth_cap(cfg) -> float | None:
+    """``interior_cap`` of the likelihood field's view ``cfg`` (m; None: the depth is not bounded; a flat namespace
+    without the key: None). An endpoint deeper inside a mapped obstacle than the cap scores as one the cap deep: a
+    return from the wall behind furniture moved since the map was made lies inside the furniture the map still
+    shows, at the true pose. Scored by its full depth (0.3 m: 4.5 nats under a hit, as bad as a reading 2 m from any
+    wall), that one beam made a pose 0.6 m along a corridor, where it met the furniture's face, outscore the true one
+    by 3-5 nats a scan, and the track followed (suites/heldout6.yaml corridor-270-moved-furniture-h13: max 0.70 and
+    1.14 m; with a cap of 0.1 m, 0.29 and 0.43 m: docs/measurements.md, "Fifty-third session"). Below the cap the
+    depth still scores: a pose too far forward sinks many returns into the walls ahead. Off by default: the large
+    generated buildings' searches tell look-alike rooms apart by the full depth."""
+    cap = getattr(cfg, "interior_cap", None)
+    return None if cap is None else float(cap)
 
 
 def _depth_tolerance(cfg, interior: str | None, grid=None) -> float | None:
