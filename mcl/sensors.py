@@ -267,7 +267,8 @@ def field_rows(grid, cfg, interior: str | None = None):
 
     view = sensor_model_view(cfg, "likelihood_field")
     tolerance = _depth_tolerance(view, interior, grid)
-    cap = np.float32(np.inf if tolerance is None or _depth_cap(view) is None else _depth_cap(view))
+    cap = None if tolerance is None else _depth_cap(view)  # depth only
+    top = np.float32(np.inf if cap is None else cap)
     surface_patches = getattr(grid, "surface_patches", None)
     dist = grid.distance
     if surface_at_faces(view):
@@ -284,21 +285,21 @@ def field_rows(grid, cfg, interior: str | None = None):
             base = dist[r0:r1]
             d = np.maximum(base - half, np.float32(0.0))
             occ = occupied[r0:r1]
-            d[occ] = 0.0 if lift is None else np.clip(base[occ] + lift, np.float32(0.0), cap)
+            d[occ] = 0.0 if lift is None else np.clip(base[occ] + lift, np.float32(0.0), top)
             return d
 
         patches = ([] if lift is None or surface_patches is None else
-                   [(y0, y1, x0, x1, mine, np.clip(metres + lift, np.float32(0.0), cap))
+                   [(y0, y1, x0, x1, mine, np.clip(metres + lift, np.float32(0.0), top))
                     for y0, y1, x0, x1, mine, metres in surface_patches(0.0)])
         return face_rows, patches
     if tolerance is not None and surface_patches is None:
         dist, patches = grid.surface_distance(tolerance), []
-        if np.isfinite(cap):  # a stand-in's whole depth field: capped on its occupied cells, in a copy
-            dist = np.where(grid.occupied, np.minimum(dist, cap), dist).astype(np.float32)
+        if cap is not None:  # a stand-in's whole depth field: capped on its occupied cells, in a copy
+            dist = np.where(grid.occupied, np.minimum(dist, top), dist).astype(np.float32)
     else:
         patches = [] if tolerance is None else surface_patches(tolerance)
-        if np.isfinite(cap):
-            patches = [(y0, y1, x0, x1, mine, np.minimum(metres, cap)) for y0, y1, x0, x1, mine, metres in patches]
+        if cap is not None:
+            patches = [(y0, y1, x0, x1, mine, np.minimum(metres, top)) for y0, y1, x0, x1, mine, metres in patches]
     return (lambda r0, r1: dist[r0:r1]), patches
 
 
