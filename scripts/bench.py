@@ -567,6 +567,40 @@ def bench_kernels(args) -> None:
     finally:
         numba.set_num_threads(saved)
     bench_beam(grid, mask, ranges, angles, max_range, laser_pose, rng, args.quick)
+    bench_uniform(args.quick)
+
+
+def bench_uniform(quick: bool) -> None:
+    """Poses drawn uniformly over a generated 150-200 m building (a global search's first updates, a re-seed's
+    oversampled candidates, ``filter.global_density``) scored with 60 beams in draw order and in cache order
+    (``mcl.filter.in_cache_order``: 4 m blocks, then heading); the ordering's own time beside them."""
+    import tempfile
+
+    from mcl.datasets.carmen import read_carmen
+    from mcl.filter import in_cache_order
+    from mcl.maps import load_map
+    from mcl.simulate import simulate
+
+    with tempfile.TemporaryDirectory() as tmp:
+        simulate(tmp, kind="large", seed=1, duration=2.0)
+        grid = load_map(Path(tmp) / "map.yaml")
+        scan = read_carmen(Path(tmp) / "log.clf").scans[0]
+    field = LikelihoodField(grid, sensor_cfg(60))
+    e = beam_endpoints(np.asarray(scan.ranges, float), scan.angles, scan.max_range, sensor_cfg(60), None)
+    rng = np.random.default_rng(0)
+    print(f"\n# uniform poses over a generated large building ({grid.width} x {grid.height} cells, "
+          f"{grid.width * grid.height * 4 / 2**20:.0f} MB table), {e.shape[1]} beams, "
+          f"{numba.get_num_threads()} threads: ms per call (median of 5)")
+    print(f"{'N':>9}{'draw order':>12}{'cache order':>13}{'ordering':>10}")
+    for n in (200_000,) if quick else (200_000, 2_000_000):
+        p = grid.sample_free(n, rng)
+        out = np.empty(n)
+        in_cache_order(p[:, :8192], grid)  # compile / load
+        drawn = timed(lambda: field.log_likelihood(p, e, out=out), 5)[0] * 1e3
+        order_ms = timed(lambda: in_cache_order(p, grid), 5)[0] * 1e3
+        q = in_cache_order(p, grid)
+        ordered = timed(lambda: field.log_likelihood(q, e, out=out), 5)[0] * 1e3
+        print(f"{n:>9}{drawn:12.1f}{ordered:13.1f}{order_ms:10.1f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -165,6 +165,39 @@ def test_the_radix_sort_of_cell_keys_is_numpys_stable_argsort(span):
     np.testing.assert_array_equal(_radix_order(keys, span), np.argsort(keys, kind="stable"))
 
 
+def test_uniform_draws_come_in_cache_order_the_same_poses_each_once():
+    # A filter's uniform draws over free space (a global start, a re-seed, a search's oversampled candidates) are put
+    # in cache order (mcl.filter.in_cache_order): the same poses, each once, by 4 m block of the map row by row and
+    # then by heading bin, ties in draw order. Small draws (under 4,096) stay in draw order.
+    from mcl.config import Config
+    from mcl.filter import _CACHE_ORDER_MIN, ParticleFilter, in_cache_order
+    from mcl.maps import OccupancyGrid
+
+    occ = np.zeros((900, 1300), dtype=np.int8)  # 65 m x 45 m: 17 x 13 blocks
+    occ[[0, -1], :] = 100
+    occ[:, [0, -1]] = 100
+    grid = OccupancyGrid.from_occupancy(occ, 0.05, (-20.0, 3.0))
+    drawn = grid.sample_free(50_000, np.random.default_rng(3))
+    got = in_cache_order(drawn, grid)
+    assert got.shape == drawn.shape and got.flags.c_contiguous
+    bx = np.floor((drawn[0] + 20.0) / 4.0).astype(np.int64)
+    by = np.floor((drawn[1] - 3.0) / 4.0).astype(np.int64)
+    th = np.floor((drawn[2] + np.pi) * (256 / (2 * np.pi))).astype(np.int64) % 256
+    order = np.lexsort((np.arange(drawn.shape[1]), th, bx, by))  # block row, block, heading; then draw order
+    np.testing.assert_array_equal(got, drawn[:, order])
+    assert len(np.unique(by[order])) == 12 and len(np.unique(bx)) == 17  # every block row and column is used
+
+    cfg = Config()
+    pf = ParticleFilter(cfg, grid, rng=np.random.default_rng(1))
+    big = pf.sample_uniform(_CACHE_ORDER_MIN, np.random.default_rng(4))
+    again = grid.sample_free(_CACHE_ORDER_MIN, np.random.default_rng(4), clearance=cfg.motion.robot_radius)
+    np.testing.assert_array_equal(big, in_cache_order(again, grid))
+    assert not np.array_equal(big, again)
+    small = pf.sample_uniform(_CACHE_ORDER_MIN - 1, np.random.default_rng(4))
+    np.testing.assert_array_equal(small, grid.sample_free(_CACHE_ORDER_MIN - 1, np.random.default_rng(4),
+                                                          clearance=cfg.motion.robot_radius))
+
+
 def test_huge_spread_keeps_full_resolution_without_a_dense_grid():
     # 1,000 particles over 10 km: 200,000 x 200,000 x 63 cells at full resolution (a dense grid could not be
     # allocated); only the occupied cells are stored, so every particle is its own cluster, and two particles
