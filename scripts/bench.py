@@ -9,7 +9,9 @@ Stages: prediction with map rejection (noise drawing included), likelihood
 field, normalisation + systematic resampling, the estimate's clusters (a
 12 m-wide cloud and one over the whole map), and the whole update
 (predict + correct + normalise + resample). For 1k, 10k and 100k particles,
-60 and 360 beams, and 1 and 2 numba threads.
+60 and 360 beams, and 1 and 2 numba threads. Last, poses uniform over a
+generated large building (a global search's candidates) scored in draw order
+and in cache order (``mcl.filter.in_cache_order``).
 
 Each figure is the median of consecutive calls (threads stay awake). A
 parallel call after the threads have idled pays an OpenMP wake-up; the
@@ -586,7 +588,7 @@ def bench_uniform(quick: bool) -> None:
         grid = load_map(Path(tmp) / "map.yaml")
         scan = read_carmen(Path(tmp) / "log.clf").scans[0]
     field = LikelihoodField(grid, sensor_cfg(60))
-    e = beam_endpoints(np.asarray(scan.ranges, float), scan.angles, scan.max_range, sensor_cfg(60), None)
+    e = beam_endpoints(np.asarray(scan.ranges, float), scan.angles, scan.max_range, sensor_cfg(60), np.zeros(3))
     rng = np.random.default_rng(0)
     print(f"\n# uniform poses over a generated large building ({grid.width} x {grid.height} cells, "
           f"{grid.width * grid.height * 4 / 2**20:.0f} MB table), {e.shape[1]} beams, "
