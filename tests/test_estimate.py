@@ -173,7 +173,7 @@ def test_uniform_draws_come_in_cache_order_the_same_poses_each_once():
     from mcl.filter import _CACHE_ORDER_MIN, ParticleFilter, in_cache_order
     from mcl.maps import OccupancyGrid
 
-    occ = np.zeros((900, 1300), dtype=np.int8)  # 65 m x 45 m: 17 x 13 blocks
+    occ = np.zeros((900, 1300), dtype=np.int8)  # 65 m x 45 m: 17 x 12 blocks of 4 m
     occ[[0, -1], :] = 100
     occ[:, [0, -1]] = 100
     grid = OccupancyGrid.from_occupancy(occ, 0.05, (-20.0, 3.0))

@@ -948,9 +948,9 @@ def test_a_robot_kidnapped_in_a_corridor_is_searched_for_not_spread_onto_the_old
     # The control pins the unmatched search: with the default's scan matching (filter.search_refine 3,
     # search_settled_std 1) the matched search finds the robot without the rule too. Since uniform draws come in
     # cache order (fifty-fourth session), the systematic resample of a search is stratified over the map, and the
-    # control's late global re-seed finds the robot more often: seeds 1-8, the default back after 0.6-1.0 s on every
-    # seed, the control after 2.2-4.4 s on 7 and never on seed 7 (before: never on seeds 2 and 3). The bar: the
-    # rule brings it back at least a second sooner (seed 3: 1.0 against 2.4 s).
+    # control's late global re-seed found the robot on seed 3 (never before): seeds 1-8 in cache order, the default
+    # back after 0.6-1.0 s on every seed, the control after 2.2-4.4 s on 7 and never on seed 7. The bar: the rule
+    # brings it back at least a second sooner (seed 3: 1.0 against 2.4 s).
     before = back_after(tmp_path / "before", "quality.collapse_from=2", "filter.search_refine=0",
                         "filter.search_settled_std=0")
     assert before is None or before >= now + 1.0, (now, before)
