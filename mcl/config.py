@@ -100,6 +100,9 @@ class FilterConfig:
     # ... or this many seconds of log time lost (after at least quality.lost_after lost updates), whichever comes
     # first: a log with a scan every 3 s (intel_lab) is otherwise lost for 30 s before the re-seed. 0: updates only
     recovery_global_after_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))
+    # lost: a lost call within this many seconds of log time after a lost episode that ended without a re-seed (the
+    # track, or a spread pose near it, fitting again) re-seeds at once (mcl.adaptive.LostRecovery.relapsed; 0: off)
+    recovery_relapse_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))
     recovery_reseed: bool = True  # lost: after global_after lost updates add a whole global set (not 5 % a step)
     recovery_probation: int = field(default=0, metadata=_rng(0, 1_000_000))  # updates after a search a lost call re-seeds
     # lost: after a global search, re-seed when over stall_window s of log time the odometry moved >= stall_travel m

@@ -82,6 +82,28 @@ def test_the_evidence_since_the_estimates_last_jump_is_summed_apart(tmp_path):
     assert 0.0 < c["gain_held"] < c["gain"] - 1_000.0
 
 
+def test_the_timeline_lists_each_judged_scan_and_sums_to_the_totals(tmp_path, capsys):
+    # the jump run: 1.5 m off from 20 s, 3.5 m from 30 s; the window ends 30 s after the kidnap at 10 s
+    from ambiguity import main
+
+    d, row = _run_dir(tmp_path, "jump", 1.5, mode="kidnapped", then=3.5)
+    c = classify(d, row, {})
+    tl = c["timeline"]
+    assert len(tl) == c["scans"]
+    t, off, gain, ref, est = (np.array(col) for col in zip(*tl))
+    assert np.all(np.diff(t) > 0) and t[0] >= row["kidnap_t"] + 2.0 and t[-1] <= row["kidnap_t"] + 30.0
+    # the offsets the trajectory was made with, before and after the jump at 30 s (to the robot's left)
+    t0 = row["kidnap_t"] - 10.0  # the log's first time
+    assert np.allclose(off[t < t0 + 29.9], 1.5, atol=1e-6) and np.allclose(off[t > t0 + 30.1], 3.5, atol=1e-6)
+    assert gain.sum() == pytest.approx(c["gain"]) and np.median(ref) == pytest.approx(c["reference"])
+    assert np.median(est) == pytest.approx(c["estimate"])
+    (tmp_path / "eval" / "runs" / "demo" / "kidnapped" / "default").mkdir(parents=True)
+    d.rename(tmp_path / "eval" / "runs" / "demo" / "kidnapped" / "default" / "seed1")
+    assert main([str(tmp_path / "eval"), "--timeline"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("nats  score reference") == c["scans"] and "1 miss" in out
+
+
 def test_the_likelihood_is_taken_at_the_best_pose_near_each_one(tmp_path):
     from mcl.config import load_config
     from mcl.filter import ParticleFilter
