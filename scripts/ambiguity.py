@@ -254,7 +254,8 @@ def main(argv=None) -> int:
               f"{c['held_s']:.1f} s, since the estimate last jumped")
         if a.timeline:
             for t, off, g, r, e in c["timeline"]:
-                print(f"    t {t:8.2f} s  {off:7.2f} m off  gain {g:9.2f} nats  score reference {r:.3f} estimate {e:.3f}")
+                print(f"    t {t:8.2f} s  {off:7.2f} m off  gain {g:9.2f} nats  "
+                      f"score reference {r:.3f} estimate {e:.3f}")
     print("lost runs: " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())))
     return 0
 
