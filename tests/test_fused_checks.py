@@ -55,7 +55,7 @@ def test_bag_info_says_each_lasers_findings(agv):
 
 def test_a_run_leaves_the_laser_at_fault_out_says_so_and_its_advice_mends_it(agv, tmp_path):
     # The demo tracked from its start (kidnapped at 50 s), 2000 particles. The rear laser, weighed as its /tf mounts it,
-    # keeps the filter from ever converging (sensor.misfit_laser: keep; within 0.3 m for good: never); left out,
+    # keeps the filter off the robot (sensor.misfit_laser: keep; within 0.3 m for good 17 s later); left out,
     # the run is the front laser's (the demo's 52.8 s). The warning names /rear/scan alone; summary.json has each
     # laser's check, the laser left out and the rear's posts. The rear laser read alone where the advice mounts it:
     # no warning.
@@ -80,7 +80,13 @@ def test_a_run_leaves_the_laser_at_fault_out_says_so_and_its_advice_mends_it(agv
     said.clear()
     kept = run(load_config(PROJECT_ROOT / "configs" / "default.yaml", [*sets, "sensor.misfit_laser=keep"]),
                tmp_path / "kept", progress=False, echo=said.append)
-    assert "left_out_lasers" not in kept and kept["eval"]["convergence_time"] is None, kept["eval"]
+    # kept, the rear laser holds the filter off the robot: it never converged before a relapse re-seeded
+    # (filter.recovery_relapse_s); now within 0.3 m for good at 70.0 s against 52.8 s, mean error 3.0 m against 0.47 m
+    # and heading RMSE 133 against 23 degrees. Bounds: 10 s later and 4x the mean error
+    k, e = kept["eval"], s["eval"]
+    assert "left_out_lasers" not in kept, kept
+    assert k["convergence_time"] is None or k["convergence_time"] >= e["convergence_time"] + 10.0, (k, e)
+    assert k["ate_mean"] > 4.0 * e["ate_mean"], (k, e)
     assert [m for m in said if "and the filter will be lost as soon as the robot moves" in m], said
     said.clear()
     s = run(load_config(PROJECT_ROOT / "configs" / "default.yaml",
