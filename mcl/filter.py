@@ -836,21 +836,28 @@ class ParticleFilter:
         particles are drawn from them in proportion to that likelihood (importance resampling, as if the search
         had started with k times the particles and resampled once). They then carry, instead of their own
         likelihood, the mean likelihood of all the candidates (the fresh component's evidence), so the scan is
-        counted once and the old cloud of a re-seed keeps its fair share. Returns ``loglik`` with the fresh
-        entries replaced (``correct`` neither matched nor scored them), or None when no candidate scored."""
+        counted once and the old cloud of a re-seed keeps its fair share. With ``search_refine_candidates`` each
+        candidate first takes the search's ``search_refine`` matching steps: scored as drawn, the draw follows the
+        few candidates that happened to fall aligned with the scan (with a 30 m laser, every fresh pose on a hall's
+        mirror image). Returns ``loglik`` with the fresh entries replaced (``correct`` neither matched nor scored
+        them), or None when no candidate scored."""
         fresh, self._fresh = self._fresh, None
         idx = np.flatnonzero(fresh) if fresh.size == loglik.size else np.zeros(0, dtype=np.int64)
         k = self._oversample_count(idx.size)
         if k <= 1 or idx.size == 0:
             return loglik
+        fc = self.cfg.filter
         cand = self.sample_uniform(k * idx.size, self.rng)
+        matched = bool(fc.search_refine and fc.search_refine_candidates)
+        if matched:  # each candidate scored at its best pose near where it fell, not at how well it happened to fall
+            cand = self._refined(cand, observation, int(fc.search_refine))
         lc = self._laser_loglik(cand, observation)
         top = float(lc.max())
         if not np.isfinite(top):
             return None  # the caller scores the fresh poses as they are
-        pick = resample(self.cfg.filter.resampling, lc, self.rng, n=idx.size)
+        pick = resample(fc.resampling, lc, self.rng, n=idx.size)
         self.particles[:, idx] = cand[:, pick]
-        if self.cfg.filter.search_refine and self.cfg.filter.search_refine_scope == "fresh":
+        if fc.search_refine and fc.search_refine_scope == "fresh" and not matched:
             self._match_scan(observation, idx)  # the drawn poses, matched as the fresh ones were (for the next scan)
         loglik = loglik.copy()
         loglik[idx] = top + math.log(np.mean(np.exp(lc - top)))  # log of the candidates' mean likelihood
