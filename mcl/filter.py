@@ -848,19 +848,23 @@ class ParticleFilter:
             return loglik
         fc = self.cfg.filter
         cand = self.sample_uniform(k * idx.size, self.rng)
-        matched = bool(fc.search_refine and fc.search_refine_candidates)
-        if matched:  # each candidate scored at its best pose near where it fell, not at how well it happened to fall
-            cand = self._refined(cand, observation, int(fc.search_refine))
         lc = self._laser_loglik(cand, observation)
         top = float(lc.max())
         if not np.isfinite(top):
             return None  # the caller scores the fresh poses as they are
+        # the fresh component's evidence: the mean likelihood of the candidates as drawn (uniform poses), so that a
+        # protected re-seed weighs the search against the track on the same terms as before matching
+        evidence = top + math.log(np.mean(np.exp(lc - top)))
+        matched = bool(fc.search_refine and fc.search_refine_candidates)
+        if matched:  # each candidate drawn by its fit at its best pose near where it fell, not by how well it fell
+            cand = self._refined(cand, observation, int(fc.search_refine))
+            lc = self._laser_loglik(cand, observation)
         pick = resample(fc.resampling, lc, self.rng, n=idx.size)
         self.particles[:, idx] = cand[:, pick]
         if fc.search_refine and fc.search_refine_scope == "fresh" and not matched:
             self._match_scan(observation, idx)  # the drawn poses, matched as the fresh ones were (for the next scan)
         loglik = loglik.copy()
-        loglik[idx] = top + math.log(np.mean(np.exp(lc - top)))  # log of the candidates' mean likelihood
+        loglik[idx] = evidence
         return loglik
 
     def correct_landmarks(self, marks, info: StepInfo | None = None) -> None:
