@@ -857,8 +857,10 @@ class ParticleFilter:
         evidence = top + math.log(np.mean(np.exp(lc - top)))
         matched = bool(fc.search_refine and fc.search_refine_candidates)
         if matched:  # each candidate drawn by its fit at its best pose near where it fell, not by how well it fell
-            cand = self._refined(cand, observation, int(fc.search_refine))
-            lc = self._laser_loglik(cand, observation)
+            moved = self._refined(cand, observation, int(fc.search_refine))
+            lm = self._laser_loglik(moved, observation)
+            if np.isfinite(lm.max()):  # (no finite fit matched: drawn as they were)
+                cand, lc = moved, lm
         pick = resample(fc.resampling, lc, self.rng, n=idx.size)
         self.particles[:, idx] = cand[:, pick]
         if fc.search_refine and fc.search_refine_scope == "fresh" and not matched:
