@@ -855,11 +855,12 @@ class ParticleFilter:
         # the fresh component's evidence: the mean likelihood of the candidates as drawn (uniform poses), so that a
         # protected re-seed weighs the search against the track on the same terms as before matching
         evidence = top + math.log(np.mean(np.exp(lc - top)))
-        matched = bool(fc.search_refine and fc.search_refine_candidates)
-        if matched:  # each candidate drawn by its fit at its best pose near where it fell, not by how well it fell
+        matched = False
+        if fc.search_refine and fc.search_refine_candidates:  # each drawn by its fit at its best pose near where it fell
             moved = self._refined(cand, observation, int(fc.search_refine))
             lm = self._laser_loglik(moved, observation)
-            if np.isfinite(lm.max()):  # (no finite fit matched: drawn as they were)
+            matched = bool(np.isfinite(lm.max()))  # (no finite fit matched: drawn as they were)
+            if matched:
                 cand, lc = moved, lm
         pick = resample(fc.resampling, lc, self.rng, n=idx.size)
         self.particles[:, idx] = cand[:, pick]
