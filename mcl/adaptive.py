@@ -689,6 +689,7 @@ class ProtectedReseed:
         self.lost_below = float(lost_below)
         self.odds = math.log(1.0 - keep) - math.log(keep) if keep < 1.0 else -math.inf
         self.updates = 0
+        self.concurred = False  # the search gathered on the track's place (concur): the track wins
 
     def weigh(self, log_track: float, log_search: float,
               scores: Callable[[], tuple[float, float, float, float]] | None) -> float:
@@ -741,13 +742,17 @@ class ProtectedReseed:
         self.updates += 1
         return odds
 
+    def concur(self) -> None:
+        """The search gathered on the track's own place (``ParticleFilter._search_concurs``): the track wins."""
+        self.concurred = True
+
     @property
     def settled(self) -> bool:
-        return abs(self.odds) >= self.reseed_odds or self.updates >= self.MAX_UPDATES
+        return self.concurred or abs(self.odds) >= self.reseed_odds or self.updates >= self.MAX_UPDATES
 
     @property
     def track_won(self) -> bool:
-        return self.odds <= 0.0
+        return self.concurred or self.odds <= 0.0
 
 
 class FaultWindow:

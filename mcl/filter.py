@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, OdometryScale, ProbationChallenge, ProtectedReseed,
-                          StallCheck, draw_injected, kld_resample, make_recovery, measurement_count)
+                          StallCheck, draw_injected, kld_resample, make_recovery, measurement_count, within_std)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
@@ -140,6 +140,7 @@ class StepInfo:
 
 
 _MAX_OVERSAMPLE = 20  # global_density: at most this many candidates per fresh pose (2 million for 100,000)
+_MATCHED_PER_FRESH = 2  # search_refine_candidates: the best this many candidates per fresh pose (as drawn) are matched
 
 
 class ParticleFilter:
@@ -215,6 +216,7 @@ class ParticleFilter:
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
         # a protected re-seed while it runs (filter.reseed_odds; its track mask selects the kept track), else None
         self.protected: ProtectedReseed | None = None
+        self._side_ests: dict = {}  # protect's cluster of each side this update (_side_estimate)
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
         self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
@@ -836,10 +838,11 @@ class ParticleFilter:
         particles are drawn from them in proportion to that likelihood (importance resampling, as if the search
         had started with k times the particles and resampled once). They then carry, instead of their own
         likelihood, the mean likelihood of all the candidates (the fresh component's evidence), so the scan is
-        counted once and the old cloud of a re-seed keeps its fair share. With ``search_refine_candidates`` each
-        candidate first takes the search's ``search_refine`` matching steps: scored as drawn, the draw follows the
-        few candidates that happened to fall aligned with the scan (with a 30 m laser, every fresh pose on a hall's
-        mirror image). Returns ``loglik`` with the fresh entries replaced (``correct`` neither matched nor scored
+        counted once and the old cloud of a re-seed keeps its fair share. With ``search_refine_candidates`` (the
+        default) the best ``_MATCHED_PER_FRESH`` candidates per fresh pose first take the search's ``search_refine``
+        matching steps, and the fresh poses are drawn from those by their matched fit: scored as drawn, the draw
+        follows the few candidates that happened to fall aligned with the scan (with a 30 m laser, every fresh pose
+        on a hall's mirror image). Returns ``loglik`` with the fresh entries replaced (``correct`` neither matched nor scored
         them), or None when no candidate scored."""
         fresh, self._fresh = self._fresh, None
         idx = np.flatnonzero(fresh) if fresh.size == loglik.size else np.zeros(0, dtype=np.int64)
@@ -857,7 +860,13 @@ class ParticleFilter:
         evidence = top + math.log(np.mean(np.exp(lc - top)))
         matched = False
         if fc.search_refine and fc.search_refine_candidates:  # each drawn by its fit at its best pose near where it fell
-            moved = self._refined(cand, observation, int(fc.search_refine))
+            # only the best _MATCHED_PER_FRESH per fresh pose as drawn: matching all k (up to 20) cost 4x the
+            # CPU of a kidnapped run on a 200 m building for the same result; kept in the cache order they were
+            # drawn in (out of it, the matching's lookups into a big map's field ran 3x slower)
+            n_match = _MATCHED_PER_FRESH * idx.size
+            best = cand if n_match >= lc.size else np.ascontiguousarray(
+                cand[:, np.sort(np.argpartition(-lc, n_match - 1)[:n_match])])
+            moved = self._refined(best, observation, int(fc.search_refine))
             lm = self._laser_loglik(moved, observation)
             matched = bool(np.isfinite(lm.max()))  # (no finite fit matched: drawn as they were)
             if matched:
@@ -925,9 +934,14 @@ class ParticleFilter:
             return
         track = p.track
         log_track, log_search = (normalize_log_weights(self.logw[side])[1] for side in (track, ~track))
+        search = ~track
+        self._side_ests = {}  # each side's heaviest cluster, worked out once an update when asked (_side_estimate)
         scores = (None if self._scan_observation is None
-                  else lambda: self._side_fits(~track, track))
+                  else lambda: self._side_fits(search, track))
+        if not p.local and self._scan_observation is not None and self._search_concurs(search, track):
+            p.concur()
         odds = p.weigh(log_track, log_search, scores)
+        self._side_ests = {}
         raw = log_search - log_track
         if not p.settled:
             if odds != raw:  # the weights carry the odds that counted: shift the search side's mass
@@ -963,19 +977,45 @@ class ParticleFilter:
         (s_search, c_search), (s_track, c_track) = self._side_fit(search), self._side_fit(track)
         return s_search, s_track, c_search, c_track
 
+    def _side_estimate(self, side: np.ndarray) -> ClusterEstimate | None:
+        """The heaviest cluster of the particles the mask ``side`` selects (None without weight); worked out once
+        for each mask during ``protect``."""
+        key = id(side)
+        if key not in self._side_ests:
+            w = self.weights[side]
+            total = float(w.sum())
+            fc = self.cfg.filter
+            self._side_ests[key] = (None if not total > 0.0 else
+                                    cluster_estimate(np.ascontiguousarray(self.particles[:, side]), w / total,
+                                                     fc.cluster_size, fc.cluster_angle))
+        return self._side_ests[key]
+
     def _side_fit(self, side: np.ndarray) -> tuple[float, float]:
         """The quality score (mcl.quality: match - 2 contradiction) and the share of beams through mapped walls of
         this update's scan at the estimate of the particles ``side`` selects (their heaviest cluster); (-inf, 1)
         without weight, nan without beams."""
-        w = self.weights[side]
-        total = float(w.sum())
-        if not total > 0.0:
+        est = self._side_estimate(side)
+        if est is None:
             return -math.inf, 1.0
-        fc = self.cfg.filter
-        est = cluster_estimate(np.ascontiguousarray(self.particles[:, side]), w / total, fc.cluster_size,
-                               fc.cluster_angle)
         f = self._scan_fit(est.mean)
         return f.score, f.contradiction
+
+    def _search_concurs(self, search: np.ndarray, track: np.ndarray) -> bool:
+        """A protected re-seed's search has gathered where the track is: its heaviest cluster holds what settles a
+        search (``GlobalSearch.settled_weight`` of its weight, x and y std under ``filter.search_settled_std``) and
+        lies within a cluster cell (``filter.cluster_size``, ``cluster_angle``) of the track's. It found no other
+        place, so the scans can no longer tell the two sides apart and the track is kept. With the search's fresh
+        poses matched before they are drawn (``filter.search_refine_candidates``) they can sit on a correct track's
+        place from the first scan, fit it as well as the track does, and leave the odds where the prior put them
+        until ``ProtectedReseed.MAX_UPDATES`` ran out."""
+        s, t = self._side_estimate(search), self._side_estimate(track)
+        if s is None or t is None or s.weight < self.search.settled_weight:
+            return False
+        if self.search.settled_std > 0.0 and not within_std(s.cov, self.search.settled_std):
+            return False
+        fc = self.cfg.filter
+        return (math.hypot(s.mean[0] - t.mean[0], s.mean[1] - t.mean[1]) <= fc.cluster_size
+                and abs(wrap_angle(s.mean[2] - t.mean[2])) <= fc.cluster_angle)
 
     def _scan_fit(self, pose):
         """This update's scan laid on the map at ``pose`` (mcl.quality.Fit)."""

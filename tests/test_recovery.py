@@ -722,18 +722,23 @@ def test_fresh_poses_drawn_anew_from_candidates_are_neither_matched_nor_scored_f
     # infinite_corridor). Now only the candidates are scored; a re-seed's old cloud is matched and scored as before.
     from mcl.filter import StepInfo
 
+    # With search_refine_candidates (the default) the best 2 candidates per fresh pose as drawn are matched and
+    # scored again (filter._MATCHED_PER_FRESH; all 10 cost 4x the CPU of a kidnapped run on a big building).
     scan = _scan(2.0)
-    pf = _filter_on_a_box("filter.global_density=400", "filter.search_exponent=1.0")  # k = 10 (the test above)
-    scored, matched = [], []
-    score, refine = pf.sensor.log_likelihood, pf._refined
-    pf.sensor.log_likelihood = lambda p, o, out=None, searching=False: (scored.append(p.shape[1]),
-                                                                         score(p, o, out, searching=searching))[1]
-    pf._refined = lambda poses, o, steps: (matched.append(poses.shape[1]), refine(poses, o, steps))[1]
-    pf.init_global()
-    obs = pf.prepare(scan, np.zeros(3))
-    pf.correct(obs, StepInfo(particles=pf.n))
-    assert scored == [10 * pf.n] and matched == [], (scored, matched)
-    assert np.isfinite(pf.logw).all()
+    for cands, expect_scored, expect_matched in (("false", [10], []), ("true", [10, 2], [2])):
+        pf = _filter_on_a_box("filter.global_density=400", "filter.search_exponent=1.0",  # k = 10 (the test above)
+                              f"filter.search_refine_candidates={cands}")
+        scored, matched = [], []
+        score, refine = pf.sensor.log_likelihood, pf._refined
+        pf.sensor.log_likelihood = lambda p, o, out=None, searching=False: (scored.append(p.shape[1]),
+                                                                             score(p, o, out, searching=searching))[1]
+        pf._refined = lambda poses, o, steps: (matched.append(poses.shape[1]), refine(poses, o, steps))[1]
+        pf.init_global()
+        obs = pf.prepare(scan, np.zeros(3))
+        pf.correct(obs, StepInfo(particles=pf.n))
+        assert scored == [m * pf.n for m in expect_scored], (cands, scored)
+        assert matched == [m * pf.n for m in expect_matched], (cands, matched)
+        assert np.isfinite(pf.logw).all()
 
 
 def test_the_likelihood_field_scores_with_the_search_field_exactly_while_the_laser_is_tempered():
@@ -1183,34 +1188,70 @@ def test_a_protected_reseed_keeps_a_correct_track_and_drops_the_search_without_p
     # freiburg-campus, tracking with gentle odometry: a correct track fits poorly outdoors for seconds at a time;
     # re-seeded, one scan that a place 170 m away fitted better handed it the whole set at the next resample, and
     # the estimate jumped there (RMSE 15 m). The track now stays its own component until one side leads by
-    # reseed_odds; here the scan is exact, the track right, and the search loses at once.
-    pf, grid = _reseeded(TRUE_POSE)
-    assert pf.protected is not None and pf.protected.track.sum() == 4000
-    obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
-    info = pf.step(None, obs)  # no one scan decides (ProtectedReseed.STEP 3 nats < reseed_odds 4.6) ...
-    assert not info.confirmed and pf.n == 8000 and pf.protected.odds == -3.0
-    # ... a few do: three with the default's filter.search_refine 3 and search_settled_std 1, two without (the
-    # matched fresh poses at the track's own place fit almost as well as the track, so the second scan adds 1.4
-    # nats, not 3)
-    for _ in range(3):
+    # reseed_odds, or the search gathers on the track's own place; here the scan is exact and the track right.
+    for matched in ("true", "false"):
+        pf, grid = _reseeded(TRUE_POSE, f"filter.search_refine_candidates={matched}")
+        assert pf.protected is not None and pf.protected.track.sum() == 4000
+        obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
+        # one exact scan gathers the search's fresh poses (drawn from 40,000 candidates) on the track's place: it
+        # found nothing else, and the search is dropped at once (no scan decides by the odds: STEP 3 < 4.6)
         info = pf.step(None, obs)
-        assert not info.switched and np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.1
-        if info.confirmed:
-            break
-    assert info.confirmed and pf.n == 4000 and pf.protected is None
-    assert not pf.search.tempering and not pf.search.holding and pf.search.since_end is None
-    assert not pf.recovery.on_probation and np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.1
+        assert pf.protected is None and info.confirmed and not info.switched, matched
+        assert pf.n == 4000 and np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.1, matched
+        assert not pf.search.tempering and not pf.search.holding and pf.search.since_end is None
+        assert not pf.recovery.on_probation
+
+
+def test_a_search_that_gathers_on_the_track_confirms_it_and_one_that_does_not_leaves_the_odds_to_decide():
+    """ParticleFilter._search_concurs: with the search's candidates matched (filter.search_refine_candidates) its
+    fresh poses sit on a correct track's place from the first scan and fit it as well as the track does, so the
+    scans no longer move the odds: without the rule the re-seed ran its 25 updates (ProtectedReseed.MAX_UPDATES) on
+    twice the particles, the odds stuck at -2.9 nats."""
+    pf, grid = _reseeded(TRUE_POSE)
+    pf._search_concurs = lambda search, track: False  # the rule off
+    obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
+    odds = []
+    for _ in range(5):
+        info = pf.step(None, obs)
+        odds.append(pf.protected.odds)
+        assert not info.confirmed and not info.switched and pf.n == 8000
+        assert np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.1
+    assert max(odds) < 0.0 and min(odds) > -4.6, odds  # the track ahead, never by reseed_odds
+    # the search's poses put on the track's (0.05 m, 0.02 rad std): gathered there; then half of them 2 m away (the
+    # heaviest cluster under 90 % of the search's weight), and all of them 1 m away (two cluster cells): not
+    pf, grid = _reseeded(TRUE_POSE)
+    track = pf.protected.track
+    search = ~track
+    pf.particles[:, search] = pf.particles[:, track]
+    pf.weights = np.full(pf.n, 1.0 / pf.n)
+    pf._side_ests = {}
+    assert pf._search_concurs(search, track)
+    half = np.flatnonzero(search)[::2]
+    pf.particles[:2, half] += np.array([[2.0], [0.0]])
+    pf._side_ests = {}
+    pf._side_ests = {}
+    assert not pf._search_concurs(search, track)
+    pf.particles[:2, half] -= np.array([[2.0], [0.0]])
+    pf.particles[0, search] += 1.0
+    pf._side_ests = {}
+    assert not pf._search_concurs(search, track)
 
 
 def test_a_protected_reseed_of_a_wrong_track_switches_to_the_search():
-    pf, grid = _reseeded([6.0, 3.0, -0.5])  # 3 m off and turned
+    # the candidates as drawn (search_refine_candidates false): the search's heaviest cluster, a blend after one
+    # scan, fits 0.75, and the estimate stays on the track for that scan
+    pf, grid = _reseeded([6.0, 3.0, -0.5], "filter.search_refine_candidates=false")  # 3 m off and turned
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
-    # one scan: the estimate stays on the track (the search's heaviest cluster, a blend after one scan, fits 0.75)
     info = pf.step(None, obs)
     assert not info.switched and pf.protected.odds == 3.0 and np.hypot(*(info.mean[:2] - [6.0, 3.0])) < 0.1
     info = pf.step(None, obs)  # (still lost by the quality window, the place it found is re-seeded on probation)
     assert info.switched and not info.confirmed and info.particles == 4000 and pf.protected is None
     assert np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.3
+    # matched (the default), the search's place fits the scan as a tracked scan does (ProtectedReseed.DECISIVE_FIT)
+    # and the track's as a lost one: the first scan decides
+    pf, grid = _reseeded([6.0, 3.0, -0.5])
+    info = pf.step(None, obs)
+    assert info.switched and pf.protected is None and np.hypot(*(info.mean[:2] - TRUE_POSE[:2])) < 0.3
 
 
 def test_while_neither_side_leads_the_estimate_stays_on_the_track_and_each_side_keeps_its_particles():
@@ -1230,7 +1271,9 @@ def test_with_kld_a_protected_search_shrinks_to_what_its_places_need_and_keeps_i
     # scan or two gathers them on a few places. With KLD sampling it now draws what its occupied bins ask for: here
     # one exact scan puts the search's weight on one place, so it drops to min_particles, the track keeps its 4,000,
     # and each side keeps its mass (the odds after one scan, 3 nats: e^3 / (1 + e^3) on the search).
-    pf, grid = _reseeded([6.0, 3.0, -0.5], "filter.kld=true", "filter.min_particles=500")
+    # (the candidates as drawn: matched, the first scan decides, test_a_protected_reseed_of_a_wrong_track_...)
+    pf, grid = _reseeded([6.0, 3.0, -0.5], "filter.kld=true", "filter.min_particles=500",
+                         "filter.search_refine_candidates=false")
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
     info = pf.step(None, obs)
     assert not info.switched and pf.protected.odds == 3.0
