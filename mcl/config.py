@@ -125,8 +125,8 @@ class FilterConfig:
     # which particles: every one at every update while the search tempers, or only a search's fresh uniform poses,
     # once, at their first scan
     search_refine_scope: Literal["tempering", "fresh"] = "tempering"
-    # the uniform candidates global_density scores are matched first (search_refine steps) and the fresh poses drawn
-    # by their matched fit; the evidence stays their mean likelihood as drawn
+    # the best 2 of the uniform candidates global_density scores per fresh pose are matched (search_refine steps) and
+    # the fresh poses drawn by their matched fit; the evidence stays the mean likelihood of all of them as drawn
     search_refine_candidates: bool = False
     # a global search settles only once its heaviest cluster's x and y std are under this (m) too; 0: by weight alone
     search_settled_std: float = field(default=0.0, metadata=_rng(0.0, 1e6))
