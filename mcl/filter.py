@@ -842,8 +842,8 @@ class ParticleFilter:
         default) the best ``_MATCHED_PER_FRESH`` candidates per fresh pose first take the search's ``search_refine``
         matching steps, and the fresh poses are drawn from those by their matched fit: scored as drawn, the draw
         follows the few candidates that happened to fall aligned with the scan (with a 30 m laser, every fresh pose
-        on a hall's mirror image). Returns ``loglik`` with the fresh entries replaced (``correct`` neither matched nor scored
-        them), or None when no candidate scored."""
+        on a hall's mirror image). Returns ``loglik`` with the fresh entries replaced (``correct`` neither matched
+        nor scored them), or None when no candidate scored."""
         fresh, self._fresh = self._fresh, None
         idx = np.flatnonzero(fresh) if fresh.size == loglik.size else np.zeros(0, dtype=np.int64)
         k = self._oversample_count(idx.size)
