@@ -509,11 +509,16 @@ class GlobalSearch:
         self.holding = False
         self.since_end = None
 
+    def settles(self, cluster_weight: float, cov=None) -> bool:
+        """Whether a heaviest cluster of this weight and covariance (``cov`` None: a place) ends a search's
+        tempering: ``settled_weight`` of the weight, and with ``settled_std`` > 0 x and y std under that."""
+        compact = self.settled_std <= 0.0 or cov is None or within_std(cov, self.settled_std)
+        return cluster_weight >= self.settled_weight and compact
+
     def observe(self, lost: bool, cluster_weight: float = 1.0, cov=None) -> None:
         """This update's lost belief, and the heaviest cluster's weight and covariance (after the estimate;
         ``cov`` None: a place)."""
-        compact = self.settled_std <= 0.0 or cov is None or within_std(cov, self.settled_std)
-        settled = cluster_weight >= self.settled_weight and compact
+        settled = self.settles(cluster_weight, cov)
         if self.tempering and settled:
             self.tempering = False
         if self.holding and (not lost or settled):

@@ -35,6 +35,7 @@ handles that), and a global reinitialisation throws away a good track.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -42,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mcl.adaptive import (FaultWindow, GlobalSearch, KLDSampling, OdometryScale, ProbationChallenge, ProtectedReseed,
-                          StallCheck, draw_injected, kld_resample, make_recovery, measurement_count, within_std)
+                          StallCheck, draw_injected, kld_resample, make_recovery, measurement_count)
 from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
@@ -216,7 +217,6 @@ class ParticleFilter:
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
         # a protected re-seed while it runs (filter.reseed_odds; its track mask selects the kept track), else None
         self.protected: ProtectedReseed | None = None
-        self._side_ests: dict = {}  # protect's cluster of each side this update (_side_estimate)
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
         self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
@@ -935,13 +935,13 @@ class ParticleFilter:
         track = p.track
         log_track, log_search = (normalize_log_weights(self.logw[side])[1] for side in (track, ~track))
         search = ~track
-        self._side_ests = {}  # each side's heaviest cluster, worked out once an update when asked (_side_estimate)
+        # each side's heaviest cluster (search first), worked out once this update if a rule asks for it
+        estimates = functools.cache(lambda: (self._side_estimate(search), self._side_estimate(track)))
         scores = (None if self._scan_observation is None
-                  else lambda: self._side_fits(search, track))
-        if not p.local and self._scan_observation is not None and self._search_concurs(search, track):
+                  else lambda: self._side_fits(*estimates()))
+        if not p.local and self._scan_observation is not None and self._search_concurs(*estimates()):
             p.concur()
         odds = p.weigh(log_track, log_search, scores)
-        self._side_ests = {}
         raw = log_search - log_track
         if not p.settled:
             if odds != raw:  # the weights carry the odds that counted: shift the search side's mass
@@ -971,51 +971,45 @@ class ParticleFilter:
         self.weights, log_norm = normalize_log_weights(logw)
         self.logw = logw - log_norm
 
-    def _side_fits(self, search: np.ndarray, track: np.ndarray) -> tuple[float, float, float, float]:
-        """This update's scan at the estimates of the sides ``search`` and ``track``: (score, score, contradiction,
-        contradiction), search first (``_side_fit``)."""
+    def _side_fits(self, search: ClusterEstimate | None,
+                   track: ClusterEstimate | None) -> tuple[float, float, float, float]:
+        """This update's scan at the heaviest clusters of the sides (``_side_estimate``): (score, score,
+        contradiction, contradiction), search first (``_side_fit``)."""
         (s_search, c_search), (s_track, c_track) = self._side_fit(search), self._side_fit(track)
         return s_search, s_track, c_search, c_track
 
     def _side_estimate(self, side: np.ndarray) -> ClusterEstimate | None:
-        """The heaviest cluster of the particles the mask ``side`` selects (None without weight); worked out once
-        for each mask during ``protect``."""
-        key = id(side)
-        if key not in self._side_ests:
-            w = self.weights[side]
-            total = float(w.sum())
-            fc = self.cfg.filter
-            self._side_ests[key] = (None if not total > 0.0 else
-                                    cluster_estimate(np.ascontiguousarray(self.particles[:, side]), w / total,
-                                                     fc.cluster_size, fc.cluster_angle))
-        return self._side_ests[key]
+        """The heaviest cluster of the particles the mask ``side`` selects (None without weight)."""
+        w = self.weights[side]
+        total = float(w.sum())
+        if not total > 0.0:
+            return None
+        fc = self.cfg.filter
+        return cluster_estimate(np.ascontiguousarray(self.particles[:, side]), w / total,
+                                fc.cluster_size, fc.cluster_angle)
 
-    def _side_fit(self, side: np.ndarray) -> tuple[float, float]:
+    def _side_fit(self, est: ClusterEstimate | None) -> tuple[float, float]:
         """The quality score (mcl.quality: match - 2 contradiction) and the share of beams through mapped walls of
-        this update's scan at the estimate of the particles ``side`` selects (their heaviest cluster); (-inf, 1)
-        without weight, nan without beams."""
-        est = self._side_estimate(side)
+        this update's scan at a side's heaviest cluster ``est``; (-inf, 1) without weight (None), nan without
+        beams."""
         if est is None:
             return -math.inf, 1.0
         f = self._scan_fit(est.mean)
         return f.score, f.contradiction
 
-    def _search_concurs(self, search: np.ndarray, track: np.ndarray) -> bool:
-        """A protected re-seed's search has gathered where the track is: its heaviest cluster holds what settles a
-        search (``GlobalSearch.settled_weight`` of its weight, x and y std under ``filter.search_settled_std``) and
-        lies within a cluster cell (``filter.cluster_size``, ``cluster_angle``) of the track's. It found no other
-        place, so the scans can no longer tell the two sides apart and the track is kept. With the search's fresh
-        poses matched before they are drawn (``filter.search_refine_candidates``) they can sit on a correct track's
-        place from the first scan, fit it as well as the track does, and leave the odds where the prior put them
-        until ``ProtectedReseed.MAX_UPDATES`` ran out."""
-        s, t = self._side_estimate(search), self._side_estimate(track)
-        if s is None or t is None or s.weight < self.search.settled_weight:
-            return False
-        if self.search.settled_std > 0.0 and not within_std(s.cov, self.search.settled_std):
+    def _search_concurs(self, search: ClusterEstimate | None, track: ClusterEstimate | None) -> bool:
+        """A protected re-seed's search has gathered where the track is: its heaviest cluster ``search`` holds what
+        settles a search (``GlobalSearch.settles``) and lies within a cluster cell (``filter.cluster_size``,
+        ``cluster_angle``) of the track's heaviest cluster ``track``. It found no other place, so the scans can no
+        longer tell the two sides apart and the track is kept. With the search's fresh poses matched before they
+        are drawn (``filter.search_refine_candidates``) they can sit on a correct track's place from the first
+        scan, fit it as well as the track does, and leave the odds where the prior put them until
+        ``ProtectedReseed.MAX_UPDATES`` ran out."""
+        if search is None or track is None or not self.search.settles(search.weight, search.cov):
             return False
         fc = self.cfg.filter
-        return (math.hypot(s.mean[0] - t.mean[0], s.mean[1] - t.mean[1]) <= fc.cluster_size
-                and abs(wrap_angle(s.mean[2] - t.mean[2])) <= fc.cluster_angle)
+        return (math.hypot(search.mean[0] - track.mean[0], search.mean[1] - track.mean[1]) <= fc.cluster_size
+                and abs(wrap_angle(search.mean[2] - track.mean[2])) <= fc.cluster_angle)
 
     def _scan_fit(self, pose):
         """This update's scan laid on the map at ``pose`` (mcl.quality.Fit)."""

@@ -1224,17 +1224,17 @@ def test_a_search_that_gathers_on_the_track_confirms_it_and_one_that_does_not_le
     search = ~track
     pf.particles[:, search] = pf.particles[:, track]
     pf.weights = np.full(pf.n, 1.0 / pf.n)
-    pf._side_ests = {}
-    assert pf._search_concurs(search, track)
+
+    def concurs():
+        return pf._search_concurs(pf._side_estimate(search), pf._side_estimate(track))
+
+    assert concurs()
     half = np.flatnonzero(search)[::2]
     pf.particles[:2, half] += np.array([[2.0], [0.0]])
-    pf._side_ests = {}
-    pf._side_ests = {}
-    assert not pf._search_concurs(search, track)
+    assert not concurs()
     pf.particles[:2, half] -= np.array([[2.0], [0.0]])
     pf.particles[0, search] += 1.0
-    pf._side_ests = {}
-    assert not pf._search_concurs(search, track)
+    assert not concurs()
 
 
 def test_a_protected_reseed_of_a_wrong_track_switches_to_the_search():
@@ -1345,7 +1345,7 @@ def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_w
     # the scan favours the search (the track is 3 m off), but the quality score is made to favour the track: the
     # odds do not move, the estimate stays on the track, and after 25 updates the tie goes to the track.
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_fit = lambda side: (0.9 if side[0] else 0.1, 0.0)  # the track's particles come first
+    pf._side_fits = lambda search, track: (0.1, 0.9, 0.0, 0.0)  # scores search, track; contradictions
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
     for k in range(24):
         info = pf.step(None, obs)
@@ -1356,10 +1356,10 @@ def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_w
     # second; and with the scan fitting the search's place as a tracked scan does (0.9) and the track's as a lost
     # one (below quality.lost_below 0.6), on the first (a sparse log's next scan can be 17 s away)
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_fit = lambda side: (0.5 if side[0] else 0.7, 0.0)
+    pf._side_fits = lambda search, track: (0.7, 0.5, 0.0, 0.0)
     assert not pf.step(None, obs).switched and pf.protected.odds == 3.0 and pf.step(None, obs).switched
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_fit = lambda side: (0.5 if side[0] else 0.9, 0.0)
+    pf._side_fits = lambda search, track: (0.9, 0.5, 0.0, 0.0)
     assert pf.step(None, obs).switched
 
 
@@ -1423,7 +1423,7 @@ def test_lost_recovery_spreads_as_a_protected_side_and_the_estimate_stays_on_the
     assert pf.n == 8000 and pf._injected.sum() == 4000 and not pf.search.tempering
     fresh = pf.particles[:, pf._injected]
     assert 0.3 < np.std(fresh[0]) < 0.7 and np.hypot(*(fresh[:2].mean(axis=1) - track[:2])) < 0.05  # std 0.5 m
-    pf._side_fit = lambda side: (0.3, 0.0)  # the scans fit neither side as a tracked scan does: no evidence
+    pf._side_fits = lambda search, track: (0.3, 0.3, 0.0, 0.0)  # the scans fit neither side as a tracked scan does: no evidence
     for k in range(5):
         info = pf.step(None, obs)
         assert pf.protected is not None and pf.protected.odds == 0.0, k
