@@ -168,7 +168,7 @@ class ParticleFilter:
         self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio)
         self.kld = KLDSampling(fc, grid) if fc.kld else None
         # a global start or re-seed until one place is left
-        self.search = GlobalSearch(settled_std=fc.search_settled_std)
+        self.search = GlobalSearch(settled_std=fc.search_settled_std, probation_from=fc.recovery_probation_from)
         # odometry faults allowed only around a lost call on a track that had held (motion.fault_*)
         self.faults = FaultWindow(cfg.motion, self.search) if cfg.motion.fault_prob > 0.0 else None
         # a place a search found whose estimate does not follow the odometry is re-seeded (filter.stall_*)
