@@ -201,6 +201,30 @@ def test_a_global_search_stops_tempering_once_settled_and_stops_holding_once_set
     s.observe(True, 1.0, np.diag([0.9 ** 2, 0.9 ** 2, 0.1]))  # x and y std under 1 m: a place
     assert not s.tempering and not s.holding and s.since_end == 1
 
+def test_the_probation_counts_from_the_settling_with_probation_from_settled():
+    # filter.recovery_probation_from: a search whose estimate fits at its first update (holding ends) and that
+    # settles 4 updates later; "fit" counts the probation from the fit, "settled" starts it again at the settling
+    from mcl.adaptive import GlobalSearch
+
+    counts = {}
+    for probation_from in ("fit", "settled"):
+        s = GlobalSearch(probation_from=probation_from)
+        s.start()
+        s.observe(False, 0.3)  # fits at the estimate, several places: holding ends, tempering goes on
+        for _ in range(3):
+            s.observe(False, 0.5)
+        assert s.tempering and s.since_end == 4
+        s.observe(False, 0.95)  # settled
+        assert not s.tempering
+        counts[probation_from] = s.since_end
+        s.start()
+        s.observe(True, 0.95)  # settled and fitting in the same update: the same either way
+        assert s.since_end == 1
+    assert counts == {"fit": 5, "settled": 1}
+    with pytest.raises(ValueError, match="probation_from"):
+        GlobalSearch(probation_from="settle")
+
+
 
 def test_a_place_a_search_found_that_wins_its_protected_reseed_leaves_probation():
     # heldout3 hall-people-dropouts-h10 global: the search found the robot at 24.6 s; people and dropouts kept its
