@@ -105,8 +105,8 @@ class FilterConfig:
     recovery_relapse_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))
     recovery_reseed: bool = True  # lost: after global_after lost updates add a whole global set (not 5 % a step)
     recovery_probation: int = field(default=0, metadata=_rng(0, 1_000_000))  # updates after a search a lost call re-seeds
-    # the probation counts from the first update the search's estimate fits (fit: its holding ends) or from the
-    # update its heaviest cluster settles (settled: its tempering ends), whichever names the later
+    # the probation after a global search counts from its first update whose estimate fits the scan (fit: holding
+    # ends), or starts again when its heaviest cluster settles after that (settled: tempering ends)
     recovery_probation_from: Literal["fit", "settled"] = "fit"
     # lost: after a global search, re-seed when over stall_window s of log time the odometry moved >= stall_travel m
     # and the estimate less than stall_ratio times as far (mcl.adaptive.StallCheck; 0: off); for stall_active s
