@@ -128,7 +128,7 @@ class FilterConfig:
     # which particles: every one at every update while the search tempers, or only a search's fresh uniform poses,
     # once, at their first scan
     search_refine_scope: Literal["tempering", "fresh"] = "tempering"
-    # the best 2 of the uniform candidates global_density scores per fresh pose are matched (search_refine steps) and
+    # the best of the uniform candidates global_density scores per fresh pose is matched (search_refine steps) and
     # the fresh poses drawn by their matched fit; the evidence stays the mean likelihood of all of them as drawn
     search_refine_candidates: bool = False
     # a global search settles only once its heaviest cluster's x and y std are under this (m) too; 0: by weight alone

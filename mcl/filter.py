@@ -141,7 +141,10 @@ class StepInfo:
 
 
 _MAX_OVERSAMPLE = 20  # global_density: at most this many candidates per fresh pose (2 million for 100,000)
-_MATCHED_PER_FRESH = 2  # search_refine_candidates: the best this many candidates per fresh pose (as drawn) are matched
+# search_refine_candidates: the best this many candidates per fresh pose (as drawn) are matched. 1 against 2
+# (fifty-eighth session): the same counts on the generated worlds and the held-out corpora measured, the worst
+# kidnapped run on a 200 m building 71 -> 39 s of CPU (docs/measurements.md, "Fifty-eighth session")
+_MATCHED_PER_FRESH = 1
 
 
 class ParticleFilter:
@@ -861,8 +864,9 @@ class ParticleFilter:
         matched = False
         if fc.search_refine and fc.search_refine_candidates:  # each drawn by its fit at its best pose near where it fell
             # only the best _MATCHED_PER_FRESH per fresh pose as drawn: matching all k (up to 20) cost 4x the
-            # CPU of a kidnapped run on a 200 m building for the same result; kept in the cache order they were
-            # drawn in (out of it, the matching's lookups into a big map's field ran 3x slower)
+            # CPU of a kidnapped run on a 200 m building for the same result, the best 2 twice the best one's;
+            # kept in the cache order they were drawn in (out of it, the matching's lookups into a big map's
+            # field ran 3x slower)
             n_match = _MATCHED_PER_FRESH * idx.size
             best = cand if n_match >= lc.size else np.ascontiguousarray(
                 cand[:, np.sort(np.argpartition(-lc, n_match - 1)[:n_match])])

@@ -746,10 +746,10 @@ def test_fresh_poses_drawn_anew_from_candidates_are_neither_matched_nor_scored_f
     # infinite_corridor). Now only the candidates are scored; a re-seed's old cloud is matched and scored as before.
     from mcl.filter import StepInfo
 
-    # With search_refine_candidates (the default) the best 2 candidates per fresh pose as drawn are matched and
+    # With search_refine_candidates (the default) the best candidate per fresh pose as drawn is matched and
     # scored again (filter._MATCHED_PER_FRESH; all 10 cost 4x the CPU of a kidnapped run on a big building).
     scan = _scan(2.0)
-    for cands, expect_scored, expect_matched in (("false", [10], []), ("true", [10, 2], [2])):
+    for cands, expect_scored, expect_matched in (("false", [10], []), ("true", [10, 1], [1])):
         pf = _filter_on_a_box("filter.global_density=400", "filter.search_exponent=1.0",  # k = 10 (the test above)
                               f"filter.search_refine_candidates={cands}")
         scored, matched = [], []
