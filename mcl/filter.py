@@ -142,7 +142,7 @@ class StepInfo:
 
 _MAX_OVERSAMPLE = 20  # global_density: at most this many candidates per fresh pose (2 million for 100,000)
 # search_refine_candidates: the best this many candidates per fresh pose (as drawn) are matched. 1 against 2
-# (fifty-eighth session): the same counts on the generated worlds and the held-out corpora measured, the worst
+# (fifty-eighth session): one more generated world's global run in, none out on the corpora measured, the worst
 # kidnapped run on a 200 m building 71 -> 39 s of CPU (docs/measurements.md, "Fifty-eighth session")
 _MATCHED_PER_FRESH = 1
 
