@@ -115,6 +115,10 @@ class FilterConfig:
     stall_travel: float = field(default=1.5, metadata=_rng(0.0, 1e6, lo_open=True))
     stall_active: float = field(default=60.0, metadata=_rng(0.0, 1e9))
     recovery_reseed_keep: float = field(default=0.5, metadata=_rng(0.0, 1.0, lo_open=True))  # prior mass of the old cloud
+    # an unprotected re-seed that kept the old cloud: until the filter is no longer lost, the pose reported is the
+    # old estimate moved by the odometry, not the heaviest cluster of the uniform poses (ParticleFilter._report_held;
+    # the pose reported only)
+    reseed_hold_pose: bool = True
     reseed_odds: float = field(default=0.0, metadata=_rng(0.0, 1e6))  # nats of log-odds that settle a protected re-seed
     # a place a search found is challenged once (a protected re-seed) when the median quality score of
     # ProbationChallenge.WINDOW updates in a row on probation is below this; 0: off
