@@ -980,7 +980,8 @@ def test_people_crowding_the_robot_do_not_make_a_correct_track_lost_and_hijacked
     # that contradicts nothing as an occlusion: the track is never called lost and ends within 0.16 m. (The
     # protected re-seed, filter.reseed_odds, also keeps this track by itself: the place 55 m away fits the crowded
     # scans worse by the quality score, so its likelihood never counts. The control turns off both, and
-    # quality.occluded_missing, which reads a sparse view's low match as occlusion, too.)
+    # quality.occluded_missing, which reads a sparse view's low match as occlusion, and filter.reseed_hold_pose,
+    # which reports the track moved by the odometry while the unprotected re-seed's search is lost, too.)
     from mcl.simulate import simulate
 
     data = tmp_path_factory.mktemp("crowd")
@@ -989,7 +990,7 @@ def test_people_crowding_the_robot_do_not_make_a_correct_track_lost_and_hijacked
     assert s["eval"]["ate_max"] < 0.5, s["eval"]
     assert s["quality"]["lost_updates"] == 0, s["quality"]
     before = _track(data, sim, tmp_path / "before", "quality.occluded_below=1.0", "quality.occluded_missing=-1",
-                    "filter.reseed_odds=0")
+                    "filter.reseed_odds=0", "filter.reseed_hold_pose=false")
     assert before["eval"]["ate_max"] > 5.0, before["eval"]
     assert before["quality"]["lost_updates"] > 0, before["quality"]
 
