@@ -220,7 +220,8 @@ class ParticleFilter:
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
         # a protected re-seed while it runs (filter.reseed_odds; its track mask selects the kept track), else None
         self.protected: ProtectedReseed | None = None
-        # the old estimate an unprotected re-seed kept, reported while its search holds (filter.reseed_hold_pose)
+        # the old estimate an unprotected re-seed kept, moved by the odometry and reported until the filter is no
+        # longer lost (filter.reseed_hold_pose, _report_held)
         self._held: np.ndarray | None = None
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
@@ -269,11 +270,11 @@ class ParticleFilter:
         p += np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
-        self._held = None
         self._start_tracking()
 
     def _start_tracking(self) -> None:
         """The policies start afresh for a track from a known pose: not lost, no search, nothing on probation."""
+        self._held = None
         self.recovery = self._make_recovery(False)
         self.search.reset()
         self.quality.reset(lost=False)
@@ -304,17 +305,16 @@ class ParticleFilter:
         p = root @ self.rng.standard_normal((3, n)) + np.asarray(mean, dtype=np.float64)[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
-        self._held = None
         self._start_tracking()
 
     def init_global(self) -> None:
         """Particles uniform over the poses the map allows (global localization)."""
         self._set(self.sample_uniform(self.cfg.filter.particles, self.rng))
-        self._held = None
         self._fresh = np.ones(self.n, dtype=bool)
         self._start_global()
 
     def _start_global(self) -> None:
+        self._held = None
         if self.cfg.filter.recovery == "auto" and self.recovery is None:
             self.recovery = self._make_recovery(True)
         self.search.start()
@@ -360,7 +360,6 @@ class ParticleFilter:
         if self.landmarks is None or not np.any(self.landmarks.map.index_of(marks.ids) >= 0):
             return False
         self._set(self.sample_from_landmarks(self.cfg.filter.particles, self.rng, marks=marks))
-        self._held = None
         self._start_global()
         return True
 
