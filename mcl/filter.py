@@ -223,6 +223,7 @@ class ParticleFilter:
         # the old estimate an unprotected re-seed kept, moved by the odometry and reported until the filter is no
         # longer lost (filter.reseed_hold_pose, _report_held)
         self._held: np.ndarray | None = None
+        self._held_cov: np.ndarray | None = None  # that estimate's covariance, reported with it
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
         self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
@@ -1225,6 +1226,7 @@ class ParticleFilter:
         elif n > 0 and fc.reseed_hold_pose and self._held is None and self.last_estimate is not None:
             # (a re-seed before the estimate fitted again keeps the pose held since the first one)
             self._held = np.array(self.last_estimate.mean, dtype=np.float64)
+            self._held_cov = np.array(self.last_estimate.cov, dtype=np.float64)
         if self.kld is not None:
             self.kld.pending = None
         info.resampled = True
@@ -1240,7 +1242,8 @@ class ParticleFilter:
         reports the heaviest cluster of 100,000 uniform poses, or a place it settled on that fits no better, or one
         that fits a single scan (freiburg-campus, the laser on the ground: 129-185 m off for nine scans while the
         track was within 0.2 m; one place 184 m off fitted a scan at 0.78). Only the pose reported (``info.mean``):
-        the filter goes on from its own estimate, as with ``_trial_estimate``."""
+        the filter goes on from its own estimate, as with ``_trial_estimate``. The covariance reported with it
+        (``info.cov``) is the one that estimate had at the re-seed, not the search's heaviest cluster's."""
         if self._held is None:
             return
         if not info.lost or self.protected is not None:
@@ -1248,6 +1251,7 @@ class ParticleFilter:
             return
         self._held = compose(self._held, self._delta if self._delta is not None else np.zeros(3))
         info.mean = self._held.copy()
+        info.cov = self._held_cov.copy()  # the held estimate's own (the recording's ellipse, --write-bag)
 
     def _kept_and_fresh(self, kept: np.ndarray, fresh: np.ndarray, keep: float) -> None:
         """The set becomes ``kept`` (resampled particles, ``keep`` of the mass) then ``fresh`` (the rest), each

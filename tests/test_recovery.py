@@ -1551,6 +1551,7 @@ def test_while_an_unprotected_reseeds_search_holds_the_pose_reported_is_the_old_
         info = _until_reseeded(pf, obs, move)
         assert pf.protected is None and pf.search.holding  # on probation: unprotected
         before = np.array(info.mean)  # the estimate of the update that re-seeded (its resample came after it)
+        before_cov = np.array(info.cov)
         # in this small room the kept cloud takes 90 % of the weight at once and the search settles; on a campus
         # 100,000 uniform poses do not: no cluster settles the search here either
         pf.search.settles = lambda weight, cov=None: False
@@ -1559,8 +1560,12 @@ def test_while_an_unprotected_reseeds_search_holds_the_pose_reported_is_the_old_
         if hold:
             np.testing.assert_array_equal(info.mean, compose(before, step))
             assert not np.array_equal(info.mean, pf.last_estimate.mean)
+            # reported with the covariance it had (the recording's ellipse, --write-bag), not the search's
+            np.testing.assert_array_equal(info.cov, before_cov)
+            assert not np.array_equal(info.cov, pf.last_estimate.cov)
         else:
             np.testing.assert_array_equal(info.mean, pf.last_estimate.mean)
+            np.testing.assert_array_equal(info.cov, pf.last_estimate.cov)
     # once the filter is no longer lost (its estimate fits: holding ends in that update's assess), its own estimate
     # is reported
     pf, obs = _found_place(0.3)
