@@ -220,10 +220,9 @@ class ParticleFilter:
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
         # a protected re-seed while it runs (filter.reseed_odds; its track mask selects the kept track), else None
         self.protected: ProtectedReseed | None = None
-        # the old estimate an unprotected re-seed kept, moved by the odometry and reported until the filter is no
-        # longer lost (filter.reseed_hold_pose, _report_held)
-        self._held: np.ndarray | None = None
-        self._held_cov: np.ndarray | None = None  # that estimate's covariance, reported with it
+        # (mean, cov) of the old estimate an unprotected re-seed kept, its mean moved by the odometry, reported until
+        # the filter is no longer lost (filter.reseed_hold_pose, _report_held)
+        self._held: tuple[np.ndarray, np.ndarray] | None = None
         # Landmarks (cfg.landmarks, mcl.landmarks): a model when a landmark map is given; injections then come
         # from the latest landmark observation (Prob. Rob. Table 6.5) when it has a known id.
         self.landmarks = LandmarkModel(landmark_map, cfg.landmarks) if landmark_map is not None else None
@@ -1225,8 +1224,8 @@ class ParticleFilter:
             self.protected = ProtectedReseed(~self._injected, keep, fc.reseed_odds, self.cfg.quality.lost_below)
         elif n > 0 and fc.reseed_hold_pose and self._held is None and self.last_estimate is not None:
             # (a re-seed before the estimate fitted again keeps the pose held since the first one)
-            self._held = np.array(self.last_estimate.mean, dtype=np.float64)
-            self._held_cov = np.array(self.last_estimate.cov, dtype=np.float64)
+            self._held = (np.array(self.last_estimate.mean, dtype=np.float64),
+                          np.array(self.last_estimate.cov, dtype=np.float64))
         if self.kld is not None:
             self.kld.pending = None
         info.resampled = True
@@ -1249,9 +1248,11 @@ class ParticleFilter:
         if not info.lost or self.protected is not None:
             self._held = None
             return
-        self._held = compose(self._held, self._delta if self._delta is not None else np.zeros(3))
-        info.mean = self._held.copy()
-        info.cov = self._held_cov.copy()  # the held estimate's own (the recording's ellipse, --write-bag)
+        mean, cov = self._held
+        mean = compose(mean, self._delta if self._delta is not None else np.zeros(3))
+        self._held = (mean, cov)
+        info.mean = mean.copy()
+        info.cov = cov.copy()  # the held estimate's own (the recording's ellipse, --write-bag)
 
     def _kept_and_fresh(self, kept: np.ndarray, fresh: np.ndarray, keep: float) -> None:
         """The set becomes ``kept`` (resampled particles, ``keep`` of the mass) then ``fresh`` (the rest), each
