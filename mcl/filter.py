@@ -1373,6 +1373,4 @@ class ParticleFilter:
     def _moved_estimate(self) -> np.ndarray:
         """The last estimate moved by this update's odometry step (the estimate itself before any motion)."""
         m = np.asarray(self.last_estimate.mean, dtype=np.float64)
-        d = self._delta if self._delta is not None else np.zeros(3)
-        c, s_ = math.cos(m[2]), math.sin(m[2])
-        return np.array([m[0] + c * d[0] - s_ * d[1], m[1] + s_ * d[0] + c * d[1], m[2] + d[2]])
+        return compose(m, self._delta) if self._delta is not None else m.copy()
