@@ -1249,8 +1249,9 @@ class ParticleFilter:
             self._held = None
             return
         mean, cov = self._held
-        mean = compose(mean, self._delta if self._delta is not None else np.zeros(3))
-        self._held = (mean, cov)
+        if self._delta is not None:  # no odometry this update: the held pose stays where it was
+            mean = compose(mean, self._delta)
+            self._held = (mean, cov)
         info.mean = mean.copy()
         info.cov = cov.copy()  # the held estimate's own (the recording's ellipse, --write-bag)
 
