@@ -1249,9 +1249,8 @@ class ParticleFilter:
             self._held = None
             return
         mean, cov = self._held
-        if self._delta is not None:  # no odometry this update: the held pose stays where it was
-            mean = compose(mean, self._delta)
-            self._held = (mean, cov)
+        mean = self._moved(mean)
+        self._held = (mean, cov)
         info.mean = mean.copy()
         info.cov = cov.copy()  # the held estimate's own (the recording's ellipse, --write-bag)
 
@@ -1371,7 +1370,11 @@ class ParticleFilter:
         p[2] = wrap_angle(p[2])
         return np.ascontiguousarray(p)
 
+    def _moved(self, pose) -> np.ndarray:
+        """``pose`` (x, y, theta) moved by this update's odometry step; a copy of it when the update had none."""
+        m = np.asarray(pose, dtype=np.float64)
+        return compose(m, self._delta) if self._delta is not None else m.copy()
+
     def _moved_estimate(self) -> np.ndarray:
         """The last estimate moved by this update's odometry step (the estimate itself before any motion)."""
-        m = np.asarray(self.last_estimate.mean, dtype=np.float64)
-        return compose(m, self._delta) if self._delta is not None else m.copy()
+        return self._moved(self.last_estimate.mean)
