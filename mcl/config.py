@@ -206,7 +206,8 @@ class LikelihoodFieldConfig:
     # interior_tolerance metres: maps draw walls about a cell thicker than the surface) or zero (AMCL's, the
     # book's as printed)
     interior: Literal["zero", "depth"] = "depth"
-    # null: 0.05 m or one cell of the map, whichever is more (mcl.sensors.DEPTH_TOLERANCE)
+    # null: 0.05 m or one cell of the map, whichever is more (mcl.sensors.DEPTH_TOLERANCE); 0 on a map drawn solid
+    # (mcl.sensors.drawn_solid)
     interior_tolerance: float | None = field(default=None, metadata=_rng(0.0))  # m
     # depth only: an endpoint deeper than this inside an obstacle scores as this deep (a return from behind furniture
     # moved since the map was made); null (the default): no bound (mcl.sensors._depth_cap)

@@ -120,6 +120,22 @@ class OccupancyGrid:
         return (o >= 0) & (o < self.free_thresh * 100.0)
 
     @cached_property
+    def solid_share(self) -> float:
+        """The share of the occupied cells that lie deeper than one cell (their four neighbours occupied; off the map
+        counts as occupied): how the walls were drawn. A map made by SLAM marks the cells its returns fell in, so its
+        walls are the surfaces the laser saw, one or two cells thick (the shared logs' maps: 0.01-0.05, fr079 0.20);
+        a map drawn from geometry (a floor plan, CAD, ``mcl simulate``) fills each wall's whole thickness (the
+        generated worlds: 0.33-0.63). 0 without occupied cells."""
+        occ = self.occupied
+        n = int(np.count_nonzero(occ))
+        if n == 0:
+            return 0.0
+        from mcl.kernels.depth import interior_cells
+
+        ys, _ = interior_cells(byte_mask(occ))
+        return ys.size / n
+
+    @cached_property
     def free_area(self) -> float:
         """m² of free space."""
         return float(np.count_nonzero(self.free)) * self.resolution ** 2

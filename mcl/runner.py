@@ -384,6 +384,9 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         echo(f"mcl: warning: {w}")
     for note in (*log.notes, *grid.notes):
         echo(note)
+    solid = _solid_map_note(cfg, grid)
+    if solid:
+        echo(solid)
     scans = _retime(scans, log, cfg.sensor.time_offset, echo)
     if cfg.sensor.use and cfg.sensor.upside_down and len(scans):
         from mcl.datasets import mirrored_scan
@@ -428,6 +431,21 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         else:
             _check_truth_motion(log, truth, cfg.truth or f"{cfg.bag}: {cfg.topics.truth}", echo)
     return log, grid, scans, marks, truth, initial
+
+
+def _solid_map_note(cfg: Config, grid) -> str | None:
+    """The note a run prints when the likelihood field's depth tolerance (``interior_tolerance: null``) is 0 because
+    the map's walls are drawn solid (``mcl.sensors.drawn_solid``); None otherwise."""
+    from mcl.sensors import drawn_solid
+
+    s = cfg.sensor
+    lf = s.likelihood_field
+    if not (s.use and s.model == "likelihood_field" and lf.interior == "depth" and lf.interior_tolerance is None
+            and lf.surface != "face" and drawn_solid(grid)):
+        return None
+    return (f"{grid.path}: walls drawn solid ({grid.solid_share:.0%} of the occupied cells deeper than one cell: a map "
+            "drawn from geometry, not by SLAM): a return a cell inside a wall scores as one a cell short of it (sensor.likelihood_field."
+            "interior_tolerance null is 0 here, not 0.05 m)")
 
 
 def _skip_self_hits(scans, log, sensor, echo):

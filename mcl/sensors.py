@@ -330,8 +330,9 @@ def _depth_cap(cfg) -> float | None:
 def _depth_tolerance(cfg, interior: str | None, grid=None) -> float | None:
     """The tolerance the depth field takes off (m) when the field scores depth inside obstacles (``interior``,
     else the config's ``interior``, is ``depth``); None for ``zero``. ``cfg``: the likelihood field's view of the
-    sensor config. Its ``interior_tolerance`` when that is a number; null (the default) is DEPTH_TOLERANCE or one
-    cell of ``grid``, whichever is more, so a map coarser than 5 cm gets the tolerance the 5 cm maps have in cells.
+    sensor config. Its ``interior_tolerance`` when that is a number; null (the default) is 0 on a map drawn solid
+    (``drawn_solid``: from geometry, 5 cm cells or finer), else DEPTH_TOLERANCE or one cell of ``grid``, whichever
+    is more, so a map coarser than 5 cm gets the tolerance the 5 cm maps have in cells.
     With 0.05 m on a 10 cm map with clutter (suites/heldout2.yaml clutter-map10cm-h9) correct returns counted as
     readings inside walls: the filter's likelihood favoured places 4-8 m off by 13-16 nats a scan, and every global
     run was lost (docs/measurements.md, "Twenty-eighth session")."""
@@ -339,10 +340,30 @@ def _depth_tolerance(cfg, interior: str | None, grid=None) -> float | None:
         return None
     tolerance = getattr(cfg, "interior_tolerance", 0.0)
     if tolerance is None:
-        if surface_at_faces(cfg):  # a floor plan's walls are as thick as drawn
+        if surface_at_faces(cfg) or drawn_solid(grid):  # a floor plan's walls are as thick as drawn
             return 0.0
         return max(DEPTH_TOLERANCE, float(getattr(grid, "resolution", 0.0)))
     return float(tolerance)
+
+
+SOLID_SHARE = 0.3  # a map whose occupied cells lie deeper than one cell this often or more was drawn from geometry
+
+
+def drawn_solid(grid) -> bool:
+    """Whether ``grid`` (5 cm cells or finer) has its walls drawn solid, from geometry (``OccupancyGrid.solid_share``
+    at least ``SOLID_SHARE``): a floor plan, CAD or ``mcl simulate`` map, whose walls are exactly where the laser
+    sees them, so ``interior_tolerance: null`` is 0 there. The 0.05 m tolerance is for maps drawn by returns (SLAM),
+    whose walls are about a cell thicker than the surface (0.01-0.20 of their occupied cells lie deeper than one
+    cell; the generated worlds' 0.33-0.63). On a solid map the tolerance makes a corridor the raster drew one cell
+    narrower than another fit better: every return sinks into its walls within the tolerance while at the true
+    place half of them fall one cell short in free space, 0.12 nats each (suites/synthetic.yaml corridor-04 global
+    s2: a look-alike 19 m off out-scored the truth by 3 nats a scan). With 0 there: synthetic tracking 128/129
+    within 0.5 m against 126, global 114/126 against 112, kidnapped 110/117 against 108, seeds 1-3; every shared
+    log is the same run (docs/measurements.md, "Sixty-third session"). A coarser map keeps one cell: a mapping
+    run at 10 cm draws a wall's surface up to a cell inside it (suites/heldout2.yaml clutter-map10cm-h9)."""
+    share = getattr(grid, "solid_share", None)
+    return (share is not None and float(getattr(grid, "resolution", 1.0)) <= DEPTH_TOLERANCE + 1e-9
+            and share >= SOLID_SHARE)
 
 
 SKIP_SUPPORT_PARTICLES = 500  # beam skipping estimates each beam's support from at most this many particles

@@ -709,3 +709,21 @@ def test_ring_depths_are_the_exact_transform_within_the_radius_and_minus_one_bey
     out = np.empty(30, dtype=np.int64)
     ring_depths(full, *np.nonzero(full), 10, out)
     assert (out == -1).all()
+
+
+@needs_data
+def test_the_shared_slam_maps_are_not_drawn_solid_and_a_generated_world_is(tmp_path):
+    # the shared logs' maps were drawn by returns (SLAM): at most 0.20 of their occupied cells lie deeper than one cell
+    # (fr079), so interior_tolerance null keeps 0.05 m there and every real run is the one it was; mcl simulate draws
+    # walls solid (0.33-0.63 over suites/synthetic.yaml), where null is 0 (mcl.sensors.drawn_solid)
+    from mcl.sensors import SOLID_SHARE, drawn_solid
+    from mcl.simulate import simulate
+
+    shares = {p.parent.name: load_map(p).solid_share for p in sorted(DATA.glob("*/map.yaml"))}
+    assert len(shares) >= 8, shares
+    assert max(shares.values()) <= 0.21 < SOLID_SHARE, shares
+    assert not any(drawn_solid(load_map(p)) for p in DATA.glob("*/map.yaml"))
+    for kind, seed in (("office", 3), ("corridor", 4)):
+        simulate(tmp_path / kind, kind=kind, seed=seed, duration=2.0)
+        g = load_map(tmp_path / kind / "map.yaml")
+        assert g.solid_share >= 0.33 and drawn_solid(g), (kind, g.solid_share)
