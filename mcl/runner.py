@@ -384,9 +384,6 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         echo(f"mcl: warning: {w}")
     for note in (*log.notes, *grid.notes):
         echo(note)
-    solid = _solid_map_note(cfg, grid)
-    if solid:
-        echo(solid)
     scans = _retime(scans, log, cfg.sensor.time_offset, echo)
     if cfg.sensor.use and cfg.sensor.upside_down and len(scans):
         from mcl.datasets import mirrored_scan
@@ -902,6 +899,9 @@ def _run(
         plane_sensor = PlaneSensor(cfg, grid, log.odometry, cfg.seed)
         updates = plane_sensor.attach(updates)
     load_time = time.perf_counter() - wall0
+    solid = _solid_map_note(cfg, grid)  # once the start and the data checked out: an error stays one line
+    if solid:
+        echo(solid)
     if compile_note:  # `mcl run`: the data loaded, the filter's kernels are next (mcl.numba_cache)
         from mcl.numba_cache import cache_is_cold
 
