@@ -441,8 +441,8 @@ def _solid_map_note(cfg: Config, grid) -> str | None:
             and lf.surface != "face" and drawn_solid(grid)):
         return None
     return (f"{grid.path}: walls drawn solid ({grid.solid_share:.0%} of the occupied cells deeper than one cell: a map "
-            "drawn from geometry, not by SLAM): a return a cell inside a wall scores as one a cell short of it (sensor.likelihood_field."
-            "interior_tolerance null is 0 here, not 0.05 m)")
+            "drawn from geometry, not by SLAM): a return a cell inside a wall scores as one a cell short of it "
+            "(sensor.likelihood_field.interior_tolerance null is 0 here, not 0.05 m)")
 
 
 def _skip_self_hits(scans, log, sensor, echo):
