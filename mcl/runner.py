@@ -433,12 +433,10 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
 def _solid_map_note(cfg: Config, grid) -> str | None:
     """The note a run prints when the likelihood field's depth tolerance (``interior_tolerance: null``) is 0 because
     the map's walls are drawn solid (``mcl.sensors.drawn_solid``); None otherwise."""
-    from mcl.sensors import drawn_solid
+    from mcl.sensors import solid_map_takes_tolerance_off
 
     s = cfg.sensor
-    lf = s.likelihood_field
-    if not (s.use and s.model == "likelihood_field" and lf.interior == "depth" and lf.interior_tolerance is None
-            and lf.surface != "face" and drawn_solid(grid)):
+    if not (s.use and s.model == "likelihood_field" and solid_map_takes_tolerance_off(s.likelihood_field, grid)):
         return None
     return (f"{grid.path}: walls drawn solid ({grid.solid_share:.0%} of the occupied cells deeper than one cell: a map "
             "drawn from geometry, not by SLAM): a return a cell inside a wall scores as one a cell short of it "

@@ -346,6 +346,14 @@ def _depth_tolerance(cfg, interior: str | None, grid=None) -> float | None:
     return float(tolerance)
 
 
+def solid_map_takes_tolerance_off(cfg, grid) -> bool:
+    """Whether ``_depth_tolerance`` is 0 for the tracking field because ``grid`` is drawn solid (``drawn_solid``),
+    not for a setting: the field scores depth (``interior: depth``), ``interior_tolerance`` is null and the
+    surface is the centre. ``cfg``: the likelihood field's view of the sensor config. The run says so in a note."""
+    return (getattr(cfg, "interior", "zero") == "depth" and getattr(cfg, "interior_tolerance", 0.0) is None
+            and not surface_at_faces(cfg) and drawn_solid(grid))
+
+
 SOLID_SHARE = 0.3  # a map whose occupied cells lie deeper than one cell this often or more was drawn from geometry
 
 

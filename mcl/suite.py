@@ -29,7 +29,7 @@ thread each, no recording) with seeds 1..K (or A..B), for the config under test 
 ``results.json`` and ``results.csv`` (one row per run), ``table.csv`` and ``table.txt`` (the median and
 the worst over seeds of each dataset x mode x config) and ``plots/DATASET.png`` (error over time). The
 results are rewritten, atomically, after every run; a run whose ``row.json`` holds the same fingerprint (its
-config, and the size and time of each data file it reads) is not run again, so an interrupted evaluation resumes
+config, mcl's source (``code_digest``), and the size and time of each data file it reads) is not run again, so an interrupted evaluation resumes
 where it stopped. A run that fails (its log
 unreadable, its truth not overlapping the log) is a row with its ``error``, counted as lost, and the others go on.
 """
@@ -601,10 +601,22 @@ def _finish_plan(jobs: list[Job]) -> None:
         j.fingerprint = hashlib.sha1(text.encode()).hexdigest()
 
 
+def code_digest(root: Path | None = None) -> str:
+    """A digest of mcl's own source (every ``.py`` file of the package, or of ``root``, by path and content), for
+    the fingerprint: the version alone (pyproject.toml's) is not bumped by every change, and a row made by other
+    code must run again, not be kept."""
+    root = Path(__file__).resolve().parent if root is None else Path(root)
+    h = hashlib.sha1()
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()[:12]
+
+
 def _data_stamp(cfg, memo: dict) -> str:
     """The size and modification time of each file a run reads (the map and the image it names, the log or bag,
-    the truth) and mcl's version, for the fingerprint: a truth corrected or a map redrawn in place runs again (its
-    old row was kept, scored on the old file). ``memo``: path -> line (and a map's image path), shared by the jobs."""
+    the truth), mcl's version and a digest of its source (``code_digest``), for the fingerprint: a truth
+    corrected, a map redrawn in place or the filter's code changed runs again (its old row was kept, scored on the
+    old file or made by the old code). ``memo``: path -> line (and a map's image path), shared by the jobs."""
     import yaml
 
     from mcl import __version__
@@ -619,7 +631,9 @@ def _data_stamp(cfg, memo: dict) -> str:
             memo["image", cfg.map] = str(Path(cfg.map).parent / image) if isinstance(image, str) else None
         if memo["image", cfg.map] is not None:
             paths.append(memo["image", cfg.map])
-    lines = [f"mcl {__version__}"]
+    if "code" not in memo:
+        memo["code"] = code_digest()
+    lines = [f"mcl {__version__} {memo['code']}"]
     for p in paths:
         if p not in memo:
             files = sorted(Path(p).iterdir()) if Path(p).is_dir() else [Path(p)]  # a rosbag2 folder: its files

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+import types
 from pathlib import Path
 
 import numpy as np
@@ -645,6 +646,32 @@ def test_suite_resumes_and_skips_finished_runs(evaluated, tmp_path, capsys):
     assert "already finished" not in printed
     assert json.loads((out / "runs/good/tracking/default/seed1/row.json").read_text())["particles"] <= 1500
 
+
+
+def test_a_row_made_by_other_code_is_run_again(tmp_path, monkeypatch):
+    # the fingerprint held mcl's version only (0.1.0, never bumped), so an evaluation resumed in an old folder kept
+    # rows the code before a change had made; it now holds a digest of the package's source too
+    from mcl import suite as suite_module
+
+    src = tmp_path / "pkg"
+    (src / "kernels").mkdir(parents=True)
+    (src / "filter.py").write_text("x = 1\n")
+    (src / "kernels" / "field.py").write_text("y = 2\n")
+    (src / "notes.txt").write_text("not code")
+    first = suite_module.code_digest(src)
+    assert suite_module.code_digest(src) == first
+    (src / "notes.txt").write_text("still not code")
+    assert suite_module.code_digest(src) == first
+    (src / "kernels" / "field.py").write_text("y = 3\n")
+    changed = suite_module.code_digest(src)
+    assert changed != first
+    (src / "kernels" / "field.py").rename(src / "kernels" / "other.py")
+    assert suite_module.code_digest(src) not in (first, changed)
+    cfg = types.SimpleNamespace(map=None, log=None, bag=None, truth=None)
+    stamp = suite_module._data_stamp(cfg, {})
+    assert suite_module.code_digest() in stamp
+    monkeypatch.setattr(suite_module, "code_digest", lambda root=None: "other")
+    assert suite_module._data_stamp(cfg, {}) != stamp
 
 
 def test_relative_out_and_cache_folders_are_the_working_directorys(evaluated, tmp_path, capsys, monkeypatch):
