@@ -147,6 +147,17 @@ _MAX_OVERSAMPLE = 20  # global_density: at most this many candidates per fresh p
 _MATCHED_PER_FRESH = 1
 
 
+def top_k(values: np.ndarray, k: int) -> np.ndarray:
+    """Indices of the ``k`` largest ``values`` (0 < k < size), in index order; of equal values at the cut, the first.
+
+    Not ``np.argpartition``: which of several equal values it picks depends on the SIMD code numpy runs (AVX-512 or
+    not), and a global search's candidates often tie (every beam off the map); one candidate more or less moved a
+    search on one machine and not on the other. The k-th largest value itself is the same everywhere."""
+    kth = np.partition(values, values.size - k)[values.size - k]
+    above = np.flatnonzero(values > kth)
+    return np.sort(np.concatenate([above, np.flatnonzero(values == kth)[: k - above.size]]))
+
+
 class ParticleFilter:
     """MCL over a (3, N) particle array with log weights."""
 
@@ -874,8 +885,7 @@ class ParticleFilter:
             # kept in the cache order they were drawn in (out of it, the matching's lookups into a big map's
             # field ran 3x slower)
             n_match = _MATCHED_PER_FRESH * idx.size
-            best = cand if n_match >= lc.size else np.ascontiguousarray(
-                cand[:, np.sort(np.argpartition(-lc, n_match - 1)[:n_match])])
+            best = cand if n_match >= lc.size else np.ascontiguousarray(cand[:, top_k(lc, n_match)])
             moved = self._refined(best, observation, int(fc.search_refine))
             lm = self._laser_loglik(moved, observation)
             matched = bool(np.isfinite(lm.max()))  # (no finite fit matched: drawn as they were)

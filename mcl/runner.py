@@ -38,6 +38,7 @@ from mcl.datasets import ScanMap
 from mcl.datasets.carmen import Scan
 from mcl.errors import ConfigError, DataError, MclError
 from mcl.estimate import compose, inverse, wrap_angle  # noqa: F401  (compose, inverse: mcl.runner's too)
+from mcl.parallel import numeric_platform
 
 
 def _to_world(pose, points) -> np.ndarray:
@@ -1178,6 +1179,7 @@ def _run(
         **({"planes": plane_sensor.summary()} if plane_sensor is not None else {}),
         "skipped_messages": dict(log.skipped),
         "recording_particles_every": viz.particles_every if viz is not None else None,  # rerun.budget_mb may raise it
+        "platform": numeric_platform(),  # the same seed on other numpy SIMD paths can give another trajectory
         "wall_time_s": {"load": load_time, "loop": loop_time, **stage_totals},
         "ms_per_update": {k: 1e3 * v / n_up for k, v in stage_totals.items()},
         "outputs": {

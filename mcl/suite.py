@@ -614,9 +614,10 @@ def code_digest(root: Path | None = None) -> str:
 
 def _data_stamp(cfg, memo: dict) -> str:
     """The size and modification time of each file a run reads (the map and the image it names, the log or bag,
-    the truth), mcl's version and a digest of its source (``code_digest``), for the fingerprint: a truth
-    corrected, a map redrawn in place or the filter's code changed runs again (its old row was kept, scored on the
-    old file or made by the old code). ``memo``: path -> line (and a map's image path), shared by the jobs."""
+    the truth), mcl's version, a digest of its source (``code_digest``) and the numeric platform
+    (``mcl.parallel.numeric_platform``), for the fingerprint: a truth corrected, a map redrawn in place, the filter's
+    code changed or the folder resumed on a machine with other math runs again (its old row was kept, scored on the
+    old file or made by the old code or arithmetic). ``memo``: path -> line (and a map's image path), shared by the jobs."""
     import yaml
 
     from mcl import __version__
@@ -633,7 +634,10 @@ def _data_stamp(cfg, memo: dict) -> str:
             paths.append(memo["image", cfg.map])
     if "code" not in memo:
         memo["code"] = code_digest()
-    lines = [f"mcl {__version__} {memo['code']}"]
+        from mcl.parallel import numeric_platform  # imports numba: not at start-up
+
+        memo["platform"] = json.dumps(numeric_platform(), sort_keys=True)
+    lines = [f"mcl {__version__} {memo['code']}", f"platform {memo['platform']}"]
     for p in paths:
         if p not in memo:
             files = sorted(Path(p).iterdir()) if Path(p).is_dir() else [Path(p)]  # a rosbag2 folder: its files

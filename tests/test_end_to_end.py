@@ -98,6 +98,8 @@ def test_run_writes_every_output_and_a_recording_with_one_row_per_update(tmp_pat
     assert summary["particles_min"] <= summary["particles_mean"] <= 500
     for stage in ("predict", "correct", "resample", "estimate", "viz"):
         assert summary["wall_time_s"][stage] >= 0
+    # what the arithmetic ran on: another machine's numpy SIMD paths can give another trajectory for the same seed
+    assert summary["platform"]["numpy"] == np.__version__ and isinstance(summary["platform"]["numpy_simd"], list)
     # The resolved config repeats the run: same trajectory, byte for byte.
     out2 = tmp_path / "again"
     assert main(["run", str(out / "config.yaml"), "--out", str(out2), "--no-progress", "--rerun", "off"]) == 0

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import shutil
+import sys
 import types
 from pathlib import Path
 
@@ -672,6 +674,40 @@ def test_a_row_made_by_other_code_is_run_again(tmp_path, monkeypatch):
     assert suite_module.code_digest() in stamp
     monkeypatch.setattr(suite_module, "code_digest", lambda root=None: "other")
     assert suite_module._data_stamp(cfg, {}) != stamp
+
+
+def test_a_row_made_on_other_simd_math_is_run_again(monkeypatch):
+    # numpy's AVX-512 exp/log/arctan2 differ from its other code in the last bit now and then, and its argpartition
+    # picked other candidates among equal ones (synthetic large-06 global seed 1 settled at 29.2 s with AVX-512,
+    # 34.8 s without): an evaluation resumed on another machine must not keep rows made with other arithmetic
+    import mcl.parallel
+    from mcl import suite as suite_module
+
+    cfg = types.SimpleNamespace(map=None, log=None, bag=None, truth=None)
+    here = mcl.parallel.numeric_platform()
+    stamp = suite_module._data_stamp(cfg, {})
+    assert json.dumps(here, sort_keys=True) in stamp
+    monkeypatch.setattr(mcl.parallel, "numeric_platform", lambda: {**here, "numpy_simd": ["X86_V3"]})
+    assert suite_module._data_stamp(cfg, {}) != stamp
+
+
+def test_the_numeric_platform_names_the_simd_numpy_runs_on():
+    # the platform must follow what numpy dispatches to, not only what the CPU has: with the top target switched
+    # off (NPY_DISABLE_CPU_FEATURES, before numpy is imported) it is gone from the list
+    import subprocess
+
+    from mcl.parallel import numeric_platform
+
+    here = numeric_platform()
+    assert here["numpy"] == np.__version__ and here["machine"]
+    if not here["numpy_simd"]:
+        pytest.skip("numpy dispatches to no SIMD target on this CPU")
+    top = here["numpy_simd"][-1]
+    code = "import json; from mcl.parallel import numeric_platform; print(json.dumps(numeric_platform()))"
+    env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": top}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    there = json.loads(out.strip().splitlines()[-1])
+    assert top not in there["numpy_simd"] and there["numpy_simd"] == here["numpy_simd"][:-1]
 
 
 def test_relative_out_and_cache_folders_are_the_working_directorys(evaluated, tmp_path, capsys, monkeypatch):
