@@ -617,7 +617,8 @@ def _data_stamp(cfg, memo: dict) -> str:
     the truth), mcl's version, a digest of its source (``code_digest``) and the numeric platform
     (``mcl.parallel.numeric_platform``), for the fingerprint: a truth corrected, a map redrawn in place, the filter's
     code changed or the folder resumed on a machine with other math runs again (its old row was kept, scored on the
-    old file or made by the old code or arithmetic). ``memo``: path -> line (and a map's image path), shared by the jobs."""
+    old file or made by the old code or arithmetic). ``memo``: path -> line (and a map's image path), shared by the
+    jobs."""
     import yaml
 
     from mcl import __version__
