@@ -635,6 +635,7 @@ def _data_stamp(cfg, memo: dict) -> str:
             paths.append(memo["image", cfg.map])
     if "code" not in memo:
         memo["code"] = code_digest()
+    if "platform" not in memo:
         from mcl.parallel import numeric_platform  # imports numba: not at start-up
 
         memo["platform"] = json.dumps(numeric_platform(), sort_keys=True)

@@ -15,14 +15,6 @@ def outputs_by_blas_threads(code: str) -> set[str]:
                            env={**os.environ, "OPENBLAS_NUM_THREADS": t, "OMP_NUM_THREADS": t}).stdout for t in "12"}
 
 
-def top_simd_target() -> str | None:
-    """The best SIMD target numpy dispatches to on this CPU (None: none)."""
-    from mcl.parallel import numeric_platform
-
-    simd = numeric_platform()["numpy_simd"]
-    return simd[-1] if simd else None
-
-
 def outputs_by_numpy_simd(code: str) -> set[str]:
     """The distinct stdouts of ``python -c code`` on each level of SIMD code numpy has on this CPU: as is, then with
     the best target switched off, then the two best, ... down to none (NPY_DISABLE_CPU_FEATURES, read when numpy is
