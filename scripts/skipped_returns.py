@@ -71,6 +71,7 @@ def main(argv=None) -> int:
     totals = Counter()
     false_bearings: Counter = Counter()
     false_ranges: list[float] = []
+    true_ranges: list[float] = []
 
     def on_update(t, pf, info, truth_pose):
         totals["updates"] += 1
@@ -84,6 +85,7 @@ def main(argv=None) -> int:
         for ex, ey in sk[:, near].T:
             false_bearings[int(round(math.degrees(math.atan2(ey, ex))))] += 1
             false_ranges.append(math.hypot(ex, ey))
+        true_ranges.extend(np.hypot(sk[0, ~near], sk[1, ~near]).tolist())
 
     with tempfile.TemporaryDirectory() as tmp:
         summary = run(cfg, Path(tmp), on_update=on_update)
@@ -97,6 +99,9 @@ def main(argv=None) -> int:
               ", ".join(f"{b}: {n}" for b, n in false_bearings.most_common(8)))
         q = np.percentile(false_ranges, [10, 50, 90])
         print(f"their ranges: 10 / 50 / 90 % {q[0]:.1f} / {q[1]:.1f} / {q[2]:.1f} m")
+    if true_ranges:
+        q = np.percentile(true_ranges, [10, 50, 90])
+        print(f"the ranges of the skips off the map at the truth: 10 / 50 / 90 % {q[0]:.1f} / {q[1]:.1f} / {q[2]:.1f} m")
     return 0
 
 
