@@ -148,7 +148,8 @@ _MATCHED_PER_FRESH = 1
 
 
 def top_k(values: np.ndarray, k: int) -> np.ndarray:
-    """Indices of the ``k`` largest ``values`` (0 < k < size), in index order; of equal values at the cut, the first.
+    """Indices of the ``k`` largest ``values`` (0 < k < size; no NaN, as ``_laser_loglik`` gives: -inf for a pose it
+    rules out), in index order; of equal values at the cut, the first.
 
     Not ``np.argpartition``: which of several equal values it picks depends on the SIMD code numpy runs (AVX-512 or
     not), and a global search's candidates often tie (every beam off the map); one candidate more or less moved a

@@ -26,6 +26,15 @@ def choose(parallel_kernel, serial_kernel, work: float):
     return serial_kernel
 
 
+def numpy_umath():
+    """numpy's C core module, which holds its SIMD dispatch tables (``__cpu_dispatch__``, ``__cpu_features__``)."""
+    try:
+        from numpy._core import _multiarray_umath as umath
+    except ImportError:  # numpy 1.x
+        from numpy.core import _multiarray_umath as umath
+    return umath
+
+
 def numeric_platform() -> dict:
     """What a run's arithmetic depends on besides its config and seed: the versions of numpy, numba and llvmlite
     and the SIMD code numpy dispatches to on this CPU (its ``__cpu_dispatch__`` targets that are on).
@@ -41,10 +50,7 @@ def numeric_platform() -> dict:
     import llvmlite
     import numpy as np
 
-    try:
-        from numpy._core import _multiarray_umath as umath
-    except ImportError:  # numpy 1.x
-        from numpy.core import _multiarray_umath as umath
+    umath = numpy_umath()
     on = getattr(umath, "__cpu_features__", {})
     return {
         "machine": platform.machine(),

@@ -20,7 +20,6 @@ RUN_DIR holds ``config.yaml`` (map, log, truth: synthetic worlds must still be i
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import tempfile
 from collections import Counter
@@ -33,22 +32,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from mcl.config import load_config  # noqa: E402
 from mcl.errors import MclError  # noqa: E402
 from mcl.maps import load_map  # noqa: E402
-from mcl.runner import run  # noqa: E402
+from mcl.runner import _to_world, run  # noqa: E402  (robot-frame points to the world frame)
 
 
 def classify(endpoints: np.ndarray, truth_pose, grid, near: float) -> np.ndarray:
     """(K,) bool: the robot-frame ``endpoints`` (2, K), laid on ``grid`` from ``truth_pose``, within ``near`` m of a
     mapped obstacle (an endpoint off the map counts as not near)."""
-    x, y, th = (float(v) for v in truth_pose[:3])
-    c, s = math.cos(th), math.sin(th)
-    wx = x + c * endpoints[0] - s * endpoints[1]
-    wy = y + s * endpoints[0] + c * endpoints[1]
-    cx = np.floor((wx - grid.origin[0]) / grid.resolution).astype(np.int64)
-    cy = np.floor((wy - grid.origin[1]) / grid.resolution).astype(np.int64)
-    dist = np.asarray(grid.distance)
-    inside = (cx >= 0) & (cx < dist.shape[1]) & (cy >= 0) & (cy < dist.shape[0])
+    wx, wy = _to_world(np.asarray(truth_pose, dtype=np.float64), endpoints)
+    ix, iy = grid.world_to_cell(wx, wy)
+    inside = grid.contains(ix, iy)
     out = np.zeros(endpoints.shape[1], dtype=bool)
-    out[inside] = dist[cy[inside], cx[inside]] <= near
+    out[inside] = np.asarray(grid.distance)[iy[inside], ix[inside]] <= near
     return out
 
 
@@ -82,9 +76,8 @@ def main(argv=None) -> int:
         near = classify(sk, truth_pose, grid, args.near)
         totals["skipped"] += sk.shape[1]
         totals["near a mapped obstacle"] += int(near.sum())
-        for ex, ey in sk[:, near].T:
-            false_bearings[int(round(math.degrees(math.atan2(ey, ex))))] += 1
-            false_ranges.append(math.hypot(ex, ey))
+        false_bearings.update(np.rint(np.degrees(np.arctan2(sk[1, near], sk[0, near]))).astype(int).tolist())
+        false_ranges.extend(np.hypot(sk[0, near], sk[1, near]).tolist())
         true_ranges.extend(np.hypot(sk[0, ~near], sk[1, ~near]).tolist())
 
     with tempfile.TemporaryDirectory() as tmp:

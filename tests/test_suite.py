@@ -699,10 +699,7 @@ def test_the_numeric_platform_names_the_simd_numpy_runs_on(monkeypatch):
 
     import mcl.parallel
 
-    try:
-        from numpy._core import _multiarray_umath as umath
-    except ImportError:  # numpy 1.x
-        from numpy.core import _multiarray_umath as umath
+    umath = mcl.parallel.numpy_umath()
     here = mcl.parallel.numeric_platform()
     assert here["numpy"] == np.__version__ and here["machine"]
     with monkeypatch.context() as m:  # numpy's two tables, made up: T2 is switched off, the CPU's T4 has no code
