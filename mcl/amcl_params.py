@@ -687,6 +687,7 @@ class _Converter:
                       "nav2_amcl::DifferentialMotionModel, nav2_amcl::OmniMotionModel): read as differential")
         self.set("motion.model", "omni" if "omni" in kind else "odometry", f"{said}: {how}", "robot_model_type")
         self.set("motion.noise_form", "variance", "sigma^2 = alpha1 rot^2 + alpha2 trans^2 (Table 5.6)")
+        self.set("motion.noise_step", 0.0, "the book's trans^2 at every step length, as AMCL draws it once an update")
         what = {"alpha1": "rotation noise from rotation", "alpha2": "rotation noise from translation",
                 "alpha3": "translation noise from translation", "alpha4": "translation noise from rotation"}
         # AMCL's omni models (amcl_odom.cpp, nav2 omni_motion_model.cpp): rot std from alpha4 rot^2 + alpha2 trans^2,

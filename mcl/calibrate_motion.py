@@ -44,6 +44,10 @@ logs jitter by centimetres) inflate the fitted alphas, alpha2 and alpha3 most.
 Pairs where neither the reference nor the odometry moved (less than 1 mm and
 1 mrad) carry no information and are skipped. An alpha above 1 (a turn's or
 a step's noise as large as itself) is implausible: the fit warns.
+
+The fit is in the config's ``motion.noise_step`` form (the block it prints
+says which): with the default 0.3 m, pairs a metre apart are scored as a
+random walk of 0.3 m steps, as the filter will draw them.
 """
 
 from __future__ import annotations
@@ -123,7 +127,7 @@ SIGMA_FLOOR = 1e-3  # m or rad: no noise std below this in the fit (logged poses
 
 
 def pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_form="variance", noise="normal",
-                         sigma_floor=SIGMA_FLOOR, min_trans=None, p_turn=0.0) -> np.ndarray:
+                         sigma_floor=SIGMA_FLOOR, min_trans=None, p_turn=0.0, noise_step=0.0) -> np.ndarray:
     """(M,) log p(x_now | (odom_prev, odom_now), x_prev) of each pair: Table 5.5 without the Jacobian, mixed with the
     turn-only density (weight p_turn; alone below min_trans), see the module docstring."""
     from mcl.motion import ROT1_MIN_TRANS, SIGMA_MIN, _wrap_np, noise_sigmas_array, odometry_deltas_array, \
@@ -131,7 +135,7 @@ def pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_form=
     from mcl.noise import log_density
 
     cfg = SimpleNamespace(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
-                          noise_form=noise_form)
+                          noise_form=noise_form, noise_step=noise_step)
     mt = ROT1_MIN_TRANS if min_trans is None else float(min_trans)
     f = max(float(sigma_floor), SIGMA_MIN)
 
@@ -165,7 +169,7 @@ def check_min_trans(min_trans) -> None:
 
 
 def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance", noise="normal",
-                        x0=(0.05, 0.05, 0.05, 0.05), min_trans=None, p_turn=None, t=None) -> dict:
+                        x0=(0.05, 0.05, 0.05, 0.05), min_trans=None, p_turn=None, t=None, noise_step=0.0) -> dict:
     """Maximum-likelihood alpha1..alpha4 of the odometry model from matched pairs (see the module docstring).
 
     Returns {"alphas": [a1..a4], "p_turn", "log_likelihood", "pairs" (used), "skipped" (still), "converged",
@@ -185,6 +189,8 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     min_trans (default the filter's 1 cm, ``ROT1_MIN_TRANS``): below this
     translation (odometry or reference) rot1 = 0 and rot2 carries the turn:
     the pair is scored on its turn and translation only.
+
+    noise_step: ``motion.noise_step`` of the model fitted (0: the book's dtrans^2 for every step length).
     """
     check_min_trans(min_trans)
     op, on, xp, xn = (np.asarray(a, dtype=np.float64) for a in (odom_prev, odom_now, x_prev, x_now))
@@ -202,7 +208,8 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
 
     def lls(z):
         a, p = unpack(z)
-        return pair_log_likelihoods(a, op, on, xp, xn, noise_form, noise, min_trans=min_trans, p_turn=p)
+        return pair_log_likelihoods(a, op, on, xp, xn, noise_form, noise, min_trans=min_trans, p_turn=p,
+                                    noise_step=noise_step)
 
     def nll(z):
         v = -float(np.sum(lls(z))) / m
@@ -233,7 +240,7 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     return {"alphas": [float(a) for a in alphas], "p_turn": float(p), "log_likelihood": float(-best.fun * m),
             "pairs": int(m), "skipped": int(np.count_nonzero(still)), "converged": converged,
             "message": str(best.message), "undetermined": [ALPHA_NAMES[k] for k in loose], "noise_form": noise_form,
-            "noise": noise, "warnings": notes}
+            "noise": noise, "noise_step": float(noise_step), "warnings": notes}
 
 
 ALPHA_NAMES = ("alpha1", "alpha2", "alpha3", "alpha4", "alpha_strafe")
@@ -276,7 +283,7 @@ def _maximise(lls, nll, z0, n_alpha: int, extra_bounds: list, names) -> tuple:
 
 
 def omni_pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_form="variance", noise="normal",
-                              sigma_floor=SIGMA_FLOOR) -> np.ndarray:
+                              sigma_floor=SIGMA_FLOOR, noise_step=0.0) -> np.ndarray:
     """(M,) log p(x_now | (odom_prev, odom_now), x_prev) of each pair under the omni model (``mcl.motion``'s
     ``log_motion_model_omni``, each pair with its own odometry), the noise stds from the reference's motion (as
     Table 5.5 takes them from the hypothesis). ``alphas``: alpha1..alpha4, alpha_strafe."""
@@ -284,14 +291,14 @@ def omni_pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_
     from mcl.noise import log_density
 
     cfg = SimpleNamespace(alpha1=alphas[0], alpha2=alphas[1], alpha3=alphas[2], alpha4=alphas[3],
-                          alpha_strafe=alphas[4], noise_form=noise_form)
+                          alpha_strafe=alphas[4], noise_form=noise_form, noise_step=noise_step)
     f = max(float(sigma_floor), SIGMA_MIN)
     residuals, _, (trans, turn) = omni_residuals(odom_prev, odom_now, x_prev, x_now)
     return sum(log_density(noise, r, np.maximum(sg, f)) for r, sg in zip(residuals, omni_sigmas(trans, turn, cfg)))
 
 
 def fit_omni_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance", noise="normal",
-                    x0=(0.05, 0.05, 0.05, 0.05, 0.05)) -> dict:
+                    x0=(0.05, 0.05, 0.05, 0.05, 0.05), noise_step=0.0) -> dict:
     """Maximum-likelihood alpha1..alpha4 and alpha_strafe of the omni model (``mcl.motion.OmniMotionModel``) from
     matched pairs, as ``fit_odometry_alphas`` (its "alphas" hold the five; no p_turn: the omni model does not split
     a step's turn). Normal noise only (a bounded support needs the odometry model's start search)."""
@@ -305,7 +312,7 @@ def fit_omni_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance"
         raise DataError(f"calibrate motion: only {m} pairs with motion; need at least 5")
 
     def lls(z):
-        return omni_pair_log_likelihoods(np.exp(z), op, on, xp, xn, noise_form, noise)
+        return omni_pair_log_likelihoods(np.exp(z), op, on, xp, xn, noise_form, noise, noise_step=noise_step)
 
     def nll(z):
         v = -float(np.sum(lls(z))) / m
@@ -317,7 +324,7 @@ def fit_omni_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance"
     return {"alphas": [float(a) for a in alphas], "log_likelihood": float(-best.fun * m), "pairs": int(m),
             "skipped": int(np.count_nonzero(still)), "converged": converged, "message": str(best.message),
             "undetermined": [ALPHA_NAMES[k] for k in loose], "noise_form": noise_form, "noise": noise,
-            "model": "omni", "warnings": notes}
+            "noise_step": float(noise_step), "model": "omni", "warnings": notes}
 
 
 def format_yaml(result: dict, noise_form: str, noise: str, source: str = "") -> str:
@@ -339,7 +346,7 @@ def format_yaml(result: dict, noise_form: str, noise: str, source: str = "") -> 
         return f"  {name}: {a[k]:.6g}{'  # implausible (> 1)' if a[k] > ALPHA_PLAUSIBLE else ''}\n"
     # model: odometry -- the alphas are the odometry model's (a velocity config's alpha1..4 mean something else)
     body = f"motion:\n  model: {'omni' if omni else 'odometry'}\n" f"  noise_form: {noise_form}\n" \
-        f"  noise: {noise}\n" + "".join(line(k) for k in range(len(a)))
+        f"  noise_step: {result.get('noise_step', 0.0):g}\n" f"  noise: {noise}\n" + "".join(line(k) for k in range(len(a)))
     return head + body
 
 
@@ -347,8 +354,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``mcl calibrate motion``."""
     p.add_argument("--log", required=True, help="CARMEN log with the odometry (ODOM lines or scan poses)")
     p.add_argument("--truth", required=True, help="reference trajectory (TUM) at (a subset of) the log's times")
-    p.add_argument("--config", help="config whose motion.model (odometry or omni), motion.noise_form and motion.noise "
-                   "the fit uses (default: the defaults)")
+    p.add_argument("--config", help="config whose motion.model (odometry or omni), motion.noise_form, "
+                   "motion.noise_step and motion.noise the fit uses (default: the defaults)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override, e.g. motion.noise_form=std")
     p.add_argument("--min-trans", type=float, default=None, metavar="M",
                    help="below this step (m, >= 0) rot1 = 0 for odometry and reference and the pair is scored on its "
@@ -368,9 +375,11 @@ def run_from_args(args) -> int:
                       "block sets model: odometry", MclWarning, stacklevel=2)
     pairs = pairs_from_log(args.log, args.truth)
     if cfg.motion.model == "omni":
-        res = fit_omni_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise)
+        res = fit_omni_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise,
+                              noise_step=cfg.motion.noise_step)
     else:
         res = fit_odometry_alphas(*pairs[:4], noise_form=cfg.motion.noise_form, noise=cfg.motion.noise,
+                                  noise_step=cfg.motion.noise_step,
                                   min_trans=args.min_trans, t=pairs[4])
     if args.json:
         print(json.dumps(res, indent=2))

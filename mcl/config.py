@@ -161,6 +161,9 @@ class MotionConfig:
     # omni model only: the noise across the direction of travel from translation (AMCL's omni alpha5); variance
     # form sigma_strafe^2 = alpha_strafe trans^2 + alpha4 rot^2
     alpha_strafe: float = field(default=0.05, metadata=_rng(0.0))
+    # m: a step longer than this has the translation-driven noise (alpha2, alpha3, alpha_strafe) of a random walk of
+    # such steps, dtrans^2 -> dtrans * min(dtrans, noise_step) (mcl.motion.noise_trans); 0: the book's dtrans^2
+    noise_step: float = field(default=0.3, metadata=_rng(0.0))
     # with model odometry: "omni" runs an odometry whose travel goes across the robot's heading (an omnidirectional
     # base: mcl.motion.sideways_share >= SIDEWAYS_OMNI) with the omni model, with a warning; "keep" warns only
     sideways: Literal["omni", "keep"] = "omni"

@@ -82,6 +82,21 @@ def noise_angle(rot: float) -> float:
     return min(abs(angle_diff(rot, 0.0)), abs(angle_diff(rot, math.pi)))
 
 
+def noise_trans(trans, cfg):
+    """|dtrans| as the translation-driven noise terms see it: sqrt(|dtrans| * min(|dtrans|, noise_step)).
+
+    Table 5.6 draws the noise once per control, with a variance that grows as dtrans^2: a log with a scan every metre
+    gets 20 times the heading variance per metre of travel of one read every 5 cm. Odometry errors accrue along the
+    path, so beyond ``motion.noise_step`` a step counts as a random walk of steps that long (variance linear in the
+    distance); shorter steps, and ``noise_step`` 0, are the book's. Floats or arrays.
+    """
+    step = float(getattr(cfg, "noise_step", 0.0))
+    t = np.abs(np.asarray(trans, dtype=np.float64))
+    if step > 0.0:
+        t = np.sqrt(t * np.minimum(t, step))
+    return float(t) if t.ndim == 0 else t
+
+
 def noise_sigmas(rot1: float, trans: float, rot2: float, cfg) -> tuple[float, float, float]:
     """Standard deviations (sigma_rot1, sigma_trans, sigma_rot2) of the noise on the deltas.
 
@@ -91,7 +106,7 @@ def noise_sigmas(rot1: float, trans: float, rot2: float, cfg) -> tuple[float, fl
     a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
     r1 = noise_angle(rot1)
     r2 = noise_angle(rot2)
-    t = abs(float(trans))
+    t = noise_trans(trans, cfg)
     if cfg.noise_form == "variance":
         return (math.sqrt(a1 * r1 * r1 + a2 * t * t),
                 math.sqrt(a3 * t * t + a4 * (r1 * r1 + r2 * r2)),
@@ -289,7 +304,7 @@ def omni_sigmas(trans, rot, cfg):
     """
     a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
     a_s = float(cfg.alpha_strafe)
-    t = np.abs(np.asarray(trans, dtype=np.float64))
+    t = np.asarray(noise_trans(trans, cfg), dtype=np.float64)
     r = np.abs(np.asarray(rot, dtype=np.float64))
     if cfg.noise_form == "variance":
         out = (np.sqrt(a3 * t * t + a4 * r * r), np.sqrt(a_s * t * t + a4 * r * r), np.sqrt(a1 * r * r + a2 * t * t))
@@ -445,7 +460,7 @@ def _noise_angle_np(rot):
 def noise_sigmas_array(rot1, trans, rot2, cfg):
     """Vectorised ``noise_sigmas``: (sigma_rot1, sigma_trans, sigma_rot2) arrays, same rules."""
     a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
-    r1, r2, t = _noise_angle_np(rot1), _noise_angle_np(rot2), np.abs(np.asarray(trans, dtype=np.float64))
+    r1, r2, t = _noise_angle_np(rot1), _noise_angle_np(rot2), np.asarray(noise_trans(trans, cfg), dtype=np.float64)
     if cfg.noise_form == "variance":
         return (np.sqrt(a1 * r1 * r1 + a2 * t * t), np.sqrt(a3 * t * t + a4 * (r1 * r1 + r2 * r2)),
                 np.sqrt(a1 * r2 * r2 + a2 * t * t))

@@ -153,7 +153,7 @@ def test_a_nav2_params_file_converts_to_the_keys_its_amcl_block_means(tmp_path):
     assert k["filter.initial_pose"] == [1.5, -2.0, 0.3]  # set_initial_pose: true
     assert "filter.initial_std" not in k  # nav2 has no initial covariance parameter
     assert "filter.recovery" not in k  # both recovery rates 0: mcl's own default recovery is left
-    assert (k["motion.model"], k["motion.noise_form"]) == ("odometry", "variance")
+    assert (k["motion.model"], k["motion.noise_form"], k["motion.noise_step"]) == ("odometry", "variance", 0.0)
     assert [k[f"motion.alpha{i}"] for i in range(1, 5)] == [0.2] * 4
     assert "motion.alpha5" not in k  # omni only; mcl's alpha5 is the velocity model's
     assert k["sensor.model"] == "likelihood_field" and k["sensor.likelihood_field.interior"] == "zero"

@@ -110,15 +110,16 @@ def _noise_angle(a):
     return np.minimum(a, np.pi - a)
 
 
-def _model_pairs(seed, m=1000, short=0.0, creep=0.0, alphas=A):
+def _model_pairs(seed, m=1000, short=0.0, creep=0.0, alphas=A, trans=(0.1, 0.5), noise_step=0.0):
     """(odom_prev, odom_now, x_prev, x_now) drawn from the model the fit assumes: reference steps (rot1, trans,
     rot2), odometry = reference + noise with the variance form's stds from the reference (Table 5.5). A share
     ``short`` turns on the spot with steps under 1 cm pointing anywhere, their noise by the filter's rule (rot1 = 0,
     rot2 = the turn); a share ``creep`` turns on the spot creeping 2-4 cm, odometry and reference in unrelated
-    directions (the turn-only component, noise the same)."""
+    directions (the turn-only component, noise the same). ``noise_step`` > 0: the translation-driven terms take
+    trans * min(trans, noise_step) for trans^2 (``motion.noise_step``)."""
     a = alphas
     rng = np.random.default_rng(seed)
-    h1, h2, ht = rng.uniform(-0.5, 0.5, m), rng.uniform(-0.5, 0.5, m), rng.uniform(0.1, 0.5, m)
+    h1, h2, ht = rng.uniform(-0.5, 0.5, m), rng.uniform(-0.5, 0.5, m), rng.uniform(*trans, m)
     ks, kc = int(short * m), int(creep * m)
     ht[:ks] = rng.uniform(0.0, 0.01, ks)
     ht[ks:ks + kc] = rng.uniform(0.02, 0.04, kc)
@@ -127,8 +128,9 @@ def _model_pairs(seed, m=1000, short=0.0, creep=0.0, alphas=A):
     turn_only = np.arange(m) < ks + kc
     n1 = np.where(turn_only, 0.0, _noise_angle(h1))
     n2 = _noise_angle(np.where(turn_only, h1 + h2, h2))
-    s1, s2 = np.sqrt(a[0] * n1 ** 2 + a[1] * ht ** 2), np.sqrt(a[0] * n2 ** 2 + a[1] * ht ** 2)
-    st = np.sqrt(a[2] * ht ** 2 + a[3] * (n1 ** 2 + n2 ** 2))
+    t2 = ht * np.minimum(ht, noise_step) if noise_step > 0 else ht ** 2
+    s1, s2 = np.sqrt(a[0] * n1 ** 2 + a[1] * t2), np.sqrt(a[0] * n2 ** 2 + a[1] * t2)
+    st = np.sqrt(a[2] * t2 + a[3] * (n1 ** 2 + n2 ** 2))
     r1, tr, r2 = h1 + s1 * rng.standard_normal(m), ht + st * rng.standard_normal(m), h2 + s2 * rng.standard_normal(m)
     creeping = np.arange(m) >= ks
     creeping &= turn_only  # the odometry creeps its own way: the turn kept, the direction redrawn
@@ -277,3 +279,22 @@ def test_the_omni_models_alphas_are_recovered_from_an_omnidirectional_drive(tmp_
 
     text = format_yaml(res, "variance", "normal")
     assert "  model: omni\n" in text and "  alpha_strafe: " in text and "p_turn" not in text
+
+
+def test_the_fit_is_in_the_configs_noise_step_form():
+    # Steps of 0.1-1.5 m drawn with motion.noise_step 0.3 (a random walk of 0.3 m steps beyond 0.3 m). Fitted in
+    # that form the alphas come back within 30 % (as the test above, 1,000 pairs); fitted in the book's form
+    # (noise_step 0) alpha2 and alpha3 come out well under the truth, since a 1.5 m step's variance grows only
+    # linearly. The printed block names the form, so pasting it reproduces the model fitted.
+    from mcl.calibrate_motion import format_yaml
+
+    pairs = _model_pairs(3, trans=(0.1, 1.5), noise_step=0.3)
+    walk = fit_odometry_alphas(*pairs, noise_step=0.3)
+    book = fit_odometry_alphas(*pairs)
+    assert walk["converged"] and book["converged"]
+    np.testing.assert_allclose(walk["alphas"], A, rtol=0.30)
+    assert book["alphas"][1] < 0.6 * A[1] and book["alphas"][2] < 0.6 * A[2]
+    assert walk["log_likelihood"] > book["log_likelihood"] + 10
+    block = yaml.safe_load(format_yaml(walk, "variance", "normal"))["motion"]
+    assert block["noise_step"] == 0.3 and yaml.safe_load(format_yaml(book, "variance", "normal"))["motion"][
+        "noise_step"] == 0

@@ -45,16 +45,21 @@ def test_a_late_scan_stamp_at_the_junction_does_not_send_the_track_down_the_corr
     stream = odometry_stream(lines)
     log = tmp_path / "late.clf"
     log.write_text("".join(delay_line(line, stream, 0.1) for line in lines))
-    for seed in (1, 2):
+    # The caps are tested with the book's noise (motion.noise_step 0), with which they were made: with the default's
+    # 0.3 m the noise of these 1 m steps is narrower, and seed 2's cloud holds the turn with no lost call (the fault
+    # mixture never opens); the bound is asserted for the default too (max 0.28 and 0.29 m, 2026-12-04).
+    for seed, noise_step in ((1, 0.0), (2, 0.0), (1, 0.3), (2, 0.3)):
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
             f"map={CORRIDOR / 'map.yaml'}", f"log={log}", f"truth={CORRIDOR / 'truth.tum'}",
             "filter.initial_pose=[1.008240, -0.016781, 0.005957]", "filter.global_localization=false",
-            "rerun.mode=off", f"seed={seed}"])
+            "rerun.mode=off", f"seed={seed}", f"motion.noise_step={noise_step}"])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            s = run(cfg, tmp_path / f"seed{seed}", progress=False, echo=lambda *_: None)
-        assert s["eval"]["scored"] >= 200 and s["fault_updates"] > 0, s  # the junction's lost call opened faults
-        assert s["eval"]["ate_max"] <= 1.0, (seed, s["eval"])
+            s = run(cfg, tmp_path / f"seed{seed}-{noise_step}", progress=False, echo=lambda *_: None)
+        assert s["eval"]["scored"] >= 200, s
+        if noise_step == 0.0:
+            assert s["fault_updates"] > 0, s  # the junction's lost call opened faults
+        assert s["eval"]["ate_max"] <= 1.0, (seed, noise_step, s["eval"])
 
 
 @pytest.fixture(scope="module")

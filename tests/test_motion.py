@@ -324,3 +324,36 @@ def test_the_odometry_scale_learns_what_the_scans_keep_adding():
     c = s.scaled(Control(np.array([1.0, 2.0, 0.3]), np.array([2.0, 4.0, 0.5]), dt=0.2, v=1.0, w=0.1))
     assert c.odom_prev.tolist() == [1.0, 2.0, 0.3] and c.odom_now == pytest.approx([2.1, 4.2, 0.5])
     assert c.v == pytest.approx(1.1) and c.w == 0.1 and c.dt == 0.2
+
+
+def test_noise_step_makes_a_long_step_a_random_walk_of_short_ones():
+    """motion.noise_step: one straight 1 m step gives the heading and the travel the variance of five 0.2 m steps.
+
+    Table 5.6's variance grows as dtrans^2, so one 1 m step has five times the heading variance of five 0.2 m steps
+    (2 alpha2 dtrans^2 against 5 x 2 alpha2 0.2^2). With noise_step 0.2 both are 2 alpha2 x 0.2. 100,000 particles,
+    N(0, 1) noise: a sample variance's standard error is sqrt(2 / N) = 0.45 %; we allow 5 SE, and the book's single
+    step (5x the variance) must be outside it.
+    """
+    alphas = (0.1, 0.05, 0.01, 0.03)
+    walk = motion_cfg(alphas=alphas)
+    walk.noise_step = 0.2
+    book = motion_cfg(alphas=alphas)
+    n = 100_000
+    tol = 5 * math.sqrt(2 / n)
+
+    def moved(cfg, steps):
+        rng = np.random.default_rng(7)
+        p = np.zeros((3, n))
+        model = OdometryMotionModel(cfg)
+        for k in range(steps):
+            p, _, _ = model.sample(p, (k / steps, 0.0, 0.0), ((k + 1) / steps, 0.0, 0.0), rng)
+        return p
+
+    one, five, one_book = moved(walk, 1), moved(walk, 5), moved(book, 1)
+    assert noise_sigmas(0.0, 1.0, 0.0, walk)[0] == pytest.approx(math.sqrt(alphas[1] * 0.2))
+    assert noise_sigmas(0.0, 0.2, 0.0, walk) == noise_sigmas(0.0, 0.2, 0.0, book)  # short steps: the book's
+    heading = 2 * alphas[1] * 0.2  # rot1 and rot2, each alpha2 * 0.2 m * 1 m
+    for p in (one, five):
+        assert wrap_np(p[2]).var() == pytest.approx(heading, rel=tol)
+        assert np.hypot(p[0], p[1]).var() == pytest.approx(alphas[2] * 0.2, rel=0.05)  # travel; heading adds ~1 %
+    assert wrap_np(one_book[2]).var() == pytest.approx(5 * heading, rel=tol)

@@ -30,7 +30,7 @@ CONFIGS = PROJECT_ROOT / "configs"
 BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.estimate", "motion.map_rejection",
                  "filter.search_exponent", "filter.global_density", "sensor.likelihood_field.interior",
                  "motion.fault_prob", "sensor.unmapped_skip", "filter.search_refine", "sensor.self_hit_skip",
-                 "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset", "motion.sideways",
+                 "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset", "motion.sideways", "motion.noise_step",
                  "filter.search_refine_candidates"}
 
 
