@@ -345,8 +345,9 @@ def format_yaml(result: dict, noise_form: str, noise: str, source: str = "") -> 
             return f"  # {name}: not determined by this log (the fit drifted to {a[k]:.3g}); keep your own\n"
         return f"  {name}: {a[k]:.6g}{'  # implausible (> 1)' if a[k] > ALPHA_PLAUSIBLE else ''}\n"
     # model: odometry -- the alphas are the odometry model's (a velocity config's alpha1..4 mean something else)
-    body = f"motion:\n  model: {'omni' if omni else 'odometry'}\n" f"  noise_form: {noise_form}\n" \
-        f"  noise_step: {result.get('noise_step', 0.0):g}\n" f"  noise: {noise}\n" + "".join(line(k) for k in range(len(a)))
+    body = (f"motion:\n  model: {'omni' if omni else 'odometry'}\n  noise_form: {noise_form}\n"
+            f"  noise_step: {result.get('noise_step', 0.0):g}\n  noise: {noise}\n")
+    body += "".join(line(k) for k in range(len(a)))
     return head + body
 
 
