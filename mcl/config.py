@@ -120,6 +120,9 @@ class FilterConfig:
     # the pose reported only)
     reseed_hold_pose: bool = True
     reseed_odds: float = field(default=0.0, metadata=_rng(0.0, 1e6))  # nats of log-odds that settle a protected re-seed
+    # a global re-seed due while lost recovery's protected spread leads, unsettled, waits while the track's last scan
+    # scores at least this (ProtectedReseed.defers_reseed); 0: off, the re-seed keeps the leading side at once
+    reseed_wait_fit: float = field(default=0.0, metadata=_rng(0.0, 1.0))
     # a place a search found is challenged once (a protected re-seed) when the median quality score of
     # ProbationChallenge.WINDOW updates in a row on probation is below this; 0: off
     probation_fit: float = field(default=0.0, metadata=_rng(0.0, 1.0))

