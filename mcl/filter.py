@@ -205,7 +205,7 @@ class ParticleFilter:
         self._known = None  # uint8 mask of the known cells (free or occupied), made on first use (unmapped_unknown)
         self.skipping = (BeamSkipping(self.sensor, cfg.sensor)
                          if cfg.sensor.beam_skip and hasattr(self.sensor, "skip_mask") else None)
-        self.quality = ScanQuality(grid, cfg.quality)
+        self.quality = ScanQuality(grid, cfg.quality, cfg.sensor.max_beams)
         self.unmapped = (UnmappedObjects(grid, cfg.sensor, dist=self.quality.dist)
                          if cfg.sensor.unmapped_skip and cfg.sensor.model == "likelihood_field" else None)
         self._unmapped_candidates = None  # (observation, (K,) bool, scan) of the scan last prepared
