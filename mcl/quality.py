@@ -273,14 +273,15 @@ class ScanQuality:
                 or (self._doubting() and fit.score < self._before - self.cfg.doubt_margin))
 
     def _evidence_beams(self) -> int:
-        """The returns a fit needs to count in the lost belief: ``min_beams``, or on a held track (not lost, and not
-        lost in the last ``doubt_updates`` updates; from a known pose, held from the start) ``held_min_beams`` if
-        larger. A hall under a 12 m laser returns 3-14 of 60 scored beams, people and unmapped boxes among them: such
-        scans called correct tracks lost, and the re-seeds that followed settled 14-45 m away on places that fitted
-        a few returns (suites/heldout15.yaml), where the baseline, never lost, drifted 1 m. A track once lost, or a
-        place a search found, is judged on ``min_beams`` again. The bar is at most a quarter of the beams a scan is
-        scored on (``scored_beams``, sensor.max_beams: 15 of the default 60), so a lower max_beams lowers it."""
-        held = not self.lost and (self.since_lost is None or self.since_lost >= self.cfg.doubt_updates)
+        """The returns a fit needs to count in the lost belief: ``min_beams``, or on a track from a known pose not yet
+        believed lost (held from the start) ``held_min_beams`` if larger. A hall under a 12 m laser returns 3-14 of 60
+        scored beams, people and unmapped boxes among them: such scans called correct tracks lost, and the re-seeds
+        that followed settled 14-45 m away on places that fitted a few returns (suites/heldout15.yaml), where the
+        baseline, never lost, drifted 1 m. After a lost call, and for a place a search found, ``min_beams`` holds: a
+        search must leave a wrong place on the few returns there are (with the bar on every track held 50 updates,
+        large-06's global searches left a wrong place 1-6 s later). The bar is at most a quarter of the beams a scan
+        is scored on (``scored_beams``, sensor.max_beams: 15 of the default 60)."""
+        held = not self.lost and self.since_lost is None
         return max(self.cfg.min_beams, self.held_min_beams) if held else self.cfg.min_beams
 
     def _creeping(self) -> bool:

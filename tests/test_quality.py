@@ -209,8 +209,9 @@ def test_a_fit_of_fewer_than_min_beams_returns_is_no_evidence():
 def test_a_held_track_is_judged_only_on_scans_with_held_min_beams_returns():
     # quality.held_min_beams: a hall under a 12 m laser returns 3-14 of 60 scored beams, people and unmapped boxes
     # among them; such scans called correct tracks lost and the re-seeds settled 14-45 m away (suites/heldout15.yaml).
-    # A held track is judged only on scans with 15 returns or more; once lost, and for doubt_updates updates after,
-    # 5 suffice again, so the same sparse scans that a held track ignores call a recent one lost
+    # A track from a known pose is judged only on scans with 15 returns or more until it is first lost; then 5
+    # suffice, so the same sparse scans that it ignored call it lost; and a search's place is judged on 5 from the
+    # start
     sparse, full, good = Fit(10, 0.0, 1.0), Fit(15, 0.0, 1.0), Fit(10, 1.0, 0.0)
     q0 = ScanQuality(_box_grid(), QCFG)  # held_min_beams 0: min_beams (5) alone
     assert _feed(q0, [sparse] * 3) == [False, False, True]
@@ -218,7 +219,11 @@ def test_a_held_track_is_judged_only_on_scans_with_held_min_beams_returns():
     assert _feed(q, [sparse] * 6) == [False] * 6  # held: no evidence
     assert _feed(q, [full] * 3) == [False, False, True]
     assert _feed(q, [good] * 4) == [True, True, True, False]  # lost: 10 returns count (the window clears)
-    assert _feed(q, [sparse] * 3) == [False, False, True]  # not held again yet: sparse scans call it lost
+    assert _feed(q, [sparse] * 3) == [False, False, True]  # lost once: sparse scans call it lost
+    assert _feed(q, [good] * 60 + [sparse] * 3)[-3:] == [False, False, True]  # however long it held since
+    g = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(QCFG), "held_min_beams": 15}))
+    g.reset(lost=True)  # a global start: the place a search finds is judged on min_beams
+    assert _feed(g, [good] * 60 + [sparse] * 3)[-3:] == [False, False, True]
     # the bar is at most a quarter of the beams scored (sensor.max_beams): 40 scored, 10 returns count on a held track
     q40 = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(QCFG), "held_min_beams": 15}), scored_beams=40)
     assert _feed(q40, [sparse] * 3) == [False, False, True]
