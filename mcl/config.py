@@ -402,8 +402,7 @@ class QualityConfig:
     collapse_from: float = field(default=2.0, metadata=_rng(-2.0, 2.0))
     min_beams: int = field(default=5, metadata=_rng(1, 100_000))  # a fit of fewer beams with a return is no evidence
     # ... and on a track from a known pose not yet believed lost a fit of fewer than this (at most a quarter of
-    # sensor.max_beams) is no evidence for the lost belief
-    # (mcl.quality.ScanQuality._evidence_beams); 0: min_beams
+    # sensor.max_beams) is no evidence for the lost belief (mcl.quality.ScanQuality._evidence_beams); 0: min_beams
     held_min_beams: int = field(default=0, metadata=_rng(0, 100_000))
     # a scan with no beam through a mapped wall is bad only below this (when lower than lost_below): readings short
     # of the map are what people and furniture the map lacks give; 1.0: no such rule

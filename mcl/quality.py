@@ -121,7 +121,7 @@ class ScanQuality:
     def __init__(self, grid, cfg, scored_beams: int | None = None):
         self.cfg = cfg
         # a held track's bar (held_min_beams), at most a quarter of the beams scored a scan (sensor.max_beams)
-        held = int(getattr(cfg, "held_min_beams", 0))
+        held = int(cfg.held_min_beams)
         self.held_min_beams = min(held, scored_beams // 4) if scored_beams is not None else held
         self.dist = np.ascontiguousarray(grid.distance, dtype=np.float32)
         self.blocked = byte_mask(grid.occupied)
@@ -281,7 +281,7 @@ class ScanQuality:
         search must leave a wrong place on the few returns there are (with the bar on every track held 50 updates,
         large-06's global searches left a wrong place 1-6 s later). The bar is at most a quarter of the beams a scan
         is scored on (``scored_beams``, sensor.max_beams: 15 of the default 60)."""
-        held = not self.lost and self.since_lost is None
+        held = self.since_lost is None  # never lost since a start from a known pose (a lost call sets it)
         return max(self.cfg.min_beams, self.held_min_beams) if held else self.cfg.min_beams
 
     def _creeping(self) -> bool:
