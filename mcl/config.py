@@ -404,6 +404,9 @@ class QualityConfig:
     # ... and on a track from a known pose not yet believed lost a fit of fewer than this (at most a quarter of
     # sensor.max_beams) is no evidence for the lost belief (mcl.quality.ScanQuality._evidence_beams); 0: min_beams
     held_min_beams: int = field(default=0, metadata=_rng(0, 100_000))
+    # ... and such sparse fits (min_beams returns or more) count together once they hold this many returns, as one
+    # fit weighted by returns (mcl.quality.ScanQuality._pooled); 0: they are no evidence
+    held_pool_beams: int = field(default=0, metadata=_rng(0, 100_000))
     # a scan with no beam through a mapped wall is bad only below this (when lower than lost_below): readings short
     # of the map are what people and furniture the map lacks give; 1.0: no such rule
     occluded_below: float = field(default=1.0, metadata=_rng(-2.0, 1.0))

@@ -1113,7 +1113,8 @@ class ParticleFilter:
         fit = None
         if obs is not None:
             fit = self.quality.fit(self.last_estimate.mean, self.sensor.endpoints(obs), self._laser_pose[:2])
-            if self.quality.occluded_call(fit) and self._prepared_scan is not None:
+            if ((self.quality.occluded_call(fit) or self.quality.pools(fit))
+                    and self._prepared_scan is not None):
                 fit = self._with_missing(fit)
         info.fit = fit
         info.lost = self.quality.update(fit)
