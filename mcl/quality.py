@@ -316,7 +316,7 @@ class ScanQuality:
         returns a scan, every one far from the map at the estimate, and with such scans ignored it was not called
         lost for 66 s (suites/heldout16.yaml hall-yaw-drift-long). The pool holds a full scan's worth (60): with 15,
         people and unmapped boxes in a sparse hall called a correct track lost over a few scans (heldout15.yaml
-        hall-stale-both-people: 48 m off), as with no bar."""
+        hall-stale-both-people: 45-52 m off), as with no bar."""
         self._pool.append(fit)
         n = sum(f.beams for f in self._pool)
         if n < max(self.cfg.held_pool_beams, self._evidence_beams()):
