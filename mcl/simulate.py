@@ -677,7 +677,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
              unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
-             _check_only: bool = False) -> dict | None:
+             doubled_walls: int = 0, _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -728,6 +728,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     slow sinusoids), so it strafes and crabs, and its odometry is noisy along the travel, across it and in the turn
     (``_odometry_omni``: the omni model of ROS AMCL) instead of in rot1, trans, rot2. 0 leaves every output
     byte-identical.
+    ``doubled_walls`` = N draws the map's walls twice in N squares along the drive (``_doubled``), the second copy
+    0.1-0.3 m off, as a SLAM map whose loop did not quite close shows them; the laser sees the world's walls once.
+    0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -788,6 +791,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected 0..500, got {phantom_furniture!r}")
     _check(isinstance(unknown_floor, (int, np.integer)) and 0 <= unknown_floor <= 20, "unknown_floor",
            f"expected 0..20, got {unknown_floor!r}")
+    _check(isinstance(doubled_walls, (int, np.integer)) and not isinstance(doubled_walls, bool)
+           and 0 <= doubled_walls <= 20, "doubled_walls", f"expected 0..20, got {doubled_walls!r}")
     _check(isinstance(laser_pose, (list, tuple, np.ndarray)) and len(laser_pose) == 3
            and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v)
                    for v in laser_pose)
@@ -897,6 +902,12 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         # N stretches of the drive, evenly spread, with the free cells within GREY_RADIUS of the path made unknown.
         grey = _grey_windows(t, int(unknown_floor), float(duration))
         occupancy = _greyed(occupancy, truth, t, grey, world.origin, world.resolution)
+    doubled = []
+    if doubled_walls:
+        # An eleventh child stream: the others are unchanged. A mapping run whose loop did not quite close: in N
+        # patches along the drive the map draws the walls twice, the second copy shifted a little.
+        rng_dbl = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(11)[10])
+        occupancy, doubled = _doubled(occupancy, truth, int(doubled_walls), rng_dbl, world.origin, world.resolution)
     if map_resolution is not None and abs(map_resolution - world.resolution) > 1e-12:
         map_res = float(map_resolution)
         occupancy = resample_occupancy(occupancy, world.resolution, map_res)
@@ -989,6 +1000,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["laser"]["pose"] = [float(v) for v in mount]
     if phantoms:
         params["phantom_furniture"] = len(phantoms)
+    if doubled:
+        params["doubled_walls"] = doubled
     if grey:
         params["unknown_floor"] = [[round(a, 3), round(b, 3)] for a, b in grey]
     if hit_windows:
@@ -1115,6 +1128,38 @@ def _greyed(occupancy: np.ndarray, truth: np.ndarray, t: np.ndarray, windows, or
     return out
 
 
+DOUBLED_SIDE = 10.0  # m: --doubled-walls draws the walls twice in squares this wide
+DOUBLED_SHIFT = (0.1, 0.3)  # m: how far the second copy lies from the walls
+
+
+def _doubled(occupancy: np.ndarray, truth: np.ndarray, n: int, rng: np.random.Generator, origin,
+             resolution: float) -> tuple[np.ndarray, list]:
+    """A copy of ``occupancy`` whose walls in ``n`` squares of DOUBLED_SIDE, centred on the path (``truth`` (T, 3))
+    at k / (n + 1) of the drive, k = 1..n, are drawn a second time, shifted DOUBLED_SHIFT in a direction drawn
+    from ``rng``: the doubled walls of a SLAM map whose loop closure left a part of the building misplaced. The copy
+    is drawn on free and unknown cells only (it may narrow a corridor or a door). Returns the map and, per square,
+    [x, y, dx, dy] (its centre and the copy's shift, m)."""
+    out = occupancy.copy()
+    wall = occupancy == 100
+    h, w = out.shape
+    half = int(round(0.5 * DOUBLED_SIDE / resolution))
+    squares = []
+    for k in range(n):
+        x, y = truth[int(round((k + 1) / (n + 1) * (len(truth) - 1))), :2]
+        shift = rng.uniform(*DOUBLED_SHIFT)
+        angle = rng.uniform(-math.pi, math.pi)
+        sx, sy = int(round(shift * math.cos(angle) / resolution)), int(round(shift * math.sin(angle) / resolution))
+        cx, cy = int((x - origin[0]) / resolution), int((y - origin[1]) / resolution)
+        r0, r1 = max(cy - half, 0), min(cy + half, h)
+        c0, c1 = max(cx - half, 0), min(cx + half, w)
+        rows, cols = np.nonzero(wall[r0:r1, c0:c1])
+        rows, cols = rows + r0 + sy, cols + c0 + sx
+        ok = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        out[rows[ok], cols[ok]] = 100
+        squares.append([round(float(x), 3), round(float(y), 3), round(sx * resolution, 3), round(sy * resolution, 3)])
+    return out, squares
+
+
 def _painted(occupancy: np.ndarray, boxes, origin, resolution: float) -> np.ndarray:
     """A copy of ``occupancy`` with the ``boxes`` (x0, y0, x1, y1) drawn occupied (100)."""
     out = occupancy.copy()
@@ -1236,6 +1281,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="N stretches of the drive (10 s each, evenly spread) over floor the map never saw: its "
                         "free cells within 1.5 m of the path are unknown on the map (a room behind a door closed "
                         "while mapping, the floor under furniture moved since); default 0")
+    parser.add_argument("--doubled-walls", type=int, default=0, metavar="N",
+                        help="N squares of 10 m along the drive (evenly spread) where the map draws the walls twice, "
+                        "the second copy shifted 0.1-0.3 m (a SLAM map whose loop did not quite close; the copy may "
+                        "narrow a corridor or a door); the laser sees the walls once; default 0")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1314,7 +1363,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     depth_every=args.depth_every, map_resolution=args.map_resolution,
                     reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
                     scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
-                    unknown_floor=args.unknown_floor,
+                    unknown_floor=args.unknown_floor, doubled_walls=args.doubled_walls,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
                     holonomic=math.radians(holonomic))

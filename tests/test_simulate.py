@@ -433,6 +433,8 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(scan_rate=float("nan")), "scan_rate"),
     (dict(phantom_furniture=-1), "phantom_furniture"),
     (dict(unknown_floor=21), "unknown_floor"),
+    (dict(doubled_walls=-1), "doubled_walls"),
+    (dict(doubled_walls=True), "doubled_walls"),
     (dict(scan_sweep=0.3), "scan_sweep"),
     (dict(laser_pose=(0.25, 0.0, 0.0)), "laser_pose"),  # off the robot's 0.2 m body: it could stand in a wall
     (dict(laser_pose=(0.1, 0.0)), "laser_pose"),
@@ -552,6 +554,39 @@ def test_unknown_floor_is_on_the_map_only(tmp_path):
     gx, gy = b.origin[0] + (xs + 0.5) * b.resolution, b.origin[1] + (ys + 0.5) * b.resolution
     d = np.min(np.hypot(gx[:, None] - poses[0, w][None, :], gy[:, None] - poses[1, w][None, :]), axis=1)
     assert d.max() < 1.5 + 2 * b.resolution and far.any()
+
+
+def test_doubled_walls_are_on_the_map_only(tmp_path):
+    # A SLAM map whose loop did not quite close: the laser, the drive and the truth are the world's (the same bytes
+    # as without); the map gains occupied cells only, each a wall cell of the same square moved by that square's
+    # shift (0.1-0.3 m), inside the squares of 10 m centred on the path at k / (n + 1) of the drive.
+    a, b = _map_only(tmp_path, 30.0, doubled_walls=2)
+    added = (b.occupancy == 100) & (a.occupancy != 100)
+    assert added.sum() > 100
+    assert np.array_equal(b.occupancy[~added], a.occupancy[~added])  # nothing else changes
+    squares = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["doubled_walls"]
+    assert len(squares) == 2
+    t, poses = read_tum(tmp_path / "b" / "truth.tum")
+    ys, xs = np.nonzero(added)
+    explained = np.zeros(ys.size, bool)
+    for k, (x, y, dx, dy) in enumerate(squares):
+        i = int(round((k + 1) / 3 * (len(t) - 1)))
+        assert (x, y) == pytest.approx((poses[0, i], poses[1, i]), abs=1e-3)
+        assert 0.1 - b.resolution <= np.hypot(dx, dy) <= 0.3 + b.resolution
+        sy, sx = int(round(dy / b.resolution)), int(round(dx / b.resolution))
+        src_y, src_x = ys - sy, xs - sx  # where each added cell came from, were it this square's copy
+        ok = (src_y >= 0) & (src_y < a.occupancy.shape[0]) & (src_x >= 0) & (src_x < a.occupancy.shape[1])
+        cx, cy = b.origin[0] + (src_x + 0.5) * b.resolution, b.origin[1] + (src_y + 0.5) * b.resolution
+        inside = ok & (np.abs(cx - x) <= 5.0 + b.resolution) & (np.abs(cy - y) <= 5.0 + b.resolution)
+        explained |= inside & (a.occupancy[np.clip(src_y, 0, None), np.clip(src_x, 0, None)] == 100)
+    assert explained.all()
+
+
+def test_doubled_walls_from_the_command_line(tmp_path):
+    from mcl.cli import main
+
+    assert main(["simulate", str(tmp_path), "--duration", "10", "--seed", "6", "--doubled-walls", "3"]) == 0
+    assert len(yaml.safe_load((tmp_path / "sim.yaml").read_text())["doubled_walls"]) == 3
 
 
 def test_the_noise_is_set_from_the_command_line(tmp_path, capsys):
