@@ -29,7 +29,14 @@ With ``--stamp-late T`` each scan is stamped T late and paired with the odometry
 late makes a log: a FLASER line's times become its time + T and its robot pose the odometry there (the ODOM lines
 stay as they were). ``sensor.time_offset`` -T undoes it.
 
-The maps and the references are those of the originals (linked, not copied). Writes
+With ``--doubled-walls N`` each map is redrawn with its walls twice in N squares of 10 m centred on the reference
+path at k / (N + 1) of it, the copy 0.1-0.3 m off (``mcl simulate --doubled-walls``'s ``_doubled``): a SLAM map
+whose loop did not quite close, under the log's own scans. ``--fov 180 --sigma 0 --drop 0`` leaves the logs as
+they are, byte for byte, so the map is the only change:
+
+    .venv/bin/python scripts/degrade_laser.py /tmp/doubled --fov 180 --sigma 0 --drop 0 --doubled-walls 6
+
+The maps (but for ``--doubled-walls``) and the references are those of the originals (linked, not copied). Writes
 ``OUT/<name>/log.clf`` with links to the rest, and ``OUT/suite.yaml``: the suite with its root at ``OUT``.
 Deterministic for a given ``--seed``. Then:
 
@@ -52,6 +59,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from mcl.datasets.carmen import interpolate_odometry  # noqa: E402
+from mcl.maps import OccupancyGrid, load_map, save_map  # noqa: E402
+from mcl.simulate import _doubled  # noqa: E402
+from mcl.trajectory import read_tum  # noqa: E402
 from mcl.runner import compose, inverse  # noqa: E402
 
 
@@ -185,6 +195,8 @@ def main(argv=None) -> int:
                     help="stamp each scan this many s late, its robot pose that of its stamp (default 0)")
     ap.add_argument("--body", type=parse_body, action="append", default=[], metavar="A0:A1@R",
                     help="beams between A0 and A1 degrees read R m (the robot's own frame in view); repeatable")
+    ap.add_argument("--doubled-walls", type=int, default=0, metavar="N",
+                    help="redraw each map with its walls twice in N squares of 10 m along the reference (default 0)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
     suite = yaml.safe_load(a.suite.read_text())
@@ -201,6 +213,15 @@ def main(argv=None) -> int:
                     if g.name != log.name and not (folder / g.name).exists():
                         os.symlink(g, folder / g.name)
                 d[key] = f"{d['name']}/{f.name}"
+        if a.doubled_walls:
+            grid = load_map(folder / Path(d["map"]).name)
+            _, ref = read_tum(folder / Path(d["truth"]).name)
+            occupancy, squares = _doubled(grid.occupancy, ref[:3].T, a.doubled_walls, rng, grid.origin,
+                                          grid.resolution)
+            save_map(OccupancyGrid.from_occupancy(occupancy, grid.resolution, grid.origin),
+                     folder / "map_doubled.yaml")
+            d["map"] = f"{d['name']}/map_doubled.yaml"
+            print(f"{d['name']}: walls doubled in {len(squares)} squares (x, y, dx, dy): {squares}")
         tmp = folder / (log.name + ".part")
         odom, flaser = Rescaled(a.odom_scale, a.turn_scale), Rescaled(a.odom_scale, a.turn_scale)
         with open(log, errors="replace") as fi, open(tmp, "w") as fo:
@@ -220,7 +241,8 @@ def main(argv=None) -> int:
         f"-odom{a.odom_scale:g}x{a.turn_scale:g}" if (a.odom_scale, a.turn_scale) != (1.0, 1.0) else "") + (
         f"-latency{a.latency:g}" if a.latency else "") + (
         f"-late{a.stamp_late:g}" if a.stamp_late else "") + (
-        "-body" if a.body else "")
+        "-body" if a.body else "") + (
+        f"-doubled{a.doubled_walls}" if a.doubled_walls else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")
     return 0

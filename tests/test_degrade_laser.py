@@ -113,3 +113,25 @@ def test_a_latency_pairs_each_scan_with_the_odometry_that_much_later(tmp_path):
     moved = np.hypot(*(got[:, :2] - np.array([s.odom for s in before.scans])[:, :2]).T)
     assert np.median(moved) > 0.05  # the robot drives: a quarter second later is somewhere else
     assert np.array_equal(after.odometry, before.odometry)  # the ODOM lines are left as they are
+
+
+def test_doubled_walls_redraw_the_map_only(tmp_path):
+    # --doubled-walls N with the laser left alone: the log is the original's byte for byte, the reference linked,
+    # and the suite points at a new map that adds occupied cells (the walls' copies) and changes nothing else
+    from mcl.maps import load_map
+
+    world = tmp_path / "world"
+    simulate(world, seed=5, duration=20)
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
+        "name": "w", "root": "world", "modes": ["tracking"],
+        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+    out = tmp_path / "out"
+    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
+                 "--doubled-walls", "2"]) == 0
+    suite = yaml.safe_load((out / "suite.yaml").read_text())
+    assert suite["datasets"][0]["map"] == "w/map_doubled.yaml" and suite["name"].endswith("-doubled2")
+    assert (out / "w" / "log.clf").read_bytes() == (world / "log.clf").read_bytes()
+    a, b = load_map(world / "map.yaml"), load_map(out / "w" / "map_doubled.yaml")
+    added = (b.occupancy == 100) & (a.occupancy != 100)
+    assert added.sum() > 100 and np.array_equal(b.occupancy[~added], a.occupancy[~added])
+    assert b.resolution == a.resolution and tuple(b.origin) == tuple(a.origin)
