@@ -199,6 +199,8 @@ def main(argv=None) -> int:
                     help="redraw each map with its walls twice in N squares of 10 m along the reference (default 0)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
+    if not 0 <= a.doubled_walls <= 20:
+        ap.error(f"--doubled-walls: expected 0..20, got {a.doubled_walls}")
     suite = yaml.safe_load(a.suite.read_text())
     src = (a.suite.parent / suite["root"]).resolve()
     rng = np.random.default_rng(a.seed)
