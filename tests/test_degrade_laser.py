@@ -15,6 +15,25 @@ sys.path.insert(0, str(PROJECT_ROOT / "scripts"))
 from degrade_laser import main  # noqa: E402
 
 
+def _suite_of(tmp_path):
+    """tmp_path / "suite.yaml": a suite of the one world in tmp_path / "world" (map, log, truth)."""
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
+        "name": "w", "root": "world", "modes": ["tracking"],
+        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+
+
+def _laser_as_it_is(tmp_path, duration: float, *options):
+    """A world of ``duration`` s (seed 5) run through the script with the laser left as it is and ``options``;
+    returns (the world's folder, the output folder)."""
+    world = tmp_path / "world"
+    simulate(world, seed=5, duration=duration)
+    _suite_of(tmp_path)
+    out = tmp_path / "out"
+    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
+                 *options]) == 0
+    return world, out
+
+
 def test_the_degraded_log_keeps_the_central_field_of_view_and_the_no_returns_and_nothing_else(tmp_path):
     world = tmp_path / "world"
     simulate(world, seed=5, duration=8, n_beams=181)  # a FLASER log of 181 beams over 180 degrees
@@ -24,9 +43,7 @@ def test_the_degraded_log_keeps_the_central_field_of_view_and_the_no_returns_and
     p[2 + 90] = "50.00"  # the middle beam: a no-return reading, as aces logs them
     lines[k] = " ".join(p)
     (world / "log.clf").write_text("\n".join(lines) + "\n")
-    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
-        "name": "w", "root": "world", "modes": ["tracking"],
-        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+    _suite_of(tmp_path)
     out = tmp_path / "out"
     assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "90", "--sigma", "0.05",
                  "--drop", "0.2"]) == 0
@@ -67,9 +84,7 @@ def test_the_rescaled_odometry_reports_the_steps_scaled_and_keeps_the_laser_on_t
             line = " ".join(p)
         lines.append(line)
     (world / "log.clf").write_text("\n".join(lines) + "\n")
-    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
-        "name": "w", "root": "world", "modes": ["tracking"],
-        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+    _suite_of(tmp_path)
     out = tmp_path / "out"
     assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
                  "--odom-scale", "1.05", "--turn-scale", "1.1"]) == 0
@@ -96,14 +111,7 @@ def test_the_rescaled_odometry_reports_the_steps_scaled_and_keeps_the_laser_on_t
 def test_a_latency_pairs_each_scan_with_the_odometry_that_much_later(tmp_path):
     from mcl.datasets.carmen import interpolate_odometry
 
-    world = tmp_path / "world"
-    simulate(world, seed=5, duration=8)
-    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
-        "name": "w", "root": "world", "modes": ["tracking"],
-        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
-    out = tmp_path / "out"
-    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
-                 "--latency", "0.25"]) == 0
+    world, out = _laser_as_it_is(tmp_path, 8.0, "--latency", "0.25")
     assert yaml.safe_load((out / "suite.yaml").read_text())["name"] == "w-fov180-latency0.25"
     before, after = read_carmen(world / "log.clf"), read_carmen(out / "w" / "log.clf")
     t = np.array([s.t for s in before.scans])
@@ -120,14 +128,7 @@ def test_doubled_walls_redraw_the_map_only(tmp_path):
     # and the suite points at a new map that adds occupied cells (the walls' copies) and changes nothing else
     from mcl.maps import load_map
 
-    world = tmp_path / "world"
-    simulate(world, seed=5, duration=20)
-    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
-        "name": "w", "root": "world", "modes": ["tracking"],
-        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
-    out = tmp_path / "out"
-    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
-                 "--doubled-walls", "2"]) == 0
+    world, out = _laser_as_it_is(tmp_path, 20.0, "--doubled-walls", "2")
     suite = yaml.safe_load((out / "suite.yaml").read_text())
     assert suite["datasets"][0]["map"] == "w/map_doubled.yaml" and suite["name"].endswith("-doubled2")
     assert (out / "w" / "log.clf").read_bytes() == (world / "log.clf").read_bytes()
