@@ -677,7 +677,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
              unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
-             doubled_walls: int = 0, _check_only: bool = False) -> dict | None:
+             doubled_walls: int = 0, map_scale: float = 1.0, _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -731,6 +731,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     ``doubled_walls`` = N draws the map's walls twice in N squares along the drive (``_doubled``), the second copy
     0.1-0.3 m off, as a SLAM map whose loop did not quite close shows them; the laser sees the world's walls once.
     0 leaves every output byte-identical.
+    ``map_scale`` = S draws the map S times the world's size (its cells S x the world's, its origin scaled about
+    the frame's zero): a floor plan or a map whose scale is off by a percent or two. The laser and the odometry
+    measure the world; truth.tum and sim.yaml's poses (start, kidnap, ``doubled_walls``' squares) are given in the
+    map's frame, the world's x, y times S, where the map shows the robot's surroundings. 1 leaves every output
+    byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -793,6 +798,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected 0..20, got {unknown_floor!r}")
     _check(isinstance(doubled_walls, (int, np.integer)) and not isinstance(doubled_walls, bool)
            and 0 <= doubled_walls <= 20, "doubled_walls", f"expected 0..20, got {doubled_walls!r}")
+    _check(isinstance(map_scale, (int, float, np.number)) and not isinstance(map_scale, bool)
+           and math.isfinite(map_scale) and 0.9 <= map_scale <= 1.1, "map_scale", f"expected 0.9..1.1, got {map_scale!r}")
+    _check(map_scale == 1.0 or not (landmarks or depth), "map_scale",
+           "a scaled map is made without landmarks and depth frames: set landmarks to 0 and depth to false")
     _check(isinstance(laser_pose, (list, tuple, np.ndarray)) and len(laser_pose) == 3
            and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v)
                    for v in laser_pose)
@@ -911,7 +920,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     if map_resolution is not None and abs(map_resolution - world.resolution) > 1e-12:
         map_res = float(map_resolution)
         occupancy = resample_occupancy(occupancy, world.resolution, map_res)
-    grid = OccupancyGrid.from_occupancy(occupancy, map_res, world.origin)
+    map_res = round(map_res * map_scale, 12)  # the map's cells, as the mapper drew them
+    grid = OccupancyGrid.from_occupancy(occupancy, map_res,
+                                        (round(world.origin[0] * map_scale, 12), round(world.origin[1] * map_scale, 12)))
     save_map(grid, out / "map.yaml")
 
     host = "sim"
@@ -951,7 +962,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         from mcl.landmarks import save_landmarks
 
         save_landmarks(out / "landmarks.yaml", lm_ids, lm_xy)
-    write_tum(out / "truth.tum", t[scan_ticks], truth[scan_ticks].T)
+    write_tum(out / "truth.tum", t[scan_ticks], (truth[scan_ticks] * [map_scale, map_scale, 1.0]).T)
     n_depth = 0
     if depth:
         from mcl.depthsim import write_depth_folder
@@ -965,6 +976,12 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
 
     import yaml
 
+    if map_scale != 1.0:  # sim.yaml's poses in the map's frame, as truth.tum's
+        start = start * [map_scale, map_scale, 1.0]
+        if kidnap:
+            kidnap = {**kidnap, **{k: _pose_list(np.array(kidnap[k]) * [map_scale, map_scale, 1.0])
+                                   for k in ("from", "to")}}
+        doubled = [[round(v * map_scale, 3) for v in square] for square in doubled]
     params = {
         "kind": kind,
         "seed": int(seed),
@@ -980,7 +997,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
                      "alphas": [float(a) for a in odom_alphas], "scale": float(odom_scale),
                      "yaw_drift_per_m": float(odom_yaw_drift), "rate_hz": odom_rate},
         "robot": {"radius": float(robot_radius), "speed": float(speed), "turn_rate": float(turn_rate)},
-        "map": {"resolution": map_res, "origin": [world.origin[0], world.origin[1]],
+        "map": {"resolution": map_res, "origin": [float(grid.origin[0]), float(grid.origin[1])],
                 "width": int(occupancy.shape[1]), "height": int(occupancy.shape[0])},
         "scans": int(scan_ticks.size),
         "path_length": round(length, 3),
@@ -1002,6 +1019,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["phantom_furniture"] = len(phantoms)
     if doubled:
         params["doubled_walls"] = doubled
+    if map_scale != 1.0:
+        params["map_scale"] = float(map_scale)
     if grey:
         params["unknown_floor"] = [[round(a, 3), round(b, 3)] for a, b in grey]
     if hit_windows:
@@ -1285,6 +1304,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="N squares of 10 m along the drive (evenly spread) where the map draws the walls twice, "
                         "the second copy shifted 0.1-0.3 m (a SLAM map whose loop did not quite close; the copy may "
                         "narrow a corridor or a door); the laser sees the walls once; default 0")
+    parser.add_argument("--map-scale", type=float, default=1.0, metavar="S",
+                        help="draw the map S times the world's size (0.9-1.1: a floor plan whose scale is off by a "
+                        "percent or two); the laser and the odometry measure the world, truth.tum is in the map's "
+                        "frame; default 1")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1363,7 +1386,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     depth_every=args.depth_every, map_resolution=args.map_resolution,
                     reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
                     scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
-                    unknown_floor=args.unknown_floor, doubled_walls=args.doubled_walls,
+                    unknown_floor=args.unknown_floor, doubled_walls=args.doubled_walls, map_scale=args.map_scale,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
                     holonomic=math.radians(holonomic))

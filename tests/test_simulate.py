@@ -435,6 +435,9 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(unknown_floor=21), "unknown_floor"),
     (dict(doubled_walls=-1), "doubled_walls"),
     (dict(doubled_walls=True), "doubled_walls"),
+    (dict(map_scale=1.2), "map_scale"),
+    (dict(map_scale=float("nan")), "map_scale"),
+    (dict(map_scale=1.01, landmarks=5), "map_scale"),
     (dict(scan_sweep=0.3), "scan_sweep"),
     (dict(laser_pose=(0.25, 0.0, 0.0)), "laser_pose"),  # off the robot's 0.2 m body: it could stand in a wall
     (dict(laser_pose=(0.1, 0.0)), "laser_pose"),
@@ -580,6 +583,27 @@ def test_doubled_walls_are_on_the_map_only(tmp_path):
         inside = ok & (np.abs(cx - x) <= 5.0 + b.resolution) & (np.abs(cy - y) <= 5.0 + b.resolution)
         explained |= inside & (a.occupancy[np.clip(src_y, 0, None), np.clip(src_x, 0, None)] == 100)
     assert explained.all()
+
+
+def test_a_scaled_map_is_the_same_image_with_bigger_cells_and_the_truth_in_its_frame(tmp_path):
+    # A floor plan 2 % too big: the laser and the odometry measure the world (the log's bytes as without), the map
+    # is the same image with cells 2 % bigger and its origin scaled, and the reference (truth.tum, sim.yaml's start
+    # and kidnap poses) is where the map shows the robot: the world's x, y times 1.02, the heading unchanged.
+    simulate(tmp_path / "a", kind="office", seed=6, duration=20.0, kidnap_at=10.0)
+    simulate(tmp_path / "b", kind="office", seed=6, duration=20.0, kidnap_at=10.0, map_scale=1.02)
+    for f in ("log.clf", "map.pgm"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+    ma, mb = (yaml.safe_load((tmp_path / w / "map.yaml").read_text()) for w in "ab")
+    assert mb["resolution"] == pytest.approx(ma["resolution"] * 1.02, abs=1e-12)
+    assert mb["origin"][:2] == pytest.approx([v * 1.02 for v in ma["origin"][:2]], abs=1e-12)
+    (ta, pa), (tb, pb) = read_tum(tmp_path / "a" / "truth.tum"), read_tum(tmp_path / "b" / "truth.tum")
+    np.testing.assert_array_equal(ta, tb)
+    np.testing.assert_allclose(pb[:2], 1.02 * pa[:2], atol=2e-6)  # TUM's 6 decimals
+    np.testing.assert_allclose(pb[2], pa[2], atol=1e-6)
+    sa, sb = (yaml.safe_load((tmp_path / w / "sim.yaml").read_text()) for w in "ab")
+    assert sb["map_scale"] == 1.02 and "map_scale" not in sa
+    for pose_a, pose_b in ((sa["start_pose"], sb["start_pose"]), (sa["kidnap"]["to"], sb["kidnap"]["to"])):
+        assert pose_b == pytest.approx([1.02 * pose_a[0], 1.02 * pose_a[1], pose_a[2]], abs=2e-6)
 
 
 def test_doubled_walls_from_the_command_line(tmp_path):
