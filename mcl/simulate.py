@@ -728,7 +728,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     slow sinusoids), so it strafes and crabs, and its odometry is noisy along the travel, across it and in the turn
     (``_odometry_omni``: the omni model of ROS AMCL) instead of in rot1, trans, rot2. 0 leaves every output
     byte-identical.
-    ``doubled_walls`` = N draws the map's walls twice in N squares along the drive (``_doubled``), the second copy
+    ``doubled_walls`` = N draws the map's walls twice in N squares along the drive (``double_walls``), the second copy
     0.1-0.3 m off, as a SLAM map whose loop did not quite close shows them; the laser sees the world's walls once.
     0 leaves every output byte-identical.
     ``map_scale`` = S draws the map S times the world's size (its cells S x the world's, its origin scaled about
@@ -799,7 +799,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(doubled_walls, (int, np.integer)) and not isinstance(doubled_walls, bool)
            and 0 <= doubled_walls <= 20, "doubled_walls", f"expected 0..20, got {doubled_walls!r}")
     _check(isinstance(map_scale, (int, float, np.number)) and not isinstance(map_scale, bool)
-           and math.isfinite(map_scale) and 0.9 <= map_scale <= 1.1, "map_scale", f"expected 0.9..1.1, got {map_scale!r}")
+           and math.isfinite(map_scale) and 0.9 <= map_scale <= 1.1, "map_scale",
+           f"expected 0.9..1.1, got {map_scale!r}")
     _check(map_scale == 1.0 or not (landmarks or depth), "map_scale",
            "a scaled map is made without landmarks and depth frames: set landmarks to 0 and depth to false")
     _check(isinstance(laser_pose, (list, tuple, np.ndarray)) and len(laser_pose) == 3
@@ -916,13 +917,13 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         # An eleventh child stream: the others are unchanged. A mapping run whose loop did not quite close: in N
         # patches along the drive the map draws the walls twice, the second copy shifted a little.
         rng_dbl = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(11)[10])
-        occupancy, doubled = _doubled(occupancy, truth, int(doubled_walls), rng_dbl, world.origin, world.resolution)
+        occupancy, doubled = double_walls(occupancy, truth, int(doubled_walls), rng_dbl, world.origin, world.resolution)
     if map_resolution is not None and abs(map_resolution - world.resolution) > 1e-12:
         map_res = float(map_resolution)
         occupancy = resample_occupancy(occupancy, world.resolution, map_res)
     map_res = round(map_res * map_scale, 12)  # the map's cells, as the mapper drew them
-    grid = OccupancyGrid.from_occupancy(occupancy, map_res,
-                                        (round(world.origin[0] * map_scale, 12), round(world.origin[1] * map_scale, 12)))
+    map_origin = (round(world.origin[0] * map_scale, 12), round(world.origin[1] * map_scale, 12))
+    grid = OccupancyGrid.from_occupancy(occupancy, map_res, map_origin)
     save_map(grid, out / "map.yaml")
 
     host = "sim"
@@ -1151,7 +1152,7 @@ DOUBLED_SIDE = 10.0  # m: --doubled-walls draws the walls twice in squares this 
 DOUBLED_SHIFT = (0.1, 0.3)  # m: how far the second copy lies from the walls
 
 
-def _doubled(occupancy: np.ndarray, truth: np.ndarray, n: int, rng: np.random.Generator, origin,
+def double_walls(occupancy: np.ndarray, truth: np.ndarray, n: int, rng: np.random.Generator, origin,
              resolution: float) -> tuple[np.ndarray, list]:
     """A copy of ``occupancy`` whose walls in ``n`` squares of DOUBLED_SIDE, centred on the path (``truth`` (T, 3))
     at k / (n + 1) of the drive, k = 1..n, are drawn a second time, shifted DOUBLED_SHIFT in a direction drawn

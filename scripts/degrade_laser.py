@@ -30,7 +30,7 @@ late makes a log: a FLASER line's times become its time + T and its robot pose t
 stay as they were). ``sensor.time_offset`` -T undoes it.
 
 With ``--doubled-walls N`` each map is redrawn with its walls twice in N squares of 10 m centred on the reference
-path at k / (N + 1) of it, the copy 0.1-0.3 m off (``mcl simulate --doubled-walls``'s ``_doubled``): a SLAM map
+path at k / (N + 1) of it, the copy 0.1-0.3 m off (``mcl simulate --doubled-walls``'s ``double_walls``): a SLAM map
 whose loop did not quite close, under the log's own scans. ``--fov 180 --sigma 0 --drop 0`` leaves the logs as
 they are, byte for byte, so the map is the only change:
 
@@ -60,7 +60,7 @@ sys.path.insert(0, str(ROOT))
 
 from mcl.datasets.carmen import interpolate_odometry  # noqa: E402
 from mcl.maps import OccupancyGrid, load_map, save_map  # noqa: E402
-from mcl.simulate import _doubled  # noqa: E402
+from mcl.simulate import double_walls  # noqa: E402
 from mcl.trajectory import read_tum  # noqa: E402
 from mcl.runner import compose, inverse  # noqa: E402
 
@@ -218,7 +218,7 @@ def main(argv=None) -> int:
         if a.doubled_walls:
             grid = load_map(folder / Path(d["map"]).name)
             _, ref = read_tum(folder / Path(d["truth"]).name)
-            occupancy, squares = _doubled(grid.occupancy, ref[:3].T, a.doubled_walls, rng, grid.origin,
+            occupancy, squares = double_walls(grid.occupancy, ref[:3].T, a.doubled_walls, rng, grid.origin,
                                           grid.resolution)
             save_map(OccupancyGrid.from_occupancy(occupancy, grid.resolution, grid.origin),
                      folder / "map_doubled.yaml")
