@@ -677,7 +677,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
              unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
-             doubled_walls: int = 0, map_scale: float = 1.0, _check_only: bool = False) -> dict | None:
+             doubled_walls: int = 0, map_scale: float = 1.0, map_rotation: float = 0.0,
+             _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -736,6 +737,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     measure the world; truth.tum and sim.yaml's poses (start, kidnap, ``doubled_walls``' squares) are given in the
     map's frame, the world's x, y times S, where the map shows the robot's surroundings. 1 leaves every output
     byte-identical.
+    ``map_rotation`` = A (rad, -pi..pi) draws the map turned by A about the frame's zero (``rotate_map``): a SLAM
+    map whose frame started at the robot's heading, not along the building, so its walls run across the cells
+    as staircases. The laser and the odometry are the same bytes; truth.tum and sim.yaml's poses are in the map's
+    frame (turned by A, then scaled by ``map_scale``). 0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -803,6 +808,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected 0.9..1.1, got {map_scale!r}")
     _check(map_scale == 1.0 or not (landmarks or depth), "map_scale",
            "a scaled map is made without landmarks and depth frames: set landmarks to 0 and depth to false")
+    _check(isinstance(map_rotation, (int, float, np.number)) and not isinstance(map_rotation, bool)
+           and math.isfinite(map_rotation) and abs(map_rotation) <= math.pi, "map_rotation",
+           f"expected -pi..pi rad, got {map_rotation!r}")
+    _check(map_rotation == 0.0 or not (landmarks or depth), "map_rotation",
+           "a turned map is made without landmarks and depth frames: set landmarks to 0 and depth to false")
     _check(isinstance(laser_pose, (list, tuple, np.ndarray)) and len(laser_pose) == 3
            and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v)
                    for v in laser_pose)
@@ -918,11 +928,14 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         # patches along the drive the map draws the walls twice, the second copy shifted a little.
         rng_dbl = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(11)[10])
         occupancy, doubled = double_walls(occupancy, truth, int(doubled_walls), rng_dbl, world.origin, world.resolution)
+    world_origin = world.origin
+    if map_rotation:
+        occupancy, world_origin = rotate_map(occupancy, world.resolution, world.origin, float(map_rotation))
     if map_resolution is not None and abs(map_resolution - world.resolution) > 1e-12:
         map_res = float(map_resolution)
         occupancy = resample_occupancy(occupancy, world.resolution, map_res)
     map_res = round(map_res * map_scale, 12)  # the map's cells, as the mapper drew them
-    map_origin = (round(world.origin[0] * map_scale, 12), round(world.origin[1] * map_scale, 12))
+    map_origin = (round(world_origin[0] * map_scale, 12), round(world_origin[1] * map_scale, 12))
     grid = OccupancyGrid.from_occupancy(occupancy, map_res, map_origin)
     save_map(grid, out / "map.yaml")
 
@@ -963,7 +976,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         from mcl.landmarks import save_landmarks
 
         save_landmarks(out / "landmarks.yaml", lm_ids, lm_xy)
-    write_tum(out / "truth.tum", t[scan_ticks], (truth[scan_ticks] * [map_scale, map_scale, 1.0]).T)
+    write_tum(out / "truth.tum", t[scan_ticks], map_frame_poses(truth[scan_ticks], map_rotation, map_scale).T)
     n_depth = 0
     if depth:
         from mcl.depthsim import write_depth_folder
@@ -977,12 +990,16 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
 
     import yaml
 
-    if map_scale != 1.0:  # sim.yaml's poses in the map's frame, as truth.tum's
-        start = start * [map_scale, map_scale, 1.0]
+    if map_scale != 1.0 or map_rotation:  # sim.yaml's poses in the map's frame, as truth.tum's
+        def in_map(pose):
+            return map_frame_poses(np.array(pose, dtype=float)[None], map_rotation, map_scale)[0]
+
+        start = in_map(start)
         if kidnap:
-            kidnap = {**kidnap, **{k: _pose_list(np.array(kidnap[k]) * [map_scale, map_scale, 1.0])
-                                   for k in ("from", "to")}}
-        doubled = [[round(v * map_scale, 3) for v in square] for square in doubled]
+            kidnap = {**kidnap, **{k: _pose_list(in_map(kidnap[k])) for k in ("from", "to")}}
+        # a square's centre as a point, its shift as a direction (turned and scaled, not moved)
+        doubled = [[round(float(v), 3) for v in (*in_map([x, y, 0.0])[:2], *in_map([dx, dy, 0.0])[:2])]
+                   for x, y, dx, dy in doubled]
     params = {
         "kind": kind,
         "seed": int(seed),
@@ -1022,6 +1039,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["doubled_walls"] = doubled
     if map_scale != 1.0:
         params["map_scale"] = float(map_scale)
+    if map_rotation:
+        params["map_rotation"] = float(map_rotation)
     if grey:
         params["unknown_floor"] = [[round(a, 3), round(b, 3)] for a, b in grey]
     if hit_windows:
@@ -1180,6 +1199,34 @@ def double_walls(occupancy: np.ndarray, truth: np.ndarray, n: int, rng: np.rando
     return out, squares
 
 
+def map_frame_poses(poses: np.ndarray, rotation: float, scale: float) -> np.ndarray:
+    """World poses (N, 3) in the frame of a map turned by ``rotation`` rad about the frame's zero, then drawn
+    ``scale`` times the world's size (``rotate_map``, ``map_scale``). Without a rotation the headings are the same
+    numbers."""
+    if not rotation:
+        return poses * [scale, scale, 1.0]
+    c, s = math.cos(rotation), math.sin(rotation)
+    x, y = poses[:, 0], poses[:, 1]
+    return np.column_stack([scale * (c * x - s * y), scale * (s * x + c * y),
+                            np.remainder(poses[:, 2] + rotation + math.pi, 2 * math.pi) - math.pi])
+
+
+def rotate_map(occupancy: np.ndarray, resolution: float, origin, angle: float):
+    """The grid ``occupancy`` (-1 unknown, 0 free, 100 occupied; row 0 at the bottom, its corner at ``origin``)
+    turned by ``angle`` rad about the frame's zero and drawn again on cells of the same size along the new axes, as
+    a mapper whose frame is turned against the building draws it: its corner moves to R(angle) ``origin`` and the
+    image turns about it, which is a map_server map with ``origin: [x, y, angle]``, so ``mcl.maps.axis_aligned``
+    draws it, as the map loader does such a map: each new cell takes the old cell under its centre (off the old
+    grid: unknown). A wall across the cells becomes a staircase whose cells touch at their corners; a ray cast from
+    cell to cell still cannot pass between them. Returns the grid and its origin (x, y)."""
+    from mcl.maps import axis_aligned
+
+    c, s = math.cos(angle), math.sin(angle)
+    ox, oy = float(origin[0]), float(origin[1])
+    out, corner = axis_aligned(occupancy, resolution, (c * ox - s * oy, s * ox + c * oy), angle)
+    return out, (round(corner[0], 12), round(corner[1], 12))
+
+
 def _painted(occupancy: np.ndarray, boxes, origin, resolution: float) -> np.ndarray:
     """A copy of ``occupancy`` with the ``boxes`` (x0, y0, x1, y1) drawn occupied (100)."""
     out = occupancy.copy()
@@ -1309,6 +1356,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="draw the map S times the world's size (0.9-1.1: a floor plan whose scale is off by a "
                         "percent or two); the laser and the odometry measure the world, truth.tum is in the map's "
                         "frame; default 1")
+    parser.add_argument("--map-rotation", type=float, default=0.0, metavar="DEG",
+                        help="draw the map turned by DEG degrees (-180..180: a SLAM map whose frame started at the "
+                        "robot's heading, so its walls run across the cells as staircases); the laser and the "
+                        "odometry are the same, truth.tum is in the map's frame; default 0")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1375,6 +1426,9 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
     holonomic = getattr(args, "holonomic", 0.0) or 0.0
     if not 0.0 <= holonomic <= 180.0:  # said in the option's degrees, not simulate()'s radians
         raise ConfigError(f"--holonomic: expected 0..180 degrees, got {holonomic:g}")
+    map_rotation = getattr(args, "map_rotation", 0.0) or 0.0
+    if not (math.isfinite(map_rotation) and -180.0 <= map_rotation <= 180.0):
+        raise ConfigError(f"--map-rotation: expected -180..180 degrees, got {map_rotation:g}")
     for a0, a1, r in getattr(args, "body", None) or []:
         if not (-180.0 <= a0 < a1 <= 180.0 and 0.0 < r < args.range_max):
             raise ConfigError(f"--body {a0:g} {a1:g} {r:g}: expected A0 A1 R with -180 <= A0 < A1 <= 180 degrees and "
@@ -1388,6 +1442,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
                     scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
                     unknown_floor=args.unknown_floor, doubled_walls=args.doubled_walls, map_scale=args.map_scale,
+                    map_rotation=math.radians(map_rotation),
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
                     holonomic=math.radians(holonomic))

@@ -36,7 +36,12 @@ they are, byte for byte, so the map is the only change:
 
     .venv/bin/python scripts/degrade_laser.py /tmp/doubled --fov 180 --sigma 0 --drop 0 --doubled-walls 6
 
-The maps (but for ``--doubled-walls``) and the references are those of the originals (linked, not copied). Writes
+With ``--map-rotation DEG`` each map is redrawn turned by DEG degrees about its frame's zero (``mcl simulate
+--map-rotation``'s ``rotate_map``: a SLAM map whose frame started at the robot's heading, its walls across the
+cells as staircases), and the reference and the start pose are turned with it (``truth_turned.tum``). The log is
+the same: the odometry has its own frame. After ``--doubled-walls`` when both are given.
+
+The maps (but for ``--doubled-walls`` and ``--map-rotation``) and the references (but for ``--map-rotation``) are those of the originals (linked, not copied). Writes
 ``OUT/<name>/log.clf`` with links to the rest, and ``OUT/suite.yaml``: the suite with its root at ``OUT``.
 Deterministic for a given ``--seed``. Then:
 
@@ -47,6 +52,7 @@ Deterministic for a given ``--seed``. Then:
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import sys
@@ -60,8 +66,8 @@ sys.path.insert(0, str(ROOT))
 
 from mcl.datasets.carmen import interpolate_odometry  # noqa: E402
 from mcl.maps import OccupancyGrid, load_map, save_map  # noqa: E402
-from mcl.simulate import double_walls  # noqa: E402
-from mcl.trajectory import read_tum  # noqa: E402
+from mcl.simulate import double_walls, map_frame_poses, rotate_map  # noqa: E402
+from mcl.trajectory import read_tum, write_tum  # noqa: E402
 from mcl.runner import compose, inverse  # noqa: E402
 
 
@@ -197,10 +203,14 @@ def main(argv=None) -> int:
                     help="beams between A0 and A1 degrees read R m (the robot's own frame in view); repeatable")
     ap.add_argument("--doubled-walls", type=int, default=0, metavar="N",
                     help="redraw each map with its walls twice in N squares of 10 m along the reference (default 0)")
+    ap.add_argument("--map-rotation", type=float, default=0.0, metavar="DEG",
+                    help="redraw each map turned by DEG degrees, the reference and start pose with it (default 0)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
     if not 0 <= a.doubled_walls <= 20:
         ap.error(f"--doubled-walls: expected 0..20, got {a.doubled_walls}")
+    if not (math.isfinite(a.map_rotation) and -180.0 <= a.map_rotation <= 180.0):
+        ap.error(f"--map-rotation: expected -180..180 degrees, got {a.map_rotation:g}")
     suite = yaml.safe_load(a.suite.read_text())
     src = (a.suite.parent / suite["root"]).resolve()
     rng = np.random.default_rng(a.seed)
@@ -224,6 +234,19 @@ def main(argv=None) -> int:
                      folder / "map_doubled.yaml")
             d["map"] = f"{d['name']}/map_doubled.yaml"
             print(f"{d['name']}: walls doubled in {len(squares)} squares (x, y, dx, dy): {squares}")
+        if a.map_rotation:
+            angle = math.radians(a.map_rotation)
+            grid = load_map(folder / Path(d["map"]).name)
+            occupancy, origin = rotate_map(grid.occupancy, grid.resolution, grid.origin, angle)
+            save_map(OccupancyGrid.from_occupancy(occupancy, grid.resolution, origin), folder / "map_turned.yaml")
+            d["map"] = f"{d['name']}/map_turned.yaml"
+            t, ref = read_tum(folder / Path(d["truth"]).name)
+            write_tum(folder / "truth_turned.tum", t, map_frame_poses(ref[:3].T, angle, 1.0).T)
+            d["truth"] = f"{d['name']}/truth_turned.tum"
+            if d.get("initial_pose"):
+                d["initial_pose"] = [round(float(v), 6) for v in map_frame_poses(
+                    np.array([d["initial_pose"]], dtype=float), angle, 1.0)[0]]
+            print(f"{d['name']}: map turned by {a.map_rotation:g} degrees")
         tmp = folder / (log.name + ".part")
         odom, flaser = Rescaled(a.odom_scale, a.turn_scale), Rescaled(a.odom_scale, a.turn_scale)
         with open(log, errors="replace") as fi, open(tmp, "w") as fo:
@@ -244,7 +267,8 @@ def main(argv=None) -> int:
         f"-latency{a.latency:g}" if a.latency else "") + (
         f"-late{a.stamp_late:g}" if a.stamp_late else "") + (
         "-body" if a.body else "") + (
-        f"-doubled{a.doubled_walls}" if a.doubled_walls else "")
+        f"-doubled{a.doubled_walls}" if a.doubled_walls else "") + (
+        f"-turned{a.map_rotation:g}" if a.map_rotation else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")
     return 0

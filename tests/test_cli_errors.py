@@ -261,6 +261,13 @@ def test_a_laser_mounted_metres_from_the_robot_warns_naming_where_the_mounting_c
     assert len(out) == 1 and out[0].startswith("mcl: warning: sensor.laser_pose puts the laser 4.00 m"), out
 
 
+@pytest.mark.parametrize("value", ["200", "-181", "nan"])
+def test_simulate_map_rotation_is_said_in_degrees(tmp_path, capsys, value):
+    assert main(["simulate", str(tmp_path / "w"), "--map-rotation", value]) == 2
+    assert _one_error(capsys) == f"mcl: error: --map-rotation: expected -180..180 degrees, got {float(value):g}"
+    assert not (tmp_path / "w").exists()
+
+
 @pytest.mark.parametrize("value", ["400", "-5", "nan"])
 def test_simulate_holonomic_is_said_in_degrees(tmp_path, capsys, value):
     # the option is degrees; the error named the keyword's radians ("expected 0..pi rad, got 6.98")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+import pytest
 import yaml
 
 from mcl.config import PROJECT_ROOT
@@ -136,3 +137,50 @@ def test_doubled_walls_redraw_the_map_only(tmp_path):
     added = (b.occupancy == 100) & (a.occupancy != 100)
     assert added.sum() > 100 and np.array_equal(b.occupancy[~added], a.occupancy[~added])
     assert b.resolution == a.resolution and tuple(b.origin) == tuple(a.origin)
+
+
+def test_a_turned_map_is_the_simulators_and_the_reference_and_start_pose_turn_with_it(tmp_path):
+    # --map-rotation DEG with the laser left alone: the log is the original's byte for byte; the map is the one
+    # `mcl simulate --map-rotation` draws of the same world, and the reference and the suite's start pose are that
+    # world's (turned about the frame's zero), so a run is scored where the turned map shows the robot.
+    import math
+
+    from mcl.trajectory import read_tum
+
+    world = tmp_path / "world"
+    simulate(world, seed=5, duration=20.0)
+    start = yaml.safe_load((world / "sim.yaml").read_text())["start_pose"]
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
+        "name": "w", "root": "world", "modes": ["tracking"],
+        "datasets": [{"name": "w", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum",
+                      "initial_pose": start}]}))
+    out = tmp_path / "out"
+    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
+                 "--map-rotation", "-120"]) == 0
+    simulate(tmp_path / "turned", seed=5, duration=20.0, map_rotation=math.radians(-120.0))
+    d = yaml.safe_load((out / "suite.yaml").read_text())["datasets"][0]
+    assert (d["map"], d["truth"]) == ("w/map_turned.yaml", "w/truth_turned.tum")
+    assert (out / "w" / "log.clf").read_bytes() == (world / "log.clf").read_bytes()
+    assert (out / "w" / "map_turned.pgm").read_bytes() == (tmp_path / "turned" / "map.pgm").read_bytes()
+    assert yaml.safe_load((out / "w" / "map_turned.yaml").read_text())["origin"] == \
+        yaml.safe_load((tmp_path / "turned" / "map.yaml").read_text())["origin"]
+    (ta, pa), (tb, pb) = read_tum(out / "w" / "truth_turned.tum"), read_tum(tmp_path / "turned" / "truth.tum")
+    np.testing.assert_array_equal(ta, tb)
+    np.testing.assert_allclose(pa[:2], pb[:2], atol=3e-6)  # turned from TUM's 6 decimals, then written to 6
+    np.testing.assert_allclose(np.cos(pa[2] - pb[2]), 1.0, atol=1e-10)
+    turned_start = yaml.safe_load((tmp_path / "turned" / "sim.yaml").read_text())["start_pose"]
+    np.testing.assert_allclose(d["initial_pose"][:2], turned_start[:2], atol=2e-6)
+    assert math.cos(d["initial_pose"][2] - turned_start[2]) == pytest.approx(1.0, abs=1e-10)
+
+
+@pytest.mark.parametrize("option, value, said", [
+    ("--map-rotation", "270", "expected -180..180 degrees, got 270"),
+    ("--map-rotation", "nan", "expected -180..180 degrees, got nan"),
+    ("--doubled-walls", "-1", "expected 0..20, got -1")])
+def test_a_map_change_out_of_range_is_one_error_line_and_nothing_written(tmp_path, capsys, option, value, said):
+    _suite_of(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        main([str(tmp_path / "out"), "--suite", str(tmp_path / "suite.yaml"), option, value])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].endswith(f"error: {option}: {said}")
+    assert not (tmp_path / "out").exists()
