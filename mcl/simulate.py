@@ -677,8 +677,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              map_resolution: float | None = None, reversals: int = 0, ground_hits: int = 0,
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
              unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
-             doubled_walls: int = 0, map_scale: float = 1.0, map_rotation: float = 0.0,
-             _check_only: bool = False) -> dict | None:
+             doubled_walls: int = 0, map_scale: float = 1.0, map_rotation: float = 0.0, scan_gaps: int = 0,
+             scan_gap_s: float = 5.0, _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -741,6 +741,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     map whose frame started at the robot's heading, not along the building, so its walls run across the cells
     as staircases. The laser and the odometry are the same bytes; truth.tum and sim.yaml's poses are in the map's
     frame (turned by A, then scaled by ``map_scale``). 0 leaves every output byte-identical.
+    ``scan_gaps`` = N drops the laser for ``scan_gap_s`` seconds N times, evenly spread over the run (at most half
+    the time between them): a driver that restarts, a USB reset, a bag whose scan topic stalled. The odometry goes
+    on; the log has no scan line there and truth.tum no pose (the reference is the scans'), and ``sim.yaml`` lists
+    the windows. The scans kept are the same bytes as without. 0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -811,6 +815,13 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(map_rotation, (int, float, np.number)) and not isinstance(map_rotation, bool)
            and math.isfinite(map_rotation) and abs(map_rotation) <= math.pi, "map_rotation",
            f"expected -pi..pi rad, got {map_rotation!r}")
+    _check(isinstance(scan_gaps, (int, np.integer)) and not isinstance(scan_gaps, bool) and 0 <= scan_gaps <= 20,
+           "scan_gaps", f"expected 0..20, got {scan_gaps!r}")
+    _check(isinstance(scan_gap_s, (int, float, np.number)) and not isinstance(scan_gap_s, bool)
+           and math.isfinite(scan_gap_s) and 0.5 <= scan_gap_s <= 60.0, "scan_gap_s",
+           f"expected 0.5..60 s, got {scan_gap_s!r}")
+    _check(scan_gaps == 0 or not depth, "scan_gaps",
+           "scan gaps are made without depth frames: set depth to false")
     _check(map_rotation == 0.0 or not (landmarks or depth), "map_rotation",
            "a turned map is made without landmarks and depth frames: set landmarks to 0 and depth to false")
     _check(isinstance(laser_pose, (list, tuple, np.ndarray)) and len(laser_pose) == 3
@@ -944,7 +955,12 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     lines = [f"# mcl simulate seed={int(seed)} duration={duration:g} beams={int(n_beams)} "
              f"fov={fov:.6f} range_max={range_max:g}; poses in the odometry frame\n",
              f"PARAM robot_front_laser_max {range_max:g} {0.0:.6f} {host} {0.0:.6f}\n"]
-    scan_row = {int(k): i for i, k in enumerate(scan_ticks)}
+    gaps = _grey_windows(t, int(scan_gaps), float(duration), float(scan_gap_s)) if scan_gaps else []
+    # the scans the log keeps: all but those inside a gap (the laser silent, the odometry going on)
+    kept = np.ones(scan_ticks.size, dtype=bool)
+    for a, b in gaps:
+        kept &= ~((t[scan_ticks] >= a) & (t[scan_ticks] < b))
+    scan_row = {int(k): i for i, k in enumerate(scan_ticks) if kept[i]}
     # Written as it is formatted, a block of lines at a time: an hour of 2,880-beam scans is 360 MB of text.
     laser_odom = _mounted(odom, mount) if mounted else None  # the laser's pose in the odometry frame, each tick
     with atomic_writer(out / "log.clf", "w", encoding="utf-8") as f:
@@ -976,7 +992,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         from mcl.landmarks import save_landmarks
 
         save_landmarks(out / "landmarks.yaml", lm_ids, lm_xy)
-    write_tum(out / "truth.tum", t[scan_ticks], map_frame_poses(truth[scan_ticks], map_rotation, map_scale).T)
+    write_tum(out / "truth.tum", t[scan_ticks[kept]],
+              map_frame_poses(truth[scan_ticks[kept]], map_rotation, map_scale).T)
     n_depth = 0
     if depth:
         from mcl.depthsim import write_depth_folder
@@ -1017,7 +1034,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         "robot": {"radius": float(robot_radius), "speed": float(speed), "turn_rate": float(turn_rate)},
         "map": {"resolution": map_res, "origin": [float(grid.origin[0]), float(grid.origin[1])],
                 "width": int(occupancy.shape[1]), "height": int(occupancy.shape[0])},
-        "scans": int(scan_ticks.size),
+        "scans": int(np.count_nonzero(kept)),
         "path_length": round(length, 3),
         "dynamic_obstacles": int(dynamic_obstacles),
         "unmapped_furniture": len(furniture),
@@ -1041,6 +1058,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["map_scale"] = float(map_scale)
     if map_rotation:
         params["map_rotation"] = float(map_rotation)
+    if gaps:
+        params["scan_gaps"] = [[round(a, 3), round(b, 3)] for a, b in gaps]
     if grey:
         params["unknown_floor"] = [[round(a, 3), round(b, 3)] for a, b in grey]
     if hit_windows:
@@ -1054,7 +1073,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["depth"] = {"folder": "depth", "frames": n_depth, "every_scans": int(depth_every),
                            "camera": cam.to_dict()}
     atomic_write_text(out / "sim.yaml", yaml.safe_dump(params, sort_keys=False))
-    return {"outdir": str(out), "scans": int(scan_ticks.size), "duration": float(t[-1]),
+    return {"outdir": str(out), "scans": int(np.count_nonzero(kept)), "duration": float(t[-1]),
             "path_length": round(length, 3), "start_pose": _pose_list(start), "kidnap": kidnap}
 
 
@@ -1135,12 +1154,19 @@ GREY_RADIUS = 1.5  # m: --unknown-floor makes the free cells this near the path 
 GREY_SECONDS = 10.0  # s of drive per unknown stretch
 
 
-def _grey_windows(t: np.ndarray, n: int, duration: float) -> list:
-    """``n`` windows of GREY_SECONDS (at most half the time between their centres) centred at k / (n + 1) of the
-    run, k = 1..n."""
-    half = 0.5 * min(GREY_SECONDS, duration / (2.0 * (n + 1)))
-    return [(max(c - half, 0.0), min(c + half, float(t[-1]))) for c in
-            (duration * (k + 1) / (n + 1) for k in range(n))]
+def _grey_windows(t: np.ndarray, n: int, duration: float, seconds: float = GREY_SECONDS) -> list:
+    """``spread_windows`` over a run of ``duration`` s from 0 (``t`` its ticks): the unknown floor's stretches, the
+    laser's gaps."""
+    return spread_windows(n, seconds, 0.0, duration, float(t[-1]))
+
+
+def spread_windows(n: int, seconds: float, start: float, duration: float, end: float | None = None) -> list:
+    """``n`` windows (a, b) of ``seconds`` (at most half the time between their centres) centred at k / (n + 1) of
+    the span of ``duration`` s from ``start``, k = 1..n, clipped to [start, ``end``] (default start + duration)."""
+    end = start + duration if end is None else end
+    half = 0.5 * min(seconds, duration / (2.0 * (n + 1)))
+    return [(max(c - half, start), min(c + half, end)) for c in
+            (start + duration * (k + 1) / (n + 1) for k in range(n))]
 
 
 def _greyed(occupancy: np.ndarray, truth: np.ndarray, t: np.ndarray, windows, origin, resolution: float) -> np.ndarray:
@@ -1360,6 +1386,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="draw the map turned by DEG degrees (-180..180: a SLAM map whose frame started at the "
                         "robot's heading, so its walls run across the cells as staircases); the laser and the "
                         "odometry are the same, truth.tum is in the map's frame; default 0")
+    parser.add_argument("--scan-gaps", type=int, default=0, metavar="N",
+                        help="the laser silent N times over the run (evenly spread) for --scan-gap-s each, the "
+                        "odometry going on (a driver restart, a USB reset, a stalled scan topic); default 0")
+    parser.add_argument("--scan-gap-s", type=float, default=5.0, metavar="S",
+                        help="seconds of each --scan-gaps gap (0.5-60); default 5")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1442,7 +1473,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     reversals=args.reversals, ground_hits=args.ground_hits, scan_rate=args.scan_rate,
                     scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
                     unknown_floor=args.unknown_floor, doubled_walls=args.doubled_walls, map_scale=args.map_scale,
-                    map_rotation=math.radians(map_rotation),
+                    map_rotation=math.radians(map_rotation), scan_gaps=args.scan_gaps, scan_gap_s=args.scan_gap_s,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
                     holonomic=math.radians(holonomic))

@@ -41,6 +41,11 @@ With ``--map-rotation DEG`` each map is redrawn turned by DEG degrees about its 
 cells as staircases), and the reference and the start pose are turned with it (``truth_turned.tum``). The log is
 the same: the odometry has its own frame. After ``--doubled-walls`` when both are given.
 
+With ``--scan-gaps N`` the laser falls silent N times for ``--scan-gap-s`` seconds (default 5), evenly spread over
+the log's scans (``mcl simulate --scan-gaps``' windows): the FLASER lines inside are dropped, the ODOM lines kept,
+and the reference loses its poses there too (``truth_gapped.tum``: a run is scored where it has scans). As a driver
+that restarts or a USB reset leaves a log.
+
 The maps (but for ``--doubled-walls`` and ``--map-rotation``) and the references (but for ``--map-rotation``) are those of the originals (linked, not copied). Writes
 ``OUT/<name>/log.clf`` with links to the rest, and ``OUT/suite.yaml``: the suite with its root at ``OUT``.
 Deterministic for a given ``--seed``. Then:
@@ -66,7 +71,7 @@ sys.path.insert(0, str(ROOT))
 
 from mcl.datasets.carmen import interpolate_odometry  # noqa: E402
 from mcl.maps import OccupancyGrid, load_map, save_map  # noqa: E402
-from mcl.simulate import double_walls, map_frame_poses, rotate_map  # noqa: E402
+from mcl.simulate import double_walls, map_frame_poses, rotate_map, spread_windows  # noqa: E402
 from mcl.trajectory import read_tum, write_tum  # noqa: E402
 from mcl.runner import compose, inverse  # noqa: E402
 
@@ -185,6 +190,19 @@ def stamped_late(lines: list[str], lag: float) -> str:
     return "".join(out)
 
 
+def without_scans_in_gaps(lines: list[str], n: int, seconds: float) -> tuple[str, list]:
+    """(the CARMEN log ``lines`` without the FLASER lines whose ipc_timestamp falls inside one of ``n`` windows of
+    ``seconds`` evenly spread over the scans' span (``mcl.simulate.spread_windows``), the windows)."""
+    def stamp(line):
+        p = line.split()
+        return float(p[2 + int(p[1]) + 6])
+
+    times = [stamp(line) for line in lines if line.startswith("FLASER ")]
+    gaps = spread_windows(n, seconds, times[0], times[-1] - times[0]) if times else []
+    return "".join(line for line in lines
+                   if not (line.startswith("FLASER ") and any(g0 <= stamp(line) < g1 for g0, g1 in gaps))), gaps
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path, help="output folder")
@@ -205,8 +223,16 @@ def main(argv=None) -> int:
                     help="redraw each map with its walls twice in N squares of 10 m along the reference (default 0)")
     ap.add_argument("--map-rotation", type=float, default=0.0, metavar="DEG",
                     help="redraw each map turned by DEG degrees, the reference and start pose with it (default 0)")
+    ap.add_argument("--scan-gaps", type=int, default=0, metavar="N",
+                    help="drop the scans of N windows evenly spread over each log (default 0)")
+    ap.add_argument("--scan-gap-s", type=float, default=5.0, metavar="S",
+                    help="seconds of each --scan-gaps window (default 5)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
+    if not 0 <= a.scan_gaps <= 20:
+        ap.error(f"--scan-gaps: expected 0..20, got {a.scan_gaps}")
+    if not (math.isfinite(a.scan_gap_s) and 0.5 <= a.scan_gap_s <= 60.0):
+        ap.error(f"--scan-gap-s: expected 0.5..60 s, got {a.scan_gap_s:g}")
     if not 0 <= a.doubled_walls <= 20:
         ap.error(f"--doubled-walls: expected 0..20, got {a.doubled_walls}")
     if not (math.isfinite(a.map_rotation) and -180.0 <= a.map_rotation <= 180.0):
@@ -259,6 +285,15 @@ def main(argv=None) -> int:
             tmp.write_text("".join(delay_line(line, stream, a.latency) for line in lines))
         if a.stamp_late:
             tmp.write_text(stamped_late(tmp.read_text().splitlines(keepends=True), a.stamp_late))
+        if a.scan_gaps:
+            text, gaps = without_scans_in_gaps(tmp.read_text().splitlines(keepends=True), a.scan_gaps, a.scan_gap_s)
+            tmp.write_text(text)
+            if d.get("truth"):
+                t, ref = read_tum(folder / Path(d["truth"]).name)
+                keep = ~np.any([(t >= g0) & (t < g1) for g0, g1 in gaps], axis=0)
+                write_tum(folder / "truth_gapped.tum", t[keep], ref[:, keep])
+                d["truth"] = f"{d['name']}/truth_gapped.tum"
+            print(f"{d['name']}: no scans in {len(gaps)} windows of {a.scan_gap_s:g} s")
         tmp.replace(folder / log.name)
         d["log"] = f"{d['name']}/{log.name}"
     suite["root"] = str(a.out.resolve())
@@ -268,7 +303,8 @@ def main(argv=None) -> int:
         f"-late{a.stamp_late:g}" if a.stamp_late else "") + (
         "-body" if a.body else "") + (
         f"-doubled{a.doubled_walls}" if a.doubled_walls else "") + (
-        f"-turned{a.map_rotation:g}" if a.map_rotation else "")
+        f"-turned{a.map_rotation:g}" if a.map_rotation else "") + (
+        f"-gaps{a.scan_gaps}x{a.scan_gap_s:g}" if a.scan_gaps else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")
     return 0

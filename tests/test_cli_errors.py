@@ -261,6 +261,15 @@ def test_a_laser_mounted_metres_from_the_robot_warns_naming_where_the_mounting_c
     assert len(out) == 1 and out[0].startswith("mcl: warning: sensor.laser_pose puts the laser 4.00 m"), out
 
 
+@pytest.mark.parametrize("options, said", [
+    (["--scan-gaps", "2", "--scan-gap-s", "0.1"], "--scan-gap-s: expected 0.5..60 s, got 0.1"),
+    (["--scan-gaps", "21"], "--scan-gaps: expected 0..20, got 21")])
+def test_simulate_scan_gaps_out_of_range_name_the_option(tmp_path, capsys, options, said):
+    assert main(["simulate", str(tmp_path / "w"), *options]) == 2
+    assert _one_error(capsys) == f"mcl: error: {said}"
+    assert not (tmp_path / "w").exists()
+
+
 @pytest.mark.parametrize("value", ["200", "-181", "nan"])
 def test_simulate_map_rotation_is_said_in_degrees(tmp_path, capsys, value):
     assert main(["simulate", str(tmp_path / "w"), "--map-rotation", value]) == 2

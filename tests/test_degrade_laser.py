@@ -176,7 +176,9 @@ def test_a_turned_map_is_the_simulators_and_the_reference_and_start_pose_turn_wi
 @pytest.mark.parametrize("option, value, said", [
     ("--map-rotation", "270", "expected -180..180 degrees, got 270"),
     ("--map-rotation", "nan", "expected -180..180 degrees, got nan"),
-    ("--doubled-walls", "-1", "expected 0..20, got -1")])
+    ("--doubled-walls", "-1", "expected 0..20, got -1"),
+    ("--scan-gaps", "30", "expected 0..20, got 30"),
+    ("--scan-gap-s", "0.2", "expected 0.5..60 s, got 0.2")])
 def test_a_map_change_out_of_range_is_one_error_line_and_nothing_written(tmp_path, capsys, option, value, said):
     _suite_of(tmp_path)
     with pytest.raises(SystemExit) as e:
@@ -184,3 +186,19 @@ def test_a_map_change_out_of_range_is_one_error_line_and_nothing_written(tmp_pat
     assert e.value.code == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].endswith(f"error: {option}: {said}")
     assert not (tmp_path / "out").exists()
+
+
+def test_scan_gaps_drop_the_scans_and_the_reference_as_the_simulator_does(tmp_path):
+    # --scan-gaps N with the laser left alone: the log is the simulator's own with the same gaps (the windows spread
+    # over the scans' span, which is the run's there), byte for byte, and the reference loses the same poses.
+    from mcl.trajectory import read_tum
+
+    world, out = _laser_as_it_is(tmp_path, 40.0, "--scan-gaps", "3", "--scan-gap-s", "4")
+    simulate(tmp_path / "gapped", seed=5, duration=40.0, scan_gaps=3, scan_gap_s=4.0)
+    d = yaml.safe_load((out / "suite.yaml").read_text())["datasets"][0]
+    assert d["truth"] == "w/truth_gapped.tum"
+    assert (out / "w" / "log.clf").read_bytes() == (tmp_path / "gapped" / "log.clf").read_bytes()
+    assert (out / "w" / "log.clf").read_bytes() != (world / "log.clf").read_bytes()
+    (ta, pa), (tb, pb) = read_tum(out / "w" / "truth_gapped.tum"), read_tum(tmp_path / "gapped" / "truth.tum")
+    np.testing.assert_array_equal(ta, tb)
+    np.testing.assert_allclose(pa, pb, atol=1e-6)

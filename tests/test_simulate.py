@@ -441,6 +441,9 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(map_scale=float("nan")), "map_scale"),
     (dict(map_scale=1.01, landmarks=5), "map_scale"),
     (dict(map_rotation=3.5), "map_rotation"),
+    (dict(scan_gaps=-1), "scan_gaps"),
+    (dict(scan_gaps=2, scan_gap_s=0.1), "scan_gap_s"),
+    (dict(scan_gaps=1, depth=True), "scan_gaps"),
     (dict(map_rotation=float("inf")), "map_rotation"),
     (dict(map_rotation=0.3, depth=True), "map_rotation"),
     (dict(scan_sweep=0.3), "scan_sweep"),
@@ -695,6 +698,38 @@ def test_a_turned_map_from_the_command_line(tmp_path, capsys):
     assert main(["simulate", str(tmp_path / "w"), "--duration", "10", "--seed", "6", "--map-rotation", "-45"]) == 0
     assert yaml.safe_load((tmp_path / "w" / "sim.yaml").read_text())["map_rotation"] == pytest.approx(-math.pi / 4)
     capsys.readouterr()
+
+
+def test_scan_gaps_drop_the_scans_and_their_reference_only(tmp_path):
+    # The laser silent three times for 4 s (a driver restart): the log keeps every ODOM line and every other scan line
+    # as it was, byte for byte, and truth.tum drops the poses of the scans that are gone; sim.yaml lists the windows,
+    # evenly spread.
+    simulate(tmp_path / "a", kind="office", seed=6, duration=40.0)
+    simulate(tmp_path / "b", kind="office", seed=6, duration=40.0, scan_gaps=3, scan_gap_s=4.0)
+    la, lb = ((tmp_path / w / "log.clf").read_text().splitlines() for w in "ab")
+    gaps = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["scan_gaps"]
+    assert gaps == [[8.0, 12.0], [18.0, 22.0], [28.0, 32.0]]
+    stamp = lambda line: float(line.split()[-1])  # noqa: E731
+
+    def in_gap(line):
+        return any(a <= stamp(line) < b for a, b in gaps)
+
+    assert lb == [line for line in la if not (line.startswith("FLASER") and in_gap(line))]
+    dropped = [line for line in la if line.startswith("FLASER") and in_gap(line)]
+    assert len(dropped) == 3 * 20  # 4 s at 5 Hz, three times
+    (ta, pa), (tb, pb) = read_tum(tmp_path / "a" / "truth.tum"), read_tum(tmp_path / "b" / "truth.tum")
+    keep = ~np.any([(ta >= a) & (ta < b) for a, b in gaps], axis=0)
+    np.testing.assert_array_equal(tb, ta[keep])
+    np.testing.assert_array_equal(pb, pa[:, keep])
+    assert yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["scans"] == int(keep.sum())
+
+
+def test_scan_gaps_from_the_command_line(tmp_path):
+    from mcl.cli import main
+
+    assert main(["simulate", str(tmp_path), "--duration", "30", "--seed", "6", "--scan-gaps", "2",
+                 "--scan-gap-s", "3"]) == 0
+    assert yaml.safe_load((tmp_path / "sim.yaml").read_text())["scan_gaps"] == [[8.5, 11.5], [18.5, 21.5]]
 
 
 def test_doubled_walls_from_the_command_line(tmp_path):
