@@ -69,6 +69,10 @@ class FilterConfig:
     max_odom_step: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
     # ... and longer than this many times the longest of the last 20 steps taken (0: the fixed bound alone)
     max_odom_ratio: float = field(default=3.0, metadata=_rng(0.0))
+    # ... unless its speed over the time since the last scan is at most this (m/s), or max_odom_ratio times the
+    # fastest of the last 20 steps' (a laser silent for seconds: the next scan comes metres on at the robot's speed;
+    # 0: off)
+    max_odom_speed: float = field(default=2.0, metadata=_rng(0.0))
     respread_std: tuple[float, float, float] = (0.5, 0.5, 0.5)  # std x, y (m), theta (rad) of a re-spread
     # KLD sampling (Fox 2003, Prob. Rob. Table 8.4; mcl.adaptive): with kld on, `particles` is the
     # maximum (and the count drawn at initialisation, as AMCL's max_particles) and each resample draws

@@ -13,7 +13,11 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
   than ``filter.max_odom_ratio`` times the longest of the last ``JUMP_HISTORY``
   steps taken, or not finite. A long step may be a glitch or real motion: logs
   with a scan every metre of travel make steps of 2-4 m at their turns
-  (Radish's orebro), hence the relative bound. And the filter hedges: every
+  (Radish's orebro), hence the relative bound. A longer step is still motion
+  when its speed since the last scan is at most ``filter.max_odom_speed``
+  or ``max_odom_ratio`` times the fastest of the last steps' (a laser silent
+  for seconds: the next scan comes metres on at the robot's speed; a glitch
+  moves metres in a scan period). Else the filter hedges: every
   other particle takes the step (the motion model's noise grows with it), the
   others are re-spread by ``filter.respread_std`` where they were (poses off
   the allowed map are drawn again), and the scan decides. Non-finite odometry
@@ -44,10 +48,14 @@ class InputGuard:
 
     JUMP_HISTORY = 20  # odometry steps taken whose longest sets the relative jump bound
 
-    def __init__(self, max_odom_step: float, max_odom_ratio: float = 0.0):
+    MIN_SPEED_DT = 0.02  # s: a step over less time has no speed to go by (stamps equal or a few ms apart)
+
+    def __init__(self, max_odom_step: float, max_odom_ratio: float = 0.0, max_odom_speed: float = 0.0):
         self.max_odom_step = float(max_odom_step)
         self.max_odom_ratio = float(max_odom_ratio)
+        self.max_odom_speed = float(max_odom_speed)
         self._steps: collections.deque[float] = collections.deque(maxlen=self.JUMP_HISTORY)
+        self._speeds: collections.deque[float] = collections.deque(maxlen=self.JUMP_HISTORY)
         self.events = dict.fromkeys(EVENT_KINDS, 0)
         self._warned: set[str] = set()
         self._step: list[str] = []  # kinds seen in the current update
@@ -89,6 +97,14 @@ class InputGuard:
             return self.max_odom_step
         return max(self.max_odom_step, self.max_odom_ratio * max(self._steps))
 
+    def speed_bound(self) -> float:
+        """m/s: the fastest a step longer than ``jump_bound`` may be and still be taken as motion: max(max_odom_speed,
+        max_odom_ratio * the fastest of the last JUMP_HISTORY steps taken); 0 when max_odom_speed is 0 (off)."""
+        if self.max_odom_speed <= 0.0:
+            return 0.0
+        recent = self.max_odom_ratio * max(self._speeds) if self._speeds else 0.0
+        return max(self.max_odom_speed, recent)
+
     def check_control(self, control):
         """(control to apply, odometry step in the robot frame (3,)): dt < 0 made 0; (control, None) for an
         odometry jump (a glitch or real motion: the filter hedges), (None, None) for non-finite odometry."""
@@ -102,13 +118,24 @@ class InputGuard:
             control = dataclasses.replace(control, dt=0.0)
         step = math.hypot(b[0] - a[0], b[1] - a[1])
         bound = self.jump_bound()
+        dt = float(control.dt if control.dt_scan is None else control.dt_scan)
+        timed = dt >= self.MIN_SPEED_DT
         if step > bound:
-            self.event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> {bound:.2f} m: "
-                       f"filter.max_odom_step {self.max_odom_step} m, or max_odom_ratio {self.max_odom_ratio} times "
-                       "the longest recent step): a glitch or real motion; half the particles take the step, the "
-                       "others are re-spread where they were, and the scan decides")
-            return control, None
-        self._steps.append(step)
+            # a long step at the robot's speed is motion (the scans stopped for a while); a glitch is not. It stays
+            # out of both histories: the next steps are measured against the scans' own, not against the gap's
+            if not (timed and step <= self.speed_bound() * dt):
+                speed = (f"; {step / dt:.2f} m/s over {dt:.2f} s, faster than filter.max_odom_speed "
+                         f"{self.max_odom_speed} m/s and max_odom_ratio times the fastest recent step"
+                         if timed and self.max_odom_speed > 0.0 else "")
+                self.event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> {bound:.2f} m: "
+                           f"filter.max_odom_step {self.max_odom_step} m, or max_odom_ratio {self.max_odom_ratio} "
+                           f"times the longest recent step{speed}): a glitch or real motion; half the particles take "
+                           "the step, the others are re-spread where they were, and the scan decides")
+                return control, None
+        else:
+            self._steps.append(step)
+            if timed:
+                self._speeds.append(step / dt)
         c, s = math.cos(a[2]), math.sin(a[2])
         dx, dy = b[0] - a[0], b[1] - a[1]
         return control, np.array([c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(b[2] - a[2]))])

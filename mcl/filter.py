@@ -99,6 +99,9 @@ class Control:
     dt: float = 0.0
     v: float = 0.0
     w: float = 0.0
+    # s since the previous scan, used or gated (None: ``dt``): how long the odometry step took, for the jump test
+    # (gated scans stood still, so a step after a long stop is not slow)
+    dt_scan: float | None = None
 
 
 SCALE_PIN = 0.8  # motion.scale_window: a correction that leaves this much of the spread along the travel pins nothing
@@ -180,7 +183,7 @@ class ParticleFilter:
                 self.allowed = allowed_mask(grid, cfg.motion.robot_radius, mu == "free")
         self.sensor = make_sensor_model(grid, cfg.sensor)
         # the policies
-        self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio)
+        self.guard = InputGuard(fc.max_odom_step, fc.max_odom_ratio, fc.max_odom_speed)
         self.kld = KLDSampling(fc, grid) if fc.kld else None
         # a global start or re-seed until one place is left
         self.search = GlobalSearch(settled_std=fc.search_settled_std, probation_from=fc.recovery_probation_from)

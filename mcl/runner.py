@@ -991,6 +991,7 @@ def _run(
     failure = None  # the exception that stopped the loop, re-raised once the outputs are closed and summarised
     last_odom = None
     last_t = 0.0
+    scan_t = None  # the previous scan's time, used or gated (Control.dt_scan)
     lasers: set = set()  # the scan sources (a bag's topics; a CARMEN log's one kind) seen to update so far
     left_out = getattr(log, "left_out_lasers", set())  # fused lasers whose mounting misfits (_check_odometry)
     turned = getattr(log, "turned_lasers", {})  # lasers mounted at the yaw their scans fit (_check_odometry)
@@ -1028,6 +1029,7 @@ def _run(
                         # trajectory still gets this scan's pose, the last estimate moved by the odometry since that
                         # update (one pose per scan).
                         pose = compose(last_mean, compose(inverse(last_odom), odom))
+                        scan_t = scan.t
                         with signals.held():
                             writer.append(scan.t, pose[0], pose[1], pose[2])
                             quality_out.write_line(_quality_line(scan.t, False, None, last_lost, pf.n, last_spread))
@@ -1056,7 +1058,8 @@ def _run(
                     v, w = scan.tv, scan.rv
                     if v == 0.0 and w == 0.0:  # no velocities in the log: from the odometry pair
                         v, w, dt = velocities_from_odometry(last_odom, odom, dt)
-                    control = Control(last_odom, odom, dt=dt, v=v, w=w)
+                    control = Control(last_odom, odom, dt=dt, v=v, w=w,
+                                      dt_scan=scan.t - scan_t if scan_t is not None else None)
                 if seed_from_landmarks and not pf.search.tempering:
                     # the laser settled the search first: its cloud stays (a late landmark observation, a false
                     # positive, re-drew a localized set 4 m off)
@@ -1071,7 +1074,7 @@ def _run(
                     owed.discard(laser)
                 if on_update is not None:
                     on_update(scan.t, pf, info, truth.at(scan.t) if truth is not None else None)
-                last_odom, last_t = odom, scan.t
+                last_odom, last_t, scan_t = odom, scan.t, scan.t
                 mean, cov = info.mean, info.cov
                 spread_full = _spread(info.full_cov)
                 last_mean, last_lost, last_spread = mean, info.lost, spread_full

@@ -211,6 +211,37 @@ def test_a_step_is_a_jump_only_when_longer_than_ratio_times_the_longest_recent_s
         assert step(fixed, 2.1)
 
 
+def test_a_long_step_at_the_robots_speed_is_motion_and_a_glitch_is_not():
+    # A laser silent for 8 s: the next scan's odometry is 6 m on, at the 0.8 m/s the robot drove; a glitch moves
+    # as far in one scan period (30 m/s). The time is the scan's since the previous scan, used or gated: a robot
+    # that stood still (gated) for a minute and then jumps 6 m between two scans 0.2 s apart glitched.
+    from mcl.degenerate import InputGuard
+
+    def jump(guard, length, dt, dt_scan=None):
+        c = Control(np.zeros(3), np.array([length, 0.0, 0.0]), dt=dt, dt_scan=dt_scan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return guard.check_control(c)[1] is None
+
+    def driving(speed_limit=2.0, speed=0.8):
+        g = InputGuard(max_odom_step=2.0, max_odom_ratio=3.0, max_odom_speed=speed_limit)
+        for _ in range(10):
+            assert not jump(g, speed * 0.2, 0.2)
+        return g
+
+    g = driving()
+    assert not jump(g, 6.0, 8.0)
+    assert g.jump_bound() == 2.0  # the long step's length stays out of the history (else 18 m)
+    assert jump(g, 6.0, 0.2)
+    assert jump(driving(), 6.0, 60.0, dt_scan=0.2)
+    assert not jump(driving(), 6.0, 0.2, dt_scan=8.0)  # the time is the scan's
+    assert jump(driving(speed_limit=0.0), 6.0, 8.0)  # off: the length bounds alone
+    assert jump(driving(), 6.0, 8.0, dt_scan=0.01)  # stamps a few ms apart say nothing of a speed
+    # a fast robot (1.5 m/s) silent for 3 s: 4.5 m at 1.5 m/s, within 3 x its own speed, though over 2 m/s
+    fast = driving(speed=1.5)
+    assert not jump(fast, 4.5, 3.0) and not jump(fast, 12.0, 3.0) and jump(fast, 14.0, 3.0)
+
+
 @pytest.mark.parametrize("odom", [[np.nan, 0.0, 0.0], [0.0, np.inf, 0.0], [0.1, 0.0, np.nan]])
 def test_non_finite_odometry_counts_as_a_jump(odom):
     pf = _pf()
@@ -274,12 +305,13 @@ def _doctor_demo(src: Path, dst: Path) -> dict:
 
 
 @pytest.mark.skipif(not (DEMO / "log.clf").is_file(), reason="bundled demo data missing")
-@pytest.mark.parametrize("ratio, jumps", [(3.0, 0), (0.0, 6)])
-def test_a_log_with_a_scan_every_two_metres_is_tracked(tmp_path, ratio, jumps):
+@pytest.mark.parametrize("ratio, speed, jumps", [(3.0, 2.0, 0), (0.0, 2.0, 0), (0.0, 0.0, 6)])
+def test_a_log_with_a_scan_every_two_metres_is_tracked(tmp_path, ratio, speed, jumps):
     # every 24th scan of the demo (before its kidnap at scan 250): 0.5-2.4 m of odometry between scans, as logs
     # with one scan per metre or two have. With max_odom_ratio 3 every step is within 3x the longest recent one
-    # and taken as motion; with the fixed 2 m bound alone, the 6 steps over it are hedged and the scan picks the
-    # half that moved. (Re-spreading in place, the rule before the hedge, was lost at the first of them.)
+    # and taken as motion; so is every step at 0.5 m/s over the 4.8 s between scans (max_odom_speed 2 m/s); with
+    # the fixed 2 m bound alone, the 6 steps over it are hedged and the scan picks the half that moved.
+    # (Re-spreading in place, the rule before the hedge, was lost at the first of them.)
     import yaml
 
     from mcl.runner import run
@@ -297,7 +329,8 @@ def test_a_log_with_a_scan_every_two_metres_is_tracked(tmp_path, ratio, jumps):
     start = yaml.safe_load((DEMO / "sim.yaml").read_text())["start_pose"]
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
         f"log={tmp_path / 'thin.clf'}", "rerun.mode=off", "filter.global_localization=false",
-        f"filter.initial_pose={start}", "filter.particles=5000", f"filter.max_odom_ratio={ratio}"])
+        f"filter.initial_pose={start}", "filter.particles=5000", f"filter.max_odom_ratio={ratio}",
+        f"filter.max_odom_speed={speed}"])
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
         s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
@@ -353,3 +386,37 @@ def test_motion_model_output_that_is_not_finite_never_reaches_the_particles():
     info = pf.step(Control(np.zeros(3), np.array([0.2, 0.0, 0.0]), dt=0.2), pf.prepare(_true_scan(pf), np.zeros(3)))
     _ok(pf)
     assert np.isfinite(info.mean).all()
+
+
+def test_a_corridor_whose_laser_falls_silent_is_followed_through_the_gaps(tmp_path):
+    # A featureless corridor, the laser silent twice for 8 s (mcl simulate --scan-gaps): the next scan comes 6 m on.
+    # Hedged as a jump, half the cloud stays behind, and a stretch of corridor that looks the same takes the track
+    # (max 6.7 m with max_odom_speed 0); at the robot's speed the step is motion and the odometry carries the cloud
+    # over the gap (max 0.44 m measured; 1 m leaves room for the drift along the corridor, which the scans after
+    # the gap cannot correct).
+    import yaml
+
+    from mcl.runner import run
+    from mcl.simulate import simulate
+    from mcl.trajectory import read_tum
+
+    world = tmp_path / "world"
+    simulate(world, kind="corridor", seed=13, duration=90.0, scan_gaps=2, scan_gap_s=8.0)
+    start = yaml.safe_load((world / "sim.yaml").read_text())["start_pose"]
+    tt, truth = read_tum(world / "truth.tum")
+
+    def max_error(speed):
+        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+            f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}", "truth=null", "rerun.mode=off",
+            f"filter.initial_pose={start}", f"filter.max_odom_speed={speed}"])
+        with warnings.catch_warnings(record=True):
+            warnings.simplefilter("always")
+            s = run(cfg, tmp_path / f"out{speed}", progress=False, echo=lambda *_: None)
+        t, est = read_tum(tmp_path / f"out{speed}" / "trajectory.tum")
+        assert np.array_equal(t, tt)  # one pose per scan, and no scan inside a gap
+        return float(np.max(np.hypot(est[0] - truth[0], est[1] - truth[1]))), s["events"]["odometry_jumps"]
+
+    err, jumps = max_error(2.0)
+    assert jumps == 0 and err < 1.0
+    err, jumps = max_error(0.0)
+    assert jumps == 2 and err > 3.0
