@@ -678,7 +678,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
              unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
              doubled_walls: int = 0, map_scale: float = 1.0, map_rotation: float = 0.0, scan_gaps: int = 0,
-             scan_gap_s: float = 5.0, _check_only: bool = False) -> dict | None:
+             scan_gap_s: float = 5.0, odom_stalls: int = 0, odom_stall_s: float = 3.0,
+             _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -745,6 +746,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     the time between them): a driver that restarts, a USB reset, a bag whose scan topic stalled. The odometry goes
     on; the log has no scan line there and truth.tum no pose (the reference is the scans'), and ``sim.yaml`` lists
     the windows. The scans kept are the same bytes as without. 0 leaves every output byte-identical.
+    ``odom_stalls`` = N stalls the odometry for ``odom_stall_s`` seconds N times, evenly spread (``_stalled``): an
+    encoder driver that hangs while the robot drives on. The odometry (ODOM lines, the scan lines' poses) holds its
+    pose and reads no velocity there, then goes on from it: the motion in the stall is lost. The laser and the truth
+    are the same bytes as without; ``sim.yaml`` lists the windows. 0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -820,6 +825,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(scan_gap_s, (int, float, np.number)) and not isinstance(scan_gap_s, bool)
            and math.isfinite(scan_gap_s) and 0.5 <= scan_gap_s <= 60.0, "scan_gap_s",
            f"expected 0.5..60 s, got {scan_gap_s!r}")
+    _check(isinstance(odom_stalls, (int, np.integer)) and not isinstance(odom_stalls, bool)
+           and 0 <= odom_stalls <= 20, "odom_stalls", f"expected 0..20, got {odom_stalls!r}")
+    _check(isinstance(odom_stall_s, (int, float, np.number)) and not isinstance(odom_stall_s, bool)
+           and math.isfinite(odom_stall_s) and 0.5 <= odom_stall_s <= 60.0, "odom_stall_s",
+           f"expected 0.5..60 s, got {odom_stall_s!r}")
     _check(scan_gaps == 0 or not depth, "scan_gaps",
            "scan gaps are made without depth frames: set depth to false")
     _check(map_rotation == 0.0 or not (landmarks or depth), "map_rotation",
@@ -879,6 +889,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
 
     # --- laser
     t = np.round(np.arange(n_ticks) / odom_rate, 6)
+    stalls = _grey_windows(t, int(odom_stalls), float(duration), float(odom_stall_s)) if odom_stalls else []
+    if stalls:
+        odom, tv, rv = _stalled(odom, tv, rv, t, stalls)
     scan_ticks = np.arange(0, n_ticks, scan_every)
     angles = beam_angles(int(n_beams), fov)
     blocked = world.blocked
@@ -1060,6 +1073,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["map_rotation"] = float(map_rotation)
     if gaps:
         params["scan_gaps"] = [[round(a, 3), round(b, 3)] for a, b in gaps]
+    if stalls:
+        params["odom_stalls"] = [[round(a, 3), round(b, 3)] for a, b in stalls]
     if grey:
         params["unknown_floor"] = [[round(a, 3), round(b, 3)] for a, b in grey]
     if hit_windows:
@@ -1223,6 +1238,30 @@ def double_walls(occupancy: np.ndarray, truth: np.ndarray, n: int, rng: np.rando
         out[rows[ok], cols[ok]] = 100
         squares.append([round(float(x), 3), round(float(y), 3), round(sx * resolution, 3), round(sy * resolution, 3)])
     return out, squares
+
+
+def _stalled(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, windows) -> tuple:
+    """(odometry poses, tv, rv) with the odometry stalled over each window [a, b) of ``t``: it holds the pose it had
+    at a and reads no velocity, and from b on it goes on from the held pose with the steps it measured (each later pose
+    moved by held ∘ pose(b-)^-1): the motion inside the window is lost, as when an encoder driver hangs."""
+    odom, tv, rv = odom.copy(), tv.copy(), rv.copy()
+    for a, b in windows:
+        ka, kb = int(np.searchsorted(t, a)), int(np.searchsorted(t, b))
+        if ka == 0 or ka >= kb:
+            continue
+        held, last = odom[ka - 1].copy(), odom[kb - 1].copy()
+        odom[ka:kb] = held
+        tv[ka:kb] = 0.0
+        rv[ka:kb] = 0.0
+        # after the stall: the pose relative to the stall's last (lost) pose, put on the held one
+        c, s = math.cos(last[2]), math.sin(last[2])
+        dx, dy = odom[kb:, 0] - last[0], odom[kb:, 1] - last[1]
+        rx, ry, rth = c * dx + s * dy, -s * dx + c * dy, odom[kb:, 2] - last[2]
+        ch, sh = math.cos(held[2]), math.sin(held[2])
+        odom[kb:, 0] = held[0] + ch * rx - sh * ry
+        odom[kb:, 1] = held[1] + sh * rx + ch * ry
+        odom[kb:, 2] = _wrap(held[2] + rth)
+    return odom, tv, rv
 
 
 def map_frame_poses(poses: np.ndarray, rotation: float, scale: float) -> np.ndarray:
@@ -1391,6 +1430,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "odometry going on (a driver restart, a USB reset, a stalled scan topic); default 0")
     parser.add_argument("--scan-gap-s", type=float, default=5.0, metavar="S",
                         help="seconds of each --scan-gaps gap (0.5-60); default 5")
+    parser.add_argument("--odom-stalls", type=int, default=0, metavar="N",
+                        help="the odometry stalled N times over the run (evenly spread) for --odom-stall-s each: it "
+                        "holds its pose while the robot drives on, then goes on from there (an encoder driver that "
+                        "hangs; the motion in the stall is lost); default 0")
+    parser.add_argument("--odom-stall-s", type=float, default=3.0, metavar="S",
+                        help="seconds of each --odom-stalls stall (0.5-60); default 3")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1474,6 +1519,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     scan_sweep=args.scan_sweep, phantom_furniture=args.phantom_furniture,
                     unknown_floor=args.unknown_floor, doubled_walls=args.doubled_walls, map_scale=args.map_scale,
                     map_rotation=math.radians(map_rotation), scan_gaps=args.scan_gaps, scan_gap_s=args.scan_gap_s,
+                    odom_stalls=args.odom_stalls, odom_stall_s=args.odom_stall_s,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
                     holonomic=math.radians(holonomic))

@@ -263,7 +263,8 @@ def test_a_laser_mounted_metres_from_the_robot_warns_naming_where_the_mounting_c
 
 @pytest.mark.parametrize("options, said", [
     (["--scan-gaps", "2", "--scan-gap-s", "0.1"], "--scan-gap-s: expected 0.5..60 s, got 0.1"),
-    (["--scan-gaps", "21"], "--scan-gaps: expected 0..20, got 21")])
+    (["--scan-gaps", "21"], "--scan-gaps: expected 0..20, got 21"),
+    (["--odom-stalls", "1", "--odom-stall-s", "100"], "--odom-stall-s: expected 0.5..60 s, got 100.0")])
 def test_simulate_scan_gaps_out_of_range_name_the_option(tmp_path, capsys, options, said):
     assert main(["simulate", str(tmp_path / "w"), *options]) == 2
     assert _one_error(capsys) == f"mcl: error: {said}"

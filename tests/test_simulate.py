@@ -442,6 +442,8 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(map_scale=1.01, landmarks=5), "map_scale"),
     (dict(map_rotation=3.5), "map_rotation"),
     (dict(scan_gaps=-1), "scan_gaps"),
+    (dict(odom_stalls=21), "odom_stalls"),
+    (dict(odom_stalls=1, odom_stall_s=0.2), "odom_stall_s"),
     (dict(scan_gaps=2, scan_gap_s=0.1), "scan_gap_s"),
     (dict(scan_gaps=1, depth=True), "scan_gaps"),
     (dict(map_rotation=float("inf")), "map_rotation"),
@@ -730,6 +732,40 @@ def test_scan_gaps_from_the_command_line(tmp_path):
     assert main(["simulate", str(tmp_path), "--duration", "30", "--seed", "6", "--scan-gaps", "2",
                  "--scan-gap-s", "3"]) == 0
     assert yaml.safe_load((tmp_path / "sim.yaml").read_text())["scan_gaps"] == [[8.5, 11.5], [18.5, 21.5]]
+
+
+def test_odometry_stalls_hold_the_pose_and_lose_the_motion_only(tmp_path):
+    # An encoder driver that hangs twice for 3 s: the laser and the truth are the same bytes; the odometry holds its
+    # pose (no velocity) inside each window and afterwards goes on with the same steps from the held pose.
+    from mcl.runner import compose, inverse
+
+    simulate(tmp_path / "a", kind="office", seed=6, duration=30.0)
+    simulate(tmp_path / "b", kind="office", seed=6, duration=30.0, odom_stalls=2, odom_stall_s=3.0)
+    assert (tmp_path / "a" / "truth.tum").read_bytes() == (tmp_path / "b" / "truth.tum").read_bytes()
+    stalls = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["odom_stalls"]
+    assert stalls == [[8.5, 11.5], [18.5, 21.5]]
+
+    def odom(w):
+        rows = [line.split() for line in (tmp_path / w / "log.clf").read_text().splitlines()
+                if line.startswith("ODOM")]
+        return np.array([float(r[-3]) for r in rows]), np.array([[float(v) for v in r[1:6]] for r in rows])
+
+    (t, a), (tb, b) = odom("a"), odom("b")
+    np.testing.assert_array_equal(t, tb)
+    inside = np.any([(t >= w0) & (t < w1) for w0, w1 in stalls], axis=0)
+    for w0, w1 in stalls:
+        k = np.flatnonzero((t >= w0) & (t < w1))
+        np.testing.assert_allclose(b[k, :3], np.broadcast_to(b[k[0] - 1, :3], (k.size, 3)), atol=1e-6)  # held
+        assert not b[k, 3:].any()  # no velocity
+    assert np.abs(a[inside, 3]).max() > 0.1  # the robot drove on
+    # outside the windows each step is the same motion (relative poses, to the log's 6 decimals)
+    steps = [k for k in range(1, t.size) if not inside[k] and not inside[k - 1]]
+    for k in steps[::7]:
+        np.testing.assert_allclose(compose(inverse(b[k - 1, :3]), b[k, :3]),
+                                   compose(inverse(a[k - 1, :3]), a[k, :3]), atol=2e-5)
+    la, lb = ((tmp_path / w / "log.clf").read_text().splitlines() for w in "ab")
+    ranges = lambda lines: [line.split()[2:2 + int(line.split()[1])] for line in lines if line.startswith("FLASER")]  # noqa: E731
+    assert ranges(la) == ranges(lb)
 
 
 def test_doubled_walls_from_the_command_line(tmp_path):
