@@ -46,6 +46,11 @@ the log's scans (``mcl simulate --scan-gaps``' windows): the FLASER lines inside
 and the reference loses its poses there too (``truth_gapped.tum``: a run is scored where it has scans). As a driver
 that restarts or a USB reset leaves a log.
 
+With ``--odom-stalls N`` the odometry stalls N times for ``--odom-stall-s`` seconds (default 3), evenly spread over
+the log's scans, as an encoder driver that hangs while the robot drives on: the ODOM lines and the FLASER lines'
+robot poses hold the pose they had at the stall's start, then go on from it with the steps they measured (the motion
+in the stall lost; a FLASER line's laser pose keeps its mounting on the robot). The scans and the reference stay.
+
 The maps (but for ``--doubled-walls`` and ``--map-rotation``) and the references (but for ``--map-rotation``) are those of the originals (linked, not copied). Writes
 ``OUT/<name>/log.clf`` with links to the rest, and ``OUT/suite.yaml``: the suite with its root at ``OUT``.
 Deterministic for a given ``--seed``. Then:
@@ -190,6 +195,50 @@ def stamped_late(lines: list[str], lag: float) -> str:
     return "".join(out)
 
 
+def with_odometry_stalled(lines: list[str], n: int, seconds: float) -> tuple[str, list]:
+    """(the CARMEN log ``lines`` with its odometry stalled over ``n`` windows of ``seconds`` evenly spread over the
+    scans' span, the windows): inside a window each ODOM line and FLASER robot pose holds the last odometry pose
+    before it (an ODOM line's velocities 0), as ``mcl simulate --odom-stalls`` does; after it, every pose p becomes
+    held ∘ last^-1 ∘ p, ``last`` the pose the odometry had reached at the window's end (the motion in the window
+    lost). A FLASER line's laser pose is moved with its robot pose."""
+    times = [float(line.split()[-3]) for line in lines if line.startswith("FLASER ")]
+    stalls = spread_windows(n, seconds, times[0], times[-1] - times[0]) if times else []
+    fix = np.zeros(3)  # the correction composed onto every odometry pose from here on
+    held = last = None  # inside a window: the pose held, and the last pose the log had there
+    before = None  # the last pose written before the window
+    k = 0  # the next window
+    out = []
+    for line in lines:
+        p = line.split()
+        if not p or p[0] not in ("ODOM", "FLASER"):
+            out.append(line)
+            continue
+        t = float(p[-3])
+        while k < len(stalls) and t >= stalls[k][1]:  # past a window: go on from the pose it held
+            if held is not None:
+                fix = compose(held, inverse(last))
+            held = last = None
+            k += 1
+        i = 1 if p[0] == "ODOM" else 2 + int(p[1]) + 3  # the robot's pose (a FLASER line: after the laser's)
+        robot = np.array([float(v) for v in p[i:i + 3]])
+        new = compose(fix, robot)
+        if k < len(stalls) and t >= stalls[k][0] and before is not None:
+            if held is None:
+                held = before
+            last, new = robot, held
+            if p[0] == "ODOM":
+                p[4] = p[5] = "0.000000"  # tv, rv
+        if p[0] == "FLASER":  # the laser keeps its mounting on the robot
+            j = 2 + int(p[1])
+            mount = compose(inverse(robot), np.array([float(v) for v in p[j:j + 3]]))
+            p[j:j + 3] = [f"{v:.6f}" for v in compose(new, mount)]
+        p[i:i + 3] = [f"{v:.6f}" for v in new]
+        if held is None:
+            before = new
+        out.append(" ".join(p) + "\n")
+    return "".join(out), stalls
+
+
 def without_scans_in_gaps(lines: list[str], n: int, seconds: float) -> tuple[str, list]:
     """(the CARMEN log ``lines`` without the FLASER lines whose ipc_timestamp falls inside one of ``n`` windows of
     ``seconds`` evenly spread over the scans' span (``mcl.simulate.spread_windows``), the windows)."""
@@ -227,8 +276,16 @@ def main(argv=None) -> int:
                     help="drop the scans of N windows evenly spread over each log (default 0)")
     ap.add_argument("--scan-gap-s", type=float, default=5.0, metavar="S",
                     help="seconds of each --scan-gaps window (default 5)")
+    ap.add_argument("--odom-stalls", type=int, default=0, metavar="N",
+                    help="stall the odometry in N windows evenly spread over each log (default 0)")
+    ap.add_argument("--odom-stall-s", type=float, default=3.0, metavar="S",
+                    help="seconds of each --odom-stalls window (default 3)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
+    if not 0 <= a.odom_stalls <= 20:
+        ap.error(f"--odom-stalls: expected 0..20, got {a.odom_stalls}")
+    if not (math.isfinite(a.odom_stall_s) and 0.5 <= a.odom_stall_s <= 60.0):
+        ap.error(f"--odom-stall-s: expected 0.5..60 s, got {a.odom_stall_s:g}")
     if not 0 <= a.scan_gaps <= 20:
         ap.error(f"--scan-gaps: expected 0..20, got {a.scan_gaps}")
     if not (math.isfinite(a.scan_gap_s) and 0.5 <= a.scan_gap_s <= 60.0):
@@ -285,6 +342,11 @@ def main(argv=None) -> int:
             tmp.write_text("".join(delay_line(line, stream, a.latency) for line in lines))
         if a.stamp_late:
             tmp.write_text(stamped_late(tmp.read_text().splitlines(keepends=True), a.stamp_late))
+        if a.odom_stalls:
+            text, stalls = with_odometry_stalled(tmp.read_text().splitlines(keepends=True), a.odom_stalls,
+                                                 a.odom_stall_s)
+            tmp.write_text(text)
+            print(f"{d['name']}: odometry stalled in {len(stalls)} windows of {a.odom_stall_s:g} s")
         if a.scan_gaps:
             text, gaps = without_scans_in_gaps(tmp.read_text().splitlines(keepends=True), a.scan_gaps, a.scan_gap_s)
             tmp.write_text(text)
@@ -304,7 +366,8 @@ def main(argv=None) -> int:
         "-body" if a.body else "") + (
         f"-doubled{a.doubled_walls}" if a.doubled_walls else "") + (
         f"-turned{a.map_rotation:g}" if a.map_rotation else "") + (
-        f"-gaps{a.scan_gaps}x{a.scan_gap_s:g}" if a.scan_gaps else "")
+        f"-gaps{a.scan_gaps}x{a.scan_gap_s:g}" if a.scan_gaps else "") + (
+        f"-stalls{a.odom_stalls}x{a.odom_stall_s:g}" if a.odom_stalls else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")
     return 0

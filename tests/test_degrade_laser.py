@@ -178,7 +178,9 @@ def test_a_turned_map_is_the_simulators_and_the_reference_and_start_pose_turn_wi
     ("--map-rotation", "nan", "expected -180..180 degrees, got nan"),
     ("--doubled-walls", "-1", "expected 0..20, got -1"),
     ("--scan-gaps", "30", "expected 0..20, got 30"),
-    ("--scan-gap-s", "0.2", "expected 0.5..60 s, got 0.2")])
+    ("--scan-gap-s", "0.2", "expected 0.5..60 s, got 0.2"),
+    ("--odom-stalls", "-3", "expected 0..20, got -3"),
+    ("--odom-stall-s", "90", "expected 0.5..60 s, got 90")])
 def test_a_map_change_out_of_range_is_one_error_line_and_nothing_written(tmp_path, capsys, option, value, said):
     _suite_of(tmp_path)
     with pytest.raises(SystemExit) as e:
@@ -202,3 +204,28 @@ def test_scan_gaps_drop_the_scans_and_the_reference_as_the_simulator_does(tmp_pa
     (ta, pa), (tb, pb) = read_tum(out / "w" / "truth_gapped.tum"), read_tum(tmp_path / "gapped" / "truth.tum")
     np.testing.assert_array_equal(ta, tb)
     np.testing.assert_allclose(pa, pb, atol=1e-6)
+
+
+def test_odometry_stalls_are_the_simulators(tmp_path):
+    # --odom-stalls N with the laser left alone: the odometry (ODOM lines, the FLASER lines' poses) is the one
+    # `mcl simulate --odom-stalls` writes for the same world (its windows spread over the scans' span, the run's
+    # there), to the log's 6 decimals; the scans and the reference are the original's.
+    from mcl.datasets.carmen import read_carmen
+
+    world, out = _laser_as_it_is(tmp_path, 30.0, "--odom-stalls", "2", "--odom-stall-s", "3")
+    simulate(tmp_path / "stalled", seed=5, duration=30.0, odom_stalls=2, odom_stall_s=3.0)
+    d = yaml.safe_load((out / "suite.yaml").read_text())["datasets"][0]
+    assert d["truth"] == "w/truth.tum"  # the reference as it was
+
+    def odometry(path):
+        rows = [line.split() for line in path.read_text().splitlines() if line.startswith("ODOM")]
+        return np.array([[float(v) for v in r[1:6]] for r in rows])
+
+    got, want = odometry(out / "w" / "log.clf"), odometry(tmp_path / "stalled" / "log.clf")
+    assert np.abs(odometry(world / "log.clf") - want).max() > 0.5  # the stalls moved the odometry
+    np.testing.assert_allclose(got[:, :2], want[:, :2], atol=5e-6)
+    np.testing.assert_allclose(np.cos(got[:, 2] - want[:, 2]), 1.0, atol=1e-9)
+    np.testing.assert_allclose(got[:, 3:], want[:, 3:], atol=1e-9)
+    a, b = read_carmen(out / "w" / "log.clf"), read_carmen(tmp_path / "stalled" / "log.clf")
+    assert [s.ranges.tolist() for s in a.scans] == [s.ranges.tolist() for s in b.scans]
+    np.testing.assert_allclose([s.odom[:2] for s in a.scans], [s.odom[:2] for s in b.scans], atol=5e-6)
