@@ -1242,25 +1242,25 @@ def double_walls(occupancy: np.ndarray, truth: np.ndarray, n: int, rng: np.rando
 
 def _stalled(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, windows) -> tuple:
     """(odometry poses, tv, rv) with the odometry stalled over each window [a, b) of ``t``: it holds the pose it had
-    at a and reads no velocity, and from b on it goes on from the held pose with the steps it measured (each later pose
-    moved by held ∘ pose(b-)^-1): the motion inside the window is lost, as when an encoder driver hangs."""
+    before a and reads no velocity, and from b on it goes on from the held pose with the steps it measured (each
+    later pose p becomes held ∘ last^-1 ∘ p, ``last`` the pose reached at the window's end): the motion inside the
+    window is lost, as when an encoder driver hangs."""
+    from mcl.estimate import compose, inverse
+
     odom, tv, rv = odom.copy(), tv.copy(), rv.copy()
     for a, b in windows:
         ka, kb = int(np.searchsorted(t, a)), int(np.searchsorted(t, b))
         if ka == 0 or ka >= kb:
             continue
-        held, last = odom[ka - 1].copy(), odom[kb - 1].copy()
-        odom[ka:kb] = held
+        fix = compose(odom[ka - 1], inverse(odom[kb - 1]))
+        odom[ka:kb] = odom[ka - 1]
         tv[ka:kb] = 0.0
         rv[ka:kb] = 0.0
-        # after the stall: the pose relative to the stall's last (lost) pose, put on the held one
-        c, s = math.cos(last[2]), math.sin(last[2])
-        dx, dy = odom[kb:, 0] - last[0], odom[kb:, 1] - last[1]
-        rx, ry, rth = c * dx + s * dy, -s * dx + c * dy, odom[kb:, 2] - last[2]
-        ch, sh = math.cos(held[2]), math.sin(held[2])
-        odom[kb:, 0] = held[0] + ch * rx - sh * ry
-        odom[kb:, 1] = held[1] + sh * rx + ch * ry
-        odom[kb:, 2] = _wrap(held[2] + rth)
+        c, s = math.cos(fix[2]), math.sin(fix[2])
+        x, y = odom[kb:, 0].copy(), odom[kb:, 1].copy()
+        odom[kb:, 0] = fix[0] + c * x - s * y
+        odom[kb:, 1] = fix[1] + s * x + c * y
+        odom[kb:, 2] = _wrap(odom[kb:, 2] + fix[2])
     return odom, tv, rv
 
 

@@ -195,14 +195,20 @@ def stamped_late(lines: list[str], lag: float) -> str:
     return "".join(out)
 
 
+def _scan_windows(lines: list[str], n: int, seconds: float) -> list:
+    """``n`` windows of ``seconds`` evenly spread over the span of the log's FLASER lines (ipc_timestamp,
+    ``mcl.simulate.spread_windows``)."""
+    times = [float(line.split()[-3]) for line in lines if line.startswith("FLASER ")]
+    return spread_windows(n, seconds, times[0], times[-1] - times[0]) if times else []
+
+
 def with_odometry_stalled(lines: list[str], n: int, seconds: float) -> tuple[str, list]:
     """(the CARMEN log ``lines`` with its odometry stalled over ``n`` windows of ``seconds`` evenly spread over the
     scans' span, the windows): inside a window each ODOM line and FLASER robot pose holds the last odometry pose
     before it (an ODOM line's velocities 0), as ``mcl simulate --odom-stalls`` does; after it, every pose p becomes
     held ∘ last^-1 ∘ p, ``last`` the pose the odometry had reached at the window's end (the motion in the window
     lost). A FLASER line's laser pose is moved with its robot pose."""
-    times = [float(line.split()[-3]) for line in lines if line.startswith("FLASER ")]
-    stalls = spread_windows(n, seconds, times[0], times[-1] - times[0]) if times else []
+    stalls = _scan_windows(lines, n, seconds)
     fix = np.zeros(3)  # the correction composed onto every odometry pose from here on
     held = last = None  # inside a window: the pose held, and the last pose the log had there
     before = None  # the last pose written before the window
@@ -242,14 +248,9 @@ def with_odometry_stalled(lines: list[str], n: int, seconds: float) -> tuple[str
 def without_scans_in_gaps(lines: list[str], n: int, seconds: float) -> tuple[str, list]:
     """(the CARMEN log ``lines`` without the FLASER lines whose ipc_timestamp falls inside one of ``n`` windows of
     ``seconds`` evenly spread over the scans' span (``mcl.simulate.spread_windows``), the windows)."""
-    def stamp(line):
-        p = line.split()
-        return float(p[2 + int(p[1]) + 6])
-
-    times = [stamp(line) for line in lines if line.startswith("FLASER ")]
-    gaps = spread_windows(n, seconds, times[0], times[-1] - times[0]) if times else []
-    return "".join(line for line in lines
-                   if not (line.startswith("FLASER ") and any(g0 <= stamp(line) < g1 for g0, g1 in gaps))), gaps
+    gaps = _scan_windows(lines, n, seconds)
+    return "".join(line for line in lines if not (line.startswith("FLASER ")
+                                                  and any(g0 <= float(line.split()[-3]) < g1 for g0, g1 in gaps))), gaps
 
 
 def main(argv=None) -> int:
@@ -282,18 +283,14 @@ def main(argv=None) -> int:
                     help="seconds of each --odom-stalls window (default 3)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
-    if not 0 <= a.odom_stalls <= 20:
-        ap.error(f"--odom-stalls: expected 0..20, got {a.odom_stalls}")
-    if not (math.isfinite(a.odom_stall_s) and 0.5 <= a.odom_stall_s <= 60.0):
-        ap.error(f"--odom-stall-s: expected 0.5..60 s, got {a.odom_stall_s:g}")
-    if not 0 <= a.scan_gaps <= 20:
-        ap.error(f"--scan-gaps: expected 0..20, got {a.scan_gaps}")
-    if not (math.isfinite(a.scan_gap_s) and 0.5 <= a.scan_gap_s <= 60.0):
-        ap.error(f"--scan-gap-s: expected 0.5..60 s, got {a.scan_gap_s:g}")
-    if not 0 <= a.doubled_walls <= 20:
-        ap.error(f"--doubled-walls: expected 0..20, got {a.doubled_walls}")
-    if not (math.isfinite(a.map_rotation) and -180.0 <= a.map_rotation <= 180.0):
-        ap.error(f"--map-rotation: expected -180..180 degrees, got {a.map_rotation:g}")
+    for option, value, lo, hi, unit in (("--doubled-walls", a.doubled_walls, 0, 20, ""),
+                                        ("--map-rotation", a.map_rotation, -180, 180, " degrees"),
+                                        ("--scan-gaps", a.scan_gaps, 0, 20, ""),
+                                        ("--scan-gap-s", a.scan_gap_s, 0.5, 60, " s"),
+                                        ("--odom-stalls", a.odom_stalls, 0, 20, ""),
+                                        ("--odom-stall-s", a.odom_stall_s, 0.5, 60, " s")):
+        if not (math.isfinite(value) and lo <= value <= hi):
+            ap.error(f"{option}: expected {lo:g}..{hi:g}{unit}, got {value:g}")
     suite = yaml.safe_load(a.suite.read_text())
     src = (a.suite.parent / suite["root"]).resolve()
     rng = np.random.default_rng(a.seed)
