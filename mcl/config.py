@@ -174,6 +174,9 @@ class MotionConfig:
     # with model odometry: "omni" runs an odometry whose travel goes across the robot's heading (an omnidirectional
     # base: mcl.motion.sideways_share >= SIDEWAYS_OMNI) with the omni model, with a warning; "keep" warns only
     sideways: Literal["omni", "keep"] = "omni"
+    # odometry that holds one pose while the scans show the robot moving (a hung encoder driver): "fill" takes the
+    # motion there from scan matching (mcl.odomstall), with a warning; "keep" leaves it still (every scan gated)
+    stalls: Literal["fill", "keep"] = "keep"
     # the noise's distribution (mcl.noise), all with the std above: normal (NumPy's exact normal),
     # normal_twelve (sum of twelve uniforms) or triangular (two uniforms)
     noise: Literal["normal", "normal_twelve", "triangular"] = "normal"

@@ -42,6 +42,9 @@ GOOD_PAIRS = 0.5  # a match pairing fewer of the scan's points is tried from a s
 MIN_PAIRS = 20  # fewer paired points: the match fails and the step is the guess
 MAX_ITERATIONS = 30
 SMOOTH = 0.5  # s: the guess is the velocity smoothed over about this long (see the module doc)
+SPARSE_DT = 0.5  # s: thorough matching of scans farther apart than this also starts from the turns below
+TURNS = (-0.9, -0.6, -0.3, 0.3, 0.6, 0.9)  # rad
+SPARSE_PRIOR = 0.5  # ... and the prior weighs this many pairs there
 MAX_MISSES = 3  # scans in a row not matched before the constant-velocity guess stops
 
 
@@ -127,12 +130,20 @@ def icp(key: Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None, wei
     return np.array([x, y, math.atan2(math.sin(th), math.cos(th))]), pairs, cost
 
 
-def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
+def laser_odometry(scans, mount=None, rate0=None, max_misses: int = MAX_MISSES,
+                   thorough: bool = False) -> tuple[np.ndarray, int]:
     """(rows (M, 6): t, x, y, theta, 0, 0 of the robot at each scan, the first at the origin; how many scans after
     the first were not matched: too few points, no pairs, or no scan with returns enough before them) for
     ``scans`` (records with t, ranges, angles, max_range, in time order; scans of one laser). ``mount``: the
     laser's pose (3,) on the robot (None: at its centre); the scans give the laser's motion, turned into the
-    robot's. A scan not matched takes the last step again (``MAX_MISSES`` in a row: no motion)."""
+    robot's. A scan not matched takes the last step again (``max_misses`` in a row: no motion). ``rate0``: the
+    laser's velocity (3,) (m/s, m/s, rad/s, its own frame) at the first scan, the first match's guess and prior
+    (the velocity after it is the matches'), or several (K, 3), the first so and the others more starts; the scans
+    before the first with returns enough to match against drive on straight at the first's speed (None: at rest).
+    ``thorough``: every scan is matched from three starts, the last step again, the same without its turn, and no
+    motion, and the best match kept (a turn that did not go on led the match into a wrong place: a sparse hall
+    scanned at 2 Hz); scans more than ``SPARSE_DT`` s apart also from ``TURNS``, standing and at the last step (a
+    thinned log, a scan every 3-6 s: the match from no motion settled 1.8 m from where a start turned 0.4 rad did)."""
     mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
     mount_inv = inverse(mount)
     rows = []
@@ -142,22 +153,39 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
     failed = misses = 0
     rate = np.zeros(3)  # smoothed velocity (m/s, m/s, rad/s) in the laser's frame
     t_prev, started = None, False
+    rates0 = None if rate0 is None else np.atleast_2d(np.asarray(rate0, dtype=np.float64))
     for scan in scans:
         pts = scan_points(scan.ranges, scan.angles, scan.max_range)
         if key is None:  # no scan with returns enough yet: this one is not matched (and counts so after the first)
             failed += bool(rows)
+            if rows and rates0 is not None:  # ... and drives on straight at the known speed
+                laser = compose(laser, np.array([rates0[0, 0], rates0[0, 1], 0.0]) * (float(scan.t) - t_prev))
             if pts.shape[1] >= MIN_PAIRS:
                 key, key_pose = Key(pts), laser.copy()
         else:
             # from the last step again (constant velocity); when under GOOD_PAIRS of the points pair, from no
             # motion too, the better match kept (a robot that stopped turning or reversed: the old velocity led
             # into a wrong match); the prior stays at constant velocity for both
-            guesses = [compose(inverse(key_pose), compose(laser, v)) for v in (velocity, np.zeros(3))]
+            others = []
+            if rates0 is not None:  # known velocities at the start: the first match's guess and prior, other starts
+                velocity, *others = rates0 * (float(scan.t) - t_prev)
+                rates0 = None
+            guesses = [compose(inverse(key_pose), compose(laser, v)) for v in (velocity, *others, np.zeros(3))]
             rel, pairs = guesses[0], 0
             if pts.shape[1] >= MIN_PAIRS:
-                best = icp(key, pts, guesses[0])
-                if best[1] < GOOD_PAIRS * pts.shape[1]:
-                    best = min(best, icp(key, pts, guesses[1], prior=guesses[0]), key=lambda m: m[2])
+                sparse = thorough and float(scan.t) - t_prev > SPARSE_DT
+                # scans far apart: the constant-velocity guess says little, and its prior only breaks ties
+                weight = SPARSE_PRIOR if sparse else PRIOR
+                best = icp(key, pts, guesses[0], weight=weight)
+                if thorough:
+                    straight = compose(inverse(key_pose), compose(laser, np.array([velocity[0], velocity[1], 0.0])))
+                    guesses.insert(1, straight)
+                if sparse:  # turned starts too, standing and at the last step
+                    guesses += [compose(inverse(key_pose), compose(laser, np.array([x, y, a])))
+                                for a in TURNS for x, y in ((0.0, 0.0), (velocity[0], velocity[1]))]
+                if thorough or best[1] < GOOD_PAIRS * pts.shape[1]:
+                    for g in guesses[1:]:
+                        best = min(best, icp(key, pts, g, prior=guesses[0], weight=weight), key=lambda m: m[2])
                 rel, pairs, _ = best
             failed += pairs == 0
             misses = 0 if pairs else misses + 1
@@ -165,7 +193,7 @@ def laser_odometry(scans, mount=None) -> tuple[np.ndarray, int]:
             # a scan not matched took the last step again; after MAX_MISSES such in a row, no more guessing
             step = compose(inverse(laser), new)
             dt = float(scan.t) - t_prev
-            if misses >= MAX_MISSES:
+            if misses >= max_misses:
                 velocity = np.zeros(3)
             elif SMOOTH > 0 and dt > 0:
                 # the guess for the next scan: the velocity smoothed over about SMOOTH s, scaled to this step's dt

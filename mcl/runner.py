@@ -408,6 +408,14 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
                 scans = _retime(scans, log, log.stamp_offset, lambda *_: None)
                 if hits is not None:
                     scans.self_hits = hits
+    if cfg.sensor.use and len(scans) and cfg.motion.stalls == "fill":
+        # where the odometry holds a pose while the scans move, their motion from scan matching (mcl.odomstall)
+        from mcl.odomcheck import run_mount
+        from mcl.odomstall import StallFill
+
+        filled = StallFill(scans, lambda s: run_mount(s, cfg.sensor.laser_pose))
+        filled.self_hits = getattr(scans, "self_hits", None)
+        scans = filled
     if cfg.truth:
         truth = Truth(*read_tum(cfg.truth))
         if not truth.t.size:
@@ -1128,6 +1136,13 @@ def _run(
     interrupted = interrupted or signals.caught  # also a signal while the outputs were closed
 
     n_up = max(counts["updates"], 1)
+    stalls = getattr(scans, "stalls", None)  # motion.stalls: fill (mcl.odomstall): the holds it filled
+    if stalls:
+        longest = max(stalls, key=lambda w: w.t1 - w.t0)
+        echo(f"mcl: warning: {log.path}: the odometry held its pose {len(stalls)} time{'s' if len(stalls) > 1 else ''} "
+             f"while the scans showed the robot moving (the longest {longest.t1 - longest.t0:.1f} s from "
+             f"t={longest.t0:.3f} s: {longest.matched:.2f} m by scan matching, {longest.odometry:.2f} m by the "
+             "odometry): the motion there is the scans' (motion.stalls: keep leaves it as it was)")
     summary: dict = {
         "mode": mode,
         "interrupted": interrupted,
@@ -1156,6 +1171,7 @@ def _run(
         **({"sweep_order": pf.sweep_order.summary()}
            if pf.sweep_order is not None and pf.sweep_order.scans else {}),
         **({"self_hits": summary_of(scans.self_hits)} if getattr(scans, "self_hits", None) else {}),
+        **({"odometry_stalls": [dataclasses.asdict(w) for w in stalls]} if stalls else {}),
         **({"odometry_check": odometry_summary(log.odometry_checks)} if getattr(log, "odometry_checks", None)
            else {}),
         **({"left_out_lasers": sorted(left_out)} if left_out else {}),

@@ -1,0 +1,203 @@
+"""Odometry that stands still while the scans move: the motion lost in a stall, found by scan matching.
+
+An encoder driver that hangs, a base controller that stops publishing and a bridge that re-sends its last message all
+leave the odometry holding one pose, with no velocity, while the robot drives on and the laser goes on scanning.
+The filter then sees no motion: every scan is gated (``filter.update_min_d``, as AMCL) and the estimate stays where
+the stall began, 2.9 m behind after a 6 s stall at 0.5 m/s; in a corridor the lost motion cannot be seen at all
+afterwards and the track is gone (``suites/heldout21.yaml``: 0 of 24 runs within 0.5 m, the default and the
+baseline alike). Some odometry instead catches up when it comes back (mit_csail's: held for 0.9 s, then one step of
+0.86 m): then nothing was lost.
+
+:class:`StallFill` (``motion.stalls: fill``) watches the run's scans. Where the odometry of the first laser's scans
+holds the same pose from one scan to the next, the scans are held back until it moves again (at most ``MAX_HOLD``
+s), then matched one to the next from the last scan before the stall to the first after it
+(:func:`mcl.laser_odometry.laser_odometry`, point-to-line ICP). When the odometry's own motion over the window is
+shorter than the matched motion by more than ``LOST_M`` m, or turns less by more than ``LOST_A`` rad, the odometry
+lost motion: each scan in the window takes the matched pose, and the odometry after it is moved rigidly to go on from
+where the matching ended (the filter uses only its steps), as ``mcl.datasets.rosbag`` fills a gap in a bag's
+odometry. Otherwise the scans pass as they were: a robot that stood still, or odometry that caught up (its step out
+of the hold ``CATCH_UP`` times as fast as its step into it and faster than ``CATCH_UP_V`` m/s or ``CATCH_UP_W``
+rad/s).
+
+The matching needs a guess, and where the scene does not constrain the motion (along a corridor) the guess decides:
+the odometry's velocity just before the hold (the faster of its last two steps: a hold that began between two scans
+leaves the last one short). Each scan is matched from it, from the same without its turn and from no motion, the
+best match kept; a scan with too few returns to match (an open hall) drives on straight at that speed. A hold that
+began *abruptly* (faster than ``ABRUPT_V`` m/s or ``ABRUPT_W`` rad/s: no wheeled robot brakes from there to a
+standstill in one scan period) is matched whole; one that began gently is first checked after ``STILL_CHECK`` s: a
+scan that matches the one before the hold at no motion (within ``STILL_M`` m and ``STILL_A`` rad) shows a robot
+standing still, and the scans pass as they came, without matching, until the odometry moves (a robot parked for
+minutes costs one match). A robot that stopped dead in a corridor is taken to drive on.
+
+Measured on the eight shared logs: only mit_csail's odometry holds a pose while the scans go on (7 windows of
+0.4-6.8 s; each a standstill or a catch-up, left as it was).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mcl.estimate import compose, inverse, wrap_angle
+from mcl.laser_odometry import MIN_PAIRS, Key, icp, laser_odometry, scan_points
+
+ABRUPT_V = 0.2  # m/s: the odometry's last step before it held faster than this: a stall, not a stop ...
+ABRUPT_W = 0.3  # rad/s ... or turning faster than this
+STILL_CHECK = 1.0  # s: a gentle hold is checked against the scan before it this long after it began
+STILL_M = 0.05  # m: ... and is a standstill when that scan matches within this ...
+STILL_A = 0.03  # rad ... and this
+LOST_M = 0.25  # m: the odometry lost motion over a window when it moved this much less than the scans matched ...
+LOST_A = 0.15  # rad ... or turned this much less
+CATCH_UP = 2.0  # the step out of a hold faster than this times the step into it ...
+CATCH_UP_V = 1.0  # m/s ... and than this ...
+CATCH_UP_W = 1.0  # rad/s ... or turning so: the odometry caught up (mit_csail: 0.86-0.94 m in 0.21 s, 4-4.5 m/s)
+MAX_HOLD = 60.0  # s: scans held back at most this long (a longer hold passes as it was)
+HELD = 1e-9  # m and rad: two odometry poses this close are the same pose
+
+
+@dataclasses.dataclass
+class Stall:
+    """One window the odometry held its pose in while the scans showed motion, filled by scan matching."""
+
+    t0: float  # s: the scan before the hold
+    t1: float  # s: the first scan after it (the last in the window when the log ended held)
+    scans: int  # scans of the first laser matched (after the one before the hold; the first after it included)
+    matched: float  # m: the motion over the window by scan matching
+    odometry: float  # m: ... by the odometry
+
+
+class StallFill:
+    """``scans`` (a sized iterable of ``mcl.datasets.carmen.Scan`` records, as a run reads them) with the odometry of
+    each stall filled by scan matching (see the module doc); lazy, so a bag's scans still stream. ``mount_of(scan)``:
+    the laser's pose on the robot as the run takes it. ``stalls`` lists the windows filled by the last pass."""
+
+    def __init__(self, scans, mount_of) -> None:
+        self.scans, self.mount_of = scans, mount_of
+        self.stalls: list[Stall] = []
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+    def __iter__(self):
+        self.stalls = []
+        return self._filled()
+
+    def _filled(self):
+        kind = None  # the first laser: the one whose odometry is watched and whose scans are matched
+        fix = np.zeros(3)  # the correction: a scan's odometry is compose(fix, its own)
+        prev = None  # the last scan of that laser passed on, as it came (its own odometry)
+        step_rate = np.zeros((2, 3))  # the odometry's velocity before it: its last two steps per second, faster first
+        rate = np.zeros(3)  # the last step's
+        held: list = []  # scans held back while the odometry holds (the first laser's and the others')
+        anchor = anchor_out = None  # the scan before the hold, and its odometry as passed on
+        entry = np.zeros((2, 3))  # step_rate as the hold began
+        abrupt = False  # the hold began at speed (a stall by its look), not after the robot slowed
+        parked = False  # the hold was checked: the robot stands still; pass the scans until the odometry moves
+        checked = False
+        for s in self.scans:
+            if kind is None:
+                kind = s.kind
+            if s.kind != kind:
+                if held:
+                    held.append(s)
+                else:
+                    yield self._moved(s, fix)
+                continue
+            same = prev is not None and _same(s.odom, prev.odom)
+            if held:
+                held.append(s)
+                if same:
+                    wait = s.t - anchor.t
+                    if not abrupt and not checked and wait >= STILL_CHECK:
+                        checked = True
+                        if _standing(anchor, s, self.mount_of(s)):
+                            parked = True
+                    if parked or wait > MAX_HOLD:  # a standstill (or too long to hold): as it was
+                        parked = True
+                        yield from (self._moved(h, fix) for h in held)
+                        held = []
+                    continue
+                fix = yield from self._resolve(anchor, anchor_out, held, entry, fix)
+                held = []
+            elif same and not parked:
+                anchor, anchor_out = prev, compose(fix, prev.odom)
+                v, w = math.hypot(step_rate[0, 0], step_rate[0, 1]), float(np.abs(step_rate[:, 2]).max())
+                entry = step_rate.copy()
+                abrupt = v > ABRUPT_V or w > ABRUPT_W
+                held, checked = [s], False
+                continue
+            else:
+                if not same:
+                    parked = False
+                yield self._moved(s, fix)
+            if prev is not None and not same:
+                dt = s.t - prev.t
+                if dt > 0.0:
+                    # the last two steps, the faster first: a hold that began between two scans leaves the last short
+                    rate, last_rate = compose(inverse(prev.odom), s.odom) / dt, rate
+                    step_rate = np.array(sorted((rate, last_rate), key=lambda r: -math.hypot(r[0], r[1])))
+            prev = s
+        if held:
+            fix = yield from self._resolve(anchor, anchor_out, held, entry, fix)
+
+    @staticmethod
+    def _moved(s, fix):
+        """``s`` with its odometry moved by the correction ``fix`` (as it was when that is none)."""
+        if not fix.any():
+            return s
+        return dataclasses.replace(s, odom=compose(fix, s.odom))
+
+    def _resolve(self, anchor, anchor_out, held: list, entry, fix):
+        """Yield the ``held`` scans (the hold after ``anchor``, ending with the first scan whose odometry moved or
+        with the log's end), filled when the matching finds motion the odometry lost; return the correction after."""
+        kind = anchor.kind
+        chain = [anchor, *(h for h in held if h.kind == kind)]
+        mount = self.mount_of(anchor)
+        # the robot's rate before the hold, in the laser's frame (for the matching's first guess)
+        # the laser's step is inverse(mount) (+) the robot's (+) mount; over 0.1 s, per second
+        laser_rate = np.array([compose(inverse(mount), compose(r * 0.1, mount)) / 0.1 for r in entry])
+        # a scan that cannot be matched (too few returns: an open hall) moves at the last rate, however many in a row
+        rows, _ = laser_odometry(chain, mount, rate0=laser_rate, max_misses=len(chain), thorough=True)
+        matched = rows[-1, 1:4]  # the robot's motion over the window, in its frame at the anchor
+        own = compose(inverse(anchor.odom), chain[-1].odom)
+        lost_m = math.hypot(matched[0], matched[1]) - math.hypot(own[0], own[1])
+        lost_a = abs(float(matched[2])) - abs(float(wrap_angle(own[2])))
+        # the odometry's step into the first scan after the hold (all of its motion over the window): much faster
+        # than before the hold, it delivered the held motion late (a catch-up), and lost none
+        dt = chain[-1].t - chain[-2].t if len(chain) > 1 else 0.0
+        caught_up = dt > 0.0 and (
+            math.hypot(own[0], own[1]) / dt > max(CATCH_UP * math.hypot(entry[0, 0], entry[0, 1]), CATCH_UP_V)
+            or abs(float(wrap_angle(own[2]))) / dt > max(CATCH_UP * float(np.abs(entry[:, 2]).max()), CATCH_UP_W))
+        if caught_up or (lost_m <= LOST_M and lost_a <= LOST_A):
+            for h in held:  # a standstill, or odometry that caught up: as it was
+                yield self._moved(h, fix)
+            return fix
+        poses = {id(sc): compose(anchor_out, r[1:4]) for sc, r in zip(chain[1:], rows[1:])}
+        last = anchor_out
+        for h in held:
+            if h.kind == kind:
+                last = poses[id(h)]
+            yield dataclasses.replace(h, odom=last, tv=0.0, rv=0.0)
+        self.stalls.append(Stall(float(anchor.t), float(chain[-1].t), len(chain) - 1,
+                                 float(math.hypot(matched[0], matched[1])), float(math.hypot(own[0], own[1]))))
+        return compose(last, inverse(chain[-1].odom))
+
+
+def _same(a, b) -> bool:
+    """Two odometry poses the same (the odometry held)."""
+    return abs(a[0] - b[0]) < HELD and abs(a[1] - b[1]) < HELD and abs(float(wrap_angle(a[2] - b[2]))) < HELD
+
+
+def _standing(anchor, s, mount) -> bool:
+    """Scan ``s`` matches ``anchor`` (the scan before a hold) at no motion: the robot stood still."""
+    key_pts = scan_points(anchor.ranges, anchor.angles, anchor.max_range)
+    pts = scan_points(s.ranges, s.angles, s.max_range)
+    if key_pts.shape[1] < MIN_PAIRS or pts.shape[1] < MIN_PAIRS:
+        return False
+    pose, pairs, _ = icp(Key(key_pts), pts, np.zeros(3))
+    if pairs < 0.5 * pts.shape[1]:
+        return False
+    robot = compose(compose(mount, pose), inverse(mount))
+    return math.hypot(robot[0], robot[1]) <= STILL_M and abs(float(robot[2])) <= STILL_A
