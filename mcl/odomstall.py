@@ -76,9 +76,17 @@ class StallFill:
     def __init__(self, scans, mount_of) -> None:
         self.scans, self.mount_of = scans, mount_of
         self.stalls: list[Stall] = []
+        self._list: list | None = None
 
     def __len__(self) -> int:
         return len(self.scans)
+
+    def __getitem__(self, k):
+        """Scan ``k`` (or a slice) as filled: the first such access reads every scan once and keeps them (an
+        instrument's random access to a CARMEN log's scans; a run streams them)."""
+        if self._list is None:
+            self._list = list(self)
+        return self._list[k]
 
     def __iter__(self):
         self.stalls = []

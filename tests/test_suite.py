@@ -31,7 +31,7 @@ BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.es
                  "filter.search_exponent", "filter.global_density", "sensor.likelihood_field.interior",
                  "motion.fault_prob", "sensor.unmapped_skip", "filter.search_refine", "sensor.self_hit_skip",
                  "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset", "motion.sideways", "motion.noise_step",
-                 "filter.search_refine_candidates"}
+                 "filter.search_refine_candidates", "motion.stalls"}
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -56,6 +56,7 @@ def test_baseline_differs_from_default_only_in_the_plain_filter_keys():
     assert baseline["sensor.unmapped_skip"] is False and baseline["sensor.self_hit_skip"] is False
     assert baseline["sensor.misfit_laser"] == "keep" and baseline["sensor.mount_yaw"] == "keep"
     assert baseline["sensor.stamp_offset"] == "keep" and baseline["motion.sideways"] == "keep"
+    assert baseline["motion.stalls"] == "keep" and default["motion.stalls"] == "fill"
     assert baseline["filter.search_exponent"] == 1.0 and baseline["filter.global_density"] == 0
     assert baseline["sensor.likelihood_field.interior"] == "zero" and baseline["motion.fault_prob"] == 0
 
