@@ -24,10 +24,10 @@ the odometry's velocity just before the hold (the faster of its last two steps: 
 leaves the last one short). Each scan is matched from it, from the same without its turn and from no motion, the
 best match kept; a scan with too few returns to match (an open hall) drives on straight at that speed. A hold that
 began *abruptly* (faster than ``ABRUPT_V`` m/s or ``ABRUPT_W`` rad/s: no wheeled robot brakes from there to a
-standstill in one scan period) is matched whole; one that began gently is first checked after ``STILL_CHECK`` s: a
-scan that matches the one before the hold at no motion (within ``STILL_M`` m and ``STILL_A`` rad) shows a robot
-standing still, and the scans pass as they came, without matching, until the odometry moves (a robot parked for
-minutes costs one match). A robot that stopped dead in a corridor is taken to drive on.
+standstill in one scan period) is matched whole; one that began gently is checked every ``STILL_CHECK`` s: a scan
+that matches the one before the hold at no motion (within ``STILL_M`` m and ``STILL_A`` rad) shows a robot standing
+still, and the scans pass as they came, without matching, until the odometry moves (a robot parked for minutes costs
+a match or a few). A robot that stopped dead in a corridor is taken to drive on.
 
 Measured on the eight shared logs: only mit_csail's odometry holds a pose while the scans go on (7 windows of
 0.4-6.8 s; each a standstill or a catch-up, left as it was).
@@ -45,7 +45,7 @@ from mcl.laser_odometry import MIN_PAIRS, Key, icp, laser_odometry, scan_points
 
 ABRUPT_V = 0.2  # m/s: the odometry's last step before it held faster than this: a stall, not a stop ...
 ABRUPT_W = 0.3  # rad/s ... or turning faster than this
-STILL_CHECK = 1.0  # s: a gentle hold is checked against the scan before it this long after it began
+STILL_CHECK = 1.0  # s: a gentle hold is checked against the scan before it every this many seconds
 STILL_M = 0.05  # m: ... and is a standstill when that scan matches within this ...
 STILL_A = 0.03  # rad ... and this
 LOST_M = 0.25  # m: the odometry lost motion over a window when it moved this much less than the scans matched ...
@@ -53,7 +53,9 @@ LOST_A = 0.15  # rad ... or turned this much less
 CATCH_UP = 2.0  # the step out of a hold faster than this times the step into it ...
 CATCH_UP_V = 1.0  # m/s ... and than this ...
 CATCH_UP_W = 1.0  # rad/s ... or turning so: the odometry caught up (mit_csail: 0.86-0.94 m in 0.21 s, 4-4.5 m/s)
-MAX_HOLD = 60.0  # s: scans held back at most this long (a longer hold passes as it was)
+# s: scans held back at most this long; a longer hold passes as it was: a hung driver is restarted within seconds,
+# and a robot stopped dead along a corridor (whose scans cannot tell it stands) is taken to drive on only so long
+MAX_HOLD = 20.0
 HELD = 1e-9  # m and rad: two odometry poses this close are the same pose
 
 
@@ -103,7 +105,7 @@ class StallFill:
         entry = np.zeros((2, 3))  # step_rate as the hold began
         abrupt = False  # the hold began at speed (a stall by its look), not after the robot slowed
         parked = False  # the hold was checked: the robot stands still; pass the scans until the odometry moves
-        checked = False
+        next_check = STILL_CHECK  # s into a gentle hold of its next standstill check
         for s in self.scans:
             if kind is None:
                 kind = s.kind
@@ -118,8 +120,8 @@ class StallFill:
                 held.append(s)
                 if same:
                     wait = s.t - anchor.t
-                    if not abrupt and not checked and wait >= STILL_CHECK:
-                        checked = True
+                    if not abrupt and wait >= next_check:  # once a second: people walking by can spoil one
+                        next_check = wait + STILL_CHECK
                         if _standing(anchor, s, self.mount_of(s)):
                             parked = True
                     if parked or wait > MAX_HOLD:  # a standstill (or too long to hold): as it was
@@ -134,7 +136,7 @@ class StallFill:
                 v, w = math.hypot(step_rate[0, 0], step_rate[0, 1]), float(np.abs(step_rate[:, 2]).max())
                 entry = step_rate.copy()
                 abrupt = v > ABRUPT_V or w > ABRUPT_W
-                held, checked = [s], False
+                held, next_check = [s], STILL_CHECK
                 continue
             else:
                 if not same:

@@ -100,17 +100,27 @@ def test_odometry_that_catches_up_is_left_as_it_was(worlds):
 
 
 def test_a_robot_standing_still_is_matched_once(worlds, monkeypatch):
-    # A robot that stops gently (its last two steps at 0.05 and 0.03 m/s) and stands for 20 s: one match of a scan
-    # a second into the stop against the one before it says it stands; the scans pass as they came, and the chain
-    # of matches over the window is never run.
+    # A robot that stops gently (its last two steps at 0.05 and 0.03 m/s) and stands for 20 s while three people
+    # walk through its view (each hides 10 beams at 0.5-2 m) and the readings jitter by 2 cm: one match of a scan a
+    # second into the stop against the one before it says it stands (3 mm measured); the scans pass as they came,
+    # and the chain of matches over the window is never run.
     import mcl.odomstall as odomstall
 
     scans = read_carmen(worlds / "a" / "log.clf").laser_stream()[:60]
     last = scans[-1]
     slow = compose(last.odom, np.array([0.005, 0.0, 0.0]))
     slower = compose(slow, np.array([0.003, 0.0, 0.0]))
-    stop = [dataclasses.replace(last, t=last.t + 0.1 * (k + 1), odom=(slow if k == 0 else slower).copy())
-            for k in range(200)]
+    rng = np.random.default_rng(1)
+
+    def people(k):
+        r = last.ranges.copy()
+        for _ in range(3):
+            c = int(k * 2 + rng.integers(0, r.size)) % r.size
+            r[max(0, c - 5):c + 5] = np.minimum(r[max(0, c - 5):c + 5], rng.uniform(0.5, 2.0))
+        return r + rng.normal(0.0, 0.02, r.size)
+
+    stop = [dataclasses.replace(last, t=last.t + 0.1 * (k + 1), odom=(slow if k == 0 else slower).copy(),
+                                ranges=people(k)) for k in range(200)]
     seq = [*scans, *stop]
     calls = {"icp": 0, "chain": 0}
     real_icp, real_chain = odomstall.icp, odomstall.laser_odometry
@@ -231,3 +241,18 @@ def test_scans_far_apart_are_matched_from_turned_starts():
         assert abs(plain[2] - truth[2]) > 0.5
         found = laser_odometry([a, b], rate0=rate0, thorough=True)[0][-1, 1:4]
         assert math.hypot(*(found[:2] - truth[:2])) < 0.3 and abs(found[2] - truth[2]) < 0.05
+
+
+def test_a_hold_longer_than_max_hold_passes_unmatched(worlds, monkeypatch):
+    # An abrupt hold (a stall by its look) that lasts 25 s: past MAX_HOLD (20 s) the held scans pass as they came,
+    # unmatched (a robot stopped dead along a corridor would otherwise be taken to drive on for as long).
+    import mcl.odomstall as odomstall
+
+    scans = read_carmen(worlds / "a" / "log.clf").laser_stream()[:60]
+    last = scans[-1]
+    stop = [dataclasses.replace(last, t=last.t + 0.1 * (k + 1)) for k in range(250)]
+    seq = [*scans, *stop, dataclasses.replace(last, t=last.t + 25.1, odom=compose(last.odom, np.array([0.01, 0, 0])))]
+    calls = []
+    monkeypatch.setattr(odomstall, "laser_odometry", lambda *a, **k: calls.append(1))
+    fill = StallFill(seq, _mount)
+    assert all(a is b for a, b in zip(fill, seq)) and not fill.stalls and not calls
