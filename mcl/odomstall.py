@@ -79,6 +79,7 @@ class StallFill:
         self.scans, self.mount_of = scans, mount_of
         self.stalls: list[Stall] = []
         self._list: list | None = None
+        self._matched: dict = {}  # the matches of each hold, by its first and last scan: passes after the first reuse them
 
     def __len__(self) -> int:
         return len(self.scans)
@@ -169,7 +170,11 @@ class StallFill:
         # the laser's step is inverse(mount) (+) the robot's (+) mount; over 0.1 s, per second
         laser_rate = np.array([compose(inverse(mount), compose(r * 0.1, mount)) / 0.1 for r in entry])
         # a scan that cannot be matched (too few returns: an open hall) moves at the last rate, however many in a row
-        rows, _ = laser_odometry(chain, mount, rate0=laser_rate, max_misses=len(chain), thorough=True)
+        key = (kind, float(anchor.t), float(chain[-1].t), len(chain))  # a run reads its scans more than once
+        if key not in self._matched:
+            self._matched[key] = laser_odometry(chain, mount, rate0=laser_rate, max_misses=len(chain),
+                                                thorough=True)[0]
+        rows = self._matched[key]
         matched = rows[-1, 1:4]  # the robot's motion over the window, in its frame at the anchor
         own = compose(inverse(anchor.odom), chain[-1].odom)
         lost_m = math.hypot(matched[0], matched[1]) - math.hypot(own[0], own[1])
