@@ -79,7 +79,7 @@ class StallFill:
         self.scans, self.mount_of = scans, mount_of
         self.stalls: list[Stall] = []
         self._list: list | None = None
-        self._matched: dict = {}  # the matches of each hold, by its first and last scan: passes after the first reuse them
+        self._matched: dict = {}  # each hold's matches, by its first and last scan: later passes reuse them
 
     def __len__(self) -> int:
         return len(self.scans)
