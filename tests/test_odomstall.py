@@ -140,38 +140,6 @@ def test_a_robot_standing_still_is_matched_once(worlds, monkeypatch):
     assert calls == {"icp": 1, "chain": 0}
 
 
-def test_a_stalled_office_is_tracked_through_its_stalls(tmp_path):
-    # An office drive whose odometry stalls twice for 6 s at 0.5 m/s (heldout21's office-stalls-long): with the
-    # odometry held every scan is gated and the estimate stays where the stall began, 2.6 m behind (motion.stalls
-    # keep: max 2.62 m measured); filled by scan matching, the track holds (max 0.22 m measured, 0.08 m on this world
-    # without stalls; 0.5 m is the suites' bound for a lost track).
-    world = tmp_path / "world"
-    simulate(world, kind="office", seed=2707, duration=60.0, odom_stalls=2, odom_stall_s=6.0)
-    start = yaml.safe_load((world / "sim.yaml").read_text())["start_pose"]
-    tt, truth = read_tum(world / "truth.tum")
-
-    def max_error(stalls):
-        from mcl.runner import run
-
-        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-            f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}", "truth=null", "rerun.mode=off",
-            f"filter.initial_pose={start}", f"motion.stalls={stalls}"])
-        said = []
-        with warnings.catch_warnings(record=True):
-            warnings.simplefilter("always")
-            s = run(cfg, tmp_path / stalls, progress=False, echo=said.append)
-        t, est = read_tum(tmp_path / stalls / "trajectory.tum")
-        assert np.array_equal(t, tt)
-        return float(np.max(np.hypot(est[0] - truth[0], est[1] - truth[1]))), s, said
-
-    err, s, said = max_error("fill")
-    assert err < 0.5
-    assert len(s["odometry_stalls"]) == 2
-    assert sum("the odometry held its pose 2 times while the scans showed the robot moving" in m for m in said) == 1
-    err, s, said = max_error("keep")
-    assert err > 1.5 and "odometry_stalls" not in s
-
-
 def test_an_abrupt_stop_the_scans_confirm_is_left_as_it_was(worlds):
     # The odometry holds right after a step at full speed (0.5 m/s): a stall by its look, so the window is matched
     # with the robot's last velocity as the guess. The robot truly stopped, in an office whose walls constrain every
@@ -187,33 +155,53 @@ def test_an_abrupt_stop_the_scans_confirm_is_left_as_it_was(worlds):
     assert all(a is b for a, b in zip(fill, seq)) and not fill.stalls
 
 
+def _tracked(world, out, source: list[str], stalls: str):
+    """(max position error against the world's truth, summary.json, the lines the run said) of a default run on
+    ``world`` from its start pose, reading ``source`` (config keys), with ``motion.stalls`` = ``stalls``."""
+    from mcl.runner import run
+
+    start = yaml.safe_load((world / "sim.yaml").read_text())["start_pose"]
+    tt, truth = read_tum(world / "truth.tum")
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={world / 'map.yaml'}", *source, "truth=null", "rerun.mode=off", f"filter.initial_pose={start}",
+        f"motion.stalls={stalls}"])
+    said: list[str] = []
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        s = run(cfg, out / stalls, progress=False, echo=said.append)
+    t, est = read_tum(out / stalls / "trajectory.tum")
+    x, y = np.interp(tt, t, est[0]), np.interp(tt, t, est[1])
+    return float(np.max(np.hypot(x - truth[0], y - truth[1]))), s, said
+
+
+def test_a_stalled_office_is_tracked_through_its_stalls(tmp_path):
+    # An office drive whose odometry stalls twice for 6 s at 0.5 m/s (heldout21's office-stalls-long): with the
+    # odometry held every scan is gated and the estimate stays where the stall began, 2.6 m behind (motion.stalls
+    # keep: max 2.62 m measured); filled by scan matching, the track holds (max 0.22 m measured, 0.08 m on this world
+    # without stalls; 0.5 m is the suites' bound for a lost track).
+    world = tmp_path / "world"
+    simulate(world, kind="office", seed=2707, duration=60.0, odom_stalls=2, odom_stall_s=6.0)
+    log = [f"log={world / 'log.clf'}"]
+    err, s, said = _tracked(world, tmp_path, log, "fill")
+    assert err < 0.5
+    assert len(s["odometry_stalls"]) == 2
+    assert sum("the odometry held its pose 2 times while the scans showed the robot moving" in m for m in said) == 1
+    err, s, said = _tracked(world, tmp_path, log, "keep")
+    assert err > 1.5 and "odometry_stalls" not in s
+
+
 def test_a_bag_whose_odometry_stalls_is_filled_too(tmp_path):
     # The same stalled office drive written as a ROS 2 bag (its /odom held for 3 s twice): the run fills both
     # windows from a bag's scans as from a CARMEN log's, and tracks within 0.5 m (0.08 m measured; 1.73 m with
     # motion.stalls keep).
-    from mcl.runner import run
     from mcl.simulate import write_log_as_bag
 
     world = tmp_path / "world"
     simulate(world, kind="office", seed=6, duration=30.0, odom_stalls=2, odom_stall_s=3.0)
-    bag = write_log_as_bag(world, "mcap")
-    start = yaml.safe_load((world / "sim.yaml").read_text())["start_pose"]
-    tt, truth = read_tum(world / "truth.tum")
-
-    def max_error(stalls):
-        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-            f"map={world / 'map.yaml'}", "log=null", f"bag={bag}", "truth=null", "rerun.mode=off",
-            f"filter.initial_pose={start}", f"motion.stalls={stalls}"])
-        with warnings.catch_warnings(record=True):
-            warnings.simplefilter("always")
-            s = run(cfg, tmp_path / stalls, progress=False, echo=lambda *_: None)
-        t, est = read_tum(tmp_path / stalls / "trajectory.tum")
-        x, y = np.interp(tt, t, est[0]), np.interp(tt, t, est[1])
-        return float(np.max(np.hypot(x - truth[0], y - truth[1]))), s
-
-    err, s = max_error("fill")
+    bag = ["log=null", f"bag={write_log_as_bag(world, 'mcap')}"]
+    err, s, _ = _tracked(world, tmp_path, bag, "fill")
     assert err < 0.5 and len(s["odometry_stalls"]) == 2
-    err, s = max_error("keep")
+    err, s, _ = _tracked(world, tmp_path, bag, "keep")
     assert err > 1.0
 
 
