@@ -433,8 +433,9 @@ class QualityConfig:
     # a lost scan that matches under this share (or goes through walls, contradiction_above) refutes the estimate:
     # filter.recovery_wait does not wait for it (0: only through walls)
     occlusion_match: float = field(default=0.0, metadata=_rng(0.0, 1.0))
-    # a scan narrower than 180 degrees (a depth camera's): occluded_below and occlusion_match times fov / 180 degrees
-    # and occluded_prior over it (scaled; one person fills a third of a 59-degree view), or as given (same)
+    # a scan narrower than 180 degrees (a depth camera's): occluded_below and occlusion_match times fov / 180 degrees,
+    # occluded_depth times its square root and occluded_prior over it (scaled; one person fills a third of a
+    # 59-degree view), or as given (same)
     narrow_view: Literal["scaled", "same"] = "scaled"
     doubt_margin: float = field(default=0.25, metadata=_rng(0.0, 2.0))  # after a lost episode: bad also this far below
     # the score the track had before it (0: off)

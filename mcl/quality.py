@@ -140,13 +140,13 @@ class ScanQuality:
     def view(self, angles) -> None:
         """Take the field of view of the scans to come from their beam ``angles`` (laser frame, rad).
 
-        With ``quality.narrow_view: scaled`` (the default), a scan narrower than 180 degrees has ``occluded_below``
-        and ``occlusion_match`` times its field of view over 180 degrees, and ``occluded_prior`` over it
-        (:meth:`_creeping`): a person a metre away fills a third of a depth camera's 59-degree view and a tenth of a
-        180-degree laser's. People crowding a 59-degree, 4.5 m view left a correct track at match 0.29-0.43 with no
-        beam through a wall; called lost and refuted at once, the spread's best pose 1.2 m away, where they line up
-        with walls, took it (suites/depth-laser.yaml clutter-kinect, every seed of 6: docs/measurements.md,
-        "Fifty-first session")."""
+        With ``quality.narrow_view: scaled`` (the default), a scan narrower than 180 degrees has ``occluded_below`` and
+        ``occlusion_match`` times its field of view over 180 degrees, ``occluded_depth`` times its square root
+        (:attr:`occluded_depth`), and ``occluded_prior`` over it (:meth:`_creeping`): a person a metre away fills a
+        third of a depth camera's 59-degree view and a tenth of a 180-degree laser's. People crowding a 59-degree, 4.5 m
+        view left a correct track at match 0.29-0.43 with no beam through a wall; called lost and refuted at once, the
+        spread's best pose 1.2 m away, where they line up with walls, took it (suites/depth-laser.yaml clutter-kinect,
+        every seed of 6: docs/measurements.md, "Fifty-first session")."""
         share = 1.0
         if self.cfg.narrow_view == "scaled":
             a = np.asarray(angles, dtype=np.float64)
