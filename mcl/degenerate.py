@@ -21,7 +21,9 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
   other particle takes the step (the motion model's noise grows with it), the
   others are re-spread by ``filter.respread_std`` where they were (poses off
   the allowed map are drawn again), and the scan decides. Non-finite odometry
-  is only re-spread;
+  is only re-spread. With ``motion.jumps: match`` a jump faster than 5 m/s (a
+  driver that restarted from 0 0 0) is taken from scan matching before the
+  filter sees it (``mcl.odomstall``);
 * ``degenerate_weights``: every weight is zero after the correction (no pose
   explains the scan): the filter re-spreads the particles around the last
   estimate moved by the odometry step, twice wider each consecutive time, and
@@ -105,6 +107,19 @@ class InputGuard:
         recent = self.max_odom_ratio * max(self._speeds) if self._speeds else 0.0
         return max(self.max_odom_speed, recent)
 
+    def observe(self, step: float, dt: float) -> bool:
+        """Whether an odometry step of ``step`` m over ``dt`` s is a jump: longer than ``jump_bound`` and, when it is
+        timed (dt at least MIN_SPEED_DT), faster than ``speed_bound``. A step within ``jump_bound`` joins the
+        histories; a longer one at the robot's speed is motion (the scans stopped for a while) but stays out of them:
+        the next steps are measured against the scans' own, not against the gap's."""
+        timed = dt >= self.MIN_SPEED_DT
+        if step > self.jump_bound():
+            return not (timed and step <= self.speed_bound() * dt)
+        self._steps.append(step)
+        if timed:
+            self._speeds.append(step / dt)
+        return False
+
     def check_control(self, control):
         """(control to apply, odometry step in the robot frame (3,)): dt < 0 made 0; (control, None) for an
         odometry jump (a glitch or real motion: the filter hedges), (None, None) for non-finite odometry."""
@@ -119,23 +134,15 @@ class InputGuard:
         step = math.hypot(b[0] - a[0], b[1] - a[1])
         bound = self.jump_bound()
         dt = float(control.dt if control.dt_scan is None else control.dt_scan)
-        timed = dt >= self.MIN_SPEED_DT
-        if step > bound:
-            # a long step at the robot's speed is motion (the scans stopped for a while); a glitch is not. It stays
-            # out of both histories: the next steps are measured against the scans' own, not against the gap's
-            if not (timed and step <= self.speed_bound() * dt):
-                speed = (f"; {step / dt:.2f} m/s over {dt:.2f} s, faster than filter.max_odom_speed "
-                         f"{self.max_odom_speed} m/s and max_odom_ratio times the fastest recent step"
-                         if timed and self.max_odom_speed > 0.0 else "")
-                self.event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> {bound:.2f} m: "
-                           f"filter.max_odom_step {self.max_odom_step} m, or max_odom_ratio {self.max_odom_ratio} "
-                           f"times the longest recent step{speed}): a glitch or real motion; half the particles take "
-                           "the step, the others are re-spread where they were, and the scan decides")
-                return control, None
-        else:
-            self._steps.append(step)
-            if timed:
-                self._speeds.append(step / dt)
+        if self.observe(step, dt):
+            speed = (f"; {step / dt:.2f} m/s over {dt:.2f} s, faster than filter.max_odom_speed "
+                     f"{self.max_odom_speed} m/s and max_odom_ratio times the fastest recent step"
+                     if dt >= self.MIN_SPEED_DT and self.max_odom_speed > 0.0 else "")
+            self.event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> {bound:.2f} m: "
+                       f"filter.max_odom_step {self.max_odom_step} m, or max_odom_ratio {self.max_odom_ratio} "
+                       f"times the longest recent step{speed}): a glitch or real motion; half the particles take "
+                       "the step, the others are re-spread where they were, and the scan decides")
+            return control, None
         c, s = math.cos(a[2]), math.sin(a[2])
         dx, dy = b[0] - a[0], b[1] - a[1]
         return control, np.array([c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(b[2] - a[2]))])

@@ -1,4 +1,4 @@
-"""Odometry that stands still while the scans move: the motion lost in a stall, found by scan matching.
+"""Odometry that stands still or jumps while the scans move: the motion lost, found by scan matching.
 
 An encoder driver that hangs, a base controller that stops publishing and a bridge that re-sends its last message all
 leave the odometry holding one pose, with no velocity, while the robot drives on and the laser goes on scanning.
@@ -31,6 +31,16 @@ a match or a few). A robot that stopped dead in a corridor is taken to drive on.
 
 Measured on the eight shared logs: only mit_csail's odometry holds a pose while the scans go on (7 windows of
 0.4-6.8 s; each a standstill or a catch-up, left as it was).
+
+A base driver that restarts starts its odometry again from 0 0 0 wherever the robot is, often after it was down
+for seconds (the odometry holding its pose there): the filter sees a step of metres in one scan period, and hedges
+it (``mcl.degenerate.InputGuard``: half the particles take it, the others are re-spread where they were), which
+keeps an instant restart but not the seconds lost before it (``suites/heldout22.yaml``: 7 of 24 runs within
+0.5 m). With ``jumps`` (``motion.jumps: match``), a step of the first laser's odometry that the filter's guard
+would call a jump and that is faster than ``JUMP_V`` is taken from scan matching the two scans instead (from the
+velocity before it and from the odometry's own step; a match that agrees with the odometry's own step leaves it),
+and the odometry after it goes on from there; and a hold that ends in such a jump is filled from the scans, however
+its step out compares (it is no catch-up). Scans of other lasers between the two keep the odometry as it came.
 """
 
 from __future__ import annotations
@@ -40,6 +50,7 @@ import math
 
 import numpy as np
 
+from mcl.degenerate import InputGuard
 from mcl.estimate import compose, inverse, wrap_angle
 from mcl.laser_odometry import MIN_PAIRS, Key, icp, laser_odometry, scan_points
 
@@ -56,6 +67,7 @@ CATCH_UP_W = 1.0  # rad/s ... or turning so: the odometry caught up (mit_csail: 
 # s: scans held back at most this long; a longer hold passes as it was: a hung driver is restarted within seconds,
 # and a robot stopped dead along a corridor (whose scans cannot tell it stands) is taken to drive on only so long
 MAX_HOLD = 20.0
+JUMP_V = 5.0  # m/s: an odometry jump faster than this is matched (no wheeled robot indoors drives so)
 HELD = 1e-9  # m and rad: two odometry poses this close are the same pose
 
 
@@ -68,15 +80,22 @@ class Stall:
     scans: int  # scans of the first laser matched (after the one before the hold; the first after it included)
     matched: float  # m: the motion over the window by scan matching
     odometry: float  # m: ... by the odometry
+    # "hold"; "jump": the odometry jumped from one scan to the next (a driver that restarted from 0 0 0, a glitch);
+    # "hold+jump": it held, then jumped (the driver was down a while before it restarted)
+    cause: str = "hold"
 
 
 class StallFill:
     """``scans`` (a sized iterable of ``mcl.datasets.carmen.Scan`` records, as a run reads them) with the odometry of
     each stall filled by scan matching (see the module doc); lazy, so a bag's scans still stream. ``mount_of(scan)``:
-    the laser's pose on the robot as the run takes it. ``stalls`` lists the windows filled by the last pass."""
+    the laser's pose on the robot as the run takes it. ``holds``: fill the holds (``motion.stalls: fill``);
+    ``jumps``: ``filter``'s (max_odom_step, max_odom_ratio, max_odom_speed), to match the odometry's jumps as
+    ``mcl.degenerate.InputGuard`` tells them (``motion.jumps: match``), or None to leave them to the filter.
+    ``stalls`` lists the windows filled by the last pass."""
 
-    def __init__(self, scans, mount_of) -> None:
+    def __init__(self, scans, mount_of, holds: bool = True, jumps: tuple | None = None) -> None:
         self.scans, self.mount_of = scans, mount_of
+        self.holds, self.jumps = holds, jumps
         self.stalls: list[Stall] = []
         self._list: list | None = None
         self._matched: dict = {}  # each hold's matches, by its first and last scan: later passes reuse them
@@ -107,6 +126,7 @@ class StallFill:
         abrupt = False  # the hold began at speed (a stall by its look), not after the robot slowed
         parked = False  # the hold was checked: the robot stands still; pass the scans until the odometry moves
         next_check = STILL_CHECK  # s into a gentle hold of its next standstill check
+        guard = InputGuard(*self.jumps) if self.jumps is not None else None  # tells the odometry's jumps
         for s in self.scans:
             if kind is None:
                 kind = s.kind
@@ -117,6 +137,7 @@ class StallFill:
                     yield self._moved(s, fix)
                 continue
             same = prev is not None and _same(s.odom, prev.odom)
+            step = None  # the robot's step from prev to s, when not the odometry's own
             if held:
                 held.append(s)
                 if same:
@@ -130,9 +151,9 @@ class StallFill:
                         yield from (self._moved(h, fix) for h in held)
                         held = []
                     continue
-                fix = yield from self._resolve(anchor, anchor_out, held, entry, fix)
+                fix, step = yield from self._resolve(anchor, anchor_out, held, entry, fix, guard)
                 held = []
-            elif same and not parked:
+            elif same and not parked and self.holds:
                 anchor, anchor_out = prev, compose(fix, prev.odom)
                 v, w = math.hypot(step_rate[0, 0], step_rate[0, 1]), float(np.abs(step_rate[:, 2]).max())
                 entry = step_rate.copy()
@@ -142,16 +163,28 @@ class StallFill:
             else:
                 if not same:
                     parked = False
+                own = compose(inverse(prev.odom), s.odom) if prev is not None else None
+                if guard is not None and own is not None and not same and _jumped(guard, own, s.t - prev.t):
+                    # a jump (a driver that restarted from 0 0 0, a glitch): the step is the scans', and the
+                    # odometry after it goes on from there; unless the scans match best at the odometry's own step
+                    # (a long step that is motion: a log with a scan every few metres)
+                    step = self._match([prev, s], step_rate, own)[-1, 1:4]
+                    if _agree(step, own):
+                        step = None
+                    else:
+                        fix = compose(compose(compose(fix, prev.odom), step), inverse(s.odom))
+                        self.stalls.append(Stall(float(prev.t), float(s.t), 1, float(math.hypot(step[0], step[1])),
+                                                 float(math.hypot(own[0], own[1])), "jump"))
                 yield self._moved(s, fix)
             if prev is not None and not same:
                 dt = s.t - prev.t
                 if dt > 0.0:
                     # the last two steps, the faster first: a hold that began between two scans leaves the last short
-                    rate, last_rate = compose(inverse(prev.odom), s.odom) / dt, rate
+                    rate, last_rate = (step if step is not None else compose(inverse(prev.odom), s.odom)) / dt, rate
                     step_rate = np.array(sorted((rate, last_rate), key=lambda r: -math.hypot(r[0], r[1])))
             prev = s
         if held:
-            fix = yield from self._resolve(anchor, anchor_out, held, entry, fix)
+            yield from self._resolve(anchor, anchor_out, held, entry, fix, guard)
 
     @staticmethod
     def _moved(s, fix):
@@ -160,35 +193,48 @@ class StallFill:
             return s
         return dataclasses.replace(s, odom=compose(fix, s.odom))
 
-    def _resolve(self, anchor, anchor_out, held: list, entry, fix):
-        """Yield the ``held`` scans (the hold after ``anchor``, ending with the first scan whose odometry moved or
-        with the log's end), filled when the matching finds motion the odometry lost; return the correction after."""
-        kind = anchor.kind
-        chain = [anchor, *(h for h in held if h.kind == kind)]
-        mount = self.mount_of(anchor)
-        # the robot's rate before the hold, in the laser's frame (for the matching's first guess)
-        # the laser's step is inverse(mount) (+) the robot's (+) mount; over 0.1 s, per second
-        laser_rate = np.array([compose(inverse(mount), compose(r * 0.1, mount)) / 0.1 for r in entry])
-        # a scan that cannot be matched (too few returns: an open hall) moves at the last rate, however many in a row
-        key = (kind, float(anchor.t), float(chain[-1].t), len(chain))  # a run reads its scans more than once
+    def _match(self, chain: list, entry, own=None) -> np.ndarray:
+        """``laser_odometry``'s rows for the scans ``chain`` of one laser (the robot's poses in its frame at the first),
+        guessed from the robot's rates ``entry`` (2, 3) before them, and for a pair from the odometry's own step
+        ``own`` between them too; kept for the run's later passes."""
+        mount = self.mount_of(chain[0])
+        if own is not None:
+            entry = np.vstack([entry, np.asarray(own) / max(float(chain[-1].t - chain[0].t), 1e-3)])
+        key = (chain[0].kind, float(chain[0].t), float(chain[-1].t), len(chain))  # a run reads its scans more than once
         if key not in self._matched:
+            # the robot's rates in the laser's frame (the matching's first guesses): the laser's step is
+            # inverse(mount) (+) the robot's (+) mount; over 0.1 s, per second
+            laser_rate = np.array([compose(inverse(mount), compose(r * 0.1, mount)) / 0.1 for r in entry])
+            # a scan that cannot be matched (too few returns: an open hall) moves at the last rate, however many in a
+            # row
             self._matched[key] = laser_odometry(chain, mount, rate0=laser_rate, max_misses=len(chain),
                                                 thorough=True)[0]
-        rows = self._matched[key]
+        return self._matched[key]
+
+    def _resolve(self, anchor, anchor_out, held: list, entry, fix, guard):
+        """Yield the ``held`` scans (the hold after ``anchor``, ending with the first scan whose odometry moved or
+        with the log's end), filled when the matching finds motion the odometry lost or when the odometry jumped out
+        of the hold (``guard``, an ``InputGuard``, tells; None: no jumps); return the correction after and the robot's
+        step into the last scan of the window (None: the odometry's own)."""
+        kind = anchor.kind
+        chain = [anchor, *(h for h in held if h.kind == kind)]
+        rows = self._match(chain, entry)
         matched = rows[-1, 1:4]  # the robot's motion over the window, in its frame at the anchor
         own = compose(inverse(anchor.odom), chain[-1].odom)
         lost_m = math.hypot(matched[0], matched[1]) - math.hypot(own[0], own[1])
         lost_a = abs(float(matched[2])) - abs(float(wrap_angle(own[2])))
         # the odometry's step into the first scan after the hold (all of its motion over the window): much faster
-        # than before the hold, it delivered the held motion late (a catch-up), and lost none
+        # than before the hold, it delivered the held motion late (a catch-up), and lost none; unless it jumped
+        # (a driver that restarted from 0 0 0 after it was down)
         dt = chain[-1].t - chain[-2].t if len(chain) > 1 else 0.0
-        caught_up = dt > 0.0 and (
+        jumped = guard is not None and dt > 0.0 and _jumped(guard, own, dt)
+        caught_up = dt > 0.0 and not jumped and (
             math.hypot(own[0], own[1]) / dt > max(CATCH_UP * math.hypot(entry[0, 0], entry[0, 1]), CATCH_UP_V)
             or abs(float(wrap_angle(own[2]))) / dt > max(CATCH_UP * float(np.abs(entry[:, 2]).max()), CATCH_UP_W))
-        if caught_up or (lost_m <= LOST_M and lost_a <= LOST_A):
+        if caught_up or (not jumped and lost_m <= LOST_M and lost_a <= LOST_A):
             for h in held:  # a standstill, or odometry that caught up: as it was
                 yield self._moved(h, fix)
-            return fix
+            return fix, None
         poses = {id(sc): compose(anchor_out, r[1:4]) for sc, r in zip(chain[1:], rows[1:])}
         last = anchor_out
         for h in held:
@@ -196,8 +242,22 @@ class StallFill:
                 last = poses[id(h)]
             yield dataclasses.replace(h, odom=last, tv=0.0, rv=0.0)
         self.stalls.append(Stall(float(anchor.t), float(chain[-1].t), len(chain) - 1,
-                                 float(math.hypot(matched[0], matched[1])), float(math.hypot(own[0], own[1]))))
-        return compose(last, inverse(chain[-1].odom))
+                                 float(math.hypot(matched[0], matched[1])), float(math.hypot(own[0], own[1])),
+                                 "hold+jump" if jumped else "hold"))
+        return compose(last, inverse(chain[-1].odom)), compose(inverse(rows[-2, 1:4]), rows[-1, 1:4])
+
+
+def _jumped(guard, step, dt: float) -> bool:
+    """The odometry's ``step`` over ``dt`` s a jump to match: one that ``guard`` (an ``InputGuard``, which it
+    feeds) calls a jump and faster than ``JUMP_V``. A long step slower than that may be motion the scans are too
+    far apart to match (a log thinned to a scan every 5 s: matched 1-2 m off) and is left to the filter."""
+    d = math.hypot(step[0], step[1])
+    return guard.observe(d, dt) and not (dt > 0.0 and d / dt <= JUMP_V)
+
+
+def _agree(a, b) -> bool:
+    """Two steps of the robot the same within ``LOST_M`` m and ``LOST_A`` rad."""
+    return math.hypot(a[0] - b[0], a[1] - b[1]) <= LOST_M and abs(float(wrap_angle(a[2] - b[2]))) <= LOST_A
 
 
 def _same(a, b) -> bool:

@@ -408,12 +408,16 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
                 scans = _retime(scans, log, log.stamp_offset, lambda *_: None)
                 if hits is not None:
                     scans.self_hits = hits
-    if cfg.sensor.use and len(scans) and cfg.motion.stalls == "fill":
-        # where the odometry holds a pose while the scans move, their motion from scan matching (mcl.odomstall)
+    if cfg.sensor.use and len(scans) and (cfg.motion.stalls == "fill" or cfg.motion.jumps == "match"):
+        # where the odometry holds a pose while the scans move, or jumps, their motion from scan matching
+        # (mcl.odomstall)
         from mcl.odomcheck import run_mount
         from mcl.odomstall import StallFill
 
-        filled = StallFill(scans, lambda s: run_mount(s, cfg.sensor.laser_pose))
+        f = cfg.filter
+        filled = StallFill(scans, lambda s: run_mount(s, cfg.sensor.laser_pose), holds=cfg.motion.stalls == "fill",
+                           jumps=((f.max_odom_step, f.max_odom_ratio, f.max_odom_speed)
+                                  if cfg.motion.jumps == "match" else None))
         filled.self_hits = getattr(scans, "self_hits", None)
         scans = filled
     if cfg.truth:
@@ -1136,13 +1140,22 @@ def _run(
     interrupted = interrupted or signals.caught  # also a signal while the outputs were closed
 
     n_up = max(counts["updates"], 1)
-    stalls = getattr(scans, "stalls", None)  # motion.stalls: fill (mcl.odomstall): the holds it filled
-    if stalls:
-        longest = max(stalls, key=lambda w: w.t1 - w.t0)
-        echo(f"mcl: warning: {log.path}: the odometry held its pose {len(stalls)} time{'s' if len(stalls) > 1 else ''} "
+    # motion.stalls: fill and motion.jumps: match (mcl.odomstall): the holds and jumps it filled
+    stalls = getattr(scans, "stalls", None) or []
+    holds = [w for w in stalls if w.cause != "jump"]
+    if holds:
+        longest = max(holds, key=lambda w: w.t1 - w.t0)
+        echo(f"mcl: warning: {log.path}: the odometry held its pose {len(holds)} time{'s' if len(holds) > 1 else ''} "
              f"while the scans showed the robot moving (the longest {longest.t1 - longest.t0:.1f} s from "
              f"t={longest.t0:.3f} s: {longest.matched:.2f} m by scan matching, {longest.odometry:.2f} m by the "
              "odometry): the motion there is the scans' (motion.stalls: keep leaves it as it was)")
+    jumps = [w for w in stalls if w.cause != "hold"]
+    if jumps:
+        first = jumps[0]
+        echo(f"mcl: warning: {log.path}: the odometry jumped {len(jumps)} time{'s' if len(jumps) > 1 else ''} (the "
+             f"first at t={first.t1:.3f} s: {first.odometry:.2f} m by the odometry, {first.matched:.2f} m by scan "
+             "matching; a driver that restarted, a glitch): the step there is the scans', and the odometry goes on "
+             "from it (motion.jumps: hedge leaves it to the filter)")
     summary: dict = {
         "mode": mode,
         "interrupted": interrupted,

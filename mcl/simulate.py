@@ -678,8 +678,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              scan_rate: float = 5.0, scan_sweep: float = 0.0, phantom_furniture: int = 0,
              unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
              doubled_walls: int = 0, map_scale: float = 1.0, map_rotation: float = 0.0, scan_gaps: int = 0,
-             scan_gap_s: float = 5.0, odom_stalls: int = 0, odom_stall_s: float = 3.0,
-             _check_only: bool = False) -> dict | None:
+             scan_gap_s: float = 5.0, odom_stalls: int = 0, odom_stall_s: float = 3.0, odom_resets: int = 0,
+             odom_reset_s: float = 0.0, _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -750,6 +750,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     encoder driver that hangs while the robot drives on. The odometry (ODOM lines, the scan lines' poses) holds its
     pose and reads no velocity there, then goes on from it: the motion in the stall is lost. The laser and the truth
     are the same bytes as without; ``sim.yaml`` lists the windows. 0 leaves every output byte-identical.
+    ``odom_resets`` = N restarts the odometry N times, evenly spread (``_reset``): a base driver that restarts, its
+    pose starting again from (0, 0, 0) where the robot then is. With ``odom_reset_s`` = S > 0 the driver is down for
+    S seconds first: the odometry holds its pose there (as ``odom_stalls``), the motion in it lost. The laser and
+    the truth are the same bytes as without; ``sim.yaml`` lists the windows. 0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -830,6 +834,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(odom_stall_s, (int, float, np.number)) and not isinstance(odom_stall_s, bool)
            and math.isfinite(odom_stall_s) and 0.5 <= odom_stall_s <= 60.0, "odom_stall_s",
            f"expected 0.5..60 s, got {odom_stall_s!r}")
+    _check(isinstance(odom_resets, (int, np.integer)) and not isinstance(odom_resets, bool)
+           and 0 <= odom_resets <= 20, "odom_resets", f"expected 0..20, got {odom_resets!r}")
+    _check(isinstance(odom_reset_s, (int, float, np.number)) and not isinstance(odom_reset_s, bool)
+           and math.isfinite(odom_reset_s) and 0.0 <= odom_reset_s <= 60.0, "odom_reset_s",
+           f"expected 0..60 s, got {odom_reset_s!r}")
     _check(scan_gaps == 0 or not depth, "scan_gaps",
            "scan gaps are made without depth frames: set depth to false")
     _check(map_rotation == 0.0 or not (landmarks or depth), "map_rotation",
@@ -892,6 +901,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     stalls = _grey_windows(t, int(odom_stalls), float(duration), float(odom_stall_s)) if odom_stalls else []
     if stalls:
         odom, tv, rv = _stalled(odom, tv, rv, t, stalls)
+    resets = _grey_windows(t, int(odom_resets), float(duration), float(odom_reset_s)) if odom_resets else []
+    if resets:
+        odom, tv, rv = _reset(odom, tv, rv, t, resets)
     scan_ticks = np.arange(0, n_ticks, scan_every)
     angles = beam_angles(int(n_beams), fov)
     blocked = world.blocked
@@ -1075,6 +1087,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["scan_gaps"] = [[round(a, 3), round(b, 3)] for a, b in gaps]
     if stalls:
         params["odom_stalls"] = [[round(a, 3), round(b, 3)] for a, b in stalls]
+    if resets:
+        params["odom_resets"] = [[round(a, 3), round(b, 3)] for a, b in resets]
     if grey:
         params["unknown_floor"] = [[round(a, 3), round(b, 3)] for a, b in grey]
     if hit_windows:
@@ -1264,6 +1278,23 @@ def _stalled(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, wi
     return odom, tv, rv
 
 
+def _reset(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, windows) -> tuple:
+    """(odometry poses, tv, rv) with the odometry restarted at the end b of each window [a, b) of ``t``: it holds
+    its pose over the window (``_stalled``; none when a == b) and from b on reads the robot's motion since b, from
+    (0, 0, 0): each later pose p becomes at_b^-1 ∘ p, as when a base driver restarts."""
+    odom, tv, rv = _stalled(odom, tv, rv, t, [(a, b) for a, b in windows if b > a])
+    for _, b in windows:
+        kb = int(np.searchsorted(t, b))
+        if kb == 0 or kb >= t.size:
+            continue
+        x0, y0, th0 = odom[kb]
+        c, s = math.cos(th0), math.sin(th0)
+        dx, dy = odom[kb:, 0] - x0, odom[kb:, 1] - y0
+        odom[kb:, 0], odom[kb:, 1] = c * dx + s * dy, -s * dx + c * dy
+        odom[kb:, 2] = _wrap(odom[kb:, 2] - th0)
+    return odom, tv, rv
+
+
 def map_frame_poses(poses: np.ndarray, rotation: float, scale: float) -> np.ndarray:
     """World poses (N, 3) in the frame of a map turned by ``rotation`` rad about the frame's zero, then drawn
     ``scale`` times the world's size (``rotate_map``, ``map_scale``). Without a rotation the headings are the same
@@ -1436,6 +1467,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "hangs; the motion in the stall is lost); default 0")
     parser.add_argument("--odom-stall-s", type=float, default=3.0, metavar="S",
                         help="seconds of each --odom-stalls stall (0.5-60); default 3")
+    parser.add_argument("--odom-resets", type=int, default=0, metavar="N",
+                        help="the odometry restarted N times over the run (evenly spread): its pose starts again "
+                        "from 0 0 0 where the robot is (a base driver that restarts); default 0")
+    parser.add_argument("--odom-reset-s", type=float, default=0.0, metavar="S",
+                        help="seconds each --odom-resets driver is down before it restarts, the odometry holding "
+                        "its pose (0-60); default 0")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1520,6 +1557,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     unknown_floor=args.unknown_floor, doubled_walls=args.doubled_walls, map_scale=args.map_scale,
                     map_rotation=math.radians(map_rotation), scan_gaps=args.scan_gaps, scan_gap_s=args.scan_gap_s,
                     odom_stalls=args.odom_stalls, odom_stall_s=args.odom_stall_s,
+                    odom_resets=args.odom_resets, odom_reset_s=args.odom_reset_s,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
                     holonomic=math.radians(holonomic))

@@ -50,6 +50,8 @@ With ``--odom-stalls N`` the odometry stalls N times for ``--odom-stall-s`` seco
 the log's scans, as an encoder driver that hangs while the robot drives on: the ODOM lines and the FLASER lines'
 robot poses hold the pose they had at the stall's start, then go on from it with the steps they measured (the motion
 in the stall lost; a FLASER line's laser pose keeps its mounting on the robot). The scans and the reference stay.
+``--odom-resets N`` restarts the odometry from 0 0 0 N times (a base driver that restarts), each after holding its
+pose for ``--odom-reset-s`` seconds (default 0).
 
 The maps (but for ``--doubled-walls`` and ``--map-rotation``) and the references (but for ``--map-rotation``) are those of the originals (linked, not copied). Writes
 ``OUT/<name>/log.clf`` with links to the rest, and ``OUT/suite.yaml``: the suite with its root at ``OUT``.
@@ -202,13 +204,16 @@ def _scan_windows(lines: list[str], n: int, seconds: float) -> list:
     return spread_windows(n, seconds, times[0], times[-1] - times[0]) if times else []
 
 
-def with_odometry_stalled(lines: list[str], n: int, seconds: float) -> tuple[str, list]:
+def with_odometry_stalled(lines: list[str], n: int, seconds: float, restart: bool = False) -> tuple[str, list]:
     """(the CARMEN log ``lines`` with its odometry stalled over ``n`` windows of ``seconds`` evenly spread over the
     scans' span, the windows): inside a window each ODOM line and FLASER robot pose holds the last odometry pose
     before it (an ODOM line's velocities 0), as ``mcl simulate --odom-stalls`` does; after it, every pose p becomes
     held ∘ last^-1 ∘ p, ``last`` the pose the odometry had reached at the window's end (the motion in the window
-    lost). A FLASER line's laser pose is moved with its robot pose."""
+    lost). ``restart``: after the window the odometry starts again from 0 0 0 instead, every pose p becoming
+    first^-1 ∘ p, ``first`` the log's pose at the first line after it (``mcl simulate --odom-resets``; ``seconds`` 0:
+    no hold). A FLASER line's laser pose is moved with its robot pose."""
     stalls = _scan_windows(lines, n, seconds)
+    reset = False  # a window just ended: the odometry restarts at this line
     fix = np.zeros(3)  # the correction composed onto every odometry pose from here on
     held = last = None  # inside a window: the pose held, and the last pose the log had there
     before = None  # the last pose written before the window
@@ -224,9 +229,12 @@ def with_odometry_stalled(lines: list[str], n: int, seconds: float) -> tuple[str
             if held is not None:
                 fix = compose(held, inverse(last))
             held = last = None
+            reset = restart
             k += 1
         i = 1 if p[0] == "ODOM" else 2 + int(p[1]) + 3  # the robot's pose (a FLASER line: after the laser's)
         robot = np.array([float(v) for v in p[i:i + 3]])
+        if reset:  # the driver restarted: this pose is 0 0 0
+            fix, reset = inverse(robot), False
         new = compose(fix, robot)
         if k < len(stalls) and t >= stalls[k][0] and before is not None:
             if held is None:
@@ -281,6 +289,11 @@ def main(argv=None) -> int:
                     help="stall the odometry in N windows evenly spread over each log (default 0)")
     ap.add_argument("--odom-stall-s", type=float, default=3.0, metavar="S",
                     help="seconds of each --odom-stalls window (default 3)")
+    ap.add_argument("--odom-resets", type=int, default=0, metavar="N",
+                    help="restart the odometry from 0 0 0 at the end of N windows evenly spread over each log "
+                    "(default 0)")
+    ap.add_argument("--odom-reset-s", type=float, default=0.0, metavar="S",
+                    help="seconds the odometry holds before each --odom-resets restart (default 0)")
     ap.add_argument("--seed", type=int, default=7)
     a = ap.parse_args(argv)
     for option, value, lo, hi, unit in (("--doubled-walls", a.doubled_walls, 0, 20, ""),
@@ -288,7 +301,9 @@ def main(argv=None) -> int:
                                         ("--scan-gaps", a.scan_gaps, 0, 20, ""),
                                         ("--scan-gap-s", a.scan_gap_s, 0.5, 60, " s"),
                                         ("--odom-stalls", a.odom_stalls, 0, 20, ""),
-                                        ("--odom-stall-s", a.odom_stall_s, 0.5, 60, " s")):
+                                        ("--odom-stall-s", a.odom_stall_s, 0.5, 60, " s"),
+                                        ("--odom-resets", a.odom_resets, 0, 20, ""),
+                                        ("--odom-reset-s", a.odom_reset_s, 0, 60, " s")):
         if not (math.isfinite(value) and lo <= value <= hi):
             ap.error(f"{option}: expected {lo:g}..{hi:g}{unit}, got {value:g}")
     suite = yaml.safe_load(a.suite.read_text())
@@ -344,6 +359,11 @@ def main(argv=None) -> int:
                                                  a.odom_stall_s)
             tmp.write_text(text)
             print(f"{d['name']}: odometry stalled in {len(stalls)} windows of {a.odom_stall_s:g} s")
+        if a.odom_resets:
+            text, resets = with_odometry_stalled(tmp.read_text().splitlines(keepends=True), a.odom_resets,
+                                                 a.odom_reset_s, restart=True)
+            tmp.write_text(text)
+            print(f"{d['name']}: odometry restarted from 0 0 0 after {len(resets)} windows of {a.odom_reset_s:g} s")
         if a.scan_gaps:
             text, gaps = without_scans_in_gaps(tmp.read_text().splitlines(keepends=True), a.scan_gaps, a.scan_gap_s)
             tmp.write_text(text)
@@ -364,7 +384,8 @@ def main(argv=None) -> int:
         f"-doubled{a.doubled_walls}" if a.doubled_walls else "") + (
         f"-turned{a.map_rotation:g}" if a.map_rotation else "") + (
         f"-gaps{a.scan_gaps}x{a.scan_gap_s:g}" if a.scan_gaps else "") + (
-        f"-stalls{a.odom_stalls}x{a.odom_stall_s:g}" if a.odom_stalls else "")
+        f"-stalls{a.odom_stalls}x{a.odom_stall_s:g}" if a.odom_stalls else "") + (
+        f"-resets{a.odom_resets}x{a.odom_reset_s:g}" if a.odom_resets else "")
     (a.out / "suite.yaml").write_text(yaml.safe_dump(suite, sort_keys=False))
     print(f"{len(suite['datasets'])} logs in {a.out}; evaluate with: mcl eval --suite {a.out / 'suite.yaml'}")
     return 0

@@ -305,12 +305,14 @@ def _doctor_demo(src: Path, dst: Path) -> dict:
 
 
 @pytest.mark.skipif(not (DEMO / "log.clf").is_file(), reason="bundled demo data missing")
-@pytest.mark.parametrize("ratio, speed, jumps", [(3.0, 2.0, 0), (0.0, 2.0, 0), (0.0, 0.0, 6)])
-def test_a_log_with_a_scan_every_two_metres_is_tracked(tmp_path, ratio, speed, jumps):
+@pytest.mark.parametrize("ratio, speed, jumps, motion_jumps", [(3.0, 2.0, 0, "hedge"), (0.0, 2.0, 0, "hedge"),
+                                                               (0.0, 0.0, 6, "hedge"), (0.0, 0.0, 6, "match")])
+def test_a_log_with_a_scan_every_two_metres_is_tracked(tmp_path, ratio, speed, jumps, motion_jumps):
     # every 24th scan of the demo (before its kidnap at scan 250): 0.5-2.4 m of odometry between scans, as logs
     # with one scan per metre or two have. With max_odom_ratio 3 every step is within 3x the longest recent one
     # and taken as motion; so is every step at 0.5 m/s over the 4.8 s between scans (max_odom_speed 2 m/s); with
-    # the fixed 2 m bound alone, the 6 steps over it are hedged and the scan picks the half that moved.
+    # the fixed 2 m bound alone, the 6 steps over it are hedged and the scan picks the half that moved
+    # (motion.jumps match only takes a jump faster than 5 m/s from scan matching).
     # (Re-spreading in place, the rule before the hedge, was lost at the first of them.)
     import yaml
 
@@ -330,11 +332,14 @@ def test_a_log_with_a_scan_every_two_metres_is_tracked(tmp_path, ratio, speed, j
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
         f"log={tmp_path / 'thin.clf'}", "rerun.mode=off", "filter.global_localization=false",
         f"filter.initial_pose={start}", "filter.particles=5000", f"filter.max_odom_ratio={ratio}",
-        f"filter.max_odom_speed={speed}"])
+        f"filter.max_odom_speed={speed}", f"motion.jumps={motion_jumps}"])
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
         s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
-    assert s["updates"] == 10 and s["events"]["odometry_jumps"] == jumps, s["events"]
+    matched = sum(w["cause"] == "jump" for w in s.get("odometry_stalls", []))
+    assert s["updates"] == 10, s
+    # a step at 0.5 m/s is not matched (motion.jumps match): no robot's, yet scans 4.8 s apart match 1-2 m off
+    assert (s["events"]["odometry_jumps"], matched) == (jumps, 0), s["events"]
     t, est = read_tum(tmp_path / "out" / "trajectory.tum")
     tt, truth = read_tum(DEMO / "truth.tum")
     ref = truth[:, np.searchsorted(tt, t - 1e-6)]
@@ -343,7 +348,8 @@ def test_a_log_with_a_scan_every_two_metres_is_tracked(tmp_path, ratio, speed, j
 
 
 @pytest.mark.skipif(not (DEMO / "log.clf").is_file(), reason="bundled demo data missing")
-def test_runner_counts_every_event_and_keeps_tracking(tmp_path):
+@pytest.mark.parametrize("motion_jumps", ["hedge", "match"])
+def test_runner_counts_every_event_and_keeps_tracking(tmp_path, motion_jumps):
     import yaml
 
     from mcl.runner import run
@@ -354,20 +360,28 @@ def test_runner_counts_every_event_and_keeps_tracking(tmp_path):
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
         f"log={tmp_path / 'bad.clf'}", "rerun.mode=off", "filter.global_localization=false",
         f"filter.initial_pose={start}", "filter.initial_std=[0.05,0.05,0.05]", "filter.particles=2000",
-        "filter.update_min_d=0.0", "filter.update_min_a=0.0"])
+        "filter.update_min_d=0.0", "filter.update_min_a=0.0", f"motion.jumps={motion_jumps}"])
+    said: list[str] = []
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
+        s = run(cfg, tmp_path / "out", progress=False, echo=said.append)
+    if motion_jumps == "match":  # the 10 m odometry reset is taken from scan matching: the filter sees no jump
+        expected["odometry_jumps"] = 0
+        (jump,) = s["odometry_stalls"]
+        assert jump["cause"] == "jump" and jump["odometry"] > 9.5 and jump["matched"] < 0.3, jump
+        assert sum("the odometry jumped 1 time " in m for m in said) == 1, said
+    else:
+        assert "odometry_stalls" not in s
     assert s["events"] == expected
     msgs = [str(w.message) for w in rec if issubclass(w.category, RuntimeWarning)]
     for kind in ("nan_ranges", "empty_scans", "time_backwards", "odometry_jumps"):
-        assert sum(f"every {kind} event" in m for m in msgs) == 1, kind
+        assert sum(f"every {kind} event" in m for m in msgs) == (expected[kind] > 0), kind
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["events"] == expected
     t, poses = read_tum(tmp_path / "out" / "trajectory.tum")
     assert t.size == s["updates"] == s["scans"] and np.isfinite(poses).all()
-    # tracked through all of it: the 10 m jump is hedged (the half that took it finds nothing), the bad scans do
-    # not derail the filter
+    # tracked through all of it: the 10 m jump is hedged (the half that took it finds nothing) or matched, the bad
+    # scans do not derail the filter
     assert s["eval"]["ate_max"] < 0.5, s["eval"]
     assert s["eval"]["ate_rmse"] < 0.1, s["eval"]
 

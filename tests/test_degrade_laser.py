@@ -206,14 +206,18 @@ def test_scan_gaps_drop_the_scans_and_the_reference_as_the_simulator_does(tmp_pa
     np.testing.assert_allclose(pa, pb, atol=1e-6)
 
 
-def test_odometry_stalls_are_the_simulators(tmp_path):
-    # --odom-stalls N with the laser left alone: the odometry (ODOM lines, the FLASER lines' poses) is the one
-    # `mcl simulate --odom-stalls` writes for the same world (its windows spread over the scans' span, the run's
-    # there), to the log's 6 decimals; the scans and the reference are the original's.
+@pytest.mark.parametrize("args, kw", [
+    (("--odom-stalls", "2", "--odom-stall-s", "3"), dict(odom_stalls=2, odom_stall_s=3.0)),
+    (("--odom-resets", "2", "--odom-reset-s", "3"), dict(odom_resets=2, odom_reset_s=3.0)),
+    (("--odom-resets", "3"), dict(odom_resets=3))])
+def test_odometry_stalls_and_restarts_are_the_simulators(tmp_path, args, kw):
+    # --odom-stalls N (--odom-resets N) with the laser left alone: the odometry (ODOM lines, the FLASER lines'
+    # poses) is the one `mcl simulate --odom-stalls` (--odom-resets) writes for the same world (its windows spread
+    # over the scans' span, the run's there), to the log's 6 decimals; the scans and the reference are the original's.
     from mcl.datasets.carmen import read_carmen
 
-    world, out = _laser_as_it_is(tmp_path, 30.0, "--odom-stalls", "2", "--odom-stall-s", "3")
-    simulate(tmp_path / "stalled", seed=5, duration=30.0, odom_stalls=2, odom_stall_s=3.0)
+    world, out = _laser_as_it_is(tmp_path, 30.0, *args)
+    simulate(tmp_path / "stalled", seed=5, duration=30.0, **kw)
     d = yaml.safe_load((out / "suite.yaml").read_text())["datasets"][0]
     assert d["truth"] == "w/truth.tum"  # the reference as it was
 

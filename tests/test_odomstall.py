@@ -155,21 +155,22 @@ def test_an_abrupt_stop_the_scans_confirm_is_left_as_it_was(worlds):
     assert all(a is b for a, b in zip(fill, seq)) and not fill.stalls
 
 
-def _tracked(world, out, source: list[str], stalls: str):
+def _tracked(world, out, source: list[str], stalls: str, jumps: str = "match"):
     """(max position error against the world's truth, summary.json, the lines the run said) of a default run on
-    ``world`` from its start pose, reading ``source`` (config keys), with ``motion.stalls`` = ``stalls``."""
+    ``world`` from its start pose, reading ``source`` (config keys), with ``motion.stalls`` = ``stalls`` and
+    ``motion.jumps`` = ``jumps``."""
     from mcl.runner import run
 
     start = yaml.safe_load((world / "sim.yaml").read_text())["start_pose"]
     tt, truth = read_tum(world / "truth.tum")
     cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
         f"map={world / 'map.yaml'}", *source, "truth=null", "rerun.mode=off", f"filter.initial_pose={start}",
-        f"motion.stalls={stalls}"])
+        f"motion.stalls={stalls}", f"motion.jumps={jumps}"])
     said: list[str] = []
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
-        s = run(cfg, out / stalls, progress=False, echo=said.append)
-    t, est = read_tum(out / stalls / "trajectory.tum")
+        s = run(cfg, out / f"{stalls}-{jumps}", progress=False, echo=said.append)
+    t, est = read_tum(out / f"{stalls}-{jumps}" / "trajectory.tum")
     x, y = np.interp(tt, t, est[0]), np.interp(tt, t, est[1])
     return float(np.max(np.hypot(x - truth[0], y - truth[1]))), s, said
 
@@ -244,3 +245,83 @@ def test_a_hold_longer_than_max_hold_passes_unmatched(worlds, monkeypatch):
     monkeypatch.setattr(odomstall, "laser_odometry", lambda *a, **k: calls.append(1))
     fill = StallFill(seq, _mount)
     assert all(a is b for a, b in zip(fill, seq)) and not fill.stalls and not calls
+
+
+JUMPS = (2.0, 3.0, 2.0)  # filter.max_odom_step, max_odom_ratio, max_odom_speed of configs/default.yaml
+
+
+@pytest.fixture(scope="module")
+def resets(tmp_path_factory):
+    """The office drive of ``worlds`` with its odometry restarted from 0 0 0 twice, at once and after 3 s down."""
+    out = tmp_path_factory.mktemp("resets")
+    simulate(out / "now", kind="office", seed=6, duration=30.0, odom_resets=2)
+    simulate(out / "down", kind="office", seed=6, duration=30.0, odom_resets=2, odom_reset_s=3.0)
+    return out
+
+
+def _windows_match_the_truth(world, scans, out, windows, bound_m: float):
+    """Over each window (t0, t1) the filled odometry moves as the truth within ``bound_m`` m and 0.05 rad, while the
+    odometry as it came is over 2 m off; every step outside the windows is the odometry's own."""
+    t = np.array([s.t for s in scans])
+    for t0, t1 in windows:
+        i, j = int(np.searchsorted(t, t0)), int(np.searchsorted(t, t1))
+        truth = compose(inverse(_truth_at(world, t[i])), _truth_at(world, t[j]))
+        filled = compose(inverse(out[i].odom), out[j].odom)
+        as_it_came = compose(inverse(scans[i].odom), scans[j].odom)
+        assert math.hypot(*(filled[:2] - truth[:2])) < bound_m and abs(filled[2] - truth[2]) < 0.05
+        assert math.hypot(*(as_it_came[:2] - truth[:2])) > 2.0
+    inside = np.any([(t >= t0) & (t <= t1) for t0, t1 in windows], axis=0)
+    for k in np.flatnonzero(~inside[1:] & ~inside[:-1]) + 1:
+        np.testing.assert_allclose(compose(inverse(out[k - 1].odom), out[k].odom),
+                                   compose(inverse(scans[k - 1].odom), scans[k].odom), atol=1e-9)
+
+
+def test_an_odometry_reset_takes_the_step_the_scans_show(resets):
+    # A base driver that restarts twice, its odometry jumping 3.4 and 4.3 m back to 0 0 0 between two scans: each
+    # jump is found (the scan before it, the first after it) and its step taken from scan matching, within 0.1 m and
+    # 0.05 rad of the truth's 0.1 m (measured 0.007 and 0.003 m). With motion.jumps hedge (jumps None) the scans
+    # pass as they came.
+    world = resets / "now"
+    scans = read_carmen(world / "log.clf").laser_stream()
+    assert all(a is b for a, b in zip(StallFill(scans, _mount, jumps=None), scans))
+    fill = StallFill(scans, _mount, jumps=JUMPS)
+    out = list(fill)
+    assert len(out) == len(scans)
+    at = [a for a, _ in yaml.safe_load((world / "sim.yaml").read_text())["odom_resets"]]
+    assert [w.cause for w in fill.stalls] == ["jump", "jump"]
+    for w, r in zip(fill.stalls, at):
+        assert w.t0 < r <= w.t1 and w.t1 - w.t0 < 0.25 and w.odometry > 2.0
+    _windows_match_the_truth(world, scans, out, [(w.t0, w.t1) for w in fill.stalls], 0.1)
+
+
+def test_a_reset_after_the_driver_was_down_fills_the_hold(resets):
+    # The driver down 3 s before each restart: the odometry holds, then jumps to 0 0 0. Without jumps the step out
+    # of the hold looks like odometry catching up, and the scans pass as they came, the 1.5 m driven in the hold
+    # lost; with them each window is filled from the scans, within 0.15 m and 0.05 rad of the truth (as a stall;
+    # measured 0.019 and 0.016 m; the odometry as it came 4.2 and 4.8 m off).
+    world = resets / "down"
+    scans = read_carmen(world / "log.clf").laser_stream()
+    holds = StallFill(scans, _mount)
+    assert all(a is b for a, b in zip(holds, scans)) and not holds.stalls
+    fill = StallFill(scans, _mount, jumps=JUMPS)
+    out = list(fill)
+    windows = yaml.safe_load((world / "sim.yaml").read_text())["odom_resets"]
+    assert [w.cause for w in fill.stalls] == ["hold+jump", "hold+jump"]
+    for w, (a, b) in zip(fill.stalls, windows):
+        assert a - 0.25 <= w.t0 < a and b <= w.t1 < b + 0.25
+    _windows_match_the_truth(world, scans, out, [(w.t0, w.t1) for w in fill.stalls], 0.15)
+
+
+def test_an_office_whose_odometry_restarts_is_tracked(tmp_path):
+    # An office drive whose base driver is down 4 s twice, then restarts from 0 0 0: matched (motion.jumps match,
+    # the default) the track holds (max 0.08 m measured; 0.5 m is the suites' bound for a lost track); hedged (half
+    # the particles take the jump, the others stay where the hold left them) it is lost for a while (6.9 m).
+    world = tmp_path / "world"
+    simulate(world, kind="office", seed=2707, duration=60.0, odom_resets=2, odom_reset_s=4.0)
+    log = [f"log={world / 'log.clf'}"]
+    err, s, said = _tracked(world, tmp_path, log, "fill")
+    assert err < 0.5
+    assert [w["cause"] for w in s["odometry_stalls"]] == ["hold+jump", "hold+jump"]
+    assert sum("the odometry jumped 2 times" in m for m in said) == 1
+    err, s, said = _tracked(world, tmp_path, log, "fill", "hedge")
+    assert err > 1.5

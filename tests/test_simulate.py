@@ -444,6 +444,8 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(scan_gaps=-1), "scan_gaps"),
     (dict(odom_stalls=21), "odom_stalls"),
     (dict(odom_stalls=1, odom_stall_s=0.2), "odom_stall_s"),
+    (dict(odom_resets=True), "odom_resets"),
+    (dict(odom_resets=1, odom_reset_s=-1.0), "odom_reset_s"),
     (dict(scan_gaps=2, scan_gap_s=0.1), "scan_gap_s"),
     (dict(scan_gaps=1, depth=True), "scan_gaps"),
     (dict(map_rotation=float("inf")), "map_rotation"),
@@ -766,6 +768,36 @@ def test_odometry_stalls_hold_the_pose_and_lose_the_motion_only(tmp_path):
     la, lb = ((tmp_path / w / "log.clf").read_text().splitlines() for w in "ab")
     ranges = lambda lines: [line.split()[2:2 + int(line.split()[1])] for line in lines if line.startswith("FLASER")]  # noqa: E731
     assert ranges(la) == ranges(lb)
+
+
+def test_odometry_resets_restart_from_zero_and_keep_every_other_step(tmp_path):
+    # A base driver that restarts twice, each time after 2 s down: the laser and the truth are the same bytes;
+    # the odometry reads 0 0 0 where each restart ends and the same steps as before everywhere else.
+    from mcl.cli import main
+    from mcl.runner import compose, inverse
+
+    simulate(tmp_path / "a", kind="office", seed=6, duration=30.0)
+    assert main(["simulate", str(tmp_path / "b"), "--kind", "office", "--seed", "6", "--duration", "30",
+                 "--odom-resets", "2", "--odom-reset-s", "2"]) == 0
+    assert (tmp_path / "a" / "truth.tum").read_bytes() == (tmp_path / "b" / "truth.tum").read_bytes()
+    resets = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["odom_resets"]
+    assert resets == [[9.0, 11.0], [19.0, 21.0]]
+
+    def odom(w):
+        rows = [line.split() for line in (tmp_path / w / "log.clf").read_text().splitlines()
+                if line.startswith("ODOM")]
+        return np.array([float(r[-3]) for r in rows]), np.array([[float(v) for v in r[1:4]] for r in rows])
+
+    (t, a), (_, b) = odom("a"), odom("b")
+    ends = [int(np.searchsorted(t, w1)) for _, w1 in resets]
+    for k in ends:
+        np.testing.assert_array_equal(b[k], [0.0, 0.0, 0.0])  # restarted
+        assert np.hypot(*b[k - 1, :2]) > 2.0  # from far off: a jump
+    held = np.flatnonzero((t >= resets[0][0]) & (t < resets[0][1]))
+    np.testing.assert_allclose(b[held], np.broadcast_to(b[held[0] - 1], (held.size, 3)), atol=1e-6)
+    inside = np.any([(t >= w0) & (t <= w1) for w0, w1 in resets], axis=0)
+    for k in [k for k in range(1, t.size) if not inside[k] and not inside[k - 1]][::7]:
+        np.testing.assert_allclose(compose(inverse(b[k - 1]), b[k]), compose(inverse(a[k - 1]), a[k]), atol=2e-5)
 
 
 def test_doubled_walls_from_the_command_line(tmp_path):

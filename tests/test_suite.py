@@ -31,7 +31,8 @@ BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.es
                  "filter.search_exponent", "filter.global_density", "sensor.likelihood_field.interior",
                  "motion.fault_prob", "sensor.unmapped_skip", "filter.search_refine", "sensor.self_hit_skip",
                  "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset", "motion.sideways", "motion.noise_step",
-                 "filter.search_refine_candidates", "motion.stalls"}
+                 "filter.search_refine_candidates", "motion.stalls",
+                 "motion.jumps"}
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -57,6 +58,7 @@ def test_baseline_differs_from_default_only_in_the_plain_filter_keys():
     assert baseline["sensor.misfit_laser"] == "keep" and baseline["sensor.mount_yaw"] == "keep"
     assert baseline["sensor.stamp_offset"] == "keep" and baseline["motion.sideways"] == "keep"
     assert baseline["motion.stalls"] == "keep" and default["motion.stalls"] == "fill"
+    assert baseline["motion.jumps"] == "hedge" and default["motion.jumps"] == "match"
     assert baseline["filter.search_exponent"] == 1.0 and baseline["filter.global_density"] == 0
     assert baseline["sensor.likelihood_field.interior"] == "zero" and baseline["motion.fault_prob"] == 0
 
@@ -141,6 +143,7 @@ def _generated_suites_but(*names: str) -> list[str]:
                                          ("heldout12", 12), ("heldout13", 12), ("heldout14", 12),
                                          ("heldout15", 12), ("heldout16", 12), ("heldout17", 12),
                                          ("heldout18", 12), ("heldout19", 12), ("heldout20", 12), ("heldout21", 12),
+                                         ("heldout22", 12),
                                          ("ground-hits", 15), ("fast-laser", 12),
                                          ("sparse-laser", 4), ("sparse-hall", 6),
                                          ("stale-map", 8), ("unknown-floor", 12), ("holonomic", 30), ("depth-laser", 12),
@@ -179,7 +182,8 @@ def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(nam
                       "heldout18": _generated_suites_but("heldout18"),
                       "heldout19": _generated_suites_but("heldout19"),
                       "heldout20": _generated_suites_but("heldout20"),
-                      "heldout21": _generated_suites_but("heldout21")}[name]:
+                      "heldout21": _generated_suites_but("heldout21"),
+                      "heldout22": _generated_suites_but("heldout22")}[name]:
             taken = {(d.simulate.get("kind", "office"), d.simulate["seed"])
                      for d in load_suite(PROJECT_ROOT / "suites" / f"{other}.yaml").datasets if d.simulate is not None}
             assert not taken & seeds, other
