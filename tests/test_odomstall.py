@@ -175,19 +175,27 @@ def _tracked(world, out, source: list[str], stalls: str, jumps: str = "match"):
     return float(np.max(np.hypot(x - truth[0], y - truth[1]))), s, said
 
 
-def test_a_stalled_office_is_tracked_through_its_stalls(tmp_path):
+@pytest.mark.parametrize("faults, causes, line, off", [
+    (dict(odom_stalls=2, odom_stall_s=6.0), ["hold", "hold"],
+     "the odometry held its pose 2 times while the scans showed the robot moving", ("keep", "match")),
+    (dict(odom_resets=2, odom_reset_s=4.0), ["hold+jump", "hold+jump"], "the odometry jumped 2 times",
+     ("fill", "hedge"))])
+def test_an_office_is_tracked_through_stalls_and_restarts(tmp_path, faults, causes, line, off):
     # An office drive whose odometry stalls twice for 6 s at 0.5 m/s (heldout21's office-stalls-long): with the
     # odometry held every scan is gated and the estimate stays where the stall began, 2.6 m behind (motion.stalls
     # keep: max 2.62 m measured); filled by scan matching, the track holds (max 0.22 m measured, 0.08 m on this world
     # without stalls; 0.5 m is the suites' bound for a lost track).
+    # The same drive whose base driver is down 4 s twice, then restarts from 0 0 0: matched (motion.jumps match, the
+    # default) the track holds (max 0.08 m measured); hedged (half the particles take the jump, the others stay where
+    # the hold left them) it is lost for a while (6.9 m).
     world = tmp_path / "world"
-    simulate(world, kind="office", seed=2707, duration=60.0, odom_stalls=2, odom_stall_s=6.0)
+    simulate(world, kind="office", seed=2707, duration=60.0, **faults)
     log = [f"log={world / 'log.clf'}"]
     err, s, said = _tracked(world, tmp_path, log, "fill")
     assert err < 0.5
-    assert len(s["odometry_stalls"]) == 2
-    assert sum("the odometry held its pose 2 times while the scans showed the robot moving" in m for m in said) == 1
-    err, s, said = _tracked(world, tmp_path, log, "keep")
+    assert [w["cause"] for w in s["odometry_stalls"]] == causes
+    assert sum(line in m for m in said) == 1
+    err, s, said = _tracked(world, tmp_path, log, *off)
     assert err > 1.5 and "odometry_stalls" not in s
 
 
@@ -310,18 +318,3 @@ def test_a_reset_after_the_driver_was_down_fills_the_hold(resets):
     for w, (a, b) in zip(fill.stalls, windows):
         assert a - 0.25 <= w.t0 < a and b <= w.t1 < b + 0.25
     _windows_match_the_truth(world, scans, out, [(w.t0, w.t1) for w in fill.stalls], 0.15)
-
-
-def test_an_office_whose_odometry_restarts_is_tracked(tmp_path):
-    # An office drive whose base driver is down 4 s twice, then restarts from 0 0 0: matched (motion.jumps match,
-    # the default) the track holds (max 0.08 m measured; 0.5 m is the suites' bound for a lost track); hedged (half
-    # the particles take the jump, the others stay where the hold left them) it is lost for a while (6.9 m).
-    world = tmp_path / "world"
-    simulate(world, kind="office", seed=2707, duration=60.0, odom_resets=2, odom_reset_s=4.0)
-    log = [f"log={world / 'log.clf'}"]
-    err, s, said = _tracked(world, tmp_path, log, "fill")
-    assert err < 0.5
-    assert [w["cause"] for w in s["odometry_stalls"]] == ["hold+jump", "hold+jump"]
-    assert sum("the odometry jumped 2 times" in m for m in said) == 1
-    err, s, said = _tracked(world, tmp_path, log, "fill", "hedge")
-    assert err > 1.5

@@ -736,6 +736,12 @@ def test_scan_gaps_from_the_command_line(tmp_path):
     assert yaml.safe_load((tmp_path / "sim.yaml").read_text())["scan_gaps"] == [[8.5, 11.5], [18.5, 21.5]]
 
 
+def _odom_lines(world):
+    """(ipc_timestamps, x y theta tv rv (T, 5)) of the ODOM lines of ``world``'s log.clf."""
+    rows = [line.split() for line in (world / "log.clf").read_text().splitlines() if line.startswith("ODOM")]
+    return np.array([float(r[-3]) for r in rows]), np.array([[float(v) for v in r[1:6]] for r in rows])
+
+
 def test_odometry_stalls_hold_the_pose_and_lose_the_motion_only(tmp_path):
     # An encoder driver that hangs twice for 3 s: the laser and the truth are the same bytes; the odometry holds its
     # pose (no velocity) inside each window and afterwards goes on with the same steps from the held pose.
@@ -747,12 +753,7 @@ def test_odometry_stalls_hold_the_pose_and_lose_the_motion_only(tmp_path):
     stalls = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["odom_stalls"]
     assert stalls == [[8.5, 11.5], [18.5, 21.5]]
 
-    def odom(w):
-        rows = [line.split() for line in (tmp_path / w / "log.clf").read_text().splitlines()
-                if line.startswith("ODOM")]
-        return np.array([float(r[-3]) for r in rows]), np.array([[float(v) for v in r[1:6]] for r in rows])
-
-    (t, a), (tb, b) = odom("a"), odom("b")
+    (t, a), (tb, b) = _odom_lines(tmp_path / "a"), _odom_lines(tmp_path / "b")
     np.testing.assert_array_equal(t, tb)
     inside = np.any([(t >= w0) & (t < w1) for w0, w1 in stalls], axis=0)
     for w0, w1 in stalls:
@@ -783,12 +784,8 @@ def test_odometry_resets_restart_from_zero_and_keep_every_other_step(tmp_path):
     resets = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["odom_resets"]
     assert resets == [[9.0, 11.0], [19.0, 21.0]]
 
-    def odom(w):
-        rows = [line.split() for line in (tmp_path / w / "log.clf").read_text().splitlines()
-                if line.startswith("ODOM")]
-        return np.array([float(r[-3]) for r in rows]), np.array([[float(v) for v in r[1:4]] for r in rows])
-
-    (t, a), (_, b) = odom("a"), odom("b")
+    (t, a), (_, b) = _odom_lines(tmp_path / "a"), _odom_lines(tmp_path / "b")
+    a, b = a[:, :3], b[:, :3]
     ends = [int(np.searchsorted(t, w1)) for _, w1 in resets]
     for k in ends:
         np.testing.assert_array_equal(b[k], [0.0, 0.0, 0.0])  # restarted
