@@ -178,7 +178,8 @@ class MotionConfig:
     # motion there from scan matching (mcl.odomstall), with a warning; "keep" leaves it still (every scan gated)
     stalls: Literal["fill", "keep"] = "keep"
     # an odometry step the filter would call a jump (filter.max_odom_step, max_odom_ratio, max_odom_speed: a base
-    # driver that restarted from 0 0 0, a glitch): "match" takes that step from scan matching and moves the odometry
+    # driver that restarted from 0 0 0, a glitch) and faster than 5 m/s or with the scans not overlapping at it:
+    # "match" takes that step from scan matching and moves the odometry
     # after it to go on from there (mcl.odomstall), with a warning; "hedge" leaves it to the filter (half the
     # particles take the step, the others are re-spread where they were)
     jumps: Literal["match", "hedge"] = "hedge"

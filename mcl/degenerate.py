@@ -21,9 +21,9 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
   other particle takes the step (the motion model's noise grows with it), the
   others are re-spread by ``filter.respread_std`` where they were (poses off
   the allowed map are drawn again), and the scan decides. Non-finite odometry
-  is only re-spread. With ``motion.jumps: match`` a jump faster than 5 m/s (a
-  driver that restarted from 0 0 0) is taken from scan matching before the
-  filter sees it (``mcl.odomstall``);
+  is only re-spread. With ``motion.jumps: match`` a jump faster than 5 m/s, or
+  one the scans do not overlap at (a driver that restarted from 0 0 0), is
+  taken from scan matching before the filter sees it (``mcl.odomstall``);
 * ``degenerate_weights``: every weight is zero after the correction (no pose
   explains the scan): the filter re-spreads the particles around the last
   estimate moved by the odometry step, twice wider each consecutive time, and
