@@ -679,7 +679,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
              doubled_walls: int = 0, map_scale: float = 1.0, map_rotation: float = 0.0, scan_gaps: int = 0,
              scan_gap_s: float = 5.0, odom_stalls: int = 0, odom_stall_s: float = 3.0, odom_resets: int = 0,
-             odom_reset_s: float = 0.0, _check_only: bool = False) -> dict | None:
+             odom_reset_s: float = 0.0, odom_slips: int = 0, odom_slip_s: float = 2.0, _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -754,6 +754,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     pose starting again from (0, 0, 0) where the robot then is. With ``odom_reset_s`` = S > 0 the driver is down for
     S seconds first: the odometry holds its pose there (as ``odom_stalls``), the motion in it lost. The laser and
     the truth are the same bytes as without; ``sim.yaml`` lists the windows. 0 leaves every output byte-identical.
+    ``odom_slips`` = N makes the right wheel slip N times for ``odom_slip_s`` seconds, evenly spread (``_slipped``): a
+    wheel spinning on a wet or dusty floor reads twice the robot's travel, so the odometry there reads 1.5 times the
+    translation and a turn of the travel over ``SLIP_BASE`` (its wheel base) on top of the true one, then goes on
+    rigidly from where that left it. The laser and the truth are the same bytes as without; ``sim.yaml`` lists the
+    windows. 0 leaves every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -839,6 +844,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(odom_reset_s, (int, float, np.number)) and not isinstance(odom_reset_s, bool)
            and math.isfinite(odom_reset_s) and 0.0 <= odom_reset_s <= 60.0, "odom_reset_s",
            f"expected 0..60 s, got {odom_reset_s!r}")
+    _check(isinstance(odom_slips, (int, np.integer)) and not isinstance(odom_slips, bool)
+           and 0 <= odom_slips <= 20, "odom_slips", f"expected 0..20, got {odom_slips!r}")
+    _check(isinstance(odom_slip_s, (int, float, np.number)) and not isinstance(odom_slip_s, bool)
+           and math.isfinite(odom_slip_s) and 0.5 <= odom_slip_s <= 60.0, "odom_slip_s",
+           f"expected 0.5..60 s, got {odom_slip_s!r}")
     _check(scan_gaps == 0 or not depth, "scan_gaps",
            "scan gaps are made without depth frames: set depth to false")
     _check(map_rotation == 0.0 or not (landmarks or depth), "map_rotation",
@@ -904,6 +914,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     resets = _grey_windows(t, int(odom_resets), float(duration), float(odom_reset_s)) if odom_resets else []
     if resets:
         odom, tv, rv = _reset(odom, tv, rv, t, resets)
+    slips = _grey_windows(t, int(odom_slips), float(duration), float(odom_slip_s)) if odom_slips else []
+    if slips:
+        odom, tv, rv = _slipped(odom, tv, rv, t, slips)
     scan_ticks = np.arange(0, n_ticks, scan_every)
     angles = beam_angles(int(n_beams), fov)
     blocked = world.blocked
@@ -1087,6 +1100,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["scan_gaps"] = [[round(a, 3), round(b, 3)] for a, b in gaps]
     if stalls:
         params["odom_stalls"] = [[round(a, 3), round(b, 3)] for a, b in stalls]
+    if slips:
+        params["odom_slips"] = [[round(a, 3), round(b, 3)] for a, b in slips]
     if resets:
         params["odom_resets"] = [[round(a, 3), round(b, 3)] for a, b in resets]
     if grey:
@@ -1295,6 +1310,39 @@ def _reset(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, wind
     return odom, tv, rv
 
 
+SLIP_BASE = 0.4  # m: the wheel base of ``_slipped``'s differential drive
+
+
+def _slipped(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, windows) -> tuple:
+    """(odometry poses, tv, rv) with the right wheel slipping over each window [a, b) of ``t``: it reads twice its
+    travel, so each odometry step there (translation d along (dx, dy), turn dth) reads (1.5 dx, 1.5 dy,
+    dth + d / SLIP_BASE) and tv, rv the same; after the window every pose goes on rigidly from where the slip left
+    it (each later pose p becomes slipped_end ∘ end^-1 ∘ p)."""
+    from mcl.estimate import compose, inverse
+
+    odom, tv, rv = odom.copy(), tv.copy(), rv.copy()
+    for a, b in windows:
+        ka, kb = int(np.searchsorted(t, a)), int(np.searchsorted(t, b))
+        if ka == 0 or ka >= kb:
+            continue
+        kb = min(kb, t.size)
+        orig = odom.copy()
+        for k in range(ka, kb):
+            step = compose(inverse(orig[k - 1]), orig[k])
+            d = math.copysign(math.hypot(step[0], step[1]), step[0])
+            odom[k] = compose(odom[k - 1], np.array([1.5 * step[0], 1.5 * step[1], step[2] + d / SLIP_BASE]))
+        tv[ka:kb] *= 1.5
+        rv[ka:kb] += tv[ka:kb] / 1.5 / SLIP_BASE
+        if kb < t.size:
+            fix = compose(odom[kb - 1], inverse(orig[kb - 1]))
+            c, s = math.cos(fix[2]), math.sin(fix[2])
+            x, y = orig[kb:, 0].copy(), orig[kb:, 1].copy()
+            odom[kb:, 0] = fix[0] + c * x - s * y
+            odom[kb:, 1] = fix[1] + s * x + c * y
+            odom[kb:, 2] = _wrap(orig[kb:, 2] + fix[2])
+    return odom, tv, rv
+
+
 def map_frame_poses(poses: np.ndarray, rotation: float, scale: float) -> np.ndarray:
     """World poses (N, 3) in the frame of a map turned by ``rotation`` rad about the frame's zero, then drawn
     ``scale`` times the world's size (``rotate_map``, ``map_scale``). Without a rotation the headings are the same
@@ -1473,6 +1521,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--odom-reset-s", type=float, default=0.0, metavar="S",
                         help="seconds each --odom-resets driver is down before it restarts, the odometry holding "
                         "its pose (0-60); default 0")
+    parser.add_argument("--odom-slips", type=int, default=0, metavar="N",
+                        help="a wheel slipping N times over the run (evenly spread) for --odom-slip-s each: the "
+                        "odometry reads 1.5 times the travel and a turn the robot did not make; default 0")
+    parser.add_argument("--odom-slip-s", type=float, default=2.0, metavar="S",
+                        help="seconds of each --odom-slips slip (0.5-60); default 2")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1558,6 +1611,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     map_rotation=math.radians(map_rotation), scan_gaps=args.scan_gaps, scan_gap_s=args.scan_gap_s,
                     odom_stalls=args.odom_stalls, odom_stall_s=args.odom_stall_s,
                     odom_resets=args.odom_resets, odom_reset_s=args.odom_reset_s,
+                    odom_slips=args.odom_slips, odom_slip_s=args.odom_slip_s,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
                     holonomic=math.radians(holonomic))

@@ -446,6 +446,8 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(odom_stalls=1, odom_stall_s=0.2), "odom_stall_s"),
     (dict(odom_resets=True), "odom_resets"),
     (dict(odom_resets=1, odom_reset_s=-1.0), "odom_reset_s"),
+    (dict(odom_slips=-1), "odom_slips"),
+    (dict(odom_slips=1, odom_slip_s=0.1), "odom_slip_s"),
     (dict(scan_gaps=2, scan_gap_s=0.1), "scan_gap_s"),
     (dict(scan_gaps=1, depth=True), "scan_gaps"),
     (dict(map_rotation=float("inf")), "map_rotation"),
@@ -795,6 +797,34 @@ def test_odometry_resets_restart_from_zero_and_keep_every_other_step(tmp_path):
     inside = np.any([(t >= w0) & (t <= w1) for w0, w1 in resets], axis=0)
     for k in [k for k in range(1, t.size) if not inside[k] and not inside[k - 1]][::7]:
         np.testing.assert_allclose(compose(inverse(b[k - 1]), b[k]), compose(inverse(a[k - 1]), a[k]), atol=2e-5)
+
+
+def test_a_slipping_wheel_reads_more_travel_and_a_turn_the_robot_did_not_make(tmp_path):
+    # The right wheel slips twice for 2 s: the laser and the truth are the same bytes; inside each window every
+    # odometry step reads 1.5 times its translation and its turn plus the travel over SLIP_BASE; outside, the same
+    # steps as without.
+    from mcl.cli import main
+    from mcl.runner import compose, inverse
+    from mcl.simulate import SLIP_BASE
+
+    simulate(tmp_path / "a", kind="office", seed=6, duration=30.0)
+    assert main(["simulate", str(tmp_path / "b"), "--kind", "office", "--seed", "6", "--duration", "30",
+                 "--odom-slips", "2"]) == 0
+    assert (tmp_path / "a" / "truth.tum").read_bytes() == (tmp_path / "b" / "truth.tum").read_bytes()
+    slips = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())["odom_slips"]
+    assert slips == [[9.0, 11.0], [19.0, 21.0]]
+    (t, a), (_, b) = _odom_lines(tmp_path / "a"), _odom_lines(tmp_path / "b")
+    inside = np.any([(t >= w0) & (t < w1) for w0, w1 in slips], axis=0)
+    turned = 0.0
+    for k in range(1, t.size):
+        sa, sb = compose(inverse(a[k - 1, :3]), a[k, :3]), compose(inverse(b[k - 1, :3]), b[k, :3])
+        if inside[k]:
+            d = np.copysign(np.hypot(sa[0], sa[1]), sa[0])
+            np.testing.assert_allclose(sb, [1.5 * sa[0], 1.5 * sa[1], sa[2] + d / SLIP_BASE], atol=3e-5)
+            turned += d / SLIP_BASE
+        else:
+            np.testing.assert_allclose(sb, sa, atol=3e-5)
+    assert turned > 2.0  # the turns the robot did not make: 1 rad/s and more
 
 
 def test_doubled_walls_from_the_command_line(tmp_path):
