@@ -829,26 +829,15 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(map_rotation, (int, float, np.number)) and not isinstance(map_rotation, bool)
            and math.isfinite(map_rotation) and abs(map_rotation) <= math.pi, "map_rotation",
            f"expected -pi..pi rad, got {map_rotation!r}")
-    _check(isinstance(scan_gaps, (int, np.integer)) and not isinstance(scan_gaps, bool) and 0 <= scan_gaps <= 20,
-           "scan_gaps", f"expected 0..20, got {scan_gaps!r}")
-    _check(isinstance(scan_gap_s, (int, float, np.number)) and not isinstance(scan_gap_s, bool)
-           and math.isfinite(scan_gap_s) and 0.5 <= scan_gap_s <= 60.0, "scan_gap_s",
-           f"expected 0.5..60 s, got {scan_gap_s!r}")
-    _check(isinstance(odom_stalls, (int, np.integer)) and not isinstance(odom_stalls, bool)
-           and 0 <= odom_stalls <= 20, "odom_stalls", f"expected 0..20, got {odom_stalls!r}")
-    _check(isinstance(odom_stall_s, (int, float, np.number)) and not isinstance(odom_stall_s, bool)
-           and math.isfinite(odom_stall_s) and 0.5 <= odom_stall_s <= 60.0, "odom_stall_s",
-           f"expected 0.5..60 s, got {odom_stall_s!r}")
-    _check(isinstance(odom_resets, (int, np.integer)) and not isinstance(odom_resets, bool)
-           and 0 <= odom_resets <= 20, "odom_resets", f"expected 0..20, got {odom_resets!r}")
-    _check(isinstance(odom_reset_s, (int, float, np.number)) and not isinstance(odom_reset_s, bool)
-           and math.isfinite(odom_reset_s) and 0.0 <= odom_reset_s <= 60.0, "odom_reset_s",
-           f"expected 0..60 s, got {odom_reset_s!r}")
-    _check(isinstance(odom_slips, (int, np.integer)) and not isinstance(odom_slips, bool)
-           and 0 <= odom_slips <= 20, "odom_slips", f"expected 0..20, got {odom_slips!r}")
-    _check(isinstance(odom_slip_s, (int, float, np.number)) and not isinstance(odom_slip_s, bool)
-           and math.isfinite(odom_slip_s) and 0.5 <= odom_slip_s <= 60.0, "odom_slip_s",
-           f"expected 0.5..60 s, got {odom_slip_s!r}")
+    # windows of the log's faults: how many (0..20) and how long each
+    for key, n, key_s, seconds, lo in (("scan_gaps", scan_gaps, "scan_gap_s", scan_gap_s, 0.5),
+                                       ("odom_stalls", odom_stalls, "odom_stall_s", odom_stall_s, 0.5),
+                                       ("odom_resets", odom_resets, "odom_reset_s", odom_reset_s, 0.0),
+                                       ("odom_slips", odom_slips, "odom_slip_s", odom_slip_s, 0.5)):
+        _check(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and 0 <= n <= 20, key,
+               f"expected 0..20, got {n!r}")
+        _check(isinstance(seconds, (int, float, np.number)) and not isinstance(seconds, bool)
+               and math.isfinite(seconds) and lo <= seconds <= 60.0, key_s, f"expected {lo:g}..60 s, got {seconds!r}")
     _check(scan_gaps == 0 or not depth, "scan_gaps",
            "scan gaps are made without depth frames: set depth to false")
     _check(map_rotation == 0.0 or not (landmarks or depth), "map_rotation",
@@ -1285,12 +1274,15 @@ def _stalled(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, wi
         odom[ka:kb] = odom[ka - 1]
         tv[ka:kb] = 0.0
         rv[ka:kb] = 0.0
-        c, s = math.cos(fix[2]), math.sin(fix[2])
-        x, y = odom[kb:, 0].copy(), odom[kb:, 1].copy()
-        odom[kb:, 0] = fix[0] + c * x - s * y
-        odom[kb:, 1] = fix[1] + s * x + c * y
-        odom[kb:, 2] = _wrap(odom[kb:, 2] + fix[2])
+        odom[kb:] = _composed(fix, odom[kb:])
     return odom, tv, rv
+
+
+def _composed(fix: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """fix ∘ p for each pose p of ``poses`` (K, 3): odometry moved rigidly."""
+    c, s = math.cos(fix[2]), math.sin(fix[2])
+    x, y = poses[:, 0], poses[:, 1]
+    return np.column_stack([fix[0] + c * x - s * y, fix[1] + s * x + c * y, _wrap(poses[:, 2] + fix[2])])
 
 
 def _reset(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, windows) -> tuple:
@@ -1334,12 +1326,7 @@ def _slipped(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, wi
         tv[ka:kb] *= 1.5
         rv[ka:kb] += tv[ka:kb] / 1.5 / SLIP_BASE
         if kb < t.size:
-            fix = compose(odom[kb - 1], inverse(orig[kb - 1]))
-            c, s = math.cos(fix[2]), math.sin(fix[2])
-            x, y = orig[kb:, 0].copy(), orig[kb:, 1].copy()
-            odom[kb:, 0] = fix[0] + c * x - s * y
-            odom[kb:, 1] = fix[1] + s * x + c * y
-            odom[kb:, 2] = _wrap(orig[kb:, 2] + fix[2])
+            odom[kb:] = _composed(compose(odom[kb - 1], inverse(orig[kb - 1])), orig[kb:])
     return odom, tv, rv
 
 
