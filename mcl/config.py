@@ -63,7 +63,8 @@ class FilterConfig:
     update_min_a: float = field(default=0.05, metadata=_rng(0.0))  # rad turned before an update (AMCL)
     # estimate: mean of the heaviest cluster (AMCL's pf_cluster_stats) or of the whole set (mcl.clusters)
     estimate: Literal["cluster", "mean"] = "cluster"
-    cluster_size: float = field(default=0.5, metadata=_rng(1e-3))  # m, histogram cell for clusters (a cell key overflows below a mm)
+    # m, histogram cell for clusters (a cell key overflows below a mm)
+    cluster_size: float = field(default=0.5, metadata=_rng(1e-3))
     cluster_angle: float = field(default=0.5236, metadata=_rng(0.0, 6.2832, lo_open=True))  # rad, its theta cell
     # degenerate input (mcl.filter): an odometry step longer than this is a jump, not motion
     max_odom_step: float = field(default=2.0, metadata=_rng(0.0, lo_open=True))  # m
@@ -90,7 +91,8 @@ class FilterConfig:
     # auto: augmented for global localization, off when tracking from a pose; false: never.
     recovery: bool | Literal["lost", "augmented", "auto"] = False
     recovery_fraction: float = field(default=0.1, metadata=_rng(0.0, 1.0, lo_open=True))
-    recovery_local_std: tuple[float, float, float] = (0.5, 0.5, 0.3)  # lost: std x, y (m), theta (rad) around the estimate
+    # lost: std x, y (m), theta (rad) around the estimate
+    recovery_local_std: tuple[float, float, float] = (0.5, 0.5, 0.3)
     # lost: lost updates before the spread around the estimate (and the tempered scan) while the lost scans look
     # occluded; a scan that refutes the estimate (mcl.quality.ScanQuality.refutes) spreads at once. 0: always at once
     recovery_wait: int = field(default=0, metadata=_rng(0, 10_000))
@@ -108,7 +110,8 @@ class FilterConfig:
     # track, or a spread pose near it, fitting again) re-seeds at once (mcl.adaptive.LostRecovery.relapsed; 0: off)
     recovery_relapse_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))
     recovery_reseed: bool = True  # lost: after global_after lost updates add a whole global set (not 5 % a step)
-    recovery_probation: int = field(default=0, metadata=_rng(0, 1_000_000))  # updates after a search a lost call re-seeds
+    # updates after a search a lost call re-seeds
+    recovery_probation: int = field(default=0, metadata=_rng(0, 1_000_000))
     # the probation after a global search counts from its first update whose estimate fits the scan (fit: holding
     # ends), or starts again when its heaviest cluster settles after that (settled: tempering ends)
     recovery_probation_from: Literal["fit", "settled"] = "fit"
@@ -118,7 +121,8 @@ class FilterConfig:
     stall_window: float = field(default=3.0, metadata=_rng(0.0, 1e6, lo_open=True))
     stall_travel: float = field(default=1.5, metadata=_rng(0.0, 1e6, lo_open=True))
     stall_active: float = field(default=60.0, metadata=_rng(0.0, 1e9))
-    recovery_reseed_keep: float = field(default=0.5, metadata=_rng(0.0, 1.0, lo_open=True))  # prior mass of the old cloud
+    # prior mass of the old cloud
+    recovery_reseed_keep: float = field(default=0.5, metadata=_rng(0.0, 1.0, lo_open=True))
     # an unprotected re-seed that kept the old cloud: until the filter is no longer lost, the pose reported is the
     # old estimate moved by the odometry, not the heaviest cluster of the uniform poses (ParticleFilter._report_held;
     # the pose reported only)
@@ -131,7 +135,8 @@ class FilterConfig:
     # ProbationChallenge.WINDOW updates in a row on probation is below this; 0: off
     probation_fit: float = field(default=0.0, metadata=_rng(0.0, 1.0))
     global_density: float = field(default=0.0, metadata=_rng(0.0, 1e6))  # uniform candidates per m2 of free space
-    search_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # laser log-lik x this while searching
+    # laser log-lik x this while searching
+    search_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))
     lost_exponent: float = field(default=1.0, metadata=_rng(0.0, 1.0, lo_open=True))  # ... while lost (lost recovery)
     # while searching, every particle first takes this many scan-matching steps (ParticleFilter._match_scan); 0: off
     search_refine: int = field(default=0, metadata=_rng(0, 50))
@@ -206,7 +211,8 @@ class MotionConfig:
     fault_contradiction: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # a lost call opens it from this
     fault_turn_max: float = field(default=0.0, metadata=_rng(0.0))  # rad/s: cap on p_k's heading std per s (0: none)
     fault_shift_max: float = field(default=1.5, metadata=_rng(0.0))  # m/s: cap on p_k's translation std per s (0: none)
-    fault_widen_after: int = field(default=5, metadata=_rng(0, 1_000_000))  # a window's first lost updates with the caps
+    # a window's first lost updates with the caps
+    fault_widen_after: int = field(default=5, metadata=_rng(0, 1_000_000))
     # online odometry scale (mcl.adaptive.OdometryScale): metres of travel its estimate forgets over; 0: off
     scale_window: float = field(default=0.0, metadata=_rng(0.0))
     scale_prior: float = field(default=10.0, metadata=_rng(0.0))  # metres of travel at scale 1 it starts from
@@ -406,8 +412,10 @@ class QualityConfig:
     """The localization-quality signal and the lost belief (mcl.quality)."""
 
     distance: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m: a beam matches the map within this
-    lost_below: float = field(default=0.6, metadata=_rng(-2.0, 1.0))  # an update is bad when match - 2 contradiction < this
-    lost_after: int = field(default=3, metadata=_rng(1, 10_000))  # lost when this many of the last 2k-1 updates were bad
+    # an update is bad when match - 2 contradiction < this
+    lost_below: float = field(default=0.6, metadata=_rng(-2.0, 1.0))
+    # lost when this many of the last 2k-1 updates were bad
+    lost_after: int = field(default=3, metadata=_rng(1, 10_000))
     # ... or at once when one update's score is below this (-2: never, no score is lower)
     lost_at_once_below: float = field(default=-2.0, metadata=_rng(-2.0, 1.0))
     # such a call on a track whose last 2 lost_after - 1 scores were all at least this is a collapse (a kidnap's
