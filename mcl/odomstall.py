@@ -141,6 +141,7 @@ class StallFill:
                     yield self._moved(s, fix)
                 continue
             same = prev is not None and _same(s.odom, prev.odom)
+            own = compose(inverse(prev.odom), s.odom) if prev is not None else None  # the odometry's step
             step = None  # the robot's step from prev to s, when not the odometry's own
             if held:
                 held.append(s)
@@ -167,29 +168,32 @@ class StallFill:
             else:
                 if not same:
                     parked = False
-                own = compose(inverse(prev.odom), s.odom) if prev is not None else None
-                if (guard is not None and own is not None and not same
-                        and _jumped(guard, own, s.t - prev.t, prev, s, self.mount_of(s))):
-                    # a jump (a driver that restarted from 0 0 0, a glitch): the step is the scans', and the
-                    # odometry after it goes on from there; unless the scans match best at the odometry's own step
-                    # (a long step that is motion: a log with a scan every few metres)
-                    step = self._match([prev, s], step_rate, own)[-1, 1:4]
-                    if _agree(step, own):
-                        step = None
-                    else:
-                        fix = compose(compose(compose(fix, prev.odom), step), inverse(s.odom))
-                        self.stalls.append(Stall(float(prev.t), float(s.t), 1, float(math.hypot(step[0], step[1])),
-                                                 float(math.hypot(own[0], own[1])), "jump"))
+                    if guard is not None and own is not None:
+                        fix, step = self._jump(prev, s, own, step_rate, fix, guard)
                 yield self._moved(s, fix)
             if prev is not None and not same:
                 dt = s.t - prev.t
                 if dt > 0.0:
                     # the last two steps, the faster first: a hold that began between two scans leaves the last short
-                    rate, last_rate = (step if step is not None else compose(inverse(prev.odom), s.odom)) / dt, rate
+                    rate, last_rate = (step if step is not None else own) / dt, rate
                     step_rate = np.array(sorted((rate, last_rate), key=lambda r: -math.hypot(r[0], r[1])))
             prev = s
         if held:
             yield from self._resolve(anchor, anchor_out, held, entry, fix, guard)
+
+    def _jump(self, prev, s, own, entry, fix, guard):
+        """(the correction after scan ``s``, the robot's step into it or None: the odometry's own ``own``). Where the
+        odometry's step from ``prev`` jumped (``_jumped``: a driver that restarted from 0 0 0, a glitch), the step is
+        the scans' (guessed from the rates ``entry`` and from ``own``) and the odometry after it goes on from there;
+        unless the scans match best at the odometry's own step (a long step that is motion)."""
+        if not _jumped(guard, own, s.t - prev.t, prev, s, self.mount_of(s)):
+            return fix, None
+        step = self._match([prev, s], entry, own)[-1, 1:4]
+        if _agree(step, own):
+            return fix, None
+        self.stalls.append(Stall(float(prev.t), float(s.t), 1, float(math.hypot(step[0], step[1])),
+                                 float(math.hypot(own[0], own[1])), "jump"))
+        return compose(compose(compose(fix, prev.odom), step), inverse(s.odom)), step
 
     @staticmethod
     def _moved(s, fix):
