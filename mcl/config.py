@@ -213,6 +213,9 @@ class MotionConfig:
     fault_shift_max: float = field(default=1.5, metadata=_rng(0.0))  # m/s: cap on p_k's translation std per s (0: none)
     # a window's first lost updates with the caps
     fault_widen_after: int = field(default=5, metadata=_rng(0, 1_000_000))
+    # a wheel's slip on every update outside the window (with fault_prob and fault_share): p_k's heading stds this
+    # times the step's own turn (up to fault_scale times the model's), its translation the model's. 0: off
+    slip_turn: float = field(default=0.0, metadata=_rng(0.0))
     # online odometry scale (mcl.adaptive.OdometryScale): metres of travel its estimate forgets over; 0: off
     scale_window: float = field(default=0.0, metadata=_rng(0.0))
     scale_prior: float = field(default=10.0, metadata=_rng(0.0))  # metres of travel at scale 1 it starts from

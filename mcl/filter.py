@@ -131,7 +131,7 @@ class StepInfo:
     cluster_weight: float = 1.0  # weight of the heaviest cluster, whose mean is the estimate
     fit: Fit | None = None  # the scan laid on the map at the estimate (mcl.quality); None without a laser scan
     lost: bool = False  # the filter believes it is lost (mcl.quality)
-    faults: bool = False  # the motion of this update allowed odometry faults (motion.fault_*, mcl.adaptive.FaultWindow)
+    faults: bool = False  # the motion of this update was in an odometry-fault window (motion.fault_*, FaultWindow)
     skipped_beams: int = 0  # beams ignored by beam skipping
     skipped_endpoints: np.ndarray | None = None  # (2, skipped_beams) their robot-frame endpoints (None: none skipped)
     events: tuple[str, ...] = ()  # degenerate-input events of this update (kinds of ParticleFilter.events)
@@ -522,14 +522,13 @@ class ParticleFilter:
         _, d, k = self._scale_step
         self.odom_scale.observe(post[0] - prior[0], d, k)
 
-    @staticmethod
-    def _weigh_motion(logw: np.ndarray, ok, lw, info: StepInfo) -> None:
+    def _weigh_motion(self, logw: np.ndarray, ok, lw, info: StepInfo) -> None:
         """Fold a motion's outcome into the log-weights ``logw`` of the particles it moved (in place: the set's, or
         a view of its moved part): the odometry-fault proposal's importance weights ``lw``, and weight zero where
         the map rejected every try (``ok`` False)."""
         if lw is not None:
             logw += lw
-            info.faults = True
+            info.faults = info.faults or self.faults.open  # the window's faults (a wheel's slip is always allowed)
         if ok is not None and not ok.all():
             bad = ~ok
             info.rejected = int(np.count_nonzero(bad))
@@ -1125,7 +1124,9 @@ class ParticleFilter:
         self.search.observe(info.lost, info.cluster_weight if self.protected is None else 0.0, self.last_estimate.cov)
         if self.faults is not None:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
-            self.faults.observe(info.lost, c if c == c else 0.0)
+            cov = info.full_cov
+            spread = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) if cov is not None else 0.0
+            self.faults.observe(info.lost, c if c == c else 0.0, spread)
         if self.recovery is not None:
             self.recovery.observe_lost(info.lost, info.cluster_weight, self._dt, self.quality.refutes(fit),
                                        self.quality.collapsed)

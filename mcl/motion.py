@@ -37,6 +37,12 @@ although it is rare) and each particle carries the importance weight
 p_f / q of its noise (``fault_log_weights``): a pose off the ordinary cloud
 must out-score it by log(share / prob) before it is believed.
 
+A wheel's slip (``turn_rel``, ``motion.slip_turn``): one wheel spinning on a
+wet floor reads travel the robot did not make, and the odometry turns the
+robot that did not turn (1-2 rad/s for a 0.4 m wheel base). Its p_k widens
+the heading alone, to ``turn_rel`` times the step's own turn: the turn may be
+the wheel's, not the robot's, and a step without a turn has none to doubt.
+
 All random numbers come from the caller's ``numpy.random.Generator``
 (standard normals, drawn outside the numba kernels), so one seed gives the
 same particles whatever the numba thread count.
@@ -130,12 +136,24 @@ class FaultProposal:
     scale: float
     turn_max: float = 0.0
     shift_max: float = 0.0
+    turn_rel: float = 0.0
 
-    def scales(self, sigmas, turns=(0, 2), shifts=(1,), dt: float = 1.0) -> list:
+    def scales(self, sigmas, turns=(0, 2), shifts=(1,), dt: float = 1.0, turned=None) -> list:
         """The fault component's multiplier of each noise dimension (3 values, or arrays shaped like
         ``sigmas``' items): ``scale``, but at most ``turn_max`` / (sigma dt) for the heading dimensions ``turns``
         and ``shift_max`` / (sigma dt) for the translation ones ``shifts`` (dt converts a rate's sigma to an angle
-        or a distance; a cap of 0 is none), and at least 1."""
+        or a distance; a cap of 0 is none), and at least 1. A slip's (``turn_rel`` > 0): ``turn_rel`` |turned_d| /
+        sigma_d for the heading dimensions, ``turned`` the step's own turn in each dimension (within 1 and
+        ``scale``), 1 for the others; without ``turned`` (a density, not a step) it is the plain model."""
+        if self.turn_rel > 0.0:
+            k = [np.float64(1.0)] * 3
+            if turned is not None:
+                for d in turns:
+                    sg = np.asarray(sigmas[d], dtype=np.float64)
+                    want = self.turn_rel * np.abs(np.asarray(turned[d], dtype=np.float64))
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        k[d] = np.where(sg > 0.0, np.clip(want / sg, 1.0, self.scale), 1.0)
+            return k
         k = [np.float64(self.scale)] * 3
         for dims, cap in ((turns, self.turn_max), (shifts, self.shift_max)):
             if cap > 0.0:
@@ -258,7 +276,7 @@ class OdometryMotionModel:
         noise, idx_all = self._buffers(n)
         kind = getattr(self.cfg, "noise", "normal")
         standard_noise(kind, rng, out=noise)  # normal: rng.standard_normal
-        k = fault.scales(sigmas, **dims) if fault is not None else None
+        k = fault.scales(sigmas, **dims, turned=self._turned(deltas)) if fault is not None else None
         scales = fault_scales(n, fault, k, rng)
         if scales is not None:
             noise *= scales
@@ -274,6 +292,12 @@ class OdometryMotionModel:
         if fault is not None and log_weight is not None:
             log_weight[:] = fault_log_weights(noise, sigmas, kind, fault, k)
         return result
+
+    @staticmethod
+    def _turned(deltas):
+        """The step's turn in each noise dimension, as the noise sees it (a reversing robot's rot1 near pi turned
+        by its difference from pi; ``FaultProposal.scales``)."""
+        return noise_angle(deltas[0]), 0.0, noise_angle(deltas[2])
 
     def _step(self, odom_prev, odom_now):
         """(the step's deltas, their noise stds, the fault caps' dimensions for ``FaultProposal.scales``, the kernel,
@@ -332,6 +356,11 @@ class OmniMotionModel(OdometryMotionModel):
 
     ``cfg`` as ``OdometryMotionModel``'s, and ``alpha_strafe``.
     """
+
+    @staticmethod
+    def _turned(deltas):
+        """The step's turn in each noise dimension (its heading's alone)."""
+        return 0.0, 0.0, abs(deltas[2])
 
     def _step(self, odom_prev, odom_now):
         """``OdometryMotionModel._step`` of this model: bearing, trans, rot; the heading's noise is the turn's, the
@@ -812,7 +841,8 @@ class VelocityMotionModel:
             self._all = np.arange(n, dtype=np.int64)
         noise = standard_noise(self.noise_kind, rng, out=self._noise)
         # the heading noise: w and the final rotation gamma over dt; the translation: v over dt
-        k = fault.scales((sv, sw, sg), turns=(1, 2), shifts=(0,), dt=dt) if fault is not None else None
+        k = (fault.scales((sv, sw, sg), turns=(1, 2), shifts=(0,), dt=dt, turned=(0.0, w, 0.0))
+             if fault is not None else None)
         scales = fault_scales(n, fault, k, rng)
         if scales is not None:
             noise *= scales
