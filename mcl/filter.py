@@ -528,7 +528,7 @@ class ParticleFilter:
         the map rejected every try (``ok`` False)."""
         if lw is not None:
             logw += lw
-            info.faults = info.faults or self.faults.open  # the window's faults (a wheel's slip is always allowed)
+            info.faults = info.faults or self.faults.open  # a window (a slip outside it is not counted)
         if ok is not None and not ok.all():
             bad = ~ok
             info.rejected = int(np.count_nonzero(bad))
