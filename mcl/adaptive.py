@@ -827,7 +827,7 @@ class FaultWindow:
         self.wide = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale))
         self.turn_rate, self.shift_rate = float(mc.fault_turn_max), float(mc.fault_shift_max)  # per second
         self.widen_after = int(mc.fault_widen_after)
-        slip = float(getattr(mc, "slip_turn", 0.0))
+        slip = float(mc.slip_turn)
         self.slip = (FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale), turn_rel=slip)
                      if slip > 0.0 else None)
         self.reset()

@@ -1124,7 +1124,7 @@ class ParticleFilter:
         self.search.observe(info.lost, info.cluster_weight if self.protected is None else 0.0, self.last_estimate.cov)
         if self.faults is not None:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
-            cov = info.full_cov
+            cov = info.full_cov if self.faults.slip is not None else None  # the spread gates a wheel's slip alone
             spread = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) if cov is not None else 0.0
             self.faults.observe(info.lost, c if c == c else 0.0, spread)
         if self.recovery is not None:

@@ -1317,7 +1317,6 @@ def _slipped(odom: np.ndarray, tv: np.ndarray, rv: np.ndarray, t: np.ndarray, wi
         ka, kb = int(np.searchsorted(t, a)), int(np.searchsorted(t, b))
         if ka == 0 or ka >= kb:
             continue
-        kb = min(kb, t.size)
         orig = odom.copy()
         for k in range(ka, kb):
             step = compose(inverse(orig[k - 1]), orig[k])

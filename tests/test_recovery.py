@@ -289,7 +289,7 @@ def test_odometry_faults_are_allowed_from_a_lost_call_on_a_held_track_for_the_wi
     s = GlobalSearch()
     f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=3,
                                     fault_contradiction=0.1, fault_turn_max=0.0, fault_shift_max=0.0,
-                                    fault_widen_after=0), s)
+                                    fault_widen_after=0, slip_turn=0.0), s)
 
     def upd(lost, cluster_weight=1.0, contradiction=0.2):
         s.observe(lost, cluster_weight)
@@ -338,7 +338,7 @@ def test_the_fault_caps_hold_for_a_windows_first_lost_updates_then_it_widens():
     s = GlobalSearch()
     f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=2,
                                     fault_contradiction=0.1, fault_turn_max=0.5, fault_shift_max=1.5,
-                                    fault_widen_after=2), s)
+                                    fault_widen_after=2, slip_turn=0.0), s)
 
     def upd(lost):
         s.observe(lost, 1.0)
