@@ -188,6 +188,10 @@ class MotionConfig:
     # after it to go on from there (mcl.odomstall), with a warning; "hedge" leaves it to the filter (half the
     # particles take the step, the others are re-spread where they were)
     jumps: Literal["match", "hedge"] = "hedge"
+    # a step of the odometry that turns 0.15 rad or more while the scans turn 0.15 rad and half their own turn less
+    # (a wheel that slips: it reads travel the robot did not make, and turns it): "match" takes that step from scan
+    # matching and moves the odometry after it to go on from there (mcl.odomstall), with a warning; "keep" leaves it
+    slips: Literal["match", "keep"] = "keep"
     # the noise's distribution (mcl.noise), all with the std above: normal (NumPy's exact normal),
     # normal_twelve (sum of twelve uniforms) or triangular (two uniforms)
     noise: Literal["normal", "normal_twelve", "triangular"] = "normal"

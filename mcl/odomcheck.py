@@ -209,6 +209,12 @@ def _score(tree: cKDTree, pts: np.ndarray, m: np.ndarray, view=None) -> float:
     return float(np.mean(np.minimum(d, TRUNCATE) ** 2))
 
 
+def score_motion(first, key: Key, pts: np.ndarray, m: np.ndarray) -> float:
+    """``_score`` of the points ``pts`` of a second scan moved by the laser's motion ``m`` against the scan ``first``
+    (its ``key``), over what ``first`` could have seen: how far apart the two scans lie under that motion."""
+    return _score(key.tree, pts, m, _view(first, key.pts))
+
+
 def run_mount(scan, laser_pose=None) -> np.ndarray:
     """(3,) the laser's pose on the robot as a run takes it: ``sensor.laser_pose`` when given, else ``scan``'s own
     mounting (a log's, a bag's /tf_static), else the robot's centre."""

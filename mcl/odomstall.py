@@ -43,6 +43,15 @@ the velocity before it and from the odometry's own step; a match that agrees wit
 it), and the odometry after it goes on from there; and a hold that ends in such a jump is filled from the scans,
 however its step out compares (it is no catch-up). Scans of other lasers between the two keep the odometry as it
 came.
+
+A wheel that slips (spins on a wet or dusty floor) reads travel the robot did not make: the odometry turns the robot
+1-2 rad/s that did not turn (``suites/heldout23.yaml``), and the cloud turns with it. With ``slips``
+(``motion.slips: match``), a step of the first laser's odometry that turns ``SLIP_TURN`` rad or more between scans
+at most ``SLIP_DT`` s apart, and that the scans say turned less (``_slipped``), is taken from scan matching as a
+jump's is, and the odometry after it goes on from there. The shared logs' odometry turns up to a few per cent more
+than their scans on fast turns, and a simulated one's by up to 0.13 rad a step: the bounds leave those alone (no
+step of ``suites/synthetic.yaml``'s worlds is taken, one of belgioioso's: the odometry -0.24 rad, the scans -0.06,
+the reference -0.065).
 """
 
 from __future__ import annotations
@@ -54,7 +63,8 @@ import numpy as np
 
 from mcl.degenerate import InputGuard
 from mcl.estimate import compose, inverse, wrap_angle
-from mcl.laser_odometry import MIN_PAIRS, Key, icp, laser_odometry, scan_points
+from mcl.laser_odometry import MIN_PAIRS, Key, far_points, icp, laser_odometry, scan_points
+from mcl.odomcheck import MIN_RANGE, YAW_WEIGHT, score_motion
 
 ABRUPT_V = 0.2  # m/s: the odometry's last step before it held faster than this: a stall, not a stop ...
 ABRUPT_W = 0.3  # rad/s ... or turning faster than this
@@ -73,6 +83,24 @@ JUMP_V = 5.0  # m/s: an odometry jump faster than this is matched (no wheeled ro
 JUMP_OVERLAP = 0.1  # ... and a slower one that leaves under this share of the scan's points near the one before's
 OVERLAP_M = 0.15  # m: a point this near a point of the scan before overlaps it
 HELD = 1e-9  # m and rad: two odometry poses this close are the same pose
+# A wheel that slips (``slips``, ``_slipped``): a step of the first laser's odometry that turns SLIP_TURN rad or more
+# between scans at most SLIP_DT s apart is checked against the scans. Where the step with its turn halved or left
+# out lies under SLIP_FIT times as far from them as the step itself (a real turn's scans fit the step), the scans are
+# matched by ICP from the step with next to no prior: a slip when their turn differs from the odometry's by more than
+# SLIP_OFF plus SLIP_SHARE times their own (the shared logs' odometry turns a few per cent more than their scans on
+# fast turns), with SLIP_PAIRED of the points paired and the match under SLIP_FIT times as far as the step
+SLIP_DT = 0.6  # s: scans farther apart are not checked (aces, 1.5 s apart: matched 0.45 m where the robot drove 0.95)
+SLIP_TURN = 0.15  # rad
+SLIP_OFF = 0.15  # rad
+# ... and within SLIP_AFTER s of a slip found (a slip lasts seconds; its first and last steps are partial, and a
+# step of it that turned under SLIP_TURN let 0.1-0.13 rad through) SLIP_TURN_AFTER and SLIP_OFF_AFTER instead
+SLIP_AFTER = 1.0  # s
+SLIP_TURN_AFTER = 0.05  # rad
+SLIP_OFF_AFTER = 0.05  # rad
+SLIP_SHARE = 0.5
+SLIP_PAIRED = 0.5
+SLIP_FIT = 0.7
+SLIP_POINTS = 120  # the distances are measured over about this many of the second scan's points
 
 
 @dataclasses.dataclass
@@ -85,8 +113,12 @@ class Stall:
     matched: float  # m: the motion over the window by scan matching
     odometry: float  # m: ... by the odometry
     # "hold"; "jump": the odometry jumped from one scan to the next (a driver that restarted from 0 0 0, a glitch);
-    # "hold+jump": it held, then jumped (the driver was down a while before it restarted)
+    # "hold+jump": it held, then jumped (the driver was down a while before it restarted); "slip": the odometry's step
+    # turned more than the scans did (a wheel that slips)
     cause: str = "hold"
+    # "slip": the odometry's step turned (rad) ``odometry_turn``, the scans' ``matched_turn`` (0 for the others)
+    odometry_turn: float = 0.0
+    matched_turn: float = 0.0
 
 
 class StallFill:
@@ -94,12 +126,15 @@ class StallFill:
     each stall filled by scan matching (see the module doc); lazy, so a bag's scans still stream. ``mount_of(scan)``:
     the laser's pose on the robot as the run takes it. ``holds``: fill the holds (``motion.stalls: fill``);
     ``jumps``: ``filter``'s (max_odom_step, max_odom_ratio, max_odom_speed), to match the odometry's jumps as
-    ``mcl.degenerate.InputGuard`` tells them (``motion.jumps: match``), or None to leave them to the filter.
+    ``mcl.degenerate.InputGuard`` tells them (``motion.jumps: match``), or None to leave them to the filter;
+    ``slips``: take the steps a wheel's slip turned from the scans (``motion.slips: match``).
     ``stalls`` lists the windows filled by the last pass."""
 
-    def __init__(self, scans, mount_of, holds: bool = True, jumps: tuple | None = None) -> None:
+    def __init__(self, scans, mount_of, holds: bool = True, jumps: tuple | None = None, slips: bool = False) -> None:
         self.scans, self.mount_of = scans, mount_of
-        self.holds, self.jumps = holds, jumps
+        self.holds, self.jumps, self.slips = holds, jumps, slips
+        self._slipped: dict = {}  # each turning step's slip check, by its two scans: later passes reuse them
+        self._slip_at = -math.inf  # the time of the last slip found (this pass)
         self.stalls: list[Stall] = []
         self._list: list | None = None
         self._matched: dict = {}  # each hold's matches, by its first and last scan: later passes reuse them
@@ -116,6 +151,7 @@ class StallFill:
 
     def __iter__(self):
         self.stalls = []
+        self._slip_at = -math.inf
         return self._filled()
 
     def _filled(self):
@@ -170,6 +206,8 @@ class StallFill:
                     parked = False
                     if guard is not None and own is not None:
                         fix, step = self._jump(prev, s, own, step_rate, fix, guard)
+                    if self.slips and step is None and own is not None:
+                        fix, step = self._slip(prev, s, own, step_rate, fix)
                 yield self._moved(s, fix)
             if prev is not None and not same:
                 dt = s.t - prev.t
@@ -193,6 +231,26 @@ class StallFill:
             return fix, None
         self.stalls.append(Stall(float(prev.t), float(s.t), 1, float(math.hypot(step[0], step[1])),
                                  float(math.hypot(own[0], own[1])), "jump"))
+        return compose(compose(compose(fix, prev.odom), step), inverse(s.odom)), step
+
+    def _slip(self, prev, s, own, entry, fix):
+        """(the correction after scan ``s``, the robot's step into it or None: the odometry's own ``own``). Where the
+        odometry's step from ``prev`` turned more than the scans did (``_slipped``: a wheel that slips), the step is
+        the scans' (matched as a jump's) and the odometry after it goes on from there; unless the match agrees with
+        the odometry's step (``_agree``), outside a slip's ``SLIP_AFTER`` s (inside them the bound is finer)."""
+        after = s.t - self._slip_at <= SLIP_AFTER
+        key = (s.kind, float(prev.t), float(s.t), after)
+        if key not in self._slipped:
+            self._slipped[key] = _slipped(prev, s, own, self.mount_of(s), *(
+                (SLIP_TURN_AFTER, SLIP_OFF_AFTER) if after else (SLIP_TURN, SLIP_OFF)))
+        if not self._slipped[key]:
+            return fix, None
+        step = self._match([prev, s], entry, own)[-1, 1:4]
+        if not after and _agree(step, own):
+            return fix, None
+        self._slip_at = float(s.t)
+        self.stalls.append(Stall(float(prev.t), float(s.t), 1, float(math.hypot(step[0], step[1])),
+                                 float(math.hypot(own[0], own[1])), "slip", float(own[2]), float(step[2])))
         return compose(compose(compose(fix, prev.odom), step), inverse(s.odom)), step
 
     @staticmethod
@@ -273,6 +331,33 @@ def _jumped(guard, step, dt: float, a, b, mount) -> bool:
         return True
     share = _overlap(a, b, step, mount)
     return share is not None and share < JUMP_OVERLAP
+
+
+def _slipped(a, b, step, mount, turn_min: float = SLIP_TURN, off: float = SLIP_OFF) -> bool:
+    """The odometry's ``step`` from scan ``a`` to scan ``b`` turned more than the scans did: a wheel that slips
+    (see ``SLIP_TURN``; ``turn_min`` and ``off`` its bounds). Scans with too few points to match (an open hall)
+    leave it as it was."""
+    if abs(float(wrap_angle(step[2]))) < turn_min or not 0.0 < b.t - a.t <= SLIP_DT:
+        return False
+    pa, pb = far_points(a, MIN_RANGE), far_points(b, MIN_RANGE)
+    if pa.shape[1] < MIN_PAIRS or pb.shape[1] < MIN_PAIRS:
+        return False
+    key = Key(pa)
+    laser = compose(compose(inverse(mount), step), mount)  # the laser's step by the odometry
+    few = pb[:, ::max(1, pb.shape[1] // SLIP_POINTS)]  # the distances are means: a few points tell them
+    at_step = score_motion(a, key, few, laser)
+    # first, without a match: the step with its turn halved or left out must lie nearer the scans (a real turn's
+    # scans fit the odometry's step: infinite_corridor's 391 steps that turn 0.15 rad or more took 1.3 s matched)
+    if min(score_motion(a, key, few, compose(compose(inverse(mount), np.array([step[0], step[1], k * step[2]])),
+                                             mount)) for k in (0.0, 0.5)) >= SLIP_FIT * at_step:
+        return False
+    pose, paired, _ = icp(key, few, laser, weight=YAW_WEIGHT)
+    if paired < SLIP_PAIRED * few.shape[1]:
+        return False
+    turn = float(compose(compose(mount, pose), inverse(mount))[2])  # the robot's, by the scans
+    if abs(float(wrap_angle(step[2] - turn))) <= off + SLIP_SHARE * abs(turn):
+        return False
+    return score_motion(a, key, few, pose) < SLIP_FIT * at_step
 
 
 def _overlap(a, b, step, mount) -> float | None:

@@ -408,16 +408,17 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
                 scans = _retime(scans, log, log.stamp_offset, lambda *_: None)
                 if hits is not None:
                     scans.self_hits = hits
-    if cfg.sensor.use and len(scans) and (cfg.motion.stalls == "fill" or cfg.motion.jumps == "match"):
-        # where the odometry holds a pose while the scans move, or jumps, their motion from scan matching
-        # (mcl.odomstall)
+    if cfg.sensor.use and len(scans) and (cfg.motion.stalls == "fill" or cfg.motion.jumps == "match"
+                                          or cfg.motion.slips == "match"):
+        # where the odometry holds a pose while the scans move, jumps, or turns where they do not, their motion from
+        # scan matching (mcl.odomstall)
         from mcl.odomcheck import run_mount
         from mcl.odomstall import StallFill
 
         f = cfg.filter
         filled = StallFill(scans, lambda s: run_mount(s, cfg.sensor.laser_pose), holds=cfg.motion.stalls == "fill",
                            jumps=((f.max_odom_step, f.max_odom_ratio, f.max_odom_speed)
-                                  if cfg.motion.jumps == "match" else None))
+                                  if cfg.motion.jumps == "match" else None), slips=cfg.motion.slips == "match")
         filled.self_hits = getattr(scans, "self_hits", None)
         scans = filled
     if cfg.truth:
@@ -1140,22 +1141,31 @@ def _run(
     interrupted = interrupted or signals.caught  # also a signal while the outputs were closed
 
     n_up = max(counts["updates"], 1)
-    # motion.stalls: fill and motion.jumps: match (mcl.odomstall): the holds and jumps it filled
+    # motion.stalls: fill, motion.jumps: match and motion.slips: match (mcl.odomstall): the holds, jumps and slips
+    # it filled
     stalls = getattr(scans, "stalls", None) or []
-    holds = [w for w in stalls if w.cause != "jump"]
+    holds = [w for w in stalls if w.cause in ("hold", "hold+jump")]
     if holds:
         longest = max(holds, key=lambda w: w.t1 - w.t0)
         echo(f"mcl: warning: {log.path}: the odometry held its pose {len(holds)} time{'s' if len(holds) > 1 else ''} "
              f"while the scans showed the robot moving (the longest {longest.t1 - longest.t0:.1f} s from "
              f"t={longest.t0:.3f} s: {longest.matched:.2f} m by scan matching, {longest.odometry:.2f} m by the "
              "odometry): the motion there is the scans' (motion.stalls: keep leaves it as it was)")
-    jumps = [w for w in stalls if w.cause != "hold"]
+    jumps = [w for w in stalls if w.cause in ("jump", "hold+jump")]
     if jumps:
         first = jumps[0]
         echo(f"mcl: warning: {log.path}: the odometry jumped {len(jumps)} time{'s' if len(jumps) > 1 else ''} (the "
              f"first at t={first.t1:.3f} s: {first.odometry:.2f} m by the odometry, {first.matched:.2f} m by scan "
              "matching; a driver that restarted, a glitch): the step there is the scans', and the odometry goes on "
              "from it (motion.jumps: hedge leaves it to the filter)")
+    slips = [w for w in stalls if w.cause == "slip"]
+    if slips:
+        first = slips[0]
+        echo(f"mcl: warning: {log.path}: the odometry turned more than the scans {len(slips)} "
+             f"time{'s' if len(slips) > 1 else ''} (the first at t={first.t1:.3f} s: "
+             f"{math.degrees(first.odometry_turn):.0f} degrees by the odometry, {math.degrees(first.matched_turn):.0f}"
+             " by scan matching; a wheel that slips): the step there is the scans', and the odometry goes on from it "
+             "(motion.slips: keep leaves it as it was)")
     summary: dict = {
         "mode": mode,
         "interrupted": interrupted,

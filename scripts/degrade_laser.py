@@ -13,6 +13,10 @@ A held-out check of the default config on real buildings with a laser or odometr
   the left) read R m (with N(0, 0.01 m) noise) before ``--sigma``'s, as where the robot's own frame, a wheel or a mast stands in the laser's
   view: returns at a fixed short range on every scan, wherever the robot is.
 
+With ``--range-scale K`` and ``--range-bias B`` every return (not a no-return reading, not a reading of 0) reads
+``K r + B`` m before the rest (clipped at 0.01 m): a laser calibrated against another range than the map was drawn
+with (a cheap lidar's few per cent, a floor plan's map). The defaults, 1 and 0, leave the ranges as they are.
+
 With ``--odom-scale S`` and ``--turn-scale R`` the odometry misreports the motion as wheels of the wrong size or a
 skid-steer base do: every step between consecutive odometry poses (in the robot frame of the first) has its
 translation multiplied by S and its rotation by R, and the poses are integrated again from the first. The ODOM
@@ -96,9 +100,10 @@ def parse_body(text: str) -> tuple[float, float, float]:
 
 
 def degrade_line(line: str, rng: np.random.Generator, fov: float, sigma: float, drop: float,
-                 no_return: float, body=()) -> str:
+                 no_return: float, body=(), range_scale: float = 1.0, range_bias: float = 0.0) -> str:
     """One FLASER line with the laser changed (see the module docstring); any other line as it is."""
-    if not line.startswith("FLASER ") or (fov >= 180.0 and sigma == 0.0 and drop == 0.0 and not body):
+    if not line.startswith("FLASER ") or (fov >= 180.0 and sigma == 0.0 and drop == 0.0 and not body
+                                          and range_scale == 1.0 and range_bias == 0.0):
         return line
     p = line.split()
     n = int(p[1])
@@ -107,6 +112,9 @@ def degrade_line(line: str, rng: np.random.Generator, fov: float, sigma: float, 
     for a0, a1, reach in body:
         hit = (angle >= a0) & (angle <= a1)
         r[hit] = np.maximum(reach + rng.normal(0.0, BODY_SIGMA, int(hit.sum())), 0.01)
+    if range_scale != 1.0 or range_bias != 0.0:  # a miscalibrated laser: every return, not a no-return reading
+        ret = (r > 0.0) & (r < no_return)
+        r[ret] = np.maximum(r[ret] * range_scale + range_bias, 0.01)
     keep = np.abs(angle) <= fov / 2.0
     out = np.where((r >= no_return) | (r <= 0.0), r, np.maximum(r + rng.normal(0.0, sigma, n), 0.01))
     out = np.where(keep & (rng.random(n) >= drop), out, 0.0)
@@ -269,6 +277,10 @@ def main(argv=None) -> int:
     ap.add_argument("--sigma", type=float, default=0.03, help="range noise std, m (default 0.03)")
     ap.add_argument("--drop", type=float, default=0.1, help="share of readings dropped (default 0.1)")
     ap.add_argument("--no-return", type=float, default=49.9, help="readings from this on are left alone (m)")
+    ap.add_argument("--range-scale", type=float, default=1.0,
+                    help="every return read this many times its range (a miscalibrated laser; default 1)")
+    ap.add_argument("--range-bias", type=float, default=0.0,
+                    help="... and this many m longer (after --range-scale; default 0)")
     ap.add_argument("--odom-scale", type=float, default=1.0, help="odometry translation factor (default 1)")
     ap.add_argument("--turn-scale", type=float, default=1.0, help="odometry rotation factor (default 1)")
     ap.add_argument("--latency", type=float, default=0.0,
@@ -346,8 +358,8 @@ def main(argv=None) -> int:
         odom, flaser = Rescaled(a.odom_scale, a.turn_scale), Rescaled(a.odom_scale, a.turn_scale)
         with open(log, errors="replace") as fi, open(tmp, "w") as fo:
             for line in fi:
-                fo.write(rescale_line(degrade_line(line, rng, a.fov, a.sigma, a.drop, a.no_return, a.body),
-                                         odom, flaser))
+                fo.write(rescale_line(degrade_line(line, rng, a.fov, a.sigma, a.drop, a.no_return, a.body,
+                                                   a.range_scale, a.range_bias), odom, flaser))
         if a.latency:
             lines = tmp.read_text().splitlines(keepends=True)
             stream = odometry_stream(lines)
@@ -378,6 +390,7 @@ def main(argv=None) -> int:
     suite["root"] = str(a.out.resolve())
     suite["name"] = f"{suite.get('name', 'suite')}-fov{a.fov:g}" + (
         f"-odom{a.odom_scale:g}x{a.turn_scale:g}" if (a.odom_scale, a.turn_scale) != (1.0, 1.0) else "") + (
+        f"-range{a.range_scale:g}x{a.range_bias:+g}" if (a.range_scale, a.range_bias) != (1.0, 0.0) else "") + (
         f"-latency{a.latency:g}" if a.latency else "") + (
         f"-late{a.stamp_late:g}" if a.stamp_late else "") + (
         "-body" if a.body else "") + (

@@ -297,13 +297,18 @@ def test_beam_model_tracks_mit_csail(tmp_path):
     # 300,000 rays per update for 1,846 updates: 62 s on this 2-core machine (2026-11-30), 254 s once on a slow CI
     # machine, a benchmark (`mcl run configs/mit_csail_beam.yaml`), not a test. Here the same config runs on the
     # log's first 250 lines (39 reference poses): measured 0.0573 m (400 lines, 70 poses: 0.0581 m, 60 % more time),
-    # and the same bound holds.
+    # and the same bound holds. With the odometry's steps as they came (motion.slips keep): these lines hold one step
+    # the default takes from scan matching (the odometry read -0.81 rad where the reference turned -0.77 over it and
+    # the step before, -1.16 by the odometry), and the filter's random stream moves with it: seed 1 0.0573 -> 0.0605 m,
+    # seeds 2-4 0.0614-0.0620 -> 0.0592-0.0612 m (the whole log 0.0581 -> 0.0601 m). This test holds the beam model to
+    # the bound it was measured against, not the fill (tests/test_odomstall.py).
     from mcl.runner import run
 
     lines = (SHARED / "mit_csail" / "log.clf").read_text().splitlines(keepends=True)
     (tmp_path / "log.clf").write_text("".join(lines[:250]))
     c = load_config(PROJECT_ROOT / "configs" / "mit_csail_beam.yaml",
-                    ["rerun.mode=off", f"log={tmp_path / 'log.clf'}", f"truth={SHARED / 'mit_csail' / 'truth.tum'}"])
+                    ["rerun.mode=off", f"log={tmp_path / 'log.clf'}", f"truth={SHARED / 'mit_csail' / 'truth.tum'}",
+                     "motion.slips=keep"])
     assert c.sensor.model == "beam" and c.filter.particles == 5000 and c.seed == 1
     s = run(c, tmp_path / "out", progress=False, echo=lambda *a, **k: None)
     ev = s["eval"]

@@ -71,6 +71,33 @@ def test_the_degraded_log_keeps_the_central_field_of_view_and_the_no_returns_and
     assert all(a.t == b.t and np.array_equal(a.odom, b.odom) for a, b in zip(after.scans, before.scans))
 
 
+def test_a_range_scale_and_bias_change_every_return_and_nothing_else(tmp_path):
+    # --range-scale 0.97 --range-bias 0.05: every return r reads 0.97 r + 0.05 m (to the log's 1 cm), the no-return
+    # reading (50.00 m) and the readings of 0 stay as they are, and so does the rest of the log.
+    world = tmp_path / "world"
+    simulate(world, seed=5, duration=8, n_beams=181)
+    lines = (world / "log.clf").read_text().splitlines()
+    k = next(i for i, s in enumerate(lines) if s.startswith("FLASER"))
+    p = lines[k].split()
+    p[2 + 90], p[2 + 10] = "50.00", "0.00"
+    lines[k] = " ".join(p)
+    (world / "log.clf").write_text("\n".join(lines) + "\n")
+    _suite_of(tmp_path)
+    out = tmp_path / "out"
+    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "180", "--sigma", "0", "--drop", "0",
+                 "--range-scale", "0.97", "--range-bias", "0.05"]) == 0
+    assert yaml.safe_load((out / "suite.yaml").read_text())["name"].endswith("-range0.97x+0.05")
+    before, after = read_carmen(world / "log.clf"), read_carmen(out / "w" / "log.clf")
+    r0 = np.array([s.ranges for s in before.scans])
+    r1 = np.array([s.ranges for s in after.scans])
+    assert r1[0, 90] == 50.0 and r1[0, 10] == 0.0
+    ret = (r0 > 0.0) & (r0 < 49.9)
+    assert ret.sum() > 1000 and np.abs(r1[ret] - (0.97 * r0[ret] + 0.05)).max() <= 0.005 + 1e-9
+    assert np.array_equal(r1[~ret], r0[~ret])
+    assert np.array_equal(after.odometry, before.odometry)
+    assert all(a.t == b.t and np.array_equal(a.odom, b.odom) for a, b in zip(after.scans, before.scans))
+
+
 def test_the_rescaled_odometry_reports_the_steps_scaled_and_keeps_the_laser_on_the_robot(tmp_path):
     world = tmp_path / "world"
     simulate(world, seed=5, duration=8)
