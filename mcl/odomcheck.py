@@ -209,10 +209,11 @@ def _score(tree: cKDTree, pts: np.ndarray, m: np.ndarray, view=None) -> float:
     return float(np.mean(np.minimum(d, TRUNCATE) ** 2))
 
 
-def score_motion(first, key: Key, pts: np.ndarray, m: np.ndarray) -> float:
-    """``_score`` of the points ``pts`` of a second scan moved by the laser's motion ``m`` against the scan ``first``
-    (its ``key``), over what ``first`` could have seen: how far apart the two scans lie under that motion."""
-    return _score(key.tree, pts, m, _view(first, key.pts))
+def score_motions(first, key: Key, pts: np.ndarray, motions) -> list[float]:
+    """``_score`` of the points ``pts`` of a second scan moved by each of the laser's ``motions`` against the scan
+    ``first`` (its ``key``), over what ``first`` could have seen: how far apart the two scans lie under each."""
+    view = _view(first, key.pts)
+    return [_score(key.tree, pts, m, view) for m in motions]
 
 
 def run_mount(scan, laser_pose=None) -> np.ndarray:

@@ -64,7 +64,7 @@ import numpy as np
 from mcl.degenerate import InputGuard
 from mcl.estimate import compose, inverse, wrap_angle
 from mcl.laser_odometry import MIN_PAIRS, Key, far_points, icp, laser_odometry, scan_points
-from mcl.odomcheck import MIN_RANGE, YAW_WEIGHT, score_motion
+from mcl.odomcheck import MIN_RANGE, YAW_WEIGHT, score_motions
 
 ABRUPT_V = 0.2  # m/s: the odometry's last step before it held faster than this: a stall, not a stop ...
 ABRUPT_W = 0.3  # rad/s ... or turning faster than this
@@ -343,13 +343,14 @@ def _slipped(a, b, step, mount, turn_min: float = SLIP_TURN, off: float = SLIP_O
     if pa.shape[1] < MIN_PAIRS or pb.shape[1] < MIN_PAIRS:
         return False
     key = Key(pa)
-    laser = compose(compose(inverse(mount), step), mount)  # the laser's step by the odometry
     few = pb[:, ::max(1, pb.shape[1] // SLIP_POINTS)]  # the distances are means: a few points tell them
-    at_step = score_motion(a, key, few, laser)
-    # first, without a match: the step with its turn halved or left out must lie nearer the scans (a real turn's
-    # scans fit the odometry's step: infinite_corridor's 391 steps that turn 0.15 rad or more took 1.3 s matched)
-    if min(score_motion(a, key, few, compose(compose(inverse(mount), np.array([step[0], step[1], k * step[2]])),
-                                             mount)) for k in (0.0, 0.5)) >= SLIP_FIT * at_step:
+    # the laser's step by the odometry, then with its turn left out and halved
+    laser, *reduced = (compose(compose(inverse(mount), np.array([step[0], step[1], k * step[2]])), mount)
+                       for k in (1.0, 0.0, 0.5))
+    at_step, *at_reduced = score_motions(a, key, few, [laser, *reduced])
+    # first, without a match: a reduced turn must lie nearer the scans (a real turn's scans fit the odometry's step:
+    # infinite_corridor's 391 steps that turn 0.15 rad or more took 1.3 s matched)
+    if min(at_reduced) >= SLIP_FIT * at_step:
         return False
     pose, paired, _ = icp(key, few, laser, weight=YAW_WEIGHT)
     if paired < SLIP_PAIRED * few.shape[1]:
@@ -357,7 +358,7 @@ def _slipped(a, b, step, mount, turn_min: float = SLIP_TURN, off: float = SLIP_O
     turn = float(compose(compose(mount, pose), inverse(mount))[2])  # the robot's, by the scans
     if abs(float(wrap_angle(step[2] - turn))) <= off + SLIP_SHARE * abs(turn):
         return False
-    return score_motion(a, key, few, pose) < SLIP_FIT * at_step
+    return score_motions(a, key, few, [pose])[0] < SLIP_FIT * at_step
 
 
 def _overlap(a, b, step, mount) -> float | None:

@@ -37,6 +37,15 @@ def _truth_at(world, t):
     return poses[:, k]
 
 
+def _outside_as_it_came(scans, out, windows):
+    """Every step of the filled scans ``out`` outside the windows (t0, t1) is the odometry's own in ``scans``."""
+    t = np.array([s.t for s in scans])
+    inside = np.any([(t >= t0) & (t <= t1) for t0, t1 in windows], axis=0)
+    for k in np.flatnonzero(~inside[1:] & ~inside[:-1]) + 1:
+        np.testing.assert_allclose(compose(inverse(out[k - 1].odom), out[k].odom),
+                                   compose(inverse(scans[k - 1].odom), scans[k].odom), atol=1e-9)
+
+
 def test_a_stall_takes_the_motion_the_scans_show(worlds):
     # Both 3 s windows are found and filled: over each, from the scan before the hold to the first after it, the
     # filled odometry moves as the robot did (the truth) within 0.15 m and 0.05 rad (scan matching erred by 0.014
@@ -58,10 +67,7 @@ def test_a_stall_takes_the_motion_the_scans_show(worlds):
         as_it_came = compose(inverse(scans[i].odom), scans[j].odom)
         assert math.hypot(*(filled[:2] - truth[:2])) < 0.15 and abs(filled[2] - truth[2]) < 0.05
         assert math.hypot(*(as_it_came[:2] - truth[:2])) > 1.0
-    inside = np.any([(t >= w.t0) & (t <= w.t1) for w in fill.stalls], axis=0)
-    for k in np.flatnonzero(~inside[1:] & ~inside[:-1]) + 1:
-        np.testing.assert_allclose(compose(inverse(out[k - 1].odom), out[k].odom),
-                                   compose(inverse(scans[k - 1].odom), scans[k].odom), atol=1e-9)
+    _outside_as_it_came(scans, out, [(w.t0, w.t1) for w in fill.stalls])
 
 
 def test_a_log_that_ends_in_a_stall_is_filled_to_its_end(worlds):
@@ -278,10 +284,7 @@ def _windows_match_the_truth(world, scans, out, windows, bound_m: float):
         as_it_came = compose(inverse(scans[i].odom), scans[j].odom)
         assert math.hypot(*(filled[:2] - truth[:2])) < bound_m and abs(filled[2] - truth[2]) < 0.05
         assert math.hypot(*(as_it_came[:2] - truth[:2])) > 2.0
-    inside = np.any([(t >= t0) & (t <= t1) for t0, t1 in windows], axis=0)
-    for k in np.flatnonzero(~inside[1:] & ~inside[:-1]) + 1:
-        np.testing.assert_allclose(compose(inverse(out[k - 1].odom), out[k].odom),
-                                   compose(inverse(scans[k - 1].odom), scans[k].odom), atol=1e-9)
+    _outside_as_it_came(scans, out, windows)
 
 
 def test_an_odometry_reset_takes_the_step_the_scans_show(resets):
@@ -381,10 +384,7 @@ def test_a_slipping_wheel_takes_the_steps_the_scans_show(slips, worlds):
         assert math.hypot(*(filled[:2] - truth[:2])) < 0.2
         assert abs(math.remainder(filled[2] - truth[2], math.tau)) < 0.25
         assert abs(math.remainder(as_it_came[2] - truth[2], math.tau)) > 2.0
-    inside = np.any([(t >= w.t0) & (t <= w.t1) for w in fill.stalls], axis=0)
-    for k in np.flatnonzero(~inside[1:] & ~inside[:-1]) + 1:
-        np.testing.assert_allclose(compose(inverse(out[k - 1].odom), out[k].odom),
-                                   compose(inverse(scans[k - 1].odom), scans[k].odom), atol=1e-9)
+    _outside_as_it_came(scans, out, [(w.t0, w.t1) for w in fill.stalls])
 
 
 def test_a_corridor_whose_wheel_slips_is_tracked(tmp_path):
