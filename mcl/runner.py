@@ -1194,7 +1194,7 @@ def _run(
         **({"sweep_order": pf.sweep_order.summary()}
            if pf.sweep_order is not None and pf.sweep_order.scans else {}),
         **({"self_hits": summary_of(scans.self_hits)} if getattr(scans, "self_hits", None) else {}),
-        **({"odometry_stalls": [dataclasses.asdict(w) for w in stalls]} if stalls else {}),
+        **({"odometry_stalls": [w.summary() for w in stalls]} if stalls else {}),
         **({"odometry_check": odometry_summary(log.odometry_checks)} if getattr(log, "odometry_checks", None)
            else {}),
         **({"left_out_lasers": sorted(left_out)} if left_out else {}),
