@@ -192,7 +192,7 @@ class StallFill:
             if s.kind != kind:
                 if held:
                     held.append(s)
-                elif span:
+                elif self.slips and span_from is not None:  # held with the span: a slip's fill places it too
                     span.append(s)
                 else:
                     yield self._moved(s, fix)
@@ -277,7 +277,8 @@ class StallFill:
         odometry's step from ``start`` to the last turned more than the scans did (``_slipped``: a wheel that slips),
         the first laser's scans take the poses matched from ``start`` (as a jump's step is matched) and the odometry
         after goes on from there; unless the match agrees with the odometry's step (``_agree``), outside a slip's
-        ``SLIP_AFTER`` s (inside them the bound is finer). Other lasers' scans keep the odometry as it came."""
+        ``SLIP_AFTER`` s (inside them the bound is finer). Other lasers' scans in the span take the poses between the
+        first laser's around them, by their time (``_between``)."""
         s = span[-1]
         own = compose(inverse(start.odom), s.odom)
         after = s.t - self._slip_at <= SLIP_AFTER
@@ -295,9 +296,12 @@ class StallFill:
         self.stalls.append(Stall(float(start.t), float(s.t), len(chain) - 1, float(math.hypot(step[0], step[1])),
                                  float(math.hypot(own[0], own[1])), "slip", float(own[2]), float(step[2])))
         at = compose(fix, start.odom)  # the start's odometry as passed on
-        poses = {id(c): compose(at, r[1:4]) for c, r in zip(chain[1:-1], rows[1:-1])}
+        placed = [compose(at, r[1:4]) for r in rows]  # the chain's poses as passed on
+        poses = {id(c): p for c, p in zip(chain[1:-1], placed[1:-1])}
+        times = np.array([c.t for c in chain], dtype=np.float64)
         for h in span[:-1]:
-            yield dataclasses.replace(h, odom=poses[id(h)]) if id(h) in poses else self._moved(h, fix)
+            # another laser's scan between two of the chain: between their poses, by its time
+            yield dataclasses.replace(h, odom=poses[id(h)] if id(h) in poses else _between(placed, times, h.t))
         fix = compose(compose(at, step), inverse(s.odom))
         yield self._moved(s, fix)
         return fix, (step if len(chain) == 2 else compose(inverse(rows[-2, 1:4]), step))
@@ -361,6 +365,14 @@ class StallFill:
                                  float(math.hypot(matched[0], matched[1])), float(math.hypot(own[0], own[1])),
                                  "hold+jump" if jumped else "hold"))
         return compose(last, inverse(chain[-1].odom)), compose(inverse(rows[-2, 1:4]), rows[-1, 1:4])
+
+
+def _between(poses: list, times: np.ndarray, t: float) -> np.ndarray:
+    """The pose at time ``t`` between the two of ``poses`` (at ``times``, ascending) around it: the first's composed
+    with the share of the step from it to the second that ``t`` lies along (at either end, that end's)."""
+    k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(poses) - 2))
+    share = float(np.clip((t - times[k]) / max(times[k + 1] - times[k], 1e-9), 0.0, 1.0))
+    return compose(poses[k], share * compose(inverse(poses[k]), poses[k + 1]))
 
 
 def _jumped(guard, step, dt: float, a, b, mount) -> bool:

@@ -457,3 +457,39 @@ def test_a_corridor_whose_wheel_slips_under_a_40_hz_laser_is_tracked(tmp_path):
     assert {w["cause"] for w in s["odometry_stalls"]} == {"slip"} and {w["scans"] for w in s["odometry_stalls"]} == {8}
     err, s, said = _tracked(world, tmp_path, log, "fill", slips="keep")
     assert err > 0.8 and "odometry_stalls" not in s
+
+
+@pytest.mark.parametrize("rate", [5.0, 40.0])
+def test_another_lasers_scans_in_a_slip_lie_between_the_filled_ones(tmp_path, rate):
+    # Two lasers (a front and a rear one, fused): the second's scans, half a period after each of the first's, carry
+    # the odometry as recorded at their time (here the odometry halfway between the first laser's two around them).
+    # Inside a slip they were passed on as they came (moved as the span's first scan was), turned off the filled
+    # track by up to the slip's turn over a span (at most 0.16 rad at 5 Hz, 0.27 rad at 40 Hz, measured); they now
+    # lie between the first laser's filled poses around them by their time: at the midpoint of those two, within
+    # 1e-9 m and rad.
+    simulate(tmp_path, kind="office", seed=6, duration=30.0, odom_slips=2, odom_slip_s=2.0, scan_rate=rate)
+    first = read_carmen(tmp_path / "log.clf").laser_stream()
+    fused = []
+    for a, b in zip(first, first[1:]):
+        half = compose(a.odom, 0.5 * compose(inverse(a.odom), b.odom))
+        fused += [a, dataclasses.replace(a, kind="RLASER", t=0.5 * (a.t + b.t), odom=half)]
+    fused.append(first[-1])
+    fill = StallFill(fused, _mount, slips=True)
+    out = list(fill)
+    assert len(out) == len(fused) and [s.kind for s in out] == [s.kind for s in fused]
+    assert {w.cause for w in fill.stalls} == {"slip"} and len(fill.stalls) >= 16
+    inside = [(w.t0, w.t1) for w in fill.stalls]
+    turned = 0.0
+    at = {s.t: k for k, s in enumerate(fused) if s.kind == fused[0].kind}
+    for k in range(1, len(out) - 1, 2):
+        span = [(t0, t1) for t0, t1 in inside if t0 <= out[k].t <= t1]
+        if not span:
+            continue
+        a, h, b = out[k - 1], out[k], out[k + 1]
+        mid = compose(a.odom, 0.5 * compose(inverse(a.odom), b.odom))
+        np.testing.assert_allclose(h.odom, mid, atol=1e-9)
+        # as it came: the odometry as recorded, moved as the span's first scan was (the correction before the span)
+        i = at[span[0][0]]
+        came = compose(compose(out[i].odom, inverse(fused[i].odom)), fused[k].odom)
+        turned = max(turned, abs(math.remainder(came[2] - h.odom[2], math.tau)))
+    assert turned > 0.1  # as they came, they were that far off the filled track
