@@ -41,8 +41,9 @@ would call a jump and that is faster than ``JUMP_V``, or slower but with the sca
 (``JUMP_OVERLAP``: a restart between scans seconds apart), is taken from scan matching the two scans instead (from
 the velocity before it and from the odometry's own step; a match that agrees with the odometry's own step leaves
 it), and the odometry after it goes on from there; and a hold that ends in such a jump is filled from the scans,
-however its step out compares (it is no catch-up). Scans of other lasers between the two keep the odometry as it
-came.
+however its step out compares (it is no catch-up). Scans of other lasers between the two lie between the first
+laser's poses around them, by their time (held with the slip check's span; with ``slips`` off they keep the odometry
+as it came).
 
 A wheel that slips (spins on a wet or dusty floor) reads travel the robot did not make: the odometry turns the robot
 1-2 rad/s that did not turn (``suites/heldout23.yaml``), and the cloud turns with it. With ``slips``
@@ -239,7 +240,13 @@ class StallFill:
                         fix, step = yield from self._slip(span_from, span, step_rate, fix)
                         span = []
                 else:
-                    yield from (self._moved(h, fix) for h in span)  # passed on with the correction before a jump
+                    # passed on with the correction before a jump; after a jump matched, another laser's scans after
+                    # prev lie between prev's pose and s's (their odometry may have restarted with it)
+                    last = max((k for k, h in enumerate(span) if h is prev), default=-1)
+                    ends = [compose(fix, prev.odom), compose(after_jump, s.odom)] if step is not None else None
+                    for k, h in enumerate(span):
+                        yield (dataclasses.replace(h, odom=_between(ends, np.array([prev.t, s.t]), h.t))
+                               if ends is not None and k > last and h.kind != kind else self._moved(h, fix))
                     span = []
                     fix = after_jump
                     yield self._moved(s, fix)

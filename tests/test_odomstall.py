@@ -306,6 +306,28 @@ def test_an_odometry_reset_takes_the_step_the_scans_show(resets):
     _windows_match_the_truth(world, scans, out, [(w.t0, w.t1) for w in fill.stalls], 0.1)
 
 
+def test_another_lasers_scan_across_a_reset_lies_between_the_filled_ones(resets):
+    # The restarting drive with a second laser fused (a copy of each scan half a period later, carrying the next
+    # scan's odometry, as a message stamped after the restart would): the copy between the two scans of a jump read
+    # the restarted odometry, and moved by the correction before the jump it lay 3.4 and 4.4 m off the track
+    # (measured); it now lies between the first laser's filled poses around it, at their midpoint within 1e-9. The
+    # default's slip check holds it with the scans after the one before the jump.
+    first = read_carmen(resets / "now" / "log.clf").laser_stream()
+    fused = []
+    for a, b in zip(first, first[1:]):
+        fused += [a, dataclasses.replace(a, kind="RLASER", t=0.5 * (a.t + b.t), odom=b.odom)]
+    fused.append(first[-1])
+    fill = StallFill(fused, _mount, jumps=JUMPS, slips=True)
+    out = list(fill)
+    assert [w.cause for w in fill.stalls] == ["jump", "jump"]
+    for w in fill.stalls:
+        k = next(k for k, s in enumerate(fused) if s.kind == "RLASER" and w.t0 < s.t < w.t1)
+        mid = compose(out[k - 1].odom, 0.5 * compose(inverse(out[k - 1].odom), out[k + 1].odom))
+        np.testing.assert_allclose(out[k].odom, mid, atol=1e-9)
+        came = compose(compose(out[k - 1].odom, inverse(fused[k - 1].odom)), fused[k].odom)
+        assert math.hypot(*(came[:2] - mid[:2])) > 2.0
+
+
 def test_a_reset_after_the_driver_was_down_fills_the_hold(resets):
     # The driver down 3 s before each restart: the odometry holds, then jumps to 0 0 0. Without jumps the step out
     # of the hold looks like odometry catching up, and the scans pass as they came, the 1.5 m driven in the hold
