@@ -217,13 +217,15 @@ class StallFill:
                 fix, step = yield from self._resolve(anchor, anchor_out, held, entry, fix, guard)
                 held = []
             elif same and not parked and self.holds:
-                yield from (self._moved(h, fix) for h in span)
-                span = []
+                # the span up to prev passes on; another laser's scans after prev are held with the hold
+                last = max((k for k, h in enumerate(span) if h is prev), default=-1)
+                yield from (self._moved(h, fix) for h in span[:last + 1])
                 anchor, anchor_out = prev, compose(fix, prev.odom)
                 v, w = math.hypot(step_rate[0, 0], step_rate[0, 1]), float(np.abs(step_rate[:, 2]).max())
                 entry = step_rate.copy()
                 abrupt = v > ABRUPT_V or w > ABRUPT_W
-                held, next_check = [s], STILL_CHECK
+                held, next_check = [*span[last + 1:], s], STILL_CHECK
+                span = []
                 continue
             else:
                 after_jump = fix
@@ -362,16 +364,16 @@ class StallFill:
             for h in held:  # a standstill, or odometry that caught up: as it was
                 yield self._moved(h, fix)
             return fix, None
-        poses = {id(sc): compose(anchor_out, r[1:4]) for sc, r in zip(chain[1:], rows[1:])}
-        last = anchor_out
-        for h in held:
-            if h.kind == kind:
-                last = poses[id(h)]
-            yield dataclasses.replace(h, odom=last, tv=0.0, rv=0.0)
+        placed = [compose(anchor_out, r[1:4]) for r in rows]
+        poses = {id(sc): p for sc, p in zip(chain[1:], placed[1:])}
+        times = np.array([c.t for c in chain], dtype=np.float64)
+        for h in held:  # another laser's scan: between the poses around it, by its time
+            yield dataclasses.replace(h, odom=poses[id(h)] if id(h) in poses else _between(placed, times, h.t),
+                                      tv=0.0, rv=0.0)
         self.stalls.append(Stall(float(anchor.t), float(chain[-1].t), len(chain) - 1,
                                  float(math.hypot(matched[0], matched[1])), float(math.hypot(own[0], own[1])),
                                  "hold+jump" if jumped else "hold"))
-        return compose(last, inverse(chain[-1].odom)), compose(inverse(rows[-2, 1:4]), rows[-1, 1:4])
+        return compose(placed[-1], inverse(chain[-1].odom)), compose(inverse(rows[-2, 1:4]), rows[-1, 1:4])
 
 
 def _between(poses: list, times: np.ndarray, t: float) -> np.ndarray:

@@ -70,6 +70,29 @@ def test_a_stall_takes_the_motion_the_scans_show(worlds):
     _outside_as_it_came(scans, out, [(w.t0, w.t1) for w in fill.stalls])
 
 
+def test_another_lasers_scan_in_a_stall_lies_between_the_filled_ones(worlds):
+    # The stalled office drive with a second laser fused (a copy of each scan half a period later, carrying the next
+    # scan's odometry): inside a hold the copy took the pose filled for the first laser's scan before it, half a step
+    # behind (0.05 m at 0.5 m/s and 5 Hz), and the one after the scan before the hold passed on as it came; it now
+    # lies between the poses filled around it, at their midpoint within 1e-9 m and rad (the first one too: the
+    # default's slip check holds it, slips=True).
+    first = read_carmen(worlds / "b" / "log.clf").laser_stream()
+    fused = []
+    for a, b in zip(first, first[1:]):
+        fused += [a, dataclasses.replace(a, kind="RLASER", t=0.5 * (a.t + b.t), odom=b.odom)]
+    fused.append(first[-1])
+    fill = StallFill(fused, _mount, slips=True)
+    out = list(fill)
+    assert [w.cause for w in fill.stalls] == ["hold", "hold"]
+    behind = []
+    for k in range(1, len(out) - 1, 2):
+        if any(w.t0 < out[k].t < w.t1 for w in fill.stalls):
+            mid = compose(out[k - 1].odom, 0.5 * compose(inverse(out[k - 1].odom), out[k + 1].odom))
+            np.testing.assert_allclose(out[k].odom, mid, atol=1e-9)
+            behind.append(math.hypot(*(out[k - 1].odom[:2] - mid[:2])))
+    assert len(behind) >= 25 and min(behind) > 0.02  # the pose before: as the copies were placed before
+
+
 def test_a_log_that_ends_in_a_stall_is_filled_to_its_end(worlds):
     # Cut 1.5 s into the second stall: the hold has no scan after it, and its scans are matched to the log's end.
     # The robot drove 0.80 m from the scan before the hold; the fill moves 0.81 m, 0.02 m from it (0.1 m allowed).
