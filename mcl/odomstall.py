@@ -63,6 +63,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+import statistics
 
 import numpy as np
 
@@ -237,7 +238,7 @@ class StallFill:
                     span.append(s)
                     firsts = sum(h.kind == kind for h in span)
                     # the span's scans: as many as come in SLIP_SPAN s at the median period (one at 5 Hz and slower)
-                    n = max(1, round(SLIP_SPAN / float(np.median(periods)))) if periods else 1
+                    n = max(1, round(SLIP_SPAN / statistics.median(periods))) if periods else 1
                     if firsts >= n or s.t - span_from.t >= SLIP_SPAN:
                         fix, step = yield from self._slip(span_from, span, step_rate, fix)
                         span = []
