@@ -46,6 +46,20 @@ def _outside_as_it_came(scans, out, windows):
                                    compose(inverse(scans[k - 1].odom), scans[k].odom), atol=1e-9)
 
 
+def _fused(first, odom=lambda a, b: b.odom):
+    """``first``'s scans with a second laser's (kind RLASER) half a period after each, carrying ``odom(a, b)`` of the
+    first laser's two around it (default the next one's: a message stamped after the odometry moved)."""
+    fused = []
+    for a, b in zip(first, first[1:]):
+        fused += [a, dataclasses.replace(a, kind="RLASER", t=0.5 * (a.t + b.t), odom=odom(a, b))]
+    return fused + [first[-1]]
+
+
+def _midway(out, k):
+    """The pose halfway between the filled scans before and after ``out[k]``."""
+    return compose(out[k - 1].odom, 0.5 * compose(inverse(out[k - 1].odom), out[k + 1].odom))
+
+
 def test_a_stall_takes_the_motion_the_scans_show(worlds):
     # Both 3 s windows are found and filled: over each, from the scan before the hold to the first after it, the
     # filled odometry moves as the robot did (the truth) within 0.15 m and 0.05 rad (scan matching erred by 0.014
@@ -76,18 +90,14 @@ def test_another_lasers_scan_in_a_stall_lies_between_the_filled_ones(worlds):
     # behind (0.05 m at 0.5 m/s and 5 Hz), and the one after the scan before the hold passed on as it came; it now
     # lies between the poses filled around it, at their midpoint within 1e-9 m and rad (the first one too: the
     # default's slip check holds it, slips=True).
-    first = read_carmen(worlds / "b" / "log.clf").laser_stream()
-    fused = []
-    for a, b in zip(first, first[1:]):
-        fused += [a, dataclasses.replace(a, kind="RLASER", t=0.5 * (a.t + b.t), odom=b.odom)]
-    fused.append(first[-1])
+    fused = _fused(read_carmen(worlds / "b" / "log.clf").laser_stream())
     fill = StallFill(fused, _mount, slips=True)
     out = list(fill)
     assert [w.cause for w in fill.stalls] == ["hold", "hold"]
     behind = []
     for k in range(1, len(out) - 1, 2):
         if any(w.t0 < out[k].t < w.t1 for w in fill.stalls):
-            mid = compose(out[k - 1].odom, 0.5 * compose(inverse(out[k - 1].odom), out[k + 1].odom))
+            mid = _midway(out, k)
             np.testing.assert_allclose(out[k].odom, mid, atol=1e-9)
             behind.append(math.hypot(*(out[k - 1].odom[:2] - mid[:2])))
     assert len(behind) >= 25 and min(behind) > 0.02  # the pose before: as the copies were placed before
@@ -335,17 +345,13 @@ def test_another_lasers_scan_across_a_reset_lies_between_the_filled_ones(resets)
     # the restarted odometry, and moved by the correction before the jump it lay 3.4 and 4.4 m off the track
     # (measured); it now lies between the first laser's filled poses around it, at their midpoint within 1e-9. The
     # default's slip check holds it with the scans after the one before the jump.
-    first = read_carmen(resets / "now" / "log.clf").laser_stream()
-    fused = []
-    for a, b in zip(first, first[1:]):
-        fused += [a, dataclasses.replace(a, kind="RLASER", t=0.5 * (a.t + b.t), odom=b.odom)]
-    fused.append(first[-1])
+    fused = _fused(read_carmen(resets / "now" / "log.clf").laser_stream())
     fill = StallFill(fused, _mount, jumps=JUMPS, slips=True)
     out = list(fill)
     assert [w.cause for w in fill.stalls] == ["jump", "jump"]
     for w in fill.stalls:
         k = next(k for k, s in enumerate(fused) if s.kind == "RLASER" and w.t0 < s.t < w.t1)
-        mid = compose(out[k - 1].odom, 0.5 * compose(inverse(out[k - 1].odom), out[k + 1].odom))
+        mid = _midway(out, k)
         np.testing.assert_allclose(out[k].odom, mid, atol=1e-9)
         came = compose(compose(out[k - 1].odom, inverse(fused[k - 1].odom)), fused[k].odom)
         assert math.hypot(*(came[:2] - mid[:2])) > 2.0
@@ -513,12 +519,8 @@ def test_another_lasers_scans_in_a_slip_lie_between_the_filled_ones(tmp_path, ra
     # lie between the first laser's filled poses around them by their time: at the midpoint of those two, within
     # 1e-9 m and rad.
     simulate(tmp_path, kind="office", seed=6, duration=30.0, odom_slips=2, odom_slip_s=2.0, scan_rate=rate)
-    first = read_carmen(tmp_path / "log.clf").laser_stream()
-    fused = []
-    for a, b in zip(first, first[1:]):
-        half = compose(a.odom, 0.5 * compose(inverse(a.odom), b.odom))
-        fused += [a, dataclasses.replace(a, kind="RLASER", t=0.5 * (a.t + b.t), odom=half)]
-    fused.append(first[-1])
+    fused = _fused(read_carmen(tmp_path / "log.clf").laser_stream(),
+                   lambda a, b: compose(a.odom, 0.5 * compose(inverse(a.odom), b.odom)))
     fill = StallFill(fused, _mount, slips=True)
     out = list(fill)
     assert len(out) == len(fused) and [s.kind for s in out] == [s.kind for s in fused]
@@ -530,8 +532,8 @@ def test_another_lasers_scans_in_a_slip_lie_between_the_filled_ones(tmp_path, ra
         span = [(t0, t1) for t0, t1 in inside if t0 <= out[k].t <= t1]
         if not span:
             continue
-        a, h, b = out[k - 1], out[k], out[k + 1]
-        mid = compose(a.odom, 0.5 * compose(inverse(a.odom), b.odom))
+        h = out[k]
+        mid = _midway(out, k)
         np.testing.assert_allclose(h.odom, mid, atol=1e-9)
         # as it came: the odometry as recorded, moved as the span's first scan was (the correction before the span)
         i = at[span[0][0]]
