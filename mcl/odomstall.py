@@ -219,13 +219,13 @@ class StallFill:
                 held = []
             elif same and not parked and self.holds:
                 # the span up to prev passes on; another laser's scans after prev are held with the hold
-                last = max((k for k, h in enumerate(span) if h is prev), default=-1)
-                yield from (self._moved(h, fix) for h in span[:last + 1])
+                before, after = _split(span, prev)
+                yield from (self._moved(h, fix) for h in before)
                 anchor, anchor_out = prev, compose(fix, prev.odom)
                 v, w = math.hypot(step_rate[0, 0], step_rate[0, 1]), float(np.abs(step_rate[:, 2]).max())
                 entry = step_rate.copy()
                 abrupt = v > ABRUPT_V or w > ABRUPT_W
-                held, next_check = [*span[last + 1:], s], STILL_CHECK
+                held, next_check = [*after, s], STILL_CHECK
                 span = []
                 continue
             else:
@@ -245,11 +245,10 @@ class StallFill:
                 else:
                     # passed on with the correction before a jump; after a jump matched, another laser's scans after
                     # prev lie between prev's pose and s's (their odometry may have restarted with it)
-                    last = max((k for k, h in enumerate(span) if h is prev), default=-1)
-                    ends = [compose(fix, prev.odom), compose(after_jump, s.odom)] if step is not None else None
-                    for k, h in enumerate(span):
-                        yield (dataclasses.replace(h, odom=_between(ends, np.array([prev.t, s.t]), h.t))
-                               if ends is not None and k > last and h.kind != kind else self._moved(h, fix))
+                    before, after = _split(span, prev)
+                    yield from (self._moved(h, fix) for h in (span if step is None else before))
+                    if step is not None:
+                        yield from _placed([prev, s], [compose(fix, prev.odom), compose(after_jump, s.odom)], after)
                     span = []
                     fix = after_jump
                     yield self._moved(s, fix)
@@ -306,12 +305,7 @@ class StallFill:
         self.stalls.append(Stall(float(start.t), float(s.t), len(chain) - 1, float(math.hypot(step[0], step[1])),
                                  float(math.hypot(own[0], own[1])), "slip", float(own[2]), float(step[2])))
         at = compose(fix, start.odom)  # the start's odometry as passed on
-        placed = [compose(at, r[1:4]) for r in rows]  # the chain's poses as passed on
-        poses = {id(c): p for c, p in zip(chain[1:-1], placed[1:-1])}
-        times = np.array([c.t for c in chain], dtype=np.float64)
-        for h in span[:-1]:
-            # another laser's scan between two of the chain: between their poses, by its time
-            yield dataclasses.replace(h, odom=poses[id(h)] if id(h) in poses else _between(placed, times, h.t))
+        yield from _placed(chain, [compose(at, r[1:4]) for r in rows], span[:-1])
         fix = compose(compose(at, step), inverse(s.odom))
         yield self._moved(s, fix)
         return fix, (step if len(chain) == 2 else compose(inverse(rows[-2, 1:4]), step))
@@ -366,15 +360,26 @@ class StallFill:
                 yield self._moved(h, fix)
             return fix, None
         placed = [compose(anchor_out, r[1:4]) for r in rows]
-        poses = {id(sc): p for sc, p in zip(chain[1:], placed[1:])}
-        times = np.array([c.t for c in chain], dtype=np.float64)
-        for h in held:  # another laser's scan: between the poses around it, by its time
-            yield dataclasses.replace(h, odom=poses[id(h)] if id(h) in poses else _between(placed, times, h.t),
-                                      tv=0.0, rv=0.0)
+        yield from _placed(chain, placed, held, tv=0.0, rv=0.0)
         self.stalls.append(Stall(float(anchor.t), float(chain[-1].t), len(chain) - 1,
                                  float(math.hypot(matched[0], matched[1])), float(math.hypot(own[0], own[1])),
                                  "hold+jump" if jumped else "hold"))
         return compose(placed[-1], inverse(chain[-1].odom)), compose(inverse(rows[-2, 1:4]), rows[-1, 1:4])
+
+
+def _split(span: list, prev) -> tuple[list, list]:
+    """(``span`` up to and with the scan ``prev``, the scans after it; all of them when ``prev`` is not in it)."""
+    k = next((k for k in range(len(span) - 1, -1, -1) if span[k] is prev), -1)
+    return span[:k + 1], span[k + 1:]
+
+
+def _placed(chain: list, poses: list, scans, **fields):
+    """``scans`` with their odometry: a scan of the first laser's ``chain`` its pose in ``poses``, another laser's
+    the pose between those around it by its time (``_between``); ``fields`` replaced too."""
+    at = {id(c): p for c, p in zip(chain, poses)}
+    times = np.array([c.t for c in chain], dtype=np.float64)
+    for h in scans:
+        yield dataclasses.replace(h, odom=at[id(h)] if id(h) in at else _between(poses, times, h.t), **fields)
 
 
 def _between(poses: list, times: np.ndarray, t: float) -> np.ndarray:
