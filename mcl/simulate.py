@@ -679,7 +679,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              unknown_floor: int = 0, laser_pose=(0.0, 0.0, 0.0), body=(), holonomic: float = 0.0,
              doubled_walls: int = 0, map_scale: float = 1.0, map_rotation: float = 0.0, scan_gaps: int = 0,
              scan_gap_s: float = 5.0, odom_stalls: int = 0, odom_stall_s: float = 3.0, odom_resets: int = 0,
-             odom_reset_s: float = 0.0, odom_slips: int = 0, odom_slip_s: float = 2.0, _check_only: bool = False) -> dict | None:
+             odom_reset_s: float = 0.0, odom_slips: int = 0, odom_slip_s: float = 2.0, range_scale: float = 1.0,
+             range_bias: float = 0.0, _check_only: bool = False) -> dict | None:
     """Generate a world, drive it and write map, log, truth and parameters to ``outdir``.
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
@@ -759,6 +760,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     translation and a turn of the travel over ``SLIP_BASE`` (its wheel base) on top of the true one, then goes on
     rigidly from where that left it. The laser and the truth are the same bytes as without; ``sim.yaml`` lists the
     windows. 0 leaves every output byte-identical.
+    ``range_scale`` = K and ``range_bias`` = B make the laser read K r + B m for a return at r m (before the noise;
+    the robot's own ``body`` too; a reading pushed to ``range_max`` or past it reads no return): a laser calibrated
+    against another range than the map was drawn with (a cheap lidar's few per cent, a scan made from a depth
+    camera, a range offset left in a driver). The odometry, the map and the truth are the same bytes; ``sim.yaml``
+    gives both. 1 and 0 leave every output byte-identical.
 
     Returns a summary: scans, duration, path length, start pose, kidnap. ``_check_only``: check the parameters
     (ConfigError naming the keyword) and return None, making nothing (``mcl eval --suite`` checks a suite's worlds
@@ -829,6 +835,12 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     _check(isinstance(map_rotation, (int, float, np.number)) and not isinstance(map_rotation, bool)
            and math.isfinite(map_rotation) and abs(map_rotation) <= math.pi, "map_rotation",
            f"expected -pi..pi rad, got {map_rotation!r}")
+    _check(isinstance(range_scale, (int, float, np.number)) and not isinstance(range_scale, bool)
+           and math.isfinite(range_scale) and 0.5 <= range_scale <= 1.5, "range_scale",
+           f"expected 0.5..1.5, got {range_scale!r}")
+    _check(isinstance(range_bias, (int, float, np.number)) and not isinstance(range_bias, bool)
+           and math.isfinite(range_bias) and abs(range_bias) <= 1.0, "range_bias",
+           f"expected -1..1 m, got {range_bias!r}")
     # windows of the log's faults: how many (0..20) and how long each
     for key, n, key_s, seconds, lo in (("scan_gaps", scan_gaps, "scan_gap_s", scan_gap_s, 0.5),
                                        ("odom_stalls", odom_stalls, "odom_stall_s", odom_stall_s, 0.5),
@@ -934,6 +946,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     for a0, a1, reach in body:  # the robot itself, nearer than anything else along those beams
         sector = (angles >= a0) & (angles <= a1)
         exact[:, sector] = np.minimum(exact[:, sector], float(reach))
+    if range_scale != 1.0 or range_bias != 0.0:  # the laser's own calibration: K r + B for every return
+        hit = exact < range_max
+        exact[hit] = np.maximum(exact[hit] * float(range_scale) + float(range_bias), 0.01)
     ranges = _noisy_ranges(exact, rng_laser, range_sigma, p_short, p_max, range_max)
     lm_obs = None
     if landmarks:
@@ -1089,6 +1104,10 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         params["scan_gaps"] = [[round(a, 3), round(b, 3)] for a, b in gaps]
     if stalls:
         params["odom_stalls"] = [[round(a, 3), round(b, 3)] for a, b in stalls]
+    if range_scale != 1.0:
+        params["range_scale"] = float(range_scale)
+    if range_bias != 0.0:
+        params["range_bias"] = float(range_bias)
     if slips:
         params["odom_slips"] = [[round(a, 3), round(b, 3)] for a, b in slips]
     if resets:
@@ -1512,6 +1531,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "odometry reads 1.5 times the travel and a turn the robot did not make; default 0")
     parser.add_argument("--odom-slip-s", type=float, default=2.0, metavar="S",
                         help="seconds of each --odom-slips slip (0.5-60); default 2")
+    parser.add_argument("--range-scale", type=float, default=1.0, metavar="K",
+                        help="the laser reads K r + --range-bias m for a return at r m (a laser calibrated against "
+                        "another range than the map's: a cheap lidar's few per cent; 0.5-1.5); default 1")
+    parser.add_argument("--range-bias", type=float, default=0.0, metavar="B",
+                        help="metres added to every return before the noise (-1..1); default 0")
     parser.add_argument("--scan-sweep", type=float, default=0.0, metavar="S",
                         help="the laser takes S seconds from its first beam to its last (a spinning lidar: 0.1-0.2 "
                         "s a turn), beams in angle order from the stamp, while the robot moves (negative: the last "
@@ -1598,6 +1622,7 @@ def _simulate_from_args(args: argparse.Namespace) -> dict:
                     odom_stalls=args.odom_stalls, odom_stall_s=args.odom_stall_s,
                     odom_resets=args.odom_resets, odom_reset_s=args.odom_reset_s,
                     odom_slips=args.odom_slips, odom_slip_s=args.odom_slip_s,
+                    range_scale=args.range_scale, range_bias=args.range_bias,
                     laser_pose=tuple(args.laser_pose) if getattr(args, "laser_pose", None) else (0.0, 0.0, 0.0),
                     body=[[math.radians(a0), math.radians(a1), r] for a0, a1, r in (getattr(args, "body", None) or [])],
                     holonomic=math.radians(holonomic))

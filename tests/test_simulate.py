@@ -448,6 +448,10 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
     (dict(odom_resets=1, odom_reset_s=-1.0), "odom_reset_s"),
     (dict(odom_slips=-1), "odom_slips"),
     (dict(odom_slips=1, odom_slip_s=0.1), "odom_slip_s"),
+    (dict(range_scale=1.6), "range_scale"),
+    (dict(range_scale=float("nan")), "range_scale"),
+    (dict(range_bias=-1.5), "range_bias"),
+    (dict(range_bias=True), "range_bias"),
     (dict(scan_gaps=2, scan_gap_s=0.1), "scan_gap_s"),
     (dict(scan_gaps=1, depth=True), "scan_gaps"),
     (dict(map_rotation=float("inf")), "map_rotation"),
@@ -825,6 +829,37 @@ def test_a_slipping_wheel_reads_more_travel_and_a_turn_the_robot_did_not_make(tm
         else:
             np.testing.assert_allclose(sb, sa, atol=3e-5)
     assert turned > 2.0  # the turns the robot did not make: 1 rad/s and more
+
+
+def test_a_laser_off_scale_reads_k_r_plus_b_and_changes_nothing_else(tmp_path):
+    # --range-scale 1.03 --range-bias 0.05 with no noise: every return reads 1.03 r + 0.05 (both logged to the
+    # millimetre: within 2 mm), a no-return stays one, and a return pushed to the laser's 6 m or past it reads none;
+    # the odometry, the map and the truth are the same bytes, and sim.yaml gives both. 1 and 0 give the log as
+    # without them, and no entry in sim.yaml.
+    from mcl.cli import main
+
+    exact = dict(range_sigma=0.0, p_short=0.0, p_max=0.0)
+    simulate(tmp_path / "a", kind="office", seed=6, duration=10.0, range_max=6.0, **exact)
+    assert main(["simulate", str(tmp_path / "b"), "--kind", "office", "--seed", "6", "--duration", "10",
+                 "--range-max", "6", "--range-sigma", "0", "--p-short", "0", "--p-max", "0",
+                 "--range-scale", "1.03", "--range-bias", "0.05"]) == 0
+    simulate(tmp_path / "c", kind="office", seed=6, duration=10.0, range_max=6.0, range_scale=1.0, range_bias=0.0,
+             **exact)
+    for f in ("truth.tum", "map.pgm", "map.yaml"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+    assert (tmp_path / "a" / "log.clf").read_bytes() == (tmp_path / "c" / "log.clf").read_bytes()
+    params = yaml.safe_load((tmp_path / "b" / "sim.yaml").read_text())
+    assert params["range_scale"] == 1.03 and params["range_bias"] == 0.05
+    assert "range_scale" not in yaml.safe_load((tmp_path / "c" / "sim.yaml").read_text())
+    la, lb = read_carmen(tmp_path / "a" / "log.clf"), read_carmen(tmp_path / "b" / "log.clf")
+    np.testing.assert_array_equal([s.odom for s in la.scans], [s.odom for s in lb.scans])
+    ra, rb = np.array([s.ranges for s in la.scans]), np.array([s.ranges for s in lb.scans])
+    hit = ra < 6.0
+    inside = hit & (1.03 * ra + 0.05 < 5.99)  # clear of the log's rounding at the laser's range
+    out = hit & (1.03 * ra + 0.05 > 6.01)
+    np.testing.assert_allclose(rb[inside], 1.03 * ra[inside] + 0.05, atol=0.002)
+    assert np.all(rb[~hit] == 6.0) and np.all(rb[out] == 6.0)
+    assert inside.sum() > 1000 and out.sum() > 10
 
 
 def test_doubled_walls_from_the_command_line(tmp_path):

@@ -145,6 +145,7 @@ def _generated_suites_but(*names: str) -> list[str]:
                                          ("heldout15", 12), ("heldout16", 12), ("heldout17", 12),
                                          ("heldout18", 12), ("heldout19", 12), ("heldout20", 12), ("heldout21", 12),
                                          ("heldout22", 12), ("heldout23", 12), ("heldout24", 10),
+                                         ("heldout25", 10),
                                          ("ground-hits", 15), ("fast-laser", 12),
                                          ("sparse-laser", 4), ("sparse-hall", 6),
                                          ("stale-map", 8), ("unknown-floor", 12), ("holonomic", 30), ("depth-laser", 12),
@@ -186,7 +187,8 @@ def test_the_shipped_generated_suites_load_with_unique_names_and_world_seeds(nam
                       "heldout21": _generated_suites_but("heldout21"),
                       "heldout22": _generated_suites_but("heldout22"),
                       "heldout23": _generated_suites_but("heldout23"),
-                      "heldout24": _generated_suites_but("heldout24")}[name]:
+                      "heldout24": _generated_suites_but("heldout24"),
+                      "heldout25": _generated_suites_but("heldout25")}[name]:
             taken = {(d.simulate.get("kind", "office"), d.simulate["seed"])
                      for d in load_suite(PROJECT_ROOT / "suites" / f"{other}.yaml").datasets if d.simulate is not None}
             assert not taken & seeds, other
