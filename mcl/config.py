@@ -435,6 +435,9 @@ class QualityConfig:
     # ... and such sparse fits (min_beams returns or more) count together once they hold this many returns, as one
     # fit weighted by returns (mcl.quality.ScanQuality._pooled); 0: they are no evidence
     held_pool_beams: int = field(default=0, metadata=_rng(0, 100_000))
+    # ... and a track from a known pose is held again (those two bars back) after this many updates without a lost
+    # call since its last lost episode (mcl.quality.ScanQuality.update); 0: never, once believed lost
+    held_again: int = field(default=0, metadata=_rng(0, 100_000))
     # a scan with no beam through a mapped wall is bad only below this (when lower than lost_below): readings short
     # of the map are what people and furniture the map lacks give; 1.0: no such rule
     occluded_below: float = field(default=1.0, metadata=_rng(-2.0, 1.0))

@@ -129,7 +129,9 @@ class ScanQuality:
         self.resolution = float(grid.resolution)
         self.lost = False
         self.collapsed = False  # this update's lost call was a collapse (update)
-        self.since_lost: int | None = None  # updates since the belief was last lost (None: not since the reset)
+        # updates since the belief was last lost (None: not since the reset, or held again: quality.held_again)
+        self.since_lost: int | None = None
+        self._from_pose = True  # the reset started a track from a known pose (not a global search): held_again
         self._recent: deque[bool] = deque(maxlen=2 * cfg.lost_after - 1)  # bad or not, last updates with a scan
         self._scores: deque[float] = deque(maxlen=2 * cfg.lost_after - 1)  # their scores
         self._held: deque[float] = deque(maxlen=DOUBT_HISTORY)  # scores of the updates held (not lost, no doubt)
@@ -290,8 +292,10 @@ class ScanQuality:
         baseline, never lost, drifted 1 m. After a lost call, and for a place a search found, ``min_beams`` holds: a
         search must leave a wrong place on the few returns there are (with the bar on every track held 50 updates,
         large-06's global searches left a wrong place 1-6 s later). The bar is at most a quarter of the beams a scan
-        is scored on (``scored_beams``, sensor.max_beams: 15 of the default 60)."""
-        held = self.since_lost is None  # never lost since a start from a known pose (a lost call sets it)
+        is scored on (``scored_beams``, sensor.max_beams: 15 of the default 60). A track from a known pose is held
+        again ``held_again`` updates after its last lost call (:meth:`update`): one lost episode, right at the time,
+        otherwise took the bar for good (a hall among unmapped furniture, 26 s later: 27 m away)."""
+        held = self.since_lost is None  # not lost since a start from a known pose, or since held_again updates
         return max(self.cfg.min_beams, self.held_min_beams) if held else self.cfg.min_beams
 
     def _creeping(self) -> bool:
@@ -380,6 +384,8 @@ class ScanQuality:
             self.since_lost = 0
         elif self.since_lost is not None:
             self.since_lost += 1
+            if self._from_pose and 0 < self.cfg.held_again <= self.since_lost:
+                self.since_lost = None  # held again (quality.held_again)
         return self.lost
 
     def reset(self, lost: bool) -> None:
@@ -387,6 +393,7 @@ class ScanQuality:
         self.lost = lost
         self.collapsed = False
         self.since_lost = 0 if lost else None
+        self._from_pose = not lost
         self._recent.clear()
         self._scores.clear()
         self._held.clear()
