@@ -800,8 +800,8 @@ class ParticleFilter:
         turn's heading error is in the predicted cloud only. The odometry turned a hall robot 0.22 rad too far
         while 3-8 of its 31 returns met mapped obstacles 6.5 m off; from the estimate they lay 1.4 m off the map
         and were skipped with the people, under the last estimate's 0.01 rad, and the filter went on turned
-        (suites/heldout25.yaml hall-short-5pc-people-h32 at range scale 1: 0.26 -> 40 m lost; the baseline, which
-        scores every beam, kept it)."""
+        (suites/heldout25.yaml hall-short-5pc-people-h32 at range scale 1, tracking: RMSE 20.5-22.7 m, now 0.083 m;
+        the baseline, which scores every beam, 0.114 m)."""
         w, _ = normalize_log_weights(self.logw)
         last = self.unmapped.blind_distance(observation, pose, self.last_estimate.cov, far)
         return np.maximum(last, self.unmapped.blind_distance(observation, pose, estimate(self.particles, w)[1], far))

@@ -665,6 +665,11 @@ def _check(cond, key, msg):
         raise ConfigError(f"simulate: {key}: {msg}")
 
 
+def _real(v) -> bool:
+    """Whether ``v`` is a finite real number (an int, float or NumPy number; not a bool)."""
+    return isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v)
+
+
 def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 60.0, n_beams: int = 181,
              fov: float = math.pi,
              range_max: float = 12.0, range_sigma: float = 0.02, p_short: float = 0.03, p_max: float = 0.01,
@@ -827,19 +832,15 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
            f"expected 0..20, got {unknown_floor!r}")
     _check(isinstance(doubled_walls, (int, np.integer)) and not isinstance(doubled_walls, bool)
            and 0 <= doubled_walls <= 20, "doubled_walls", f"expected 0..20, got {doubled_walls!r}")
-    _check(isinstance(map_scale, (int, float, np.number)) and not isinstance(map_scale, bool)
-           and math.isfinite(map_scale) and 0.9 <= map_scale <= 1.1, "map_scale",
+    _check(_real(map_scale) and 0.9 <= map_scale <= 1.1, "map_scale",
            f"expected 0.9..1.1, got {map_scale!r}")
     _check(map_scale == 1.0 or not (landmarks or depth), "map_scale",
            "a scaled map is made without landmarks and depth frames: set landmarks to 0 and depth to false")
-    _check(isinstance(map_rotation, (int, float, np.number)) and not isinstance(map_rotation, bool)
-           and math.isfinite(map_rotation) and abs(map_rotation) <= math.pi, "map_rotation",
+    _check(_real(map_rotation) and abs(map_rotation) <= math.pi, "map_rotation",
            f"expected -pi..pi rad, got {map_rotation!r}")
-    _check(isinstance(range_scale, (int, float, np.number)) and not isinstance(range_scale, bool)
-           and math.isfinite(range_scale) and 0.5 <= range_scale <= 1.5, "range_scale",
+    _check(_real(range_scale) and 0.5 <= range_scale <= 1.5, "range_scale",
            f"expected 0.5..1.5, got {range_scale!r}")
-    _check(isinstance(range_bias, (int, float, np.number)) and not isinstance(range_bias, bool)
-           and math.isfinite(range_bias) and abs(range_bias) <= 1.0, "range_bias",
+    _check(_real(range_bias) and abs(range_bias) <= 1.0, "range_bias",
            f"expected -1..1 m, got {range_bias!r}")
     # windows of the log's faults: how many (0..20) and how long each
     for key, n, key_s, seconds, lo in (("scan_gaps", scan_gaps, "scan_gap_s", scan_gap_s, 0.5),
@@ -848,25 +849,22 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
                                        ("odom_slips", odom_slips, "odom_slip_s", odom_slip_s, 0.5)):
         _check(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and 0 <= n <= 20, key,
                f"expected 0..20, got {n!r}")
-        _check(isinstance(seconds, (int, float, np.number)) and not isinstance(seconds, bool)
-               and math.isfinite(seconds) and lo <= seconds <= 60.0, key_s, f"expected {lo:g}..60 s, got {seconds!r}")
+        _check(_real(seconds) and lo <= seconds <= 60.0, key_s, f"expected {lo:g}..60 s, got {seconds!r}")
     _check(scan_gaps == 0 or not depth, "scan_gaps",
            "scan gaps are made without depth frames: set depth to false")
     _check(map_rotation == 0.0 or not (landmarks or depth), "map_rotation",
            "a turned map is made without landmarks and depth frames: set landmarks to 0 and depth to false")
     _check(isinstance(laser_pose, (list, tuple, np.ndarray)) and len(laser_pose) == 3
-           and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v)
-                   for v in laser_pose)
+           and all(_real(v) for v in laser_pose)
            and math.hypot(laser_pose[0], laser_pose[1]) <= robot_radius + 1e-12, "laser_pose",
            f"expected [x, y, theta] with the laser within the robot's {robot_radius:g} m radius, got {laser_pose!r}")
     _check(isinstance(body, (list, tuple)) and all(
         isinstance(b, (list, tuple)) and len(b) == 3
-        and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and math.isfinite(v) for v in b)
+        and all(_real(v) for v in b)
         and -math.pi <= b[0] < b[1] <= math.pi and 0.0 < b[2] < range_max for b in body), "body",
         f"expected [[a0, a1, r], ...] with -pi <= a0 < a1 <= pi rad and 0 < r < range_max ({range_max:g} m), "
         f"got {body!r}")
-    _check(isinstance(holonomic, (int, float, np.number)) and not isinstance(holonomic, bool)
-           and math.isfinite(holonomic) and 0.0 <= holonomic <= math.pi, "holonomic",
+    _check(_real(holonomic) and 0.0 <= holonomic <= math.pi, "holonomic",
            f"expected 0..pi rad, got {holonomic!r}")
     mount = np.array([float(v) for v in laser_pose])
     mounted = bool(np.any(mount != 0.0))
