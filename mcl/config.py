@@ -106,6 +106,10 @@ class FilterConfig:
     # ... or this many seconds of log time lost (after at least quality.lost_after lost updates), whichever comes
     # first: a log with a scan every 3 s (intel_lab) is otherwise lost for 30 s before the re-seed. 0: updates only
     recovery_global_after_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))
+    # ... but recovery_global_after updates count only once they span this many seconds of log time: at 10-40 Hz
+    # ten updates are 0.25-1 s, shorter than the ground hits or the crowd that made a correct track look lost (the
+    # number of updates was chosen at 5 Hz, where ten span 1.8 s). 0: updates alone
+    recovery_global_min_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))
     # lost: a lost call within this many seconds of log time after a lost episode that ended without a re-seed (the
     # track, or a spread pose near it, fitting again) re-seeds at once (mcl.adaptive.LostRecovery.relapsed; 0: off)
     recovery_relapse_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))

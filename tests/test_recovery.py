@@ -430,7 +430,7 @@ def test_reseed_adds_a_whole_global_set_with_the_old_cloud_keeping_its_share_of_
     pf.logw = np.log(np.full(pf.n, 1.0 / pf.n))
     n_old = pf.n
     for _ in range(10):
-        pf.recovery.observe_lost(True)
+        pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
     # filled up to filter.particles, and at least doubled (here N was already 4,000: 4,000 more)
@@ -448,7 +448,7 @@ def test_reseed_adds_a_whole_global_set_with_the_old_cloud_keeping_its_share_of_
     pf = _filter_on_a_box("filter.recovery_reseed=false", "filter.kld=false")
     pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1])
     for _ in range(10):
-        pf.recovery.observe_lost(True)
+        pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
     assert pf.n == 4000 and 300 <= info.injected <= 500 and not pf.search.tempering
@@ -472,11 +472,11 @@ def test_a_collapse_re_seeds_at_the_first_lost_update_unprotected():
     # the same lost update without the collapse: no re-seed yet
     pf = _filter_on_a_box("filter.recovery_reseed=true")
     pf.init_gaussian([5.0, 5.0, 0.0], [0.1, 0.1, 0.1])
-    pf.recovery.observe_lost(True)
+    pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
     assert not pf.recovery.reseed_due
     # ... and the re-seed it comes to (global_after lost updates later) is protected: a trusted track
     for _ in range(9):
-        pf.recovery.observe_lost(True)
+        pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
     assert info.reseeded and pf.protected is not None and not pf.protected.local
@@ -564,7 +564,7 @@ def test_a_second_reseed_draws_the_grown_set_back_down_so_the_set_stays_within_t
     for _ in range(3):
         pf.search.holding = False
         for _ in range(10):
-            pf.recovery.observe_lost(True)
+            pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
         info = StepInfo(particles=pf.n, ess=float(pf.n))
         pf.resample(info)
         assert info.reseeded and pf.n == 8000 and info.injected == 4000
@@ -782,7 +782,7 @@ def test_the_likelihood_field_scores_with_the_search_field_exactly_while_the_las
     pf.init_gaussian([5.0, 5.0, 0.0], [0.2, 0.2, 0.1])
     obs = pf.prepare(scan, np.zeros(3))
     _correction_gain(pf, obs)  # tracking
-    pf.recovery.observe_lost(True)
+    pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
     _correction_gain(pf, obs)  # lost: poses spread around the estimate
     pf.recovery.observe_lost(False)
     _correction_gain(pf, obs)
@@ -1131,7 +1131,7 @@ def _reseeded(track, *sets):
     pf = ParticleFilter(cfg, grid, rng=np.random.default_rng(5))
     pf.init_gaussian(track, [0.05, 0.05, 0.02])
     for _ in range(cfg.filter.recovery_global_after):
-        pf.recovery.observe_lost(True)
+        pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
     assert info.reseeded and pf.n == 8000 and pf.search.tempering
@@ -1372,7 +1372,7 @@ def test_a_reseed_of_a_place_a_search_just_found_is_not_protected_nor_with_resee
     pf.search.since_end = 3  # the search that found this place ended 3 updates ago: on probation
     pf.search.tempering = pf.search.holding = False
     assert pf.recovery.on_probation
-    pf.recovery.observe_lost(True)
+    pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
     assert info.reseeded and pf.protected is None
@@ -1499,7 +1499,7 @@ def test_no_spread_starts_on_a_scan_that_fits_the_track_while_the_lost_belief_ho
         pf = _tracking_protected(truth)
         pf.quality.reset(lost=True)  # lost, and lost recovery past its wait
         for _ in range(pf.cfg.filter.recovery_wait + 1):
-            pf.recovery.observe_lost(True)
+            pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
         info = pf.step(None, pf.prepare(_cast_scan(pf.grid, scan_at), np.zeros(3)))
         assert pf.quality.lost and pf.recovery.spreading, scan_at  # the belief holds either way
         assert (pf.protected is not None) == spreads and pf.n == (8000 if spreads else 4000), scan_at
@@ -1514,7 +1514,7 @@ def test_a_global_reseed_due_during_a_protected_spread_keeps_the_leading_side_as
     pf.protected.odds = -1.0  # the track leads
     kept = pf.particles[:, ~pf._injected].copy()
     for _ in range(pf.cfg.filter.recovery_global_after):
-        pf.recovery.observe_lost(True)
+        pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
     info = StepInfo(particles=pf.n, ess=float(pf.n))
     pf.resample(info)
     assert info.reseeded and pf.search.tempering and pf.protected is not None and not pf.protected.local
@@ -1627,7 +1627,7 @@ def test_a_global_reseed_due_while_the_spread_leads_waits_while_the_track_still_
         p.odds, p.updates, p.track_score = 3.0, 4, track_score  # the spread leads, not settled (reseed_odds 4.6)
         spread = pf.particles[:, pf._injected].copy()
         for _ in range(pf.cfg.filter.recovery_global_after):
-            pf.recovery.observe_lost(True)
+            pf.recovery.observe_lost(True, dt=0.2)  # a 5 Hz log (filter.recovery_global_min_s)
         info = StepInfo(particles=pf.n, ess=float(pf.n))
         pf.resample(info)
         case = (track_score, wait_fit)
@@ -1673,3 +1673,23 @@ def test_a_global_reseed_waits_for_a_spread_that_leads_on_a_stale_map(tmp_path_f
     assert s["eval"]["ate_max"] < 0.5, s["eval"]
     kept = _track(data, sim, tmp_path / "kept", "filter.reseed_wait_fit=0")
     assert kept["eval"]["ate_max"] > 0.6, kept["eval"]
+
+
+def test_a_fast_lasers_lost_updates_re_seed_only_once_they_span_the_floor():
+    # filter.recovery_global_min_s: recovery_global_after (10) lost updates re-seed only once they span this much log
+    # time, as ten do at 5 Hz (1.8 s). At 15 Hz ten are 0.67 s: a correct track lost while its laser saw the ground for
+    # 2 s was re-seeded inside them onto a look-alike 28 m away (a generated building under an 8 m laser, seeds 2-3).
+    from mcl.adaptive import GlobalSearch, LostRecovery
+
+    def due_after(n, dt, floor):
+        r = LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=True, search=GlobalSearch(),
+                         global_after_s=3.0, global_min_s=floor)
+        for _ in range(n):
+            r.observe_lost(True, 1.0, dt)
+        return r.reseed_due
+
+    assert not due_after(9, 0.2, 1.8) and due_after(10, 0.2, 1.8)  # 5 Hz: ten updates, as without the floor
+    assert due_after(10, 1 / 15, 0.0)  # 15 Hz without the floor: 0.6 s in
+    assert not due_after(10, 1 / 15, 1.8) and not due_after(27, 1 / 15, 1.8)  # 0.6 s, 1.73 s
+    assert due_after(28, 1 / 15, 1.8)  # 1.8 s
+    assert due_after(4, 1.0, 1.8)  # a sparse log: recovery_global_after_s (3 s) first, as before
