@@ -119,6 +119,9 @@ class FilterConfig:
     # the probation after a global search counts from its first update whose estimate fits the scan (fit: holding
     # ends), or starts again when its heaviest cluster settles after that (settled: tempering ends)
     recovery_probation_from: Literal["fit", "settled"] = "fit"
+    # ... and lasts at least this many seconds of log time: at 10-40 Hz fifty updates are 1.3-5 s (the number was
+    # chosen at 5 Hz, where it spans 10 s). 0: updates alone
+    recovery_probation_min_s: float = field(default=0.0, metadata=_rng(0.0, 1e9))
     # lost: after a global search, re-seed when over stall_window s of log time the odometry moved >= stall_travel m
     # and the estimate less than stall_ratio times as far (mcl.adaptive.StallCheck; 0: off); for stall_active s
     stall_ratio: float = field(default=0.0, metadata=_rng(0.0, 1.0))

@@ -1133,7 +1133,8 @@ class ParticleFilter:
         info.fit = fit
         info.lost = self.quality.update(fit)
         # a protected re-seed's search settles by the odds (protect), not by the track's cluster
-        self.search.observe(info.lost, info.cluster_weight if self.protected is None else 0.0, self.last_estimate.cov)
+        self.search.observe(info.lost, info.cluster_weight if self.protected is None else 0.0, self.last_estimate.cov,
+                           self._dt)
         if self.faults is not None:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
             cov = info.full_cov if self.faults.slip is not None else None  # the spread gates a wheel's slip alone

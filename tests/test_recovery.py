@@ -572,6 +572,39 @@ def test_a_second_reseed_draws_the_grown_set_back_down_so_the_set_stays_within_t
         assert w[:4000].sum() == pytest.approx(0.5)
 
 
+def test_a_fast_lasers_probation_lasts_the_seconds_fifty_updates_span_at_5_hz():
+    # filter.recovery_probation_min_s: 50 updates after a search are 10 s at 5 Hz but 1.7 s at 30 Hz. With the floor
+    # (10 s) a lost call 60 updates (2 s) after a 30 Hz search re-seeds at once; without it, it is past the probation.
+    # At 5 Hz the count alone decides, as before: off probation at the 51st update, 10.0 s after the search ended.
+    from mcl.adaptive import GlobalSearch, LostRecovery
+
+    def after_search(min_s: float, dt: float, fitting: int):
+        r = LostRecovery(0.1, (0.5, 0.5, 0.3), global_after=10, lost_after=3, reseed=True, probation=50,
+                         search=GlobalSearch(), probation_min_s=min_s)
+        _start(r)
+        for _ in range(fitting):  # the search ends at its first fitting update, then the place fits on
+            r.search.observe(False, 1.0, None, dt)
+            r.observe_lost(False, 1.0, dt)
+        return r
+
+    assert after_search(10.0, 1 / 30, 60).on_probation
+    assert not after_search(0.0, 1 / 30, 60).on_probation
+    assert after_search(10.0, 1 / 30, 300).on_probation  # 299 x 1/30 s: 9.97 s
+    assert not after_search(10.0, 1 / 30, 302).on_probation  # 10.03 s
+    for min_s in (0.0, 10.0):
+        assert after_search(min_s, 0.2, 50).on_probation
+        assert not after_search(min_s, 0.2, 51).on_probation
+    r = after_search(10.0, 1 / 30, 60)
+    r.search.observe(True, 1.0, None, 1 / 30)
+    r.observe_lost(True, 1.0, 1 / 30)
+    assert r.reseed_due  # the first lost call re-seeds
+    r = _lost_recovery(True, probation=0)  # probation off: the floor is inert
+    r.probation_min_s = 10.0
+    _start(r)
+    _observe(r, False)
+    assert not r.on_probation
+
+
 def test_probation_reseeds_at_the_first_lost_call_after_a_search_and_only_then():
     r = _lost_recovery(True, probation=5)
     _observe(r, True)  # a track that never searched: the usual 10 lost updates
