@@ -880,6 +880,12 @@ class FaultWindow:
         return dataclasses.replace(self.wide, turn_max=self.turn_rate * dt, shift_max=self.shift_rate * dt)
 
 
+def _spans(seconds: float, floor: float) -> bool:
+    """Whether log time summed over updates reaches a floor of seconds, the sum's rounding forgiven: the floors are
+    what a count of updates spans at 5 Hz, and nine steps of 0.2 s sum to 1.7999... s."""
+    return seconds >= floor - 1e-9
+
+
 class LostRecovery:
     """Recovery only when lost, local before global.
 
@@ -995,7 +1001,7 @@ class LostRecovery:
         a second: at 15 Hz ten updates are 0.67 s, and a correct track called lost while its laser saw the ground for
         2 s was re-seeded inside them, a look-alike 28 m away fitting the ground hits' scans at 0.92 (a generated
         building under an 8 m laser, seeds 2-3 lost 64-71 m off; the baseline 0.26 m)."""
-        if self.lost_updates >= self.global_after and self.lost_time >= self.global_min_s - 1e-9:  # 9 x 0.2 s: 1.7999...
+        if self.lost_updates >= self.global_after and _spans(self.lost_time, self.global_min_s):
             return True
         return (self.global_after_s > 0.0 and self.lost_updates >= self.lost_after
                 and self.lost_time >= self.global_after_s)
@@ -1012,8 +1018,7 @@ class LostRecovery:
         since = self.search.since_end
         if since is None or self.probation <= 0:
             return False
-        # 50 x 0.2 s: 10.000000000000002 at 5 Hz, where the count alone decides
-        return since <= self.probation or self.search.since_end_s < self.probation_min_s - 1e-9
+        return since <= self.probation or not _spans(self.search.since_end_s, self.probation_min_s)
 
     @property
     def inject_probability(self) -> float:
