@@ -17,7 +17,7 @@ lost motion: each scan in the window takes the matched pose, and the odometry af
 where the matching ended (the filter uses only its steps), as ``mcl.datasets.rosbag`` fills a gap in a bag's
 odometry. Otherwise the scans pass as they were: a robot that stood still, or odometry that caught up (its step out
 of the hold ``CATCH_UP`` times as fast as its step into it and faster than ``CATCH_UP_V`` m/s or ``CATCH_UP_W``
-rad/s).
+rad/s, turning over the window within ``CATCH_UP_TURN`` rad of the scans: a catch-up delivers the motion they saw).
 
 The matching needs a guess, and where the scene does not constrain the motion (along a corridor) the guess decides:
 the odometry's velocity just before the hold (the faster of its last two steps: a hold that began between two scans
@@ -41,9 +41,11 @@ would call a jump and that is faster than ``JUMP_V``, or slower but with the sca
 (``JUMP_OVERLAP``: a restart between scans seconds apart), is taken from scan matching the two scans instead (from
 the velocity before it and from the odometry's own step; a match that agrees with the odometry's own step leaves
 it), and the odometry after it goes on from there; and a hold that ends in such a jump is filled from the scans,
-however its step out compares (it is no catch-up). Scans of other lasers between the two lie between the first
-laser's poses around them, by their time (held with the slip check's span; with ``slips`` off they keep the odometry
-as it came).
+however its step out compares (it is no catch-up). So is a hold whose fast step out turns the robot over
+``CATCH_UP_TURN`` rad more or less than the scans did over it: a driver that restarted a metre or two from where its
+odometry held (the odometry had come back near its origin) jumps too short for the guard, and as fast as a catch-up.
+Scans of other lasers between the two lie between the first laser's poses around them, by their time (held with the
+slip check's span; with ``slips`` off they keep the odometry as it came).
 
 A wheel that slips (spins on a wet or dusty floor) reads travel the robot did not make: the odometry turns the robot
 1-2 rad/s that did not turn (``suites/heldout23.yaml``), and the cloud turns with it. With ``slips``
@@ -82,6 +84,10 @@ LOST_A = 0.15  # rad ... or turned this much less
 CATCH_UP = 2.0  # the step out of a hold faster than this times the step into it ...
 CATCH_UP_V = 1.0  # m/s ... and than this ...
 CATCH_UP_W = 1.0  # rad/s ... or turning so: the odometry caught up (mit_csail: 0.86-0.94 m in 0.21 s, 4-4.5 m/s)
+# rad: ... and its turn over the window within this of the scans' (a catch-up delivers the motion they saw: mit_csail's
+# three within 0.35 rad). A step out that turns more or less is a driver that restarted from 0 0 0 a metre or two from
+# where its odometry held (a jump too short for the guard): the robot's pose turned by the heading it had there
+CATCH_UP_TURN = 0.7
 # s: scans held back at most this long; a longer hold passes as it was: a hung driver is restarted within seconds,
 # and a robot stopped dead along a corridor (whose scans cannot tell it stands) is taken to drive on only so long
 MAX_HOLD = 20.0
@@ -349,12 +355,16 @@ class StallFill:
         lost_a = abs(float(matched[2])) - abs(float(wrap_angle(own[2])))
         # the odometry's step into the first scan after the hold (all of its motion over the window): much faster
         # than before the hold, it delivered the held motion late (a catch-up), and lost none; unless it jumped
-        # (a driver that restarted from 0 0 0 after it was down)
+        # (a driver that restarted from 0 0 0 after it was down), far (the guard) or near, turning where the scans
+        # did not
         dt = chain[-1].t - chain[-2].t if len(chain) > 1 else 0.0
-        jumped = guard is not None and dt > 0.0 and _jumped(guard, own, dt, anchor, chain[-1], self.mount_of(anchor))
-        caught_up = dt > 0.0 and not jumped and (
+        fast = dt > 0.0 and (
             math.hypot(own[0], own[1]) / dt > max(CATCH_UP * math.hypot(entry[0, 0], entry[0, 1]), CATCH_UP_V)
             or abs(float(wrap_angle(own[2]))) / dt > max(CATCH_UP * float(np.abs(entry[:, 2]).max()), CATCH_UP_W))
+        jumped = guard is not None and dt > 0.0 and (
+            _jumped(guard, own, dt, anchor, chain[-1], self.mount_of(anchor))
+            or (fast and abs(float(wrap_angle(own[2] - matched[2]))) > CATCH_UP_TURN))
+        caught_up = fast and not jumped
         if caught_up or (not jumped and lost_m <= LOST_M and lost_a <= LOST_A):
             for h in held:  # a standstill, or odometry that caught up: as it was
                 yield self._moved(h, fix)
