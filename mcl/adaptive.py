@@ -697,8 +697,13 @@ class ProtectedReseed:
     STEP = 3.0  # nats: the most one scan may move the log-odds (with reseed_odds 4.6, two scans decide)
     DECISIVE_FIT = 0.9  # ... unless the search's place fits it at least this well (quality score) and the track is bad
 
-    def __init__(self, track: np.ndarray, keep: float, reseed_odds: float, lost_below: float, local: bool = False):
+    def __init__(self, track: np.ndarray, keep: float, reseed_odds: float, lost_below: float, local: bool = False,
+                 min_beams: int = 0):
         self.track = track
+        # a scan with fewer returns than this decides nothing at once (the held track's bar, quality.held_min_beams
+        # as mcl.quality.ScanQuality takes it): nine people's returns in a hall fitted a place 38 m away at 0.9 and
+        # the correct track at 0 (a hunt's hall-p24-res2-pmax-w3631)
+        self.min_beams = int(min_beams)
         self.local = bool(local)  # the other side is lost recovery's spread around the estimate, not a global search
         self.reseed_odds = float(reseed_odds)
         self.lost_below = float(lost_below)
@@ -724,8 +729,11 @@ class ProtectedReseed:
             # outdoors one scan that fits the true pose badly (a third of its beams through mapped walls) gave a
             # place 176 m away e^50 the likelihood while fitting worse still there (-0.23 against 0.02: the
             # likelihood field does not see readings through walls)
-            s_search, s_track, _, c_track = scores()  # (the search's share through walls: no rule reads it)
+            # (the search's share through walls: no rule reads it; then the scan's returns, when given)
+            s_search, s_track, _, c_track, *returns = scores()
             self.track_score = s_track
+            # a scan fits the search's place as a tracked scan does (decisive) only with returns enough to tell
+            decisive = s_search >= self.DECISIVE_FIT and (not returns or returns[0] >= self.min_beams)
             step = raw - self.odds if (raw - self.odds) * (s_search - s_track) >= 0.0 else 0.0
             # nor, for a global search, a scan the track explains as occlusion (no beam through a mapped wall),
             # unless it fits the search's place as a tracked scan does (DECISIVE_FIT): people end readings short of
@@ -738,7 +746,7 @@ class ProtectedReseed:
             # hall-360-crowd-h16: 12-31 m off for 4 s, every seed). A right place that fits at 0.89-0.96 can still
             # have one stray beam through a corner: held back by it, the demo's recovery from its kidnapping took a
             # second longer
-            if step > 0.0 and not self.local and c_track == 0.0 and s_search < self.DECISIVE_FIT:
+            if step > 0.0 and not self.local and c_track == 0.0 and not decisive:
                 step = 0.0
             # and, for a spread around the estimate (local), only if the scan fits the side it favours as a tracked
             # scan does: two seconds of a tilted laser's ground hits fit no pose near the track, and spread poses
@@ -758,7 +766,7 @@ class ProtectedReseed:
             # -1; unless the scan fits the search's place as a tracked scan does and the track's as a lost one: on
             # a log with a scan every 3 s (fr101, kidnapped: 0.96 against 0.34) the second scan came 17 s later.
             # Never for a spread, whose best pose of thousands near the track fits a cluttered scan best by chance
-            if self.local or not (s_search >= self.DECISIVE_FIT and s_track < self.lost_below):
+            if self.local or not (decisive and s_track < self.lost_below):
                 step = min(max(step, -self.STEP), self.STEP)
             odds = self.odds + step
         self.odds = odds

@@ -1007,11 +1007,12 @@ class ParticleFilter:
         self.logw = logw - log_norm
 
     def _side_fits(self, search: ClusterEstimate | None,
-                   track: ClusterEstimate | None) -> tuple[float, float, float, float]:
+                   track: ClusterEstimate | None) -> tuple[float, float, float, float, int]:
         """This update's scan at the heaviest clusters of the sides (``_side_estimate``): (score, score,
-        contradiction, contradiction), search first (``_side_fit``)."""
-        (s_search, c_search), (s_track, c_track) = self._side_fit(search), self._side_fit(track)
-        return s_search, s_track, c_search, c_track
+        contradiction, contradiction), search first (``_side_fit``), and the scan's beams with a return (a count
+        the pose does not change)."""
+        (s_search, c_search, _), (s_track, c_track, beams) = self._side_fit(search), self._side_fit(track)
+        return s_search, s_track, c_search, c_track, beams
 
     def _side_estimate(self, side: np.ndarray) -> ClusterEstimate | None:
         """The heaviest cluster of the particles the mask ``side`` selects (None without weight)."""
@@ -1023,14 +1024,14 @@ class ParticleFilter:
         return cluster_estimate(np.ascontiguousarray(self.particles[:, side]), w / total,
                                 fc.cluster_size, fc.cluster_angle)
 
-    def _side_fit(self, est: ClusterEstimate | None) -> tuple[float, float]:
-        """The quality score (mcl.quality: match - 2 contradiction) and the share of beams through mapped walls of
-        this update's scan at a side's heaviest cluster ``est``; (-inf, 1) without weight (None), nan without
-        beams."""
+    def _side_fit(self, est: ClusterEstimate | None) -> tuple[float, float, int]:
+        """The quality score (mcl.quality: match - 2 contradiction), the share of beams through mapped walls and the
+        beams with a return of this update's scan at a side's heaviest cluster ``est``; (-inf, 1, 0) without weight
+        (None), nan without beams."""
         if est is None:
-            return -math.inf, 1.0
+            return -math.inf, 1.0, 0
         f = self._scan_fit(est.mean)
-        return f.score, f.contradiction
+        return f.score, f.contradiction, f.beams
 
     def _search_concurs(self, search: ClusterEstimate | None, track: ClusterEstimate | None) -> bool:
         """A protected re-seed's search has gathered where the track is: its heaviest cluster ``search`` holds what
@@ -1253,7 +1254,8 @@ class ParticleFilter:
         self._kept_and_fresh(self.particles[:, idx], self.recovery_sampler(m, self.rng, self._observation), keep)
         self._fresh = self._injected.copy()
         if keep > 0.0 and n > 0 and trusted and fc.reseed_odds > 0.0:
-            self.protected = ProtectedReseed(~self._injected, keep, fc.reseed_odds, self.cfg.quality.lost_below)
+            self.protected = ProtectedReseed(~self._injected, keep, fc.reseed_odds, self.cfg.quality.lost_below,
+                                             min_beams=max(self.cfg.quality.min_beams, self.quality.held_min_beams))
         elif n > 0 and fc.reseed_hold_pose and self._held is None and self.last_estimate is not None:
             # (a re-seed before the estimate fitted again keeps the pose held since the first one)
             self._held = (np.array(self.last_estimate.mean, dtype=np.float64),
