@@ -718,8 +718,8 @@ class ProtectedReseed:
         """This update's log masses of the two sides (log-sum-exp: a side can hold e^-50 of the weight and still
         come back) -> the odds that counted. ``scores()`` gives this scan's quality score at the search's and at
         the track's estimate, then the share of its beams through mapped walls at each (only the track's is read
-        since the sixty-first session's occlusion rule), asked only when the masses moved; None when the update had
-        no scan."""
+        since the sixty-first session's occlusion rule), then its beams with a return, asked only when the masses
+        moved; None when the update had no scan."""
         raw = log_search - log_track
         odds = raw
         if not (math.isfinite(log_track) and math.isfinite(log_search)):  # a side with no weight at all lost
@@ -729,11 +729,11 @@ class ProtectedReseed:
             # outdoors one scan that fits the true pose badly (a third of its beams through mapped walls) gave a
             # place 176 m away e^50 the likelihood while fitting worse still there (-0.23 against 0.02: the
             # likelihood field does not see readings through walls)
-            # (the search's share through walls: no rule reads it; then the scan's returns, when given)
-            s_search, s_track, _, c_track, *returns = scores()
+            # (the search's share through walls: no rule reads it)
+            s_search, s_track, _, c_track, returns = scores()
             self.track_score = s_track
             # a scan fits the search's place as a tracked scan does (decisive) only with returns enough to tell
-            decisive = s_search >= self.DECISIVE_FIT and (not returns or returns[0] >= self.min_beams)
+            decisive = s_search >= self.DECISIVE_FIT and returns >= self.min_beams
             step = raw - self.odds if (raw - self.odds) * (s_search - s_track) >= 0.0 else 0.0
             # nor, for a global search, a scan the track explains as occlusion (no beam through a mapped wall),
             # unless it fits the search's place as a tracked scan does (DECISIVE_FIT): people end readings short of

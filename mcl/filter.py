@@ -1255,7 +1255,7 @@ class ParticleFilter:
         self._fresh = self._injected.copy()
         if keep > 0.0 and n > 0 and trusted and fc.reseed_odds > 0.0:
             self.protected = ProtectedReseed(~self._injected, keep, fc.reseed_odds, self.cfg.quality.lost_below,
-                                             min_beams=max(self.cfg.quality.min_beams, self.quality.held_min_beams))
+                                             min_beams=self.quality.held_bar)
         elif n > 0 and fc.reseed_hold_pose and self._held is None and self.last_estimate is not None:
             # (a re-seed before the estimate fitted again keeps the pose held since the first one)
             self._held = (np.array(self.last_estimate.mean, dtype=np.float64),

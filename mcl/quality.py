@@ -296,7 +296,13 @@ class ScanQuality:
         again ``held_again`` updates after its last lost call (:meth:`update`): one lost episode, right at the time,
         otherwise took the bar for good (a hall among unmapped furniture, 26 s later: 27 m away)."""
         held = self.since_lost is None  # not lost since a start from a known pose, or since held_again updates
-        return max(self.cfg.min_beams, self.held_min_beams) if held else self.cfg.min_beams
+        return self.held_bar if held else self.cfg.min_beams
+
+    @property
+    def held_bar(self) -> int:
+        """The returns a held track's scan needs to count (``min_beams``, or ``held_min_beams`` if larger); a protected
+        re-seed's scan needs as many to decide at once (``mcl.adaptive.ProtectedReseed``)."""
+        return max(self.cfg.min_beams, self.held_min_beams)
 
     def _creeping(self) -> bool:
         """Whether the near misses of ``occluded_depth`` are exempt now: on a held track (not lost in the last

@@ -1203,20 +1203,20 @@ def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_thr
 
     p = fresh()
     assert p.odds == 0.0 and not p.settled
-    assert p.weigh(0.0, 10.0, lambda: (0.8, 0.7, 0.0, 0.05)) == 3.0 and not p.settled  # agreed, capped at STEP
-    assert p.weigh(0.0, 13.0, lambda: (0.8, 0.7, 0.0, 0.05)) == 6.0 and p.settled and not p.track_won
+    assert p.weigh(0.0, 10.0, lambda: (0.8, 0.7, 0.0, 0.05, 60)) == 3.0 and not p.settled  # agreed, capped at STEP
+    assert p.weigh(0.0, 13.0, lambda: (0.8, 0.7, 0.0, 0.05, 60)) == 6.0 and p.settled and not p.track_won
     p = fresh()
     # the likelihood favours the search, the fit the track
-    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.7, 0.0, 0.0)) == 0.0
-    assert p.weigh(0.0, -8.0, lambda: (0.5, 0.7, 0.0, 0.0)) == -3.0  # both favour the track: capped
+    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.7, 0.0, 0.0, 60)) == 0.0
+    assert p.weigh(0.0, -8.0, lambda: (0.5, 0.7, 0.0, 0.0, 60)) == -3.0  # both favour the track: capped
     # a spread around the estimate (local): the fit agrees, but the scan fits neither side as a tracked scan does
     # (below lost_below 0.6), so it is no evidence (ground hits of a tilted laser fit no pose near the track); a
     # global search counts it (after a kidnap the search's place fits poorly for many scans while it converges)
     p = ProtectedReseed(np.ones(4, dtype=bool), keep=0.5, reseed_odds=4.6, lost_below=0.6, local=True)
-    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.3, 0.0, 0.0)) == 0.0
-    assert p.weigh(0.0, -10.0, lambda: (0.3, 0.5, 0.0, 0.0)) == 0.0
-    assert p.weigh(0.0, 10.0, lambda: (0.7, 0.3, 0.0, 0.0)) == 3.0
-    assert fresh().weigh(0.0, 10.0, lambda: (0.5, 0.3, 0.0, 0.05)) == 3.0
+    assert p.weigh(0.0, 10.0, lambda: (0.5, 0.3, 0.0, 0.0, 60)) == 0.0
+    assert p.weigh(0.0, -10.0, lambda: (0.3, 0.5, 0.0, 0.0, 60)) == 0.0
+    assert p.weigh(0.0, 10.0, lambda: (0.7, 0.3, 0.0, 0.0, 60)) == 3.0
+    assert fresh().weigh(0.0, 10.0, lambda: (0.5, 0.3, 0.0, 0.05, 60)) == 3.0
     # a spread's best pose of thousands fitted people filling a narrow view better (0.95) than the correct track
     # did (0.75): a scan counts for a spread only while the track fits it as a lost scan does, and none decides;
     # for the track, a scan that fits it as tracked still counts
@@ -1224,13 +1224,13 @@ def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_thr
         return ProtectedReseed(np.ones(4, dtype=bool), keep=0.5, reseed_odds=4.6, lost_below=0.6, local=True)
 
     p = spread()
-    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.75, 0.0, 0.0)) == 0.0
-    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.0, 0.0)) == 3.0
-    assert not p.settled and spread().weigh(0.0, -10.0, lambda: (0.5, 0.75, 0.0, 0.0)) == -3.0
-    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.75, 0.0, 0.0)) == 3.0  # a global search counts it
+    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.75, 0.0, 0.0, 60)) == 0.0
+    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.0, 0.0, 60)) == 3.0
+    assert not p.settled and spread().weigh(0.0, -10.0, lambda: (0.5, 0.75, 0.0, 0.0, 60)) == -3.0
+    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.75, 0.0, 0.0, 60)) == 3.0  # a global search counts it
     p = fresh()
     # decisive: fits as tracked vs as lost
-    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.0, 0.0)) == 10.0 and p.settled
+    assert p.weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.0, 0.0, 60)) == 10.0 and p.settled
     # ... with returns enough to tell (quality.held_min_beams, 15 in the default): nine returns, all of them people
     # in a hall, fitted a place 38 m away at 0.9 and the correct track at 0; with nothing through a wall at the
     # track they count for nothing, and with a wall crossed they count as any scan does (capped at STEP)
@@ -1241,7 +1241,7 @@ def test_protected_reseed_odds_count_a_scan_only_where_the_fit_agrees_and_by_thr
     assert few(9) == 0.0 and few(15) == 10.0 and few(14) == 0.0
     p = ProtectedReseed(np.ones(4, dtype=bool), keep=0.5, reseed_odds=4.6, lost_below=0.6, min_beams=15)
     assert p.weigh(0.0, 10.0, lambda: (0.95, 0.0, 0.0, 0.05, 9)) == 3.0 and not p.settled
-    assert fresh().weigh(0.0, -math.inf, lambda: (0.0, 0.0, 0.0, 0.0)) == -math.inf  # the search has no weight left
+    assert fresh().weigh(0.0, -math.inf, lambda: (0.0, 0.0, 0.0, 0.0, 60)) == -math.inf  # the search has no weight left
     assert fresh().weigh(-math.inf, 0.0, None) == math.inf  # nor the track
     p = fresh()
     for _ in range(ProtectedReseed.MAX_UPDATES - 1):
@@ -1265,23 +1265,23 @@ def test_protected_reseed_counts_no_scan_the_track_explains_as_occlusion_unless_
 
     p = fresh()
     for _ in range(5):
-        assert p.weigh(0.0, 10.0, lambda: (0.62, 0.48, 0.034, 0.0)) == 0.0
+        assert p.weigh(0.0, 10.0, lambda: (0.62, 0.48, 0.034, 0.0, 60)) == 0.0
     assert not p.settled
     # neither through walls (hall-360-crowd-h16 at 59.6-61 s: 0.68-0.73 against 0.32-0.50): no evidence either;
     # this line read 3.0 before the sixty-first session
     for _ in range(5):
-        assert p.weigh(0.0, 10.0, lambda: (0.68, 0.32, 0.0, 0.0)) == 0.0
+        assert p.weigh(0.0, 10.0, lambda: (0.68, 0.32, 0.0, 0.0, 60)) == 0.0
     assert not p.settled
-    assert fresh().weigh(0.0, 10.0, lambda: (0.62, 0.48, 0.05, 0.02)) == 3.0  # the track through walls too
-    assert fresh().weigh(0.0, 10.0, lambda: (0.89, 0.8, 0.02, 0.0)) == 0.0  # just below DECISIVE_FIT
+    assert fresh().weigh(0.0, 10.0, lambda: (0.62, 0.48, 0.05, 0.02, 60)) == 3.0  # the track through walls too
+    assert fresh().weigh(0.0, 10.0, lambda: (0.89, 0.8, 0.02, 0.0, 60)) == 0.0  # just below DECISIVE_FIT
     # a place that fits as a tracked scan does (DECISIVE_FIT 0.9) is not discredited by one stray beam through a
     # corner (the demo's recovery from its kidnapping: 0.89-0.96 with one such beam, against the track's 0.8)
-    assert fresh().weigh(0.0, 10.0, lambda: (0.93, 0.83, 0.02, 0.0)) == 3.0
-    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.02, 0.0)) == 10.0  # decisive: fits as tracked vs lost
-    assert fresh().weigh(0.0, -10.0, lambda: (0.3, 0.5, 0.2, 0.0)) == -3.0  # evidence for the track counts
-    assert fresh().weigh(0.0, -10.0, lambda: (0.3, 0.5, 0.0, 0.0)) == -3.0  # ... occluded at both or not
-    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.7, 0.0, 0.0)) == 3.0  # a search's place that fits as tracked
-    assert fresh(local=True).weigh(0.0, 10.0, lambda: (0.7, 0.3, 0.05, 0.0)) == 3.0  # a spread: its own rules
+    assert fresh().weigh(0.0, 10.0, lambda: (0.93, 0.83, 0.02, 0.0, 60)) == 3.0
+    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.3, 0.02, 0.0, 60)) == 10.0  # decisive: fits as tracked vs lost
+    assert fresh().weigh(0.0, -10.0, lambda: (0.3, 0.5, 0.2, 0.0, 60)) == -3.0  # evidence for the track counts
+    assert fresh().weigh(0.0, -10.0, lambda: (0.3, 0.5, 0.0, 0.0, 60)) == -3.0  # ... occluded at both or not
+    assert fresh().weigh(0.0, 10.0, lambda: (0.95, 0.7, 0.0, 0.0, 60)) == 3.0  # a search's place that fits as tracked
+    assert fresh(local=True).weigh(0.0, 10.0, lambda: (0.7, 0.3, 0.05, 0.0, 60)) == 3.0  # a spread: its own rules
 
 
 def test_a_protected_reseed_keeps_a_correct_track_and_drops_the_search_without_probation():
@@ -1445,7 +1445,7 @@ def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_w
     # the scan favours the search (the track is 3 m off), but the quality score is made to favour the track: the
     # odds do not move, the estimate stays on the track, and after 25 updates the tie goes to the track.
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_fits = lambda search, track: (0.1, 0.9, 0.0, 0.0)  # scores search, track; contradictions
+    pf._side_fits = lambda search, track: (0.1, 0.9, 0.0, 0.0, 60)  # scores search, track; contradictions; returns
     obs = pf.prepare(_cast_scan(grid, TRUE_POSE), np.zeros(3))
     for k in range(24):
         info = pf.step(None, obs)
@@ -1457,10 +1457,10 @@ def test_a_scan_counts_for_a_protected_reseed_only_if_its_quality_score_agrees_w
     # as a tracked scan does (0.9) and the track's as a lost one (below quality.lost_below 0.6), on the first (a
     # sparse log's next scan can be 17 s away)
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_fits = lambda search, track: (0.7, 0.5, 0.0, 0.05)
+    pf._side_fits = lambda search, track: (0.7, 0.5, 0.0, 0.05, 60)
     assert not pf.step(None, obs).switched and pf.protected.odds == 3.0 and pf.step(None, obs).switched
     pf, grid = _reseeded([6.0, 3.0, -0.5])
-    pf._side_fits = lambda search, track: (0.9, 0.5, 0.0, 0.0)
+    pf._side_fits = lambda search, track: (0.9, 0.5, 0.0, 0.0, 60)
     assert pf.step(None, obs).switched
 
 
@@ -1524,7 +1524,8 @@ def test_lost_recovery_spreads_as_a_protected_side_and_the_estimate_stays_on_the
     assert pf.n == 8000 and pf._injected.sum() == 4000 and not pf.search.tempering
     fresh = pf.particles[:, pf._injected]
     assert 0.3 < np.std(fresh[0]) < 0.7 and np.hypot(*(fresh[:2].mean(axis=1) - track[:2])) < 0.05  # std 0.5 m
-    pf._side_fits = lambda search, track: (0.3, 0.3, 0.0, 0.0)  # the scans fit neither side as a tracked scan does: no evidence
+    # the scans fit neither side as a tracked scan does: no evidence
+    pf._side_fits = lambda search, track: (0.3, 0.3, 0.0, 0.0, 60)
     for k in range(5):
         info = pf.step(None, obs)
         assert pf.protected is not None and pf.protected.odds == 0.0, k
