@@ -120,6 +120,23 @@ def test_truth_path_stays_clear_of_walls(sim):
     assert len({(int(a), int(b)) for a, b in zip(x // 3, y // 3)}) > 5  # through several places
 
 
+def test_a_drive_that_cuts_into_a_wall_is_drawn_again(tmp_path, monkeypatch):
+    """clutter seed 3653's first drive cuts a route's cusp 0.22 m from a wall at 78 s (the simulator's own check
+    wants the radius, 0.2 m, and a cell): the world is written all the same, from a drive redrawn clear of
+    walls. With one attempt allowed it is the error it was."""
+    import mcl.simulate as sim_mod
+
+    simulate(tmp_path / "w", kind="clutter", seed=3653, duration=90.0)
+    g = load_map(tmp_path / "w" / "map.yaml")
+    t, p = read_tum(tmp_path / "w" / "truth.tum")
+    assert t[-1] - t[0] > 89.0
+    ix, iy = g.world_to_cell(p[0], p[1])
+    assert g.distance[iy, ix].min() >= 0.2 + g.resolution / 2
+    monkeypatch.setattr(sim_mod, "DRIVE_ATTEMPTS", 1)
+    with pytest.raises(RuntimeError, match="close to a wall"):
+        simulate(tmp_path / "w1", kind="clutter", seed=3653, duration=90.0)
+
+
 def test_log_parses_and_matches_truth_timing(sim):
     out, summary = sim
     log = read_carmen(out / "log.clf")
