@@ -818,6 +818,10 @@ class FaultWindow:
     ``fault_turn_max``): a short episode is a slip or a glitch, and a fast robot's full-width component (2.2 m at
     1 m a scan) let scans stamped late at a junction turn the cloud around (infinite_corridor). After that it has
     its full width, which is a search as well: a kidnapped fast robot's wide fault poses find it within seconds.
+    Once the track holds again (an update not lost, after the window's last lost one) the search is over: the
+    component is capped at ``fault_shift_max`` and its heading at ``fault_held_turn_max`` until the window closes or
+    the filter is lost again. A square room whose walls the map draws twice fitted a pose turned 60-90 degrees as
+    well as the held track, and the full-width heading put fault poses there (hunt world w3676: 1.95 m off).
 
     With ``motion.slip_turn`` > 0 (off by default) one fault stays allowed outside the window, on every update: a
     wheel's slip, a turn the odometry reports and the robot did not make. Its component widens the heading alone,
@@ -838,6 +842,7 @@ class FaultWindow:
         self.wide = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale))
         self.turn_rate, self.shift_rate = float(mc.fault_turn_max), float(mc.fault_shift_max)  # per second
         self.widen_after = int(mc.fault_widen_after)
+        self.held_turn_rate = float(mc.fault_held_turn_max)  # per second, once the track holds again
         slip = float(mc.slip_turn)
         self.slip = (FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale), turn_rel=slip)
                      if slip > 0.0 else None)
@@ -878,11 +883,16 @@ class FaultWindow:
     def proposal(self, dt: float):
         """The ``FaultProposal`` for the next motion update, which spans ``dt`` s of the log: for the window's first
         ``fault_widen_after`` lost updates with its stds capped at ``fault_shift_max`` and ``fault_turn_max`` times
-        ``dt`` (a slip accrues with time: a sparse log's update may hold a larger one), at full width after; while
-        the window is closed, a wheel's slip (``motion.slip_turn``) while the set is one compact cloud, or None (the
+        ``dt`` (a slip accrues with time: a sparse log's update may hold a larger one), at full width after; once
+        the track holds again inside the window, capped at ``fault_shift_max`` and ``fault_held_turn_max`` times
+        ``dt`` (``fault_held_turn_max`` 0: as while lost); while the window is closed, a wheel's slip (``motion.slip_turn``) while the set is one compact cloud, or None (the
         plain motion model)."""
         if not self.open:
             return self.slip if self.compact else None
+        if self.since_lost and self.held_turn_rate > 0.0 and dt > 0.0:
+            # the track holds again: no search, and a fault pose turned far off needs only out-fit the track by
+            # log(fault_share / fault_prob) once to take it
+            return dataclasses.replace(self.wide, turn_max=self.held_turn_rate * dt, shift_max=self.shift_rate * dt)
         if self.lost_run > self.widen_after or dt <= 0.0:
             return self.wide
         return dataclasses.replace(self.wide, turn_max=self.turn_rate * dt, shift_max=self.shift_rate * dt)

@@ -224,6 +224,9 @@ class MotionConfig:
     fault_shift_max: float = field(default=1.5, metadata=_rng(0.0))  # m/s: cap on p_k's translation std per s (0: none)
     # a window's first lost updates with the caps
     fault_widen_after: int = field(default=5, metadata=_rng(0, 1_000_000))
+    # rad/s: once the track holds again inside the window, p_k's heading std at most this per s (and its translation
+    # fault_shift_max's); 0: as while lost
+    fault_held_turn_max: float = field(default=0.0, metadata=_rng(0.0))
     # a wheel's slip on every update outside the window (with fault_prob and fault_share): p_k's heading stds this
     # times the step's own turn (up to fault_scale times the model's), its translation the model's. 0: off
     slip_turn: float = field(default=0.0, metadata=_rng(0.0))
