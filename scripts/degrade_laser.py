@@ -288,7 +288,8 @@ def main(argv=None) -> int:
     ap.add_argument("--stamp-late", type=float, default=0.0,
                     help="stamp each scan this many s late, its robot pose that of its stamp (default 0)")
     ap.add_argument("--body", type=parse_body, action="append", default=[], metavar="A0:A1@R",
-                    help="beams between A0 and A1 degrees read R m (the robot's own frame in view); repeatable")
+                    help="beams between A0 and A1 degrees read R m (the robot's own frame in view); repeatable; "
+                         "a negative A0 with '=': --body=-100:-80@0.25")
     ap.add_argument("--doubled-walls", type=int, default=0, metavar="N",
                     help="redraw each map with its walls twice in N squares of 10 m along the reference (default 0)")
     ap.add_argument("--map-rotation", type=float, default=0.0, metavar="DEG",
