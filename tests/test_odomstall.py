@@ -375,6 +375,38 @@ def test_a_reset_after_the_driver_was_down_fills_the_hold(resets):
     _windows_match_the_truth(world, scans, out, [(w.t0, w.t1) for w in fill.stalls], 0.15)
 
 
+def _held_then(world, step_out):
+    """``world``'s scans with the odometry held from 10 s to 13 s (the motion lost) and its step out of the hold
+    ``step_out(truth)``, ``truth`` the robot's motion over the window (in its frame at the window's start); the scans,
+    the window's first held scan and first scan after (k0, k1), and ``truth``."""
+    scans = read_carmen(world / "log.clf").laser_stream()
+    t = np.array([s.t for s in scans])
+    k0, k1 = int(np.searchsorted(t, 10.0)), int(np.searchsorted(t, 13.0))
+    truth = compose(inverse(_truth_at(world, t[k0 - 1])), _truth_at(world, t[k1]))
+    frame = compose(compose(scans[k0 - 1].odom, step_out(truth)), inverse(scans[k1].odom))
+    held = [dataclasses.replace(s, odom=scans[k0 - 1].odom.copy(), tv=0.0, rv=0.0) if k0 <= k < k1
+            else dataclasses.replace(s, odom=compose(frame, s.odom)) if k >= k1 else s
+            for k, s in enumerate(scans)]
+    return held, k0, k1, truth
+
+
+def _filled_from_the_scans(held, k0, k1, truth, cause):
+    """The fill takes the one window of ``_held_then``'s scans as ``cause``, within 0.15 m and 0.1 rad of ``truth``,
+    and leaves every other scan as it came."""
+    fill = StallFill(held, _mount, jumps=JUMPS)
+    out = list(fill)
+    t0, t1 = held[k0 - 1].t, held[k1].t
+    assert [(w.cause, w.t0, w.t1) for w in fill.stalls] == [(cause, t0, t1)]
+    filled = compose(inverse(out[k0 - 1].odom), out[k1].odom)
+    assert math.hypot(*(filled[:2] - truth[:2])) < 0.15 and abs(filled[2] - truth[2]) < 0.1
+    _outside_as_it_came(held, out, [(t0, t1)])
+
+
+def _passes_as_it_came(scans):
+    fill = StallFill(scans, _mount, jumps=JUMPS)
+    assert all(a is b for a, b in zip(fill, scans)) and not fill.stalls
+
+
 def test_a_restart_near_where_the_odometry_held_is_no_catch_up(worlds, monkeypatch):
     # A driver down 3 s that restarts from 0 0 0 a metre from where its odometry held (the odometry had come back
     # near its origin): the step out of the hold, 0.86 m in one scan period, is too short for the guard's jump
@@ -385,26 +417,12 @@ def test_a_restart_near_where_the_odometry_held_is_no_catch_up(worlds, monkeypat
     # world seed 3526: 2.6 m off).
     import mcl.odomstall as odomstall
 
-    world = worlds / "a"
-    scans = read_carmen(world / "log.clf").laser_stream()
-    t = np.array([s.t for s in scans])
-    k0, k1 = int(np.searchsorted(t, 10.0)), int(np.searchsorted(t, 13.0))
-    truth = compose(inverse(_truth_at(world, t[k0 - 1])), _truth_at(world, t[k1]))
-    out_step = truth + np.array([-0.5, 0.6, 1.5])  # the restarted odometry's step out of the hold
-    frame = compose(compose(scans[k0 - 1].odom, out_step), inverse(scans[k1].odom))
-    restarted = [dataclasses.replace(s, odom=scans[k0 - 1].odom.copy(), tv=0.0, rv=0.0) if k0 <= k < k1
-                 else dataclasses.replace(s, odom=compose(frame, s.odom)) if k >= k1 else s
-                 for k, s in enumerate(scans)]
+    # the restarted odometry's step out of the hold
+    restarted, k0, k1, truth = _held_then(worlds / "a", lambda truth: truth + np.array([-0.5, 0.6, 1.5]))
     assert math.hypot(*(restarted[k1].odom[:2] - restarted[k1 - 1].odom[:2])) < JUMPS[0]
-    fill = StallFill(restarted, _mount, jumps=JUMPS)
-    out = list(fill)
-    assert [(w.cause, w.t0, w.t1) for w in fill.stalls] == [("hold+jump", t[k0 - 1], t[k1])]
-    filled = compose(inverse(out[k0 - 1].odom), out[k1].odom)
-    assert math.hypot(*(filled[:2] - truth[:2])) < 0.15 and abs(filled[2] - truth[2]) < 0.1
-    _outside_as_it_came(restarted, out, [(t[k0 - 1], t[k1])])
+    _filled_from_the_scans(restarted, k0, k1, truth, "hold+jump")
     monkeypatch.setattr(odomstall, "CATCH_UP_TURN", 10.0)  # the rule off: taken for a catch-up
-    fill = StallFill(restarted, _mount, jumps=JUMPS)
-    assert all(a is b for a, b in zip(fill, restarted)) and not fill.stalls
+    _passes_as_it_came(restarted)
 
 
 def test_a_stall_whose_step_out_turns_on_the_spot_is_no_catch_up(worlds, monkeypatch):
@@ -417,27 +435,15 @@ def test_a_stall_whose_step_out_turns_on_the_spot_is_no_catch_up(worlds, monkeyp
     # its own catch-up: 2.0 m off).
     import mcl.odomstall as odomstall
 
-    world = worlds / "a"
-    scans = read_carmen(world / "log.clf").laser_stream()
-    t = np.array([s.t for s in scans])
-    k0, k1 = int(np.searchsorted(t, 10.0)), int(np.searchsorted(t, 13.0))
-    truth = compose(inverse(_truth_at(world, t[k0 - 1])), _truth_at(world, t[k1]))
+    # a turn on the spot, nothing more
+    stalled, k0, k1, truth = _held_then(
+        worlds / "a", lambda truth: np.array([0.0, 0.0, truth[2] + math.copysign(0.5, truth[2])]))
     assert math.hypot(*truth[:2]) > 1.0  # the robot drove on over the stall
-    out_step = np.array([0.0, 0.0, truth[2] + math.copysign(0.5, truth[2])])  # a turn on the spot, nothing more
-    assert abs(out_step[2]) / (t[k1] - t[k1 - 1]) > 2.0
-    frame = compose(compose(scans[k0 - 1].odom, out_step), inverse(scans[k1].odom))
-    stalled = [dataclasses.replace(s, odom=scans[k0 - 1].odom.copy(), tv=0.0, rv=0.0) if k0 <= k < k1
-               else dataclasses.replace(s, odom=compose(frame, s.odom)) if k >= k1 else s
-               for k, s in enumerate(scans)]
-    fill = StallFill(stalled, _mount, jumps=JUMPS)
-    out = list(fill)
-    assert [(w.cause, w.t0, w.t1) for w in fill.stalls] == [("hold", t[k0 - 1], t[k1])]
-    filled = compose(inverse(out[k0 - 1].odom), out[k1].odom)
-    assert math.hypot(*(filled[:2] - truth[:2])) < 0.15 and abs(filled[2] - truth[2]) < 0.1
-    _outside_as_it_came(stalled, out, [(t[k0 - 1], t[k1])])
+    step = compose(inverse(stalled[k1 - 1].odom), stalled[k1].odom)
+    assert math.hypot(*step[:2]) < 1e-9 and abs(step[2]) / (stalled[k1].t - stalled[k1 - 1].t) > 2.0
+    _filled_from_the_scans(stalled, k0, k1, truth, "hold")
     monkeypatch.setattr(odomstall, "CATCH_UP_TRAVEL", 0.0)  # the rule off: taken for a catch-up
-    fill = StallFill(stalled, _mount, jumps=JUMPS)
-    assert all(a is b for a, b in zip(fill, stalled)) and not fill.stalls
+    _passes_as_it_came(stalled)
 
 
 def test_a_restart_between_scans_far_apart_is_matched_and_their_slow_steps_are_not():

@@ -326,19 +326,18 @@ def test_odometry_faults_are_allowed_from_a_lost_call_on_a_held_track_for_the_wi
     assert f.proposal(0.2) is None
 
 
-def test_the_fault_caps_hold_for_a_windows_first_lost_updates_then_it_widens():
-    # motion.fault_widen_after = 2: the window's first two lost updates move with the capped fault component (a
-    # slip is short: scans stamped late at a junction, infinite_corridor), the third on at full width (a kidnap: the
-    # wide fault poses are a search), until the window closes; a new window starts capped again. The caps are
-    # rates: fault_shift_max 1.5 m/s is 0.3 m over a 0.2 s update and 3.9 m over a sparse log's 2.6 s.
+def _fault_window(**motion):
+    """A ``FaultWindow`` on the fault keys below with ``motion``'s replaced, and two helpers: ``upd(lost)`` observes
+    one update (its scan 20 % through mapped walls, the search settled) and ``caps(dt)`` gives the next proposal's
+    (turn_max, shift_max) over ``dt`` s, None while the window is closed."""
     from types import SimpleNamespace
 
     from mcl.adaptive import FaultWindow, GlobalSearch
 
+    keys = dict(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=2, fault_contradiction=0.1,
+                fault_turn_max=0.0, fault_shift_max=0.0, fault_widen_after=0, fault_held_turn_max=0.0, slip_turn=0.0)
     s = GlobalSearch()
-    f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=2,
-                                    fault_contradiction=0.1, fault_turn_max=0.5, fault_shift_max=1.5,
-                                    fault_widen_after=2, fault_held_turn_max=0.0, slip_turn=0.0), s)
+    f = FaultWindow(SimpleNamespace(**{**keys, **motion}), s)
 
     def upd(lost):
         s.observe(lost, 1.0)
@@ -348,6 +347,15 @@ def test_the_fault_caps_hold_for_a_windows_first_lost_updates_then_it_widens():
         p = f.proposal(dt)
         return None if p is None else (round(p.turn_max, 9), round(p.shift_max, 9))
 
+    return f, upd, caps
+
+
+def test_the_fault_caps_hold_for_a_windows_first_lost_updates_then_it_widens():
+    # motion.fault_widen_after = 2: the window's first two lost updates move with the capped fault component (a
+    # slip is short: scans stamped late at a junction, infinite_corridor), the third on at full width (a kidnap: the
+    # wide fault poses are a search), until the window closes; a new window starts capped again. The caps are
+    # rates: fault_shift_max 1.5 m/s is 0.3 m over a 0.2 s update and 3.9 m over a sparse log's 2.6 s.
+    f, upd, caps = _fault_window(fault_window=2, fault_turn_max=0.5, fault_shift_max=1.5, fault_widen_after=2)
     seen = []
     for lost in (True, True, False, True, True, False, False, False, True, True, True):
         upd(lost)
@@ -368,23 +376,7 @@ def test_a_track_held_again_inside_the_window_has_the_fault_heading_capped():
     # capped with no heading cap, fault_turn_max 0, then at full width: a search), but once the track holds again
     # the fault poses turn at most 0.1 rad (std) over a 0.2 s update and shift at most fault_shift_max's 0.3 m; a
     # lost update widens it again
-    from types import SimpleNamespace
-
-    from mcl.adaptive import FaultWindow, GlobalSearch
-
-    s = GlobalSearch()
-    f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=3,
-                                    fault_contradiction=0.1, fault_turn_max=0.0, fault_shift_max=1.5,
-                                    fault_widen_after=1, fault_held_turn_max=0.5, slip_turn=0.0), s)
-
-    def upd(lost):
-        s.observe(lost, 1.0)
-        f.observe(lost, 0.2)
-
-    def caps(dt=0.2):
-        p = f.proposal(dt)
-        return None if p is None else (round(p.turn_max, 9), round(p.shift_max, 9))
-
+    f, upd, caps = _fault_window(fault_window=3, fault_shift_max=1.5, fault_widen_after=1, fault_held_turn_max=0.5)
     for _ in range(3):
         upd(False)
     seen = []
