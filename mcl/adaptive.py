@@ -729,8 +729,7 @@ class ProtectedReseed:
             # outdoors one scan that fits the true pose badly (a third of its beams through mapped walls) gave a
             # place 176 m away e^50 the likelihood while fitting worse still there (-0.23 against 0.02: the
             # likelihood field does not see readings through walls)
-            # (the search's share through walls: no rule reads it)
-            s_search, s_track, _, c_track, returns = scores()
+            s_search, s_track, _, c_track, returns = scores()  # (the search's share through walls: no rule reads it)
             self.track_score = s_track
             # a scan fits the search's place as a tracked scan does (decisive) only with returns enough to tell
             decisive = s_search >= self.DECISIVE_FIT and returns >= self.min_beams
@@ -885,17 +884,16 @@ class FaultWindow:
         ``fault_widen_after`` lost updates with its stds capped at ``fault_shift_max`` and ``fault_turn_max`` times
         ``dt`` (a slip accrues with time: a sparse log's update may hold a larger one), at full width after; once
         the track holds again inside the window, capped at ``fault_shift_max`` and ``fault_held_turn_max`` times
-        ``dt`` (``fault_held_turn_max`` 0: as while lost); while the window is closed, a wheel's slip (``motion.slip_turn``) while the set is one compact cloud, or None (the
-        plain motion model)."""
+        ``dt`` (``fault_held_turn_max`` 0: as while lost); while the window is closed, a wheel's slip
+        (``motion.slip_turn``) while the set is one compact cloud, or None (the plain motion model)."""
         if not self.open:
             return self.slip if self.compact else None
-        if self.since_lost and self.held_turn_rate > 0.0 and dt > 0.0:
-            # the track holds again: no search, and a fault pose turned far off needs only out-fit the track by
-            # log(fault_share / fault_prob) once to take it
-            return dataclasses.replace(self.wide, turn_max=self.held_turn_rate * dt, shift_max=self.shift_rate * dt)
-        if self.lost_run > self.widen_after or dt <= 0.0:
+        # held again: no search, and a fault pose turned far off need only out-fit the track once to take it
+        held = bool(self.since_lost) and self.held_turn_rate > 0.0
+        if dt <= 0.0 or (self.lost_run > self.widen_after and not held):
             return self.wide
-        return dataclasses.replace(self.wide, turn_max=self.turn_rate * dt, shift_max=self.shift_rate * dt)
+        turn_rate = self.held_turn_rate if held else self.turn_rate
+        return dataclasses.replace(self.wide, turn_max=turn_rate * dt, shift_max=self.shift_rate * dt)
 
 
 def _spans(seconds: float, floor: float) -> bool:

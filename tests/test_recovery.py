@@ -66,6 +66,16 @@ def _track(data, sim, out, *sets):
     return run(cfg, out, progress=False, echo=lambda m: None)
 
 
+def _tracked_and_mend_off(tmp_path_factory, tmp_path, off: str, **world):
+    """The evaluations (``summary["eval"]``) of tracking a world ``mcl simulate`` makes with the keywords ``world``
+    from its start pose: with the default config, then with the setting ``off`` (a mend switched off)."""
+    from mcl.simulate import simulate
+
+    data = tmp_path_factory.mktemp(f"{world['kind']}-{world['seed']}")
+    sim = simulate(data, **world)
+    return (_track(data, sim, tmp_path / "default")["eval"], _track(data, sim, tmp_path / "off", off)["eval"])
+
+
 def test_default_recovery_does_not_inject_while_the_track_is_correct_on_repeated_rooms(rooms_world, tmp_path):
     # Identical rooms off a corridor: a pose in the next room fits the scan as well as the true one, so
     # any particle drawn there can take the estimate away. The default (`lost` recovery) must draw none
@@ -1064,15 +1074,10 @@ def test_a_few_returns_in_a_crowd_do_not_hand_a_track_to_a_search(tmp_path_facto
     # track fitted none: decisive, that one scan took the estimate, and the run ended 47.6-48.4 m off (seeds 1-3; the
     # baseline, which never re-seeds, 1.3-1.8 m). A scan decides at once only with quality.held_min_beams (15) returns
     # or more: 1.41-1.45 m measured (the people pull the estimate off; 3 m allowed); with the bar at 0, 48.4 m.
-    from mcl.simulate import simulate
-
-    data = tmp_path_factory.mktemp("hall-crowd")
-    sim = simulate(data, kind="hall", seed=3631, duration=90.0, dynamic_obstacles=24, map_resolution=0.025,
-                   p_max=0.2)
-    s = _track(data, sim, tmp_path / "default")
-    assert s["eval"]["ate_max"] < 3.0, s["eval"]
-    off = _track(data, sim, tmp_path / "off", "quality.held_min_beams=0")
-    assert off["eval"]["ate_max"] > 20.0, off["eval"]
+    kept, off = _tracked_and_mend_off(tmp_path_factory, tmp_path, "quality.held_min_beams=0", kind="hall", seed=3631,
+                                      duration=90.0, dynamic_obstacles=24, map_resolution=0.025, p_max=0.2)
+    assert kept["ate_max"] < 3.0, kept
+    assert off["ate_max"] > 20.0, off
 
 
 def test_a_track_held_again_after_a_lost_call_is_not_turned_by_the_fault_poses(tmp_path_factory, tmp_path):
@@ -1082,15 +1087,10 @@ def test_a_track_held_again_after_a_lost_call_is_not_turned_by_the_fault_poses(t
     # heading width, and at 42.4 s one turned 52 degrees, in a square whose doubled walls it fits as well, took the
     # estimate: 1.95 m off (seeds 1 and 3: 1.95 and 5.25 m; the baseline 0.41-0.44 m). With the heading capped
     # once the track holds again (motion.fault_held_turn_max 0.5 rad/s): 0.42 m measured (0.5 m allowed).
-    from mcl.simulate import simulate
-
-    data = tmp_path_factory.mktemp("doubled-square")
-    sim = simulate(data, kind="clutter", seed=3676, duration=90.0, map_scale=0.99, map_rotation=1.0584,
-                   doubled_walls=6)
-    s = _track(data, sim, tmp_path / "default")
-    assert s["eval"]["ate_max"] < 0.5, s["eval"]
-    wide = _track(data, sim, tmp_path / "wide", "motion.fault_held_turn_max=0")
-    assert wide["eval"]["ate_max"] > 1.5, wide["eval"]
+    kept, wide = _tracked_and_mend_off(tmp_path_factory, tmp_path, "motion.fault_held_turn_max=0", kind="clutter",
+                                       seed=3676, duration=90.0, map_scale=0.99, map_rotation=1.0584, doubled_walls=6)
+    assert kept["ate_max"] < 0.5, kept
+    assert wide["ate_max"] > 1.5, wide
 
 
 def test_a_crowd_that_pulls_the_estimate_a_little_off_is_no_lost_track(tmp_path_factory, tmp_path):
@@ -1100,14 +1100,10 @@ def test_a_crowd_that_pulls_the_estimate_a_little_off_is_no_lost_track(tmp_path_
     # re-seed took a place 13 m away that fits the crowded scans at 0.8-1.0: lost on every seed of 5, while the
     # baseline kept every one. quality.occluded_depth reads those near misses as occlusion on a held track whose fit
     # had sunk (occluded_prior): within 0.5 m on every seed (0.33-0.37 m measured).
-    from mcl.simulate import simulate
-
-    data = tmp_path_factory.mktemp("crowd-fast")
-    sim = simulate(data, kind="clutter", seed=503, duration=60.0, speed=1.5)
-    s = _track(data, sim, tmp_path / "default")
-    assert s["eval"]["ate_max"] < 0.5, s["eval"]
-    before = _track(data, sim, tmp_path / "before", "quality.occluded_depth=0")
-    assert before["eval"]["ate_max"] > 5.0, before["eval"]
+    kept, before = _tracked_and_mend_off(tmp_path_factory, tmp_path, "quality.occluded_depth=0", kind="clutter",
+                                         seed=503, duration=60.0, speed=1.5)
+    assert kept["ate_max"] < 0.5, kept
+    assert before["ate_max"] > 5.0, before
 
 
 def test_a_robot_kidnapped_in_a_corridor_is_searched_for_not_spread_onto_the_old_stretch(tmp_path_factory, tmp_path):
