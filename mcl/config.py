@@ -456,6 +456,9 @@ class QualityConfig:
     # there or past them, or when the map shows it fewer than min_beams: people hide what the map shows, a wrong
     # place lacks it (< 0: off)
     occluded_missing: float = field(default=-1.0, metadata=_rng(-1.0, 1.0))
+    # ... but not while more of its returns lie on open floor (neither matched nor through a wall) than this share of
+    # its scored directions: people fill a few, a wrong place's own walls most (1.0: no such cap)
+    occluded_open: float = field(default=1.0, metadata=_rng(0.0, 1.0))
     # ... and so is a scan whose beams through walls all end within this of a mapped obstacle (m; 0: none is
     # exempt): near misses, as an estimate a few decimetres off makes them; only its match counts then
     occluded_depth: float = field(default=0.0, metadata=_rng(0.0, 100.0))

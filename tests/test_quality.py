@@ -40,7 +40,7 @@ def _scan_from(pose, grid, n=90):
 T0 = 0.0  # the simulator's logs start at t = 0 (sim.yaml times are from there)
 QCFG = SimpleNamespace(distance=0.3, lost_below=0.6, lost_after=3, min_beams=5, doubt_margin=0.0, doubt_updates=50,
                        contradiction_above=0.0, lost_at_once_below=-2.0, occluded_below=1.0, occluded_missing=-1.0,
-                       occluded_depth=0.0, occluded_prior=2.0, collapse_from=2.0, narrow_view="same",
+                       occluded_open=1.0, occluded_depth=0.0, occluded_prior=2.0, collapse_from=2.0, narrow_view="same",
                        held_min_beams=0, held_pool_beams=0, held_again=0)
 
 
@@ -561,6 +561,31 @@ def test_an_occluded_scan_is_no_evidence_while_what_the_map_shows_is_there():
     assert _feed(q, [Fit(13, 0.95, 0.0)] * 5 + [occluded] * 10) == [False] * 15
 
 
+def test_a_view_whose_returns_mostly_lie_on_open_floor_is_no_crowd():
+    # aces with its filter kidnapped (seed 2): from the old estimate the map shows 12 and 22 of the 60 scored
+    # directions an obstacle, every one read, but 36 of 42 and 50 of 60 returns lie on open floor: the kidnapped
+    # robot's own walls, not people. Taken for a crowd, the lost call came 25 s late (34.6 s to recover; 21.1 s
+    # with the cap). The sparse hall's crowd at the true pose leaves 5-14 of 60 on open floor.
+    cfg = SimpleNamespace(**{**vars(QCFG), "occluded_below": 0.4, "occluded_missing": 0.2, "occluded_open": 0.5})
+    q = ScanQuality(_box_grid(), cfg)
+    kidnapped = [Fit(42, 0.14, 0.0, predicted=12, missing=0, directions=60),
+                 Fit(60, 0.17, 0.0, predicted=22, missing=0, directions=60)]
+    assert [q.bad(f) for f in kidnapped] == [True, True]
+    crowd = Fit(17, 0.24, 0.0, predicted=8, missing=1, directions=60)  # 13 of 60 on open floor
+    assert q.bad(crowd) is False
+    assert q.bad(Fit(36, 0.17, 0.0, predicted=8, missing=0, directions=60)) is False  # 30 of 60: at the cap
+    assert q.bad(Fit(38, 0.17, 0.0, predicted=8, missing=0, directions=60)) is True  # 31.5 of 60: over it
+    # pooled scans sum their directions: five of 12 returns, 4 of 20 directions shown, 48 of 100 on open floor
+    pooled = SimpleNamespace(**{**vars(cfg), "held_pool_beams": 60, "held_min_beams": 15})
+    assert _feed(ScanQuality(_box_grid(), pooled), [Fit(12, 0.2, 0.0, predicted=4, missing=0, directions=20)] * 30) \
+        == [False] * 30
+    off = ScanQuality(_box_grid(), SimpleNamespace(**{**vars(cfg), "occluded_open": 1.0}))
+    assert [off.bad(f) for f in kidnapped] == [False, False]  # without the cap: taken for people, as before
+    # a laser tilted onto the floor of an open hall: 35-49 returns on the floor at the true pose, the map showing 2-3
+    # obstacles (suites/ground-hits.yaml's kind): fewer than min_beams shown is nothing to judge by, cap or not
+    assert q.bad(Fit(49, 0.061, 0.0, predicted=3, missing=0, directions=60)) is False
+
+
 def test_people_in_a_sparse_hall_do_not_make_a_correct_track_lost(tmp_path):
     # The first 8 s of suites/sparse-hall.yaml hall-fast-people-916 (a 12 m laser at 1.5 m/s in a hall of sparse
     # pillars, 8 people): people make most of a scan's returns, the match falls to 0.29-0.40 at the true pose with
@@ -641,12 +666,12 @@ def test_a_robot_kidnapped_in_a_sparse_hall_is_called_lost_on_its_pooled_scans(t
     x, y, th = sim["start_pose"]
     truth = np.loadtxt(data / "truth.tum")
 
-    def after_kidnap(pool):
+    def after_kidnap(pool, *sets):
         out = tmp_path / f"run{pool}"
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
             f"map={data / 'map.yaml'}", f"log={data / 'log.clf'}", "rerun.mode=off", "seed=1",
             "filter.global_localization=false", f"filter.initial_pose=[{x}, {y}, {th}]",
-            f"quality.held_pool_beams={pool}"])
+            f"quality.held_pool_beams={pool}", *sets])
         run(cfg, out, progress=False, echo=lambda m: None)
         rows = list(csv.DictReader(open(out / "quality.csv")))
         t0 = float(rows[0]["t"])
@@ -660,5 +685,7 @@ def test_a_robot_kidnapped_in_a_sparse_hall_is_called_lost_on_its_pooled_scans(t
     lost, back = after_kidnap(60)
     assert lost and 40.0 <= lost[0] < 47.0, lost[:3]
     assert back.size and back[0] < 50.0, back[:3]
-    lost0, back0 = after_kidnap(0)
+    # the control: not pooled, and the few scans of 15 returns or more taken for people (quality.occluded_open off;
+    # with it, those whose returns lie mostly on open floor call the kidnap lost at 40.4 s even unpooled)
+    lost0, back0 = after_kidnap(0, "quality.occluded_open=1.0")
     assert lost0 == [] and back0.size == 0, (lost0[:3], back0[:3])
