@@ -320,7 +320,7 @@ def main(argv=None) -> int:
         if not (math.isfinite(value) and lo <= value <= hi):
             ap.error(f"{option}: expected {lo:g}..{hi:g}{unit}, got {value:g}")
     suite = yaml.safe_load(a.suite.read_text())
-    src = (a.suite.parent / suite["root"]).resolve()
+    src = (a.suite.parent / str(suite.get("root", "."))).resolve()  # as mcl.suite: no root, the file's folder
     rng = np.random.default_rng(a.seed)
     for d in suite["datasets"]:
         folder = a.out / d["name"]

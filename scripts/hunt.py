@@ -35,6 +35,9 @@ from pathlib import Path
 
 import yaml
 
+from mcl.errors import MclError
+from mcl.suite import load_suite
+
 HERE = Path(__file__).resolve().parent
 KINDS = ["office", "rooms", "corridor", "hall", "clutter", "large"]
 
@@ -120,7 +123,7 @@ def synthetic(seed: int, n: int, out: Path, fast: bool = False) -> list[str]:
 
 
 def real_draw(k: int, datasets: list, conditions: int = 3, range_cut: bool = True) -> tuple[dict, list[str]]:
-    """Log ``k``'s dataset (one of ``datasets``) and its conditions (see the module doc)."""
+    """Log ``k``'s dataset (one of ``datasets``, as they come) and its conditions (see the module doc)."""
     rng = random.Random(k * 7919)
     d = rng.choice(datasets)
     pool = sorted(c for c in REAL_CONDITIONS if range_cut or c != "rng8")
@@ -128,23 +131,26 @@ def real_draw(k: int, datasets: list, conditions: int = 3, range_cut: bool = Tru
 
 
 def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_cut: bool = True) -> list[str]:
-    """Degrade logs ``seed``..``seed + n - 1`` into ``out`` and write ``out/suite.yaml``; return their names."""
-    base = yaml.safe_load(suite.read_text())
-    root = (suite.parent / str(base.get("root", "."))).resolve()
+    """Degrade logs ``seed``..``seed + n - 1`` into ``out`` and write ``out/suite.yaml``; return their names. A bad
+    ``suite`` raises ``mcl.suite.load_suite``'s error; a log the degrader refuses, SystemExit naming it."""
+    datasets = load_suite(suite).datasets  # the paths resolved against the suite's root
     entries = []
     for k in range(seed, seed + n):
-        d, conds = real_draw(k, base["datasets"], conditions, range_cut)
+        d, conds = real_draw(k, datasets, conditions, range_cut)
         args = [a for c in conds for a in REAL_CONDITIONS[c]]
         if not any(c.startswith(("fov", "noise", "drop")) for c in conds):
             args += ["--fov", "180", "--sigma", "0", "--drop", "0"]  # the laser as it was
-        name = f"{d['name']}-{'-'.join(conds)}-r{k}"
+        name = f"{d.name}-{'-'.join(conds)}-r{k}"
         folder = out / name
         folder.mkdir(parents=True, exist_ok=True)
         one = folder.with_name(name + ".suite.yaml")
-        one.write_text(yaml.safe_dump({**{key: v for key, v in base.items() if key != "datasets"},
-                                       "root": str(root), "datasets": [d]}, sort_keys=False))
-        subprocess.run([sys.executable, str(HERE / "degrade_laser.py"), "--suite", str(one), "--seed", str(k),
-                        *args, str(folder)], check=True, stdout=subprocess.DEVNULL)
+        entry = {"name": d.name, "map": d.map, "log": d.log, "truth": d.truth, "lost_m": d.lost_m,
+                 **({"initial_pose": list(d.initial_pose)} if d.initial_pose is not None else {})}
+        one.write_text(yaml.safe_dump({"name": d.name, "datasets": [entry]}, sort_keys=False))
+        done = subprocess.run([sys.executable, str(HERE / "degrade_laser.py"), "--suite", str(one), "--seed", str(k),
+                               *args, str(folder)], stdout=subprocess.DEVNULL)
+        if done.returncode != 0:  # its own error line is above
+            raise SystemExit(f"hunt.py: {one}: scripts/degrade_laser.py failed (exit {done.returncode})")
         made = yaml.safe_load((folder / "suite.yaml").read_text())
         for x in made["datasets"]:
             for key in ("map", "log", "truth"):
@@ -184,9 +190,10 @@ def main(argv=None) -> int:
         names = synthetic(a.seed, a.n, a.out, a.fast)
         print(f"{a.out}: {len(names)} worlds")
     else:
-        if not a.suite.is_file():
-            ap.error(f"--suite {a.suite}: no such file")
-        names = real(a.seed, a.n, a.out, a.suite, a.conditions, not a.no_range_cut)
+        try:
+            names = real(a.seed, a.n, a.out, a.suite, a.conditions, not a.no_range_cut)
+        except MclError as e:
+            ap.error(str(e))  # names the file and the entry
         print(f"{a.out / 'suite.yaml'}: {len(names)} logs")
     for name in names:
         print(" ", name)
