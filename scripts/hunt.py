@@ -145,7 +145,8 @@ def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_c
         folder.mkdir(parents=True, exist_ok=True)
         one = folder.with_name(name + ".suite.yaml")
         entry = {"name": d.name, "map": d.map, "log": d.log, "truth": d.truth, "lost_m": d.lost_m,
-                 **({"initial_pose": list(d.initial_pose)} if d.initial_pose is not None else {})}
+                 **({"initial_pose": list(d.initial_pose)} if d.initial_pose is not None else {}),
+                 **({"laser": d.laser} if d.laser is not None else {}), **({"set": dict(d.set)} if d.set else {})}
         one.write_text(yaml.safe_dump({"name": d.name, "datasets": [entry]}, sort_keys=False))
         done = subprocess.run([sys.executable, str(HERE / "degrade_laser.py"), "--suite", str(one), "--seed", str(k),
                                *args, str(folder)], stdout=subprocess.DEVNULL)
@@ -157,8 +158,8 @@ def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_c
                 if key in x and not os.path.isabs(x[key]):
                     x[key] = os.path.join(made["root"], x[key])
             x["name"] = name
-            if "rng8" in conds:
-                x["set"] = {"sensor.range_max": 8.0}
+            if "rng8" in conds:  # beside the dataset's own settings
+                x["set"] = {**x.get("set", {}), "sensor.range_max": 8.0}
             entries.append(x)
     (out / "suite.yaml").write_text(yaml.safe_dump({"name": f"realhunt{seed}", "root": "/",
                                                     "modes": ["tracking", "kidnapped"], "datasets": entries},

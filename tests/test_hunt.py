@@ -47,14 +47,14 @@ def test_a_real_hunt_log_is_drawn_again_and_degraded(tmp_path):
     base = tmp_path / "demo.yaml"
     base.write_text(yaml.safe_dump({"name": "demo", "root": str(PROJECT_ROOT / "data" / "demo"), "datasets": [
         {"name": "demo", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum",
-         "initial_pose": [0.0, 0.0, 0.0]}]}))
+         "initial_pose": [0.0, 0.0, 0.0], "set": {"filter.particles": 3000}}]}))
     k = next(k for k in range(1000, 2000) if set(real_draw(k, [{"name": "demo"}])[1]) >= {"stalls3", "rng8"})
     conds = real_draw(k, [{"name": "demo"}])[1]
     out = tmp_path / "hunt"
     assert main(["real", str(k), "1", str(out), "--suite", str(base)]) == 0
     suite = load_suite(out / "suite.yaml")
     (d,) = suite.datasets
-    assert d.name == f"demo-{'-'.join(conds)}-r{k}" and d.set == {"sensor.range_max": 8.0}
+    assert d.name == f"demo-{'-'.join(conds)}-r{k}" and d.set == {"filter.particles": 3000, "sensor.range_max": 8.0}
     made = list(read_carmen(d.log).scans)
     held = sum(1 for a, b in zip(made, made[1:]) if (a.odom == b.odom).all())
     original = list(read_carmen(PROJECT_ROOT / "data" / "demo" / "log.clf").scans)
