@@ -216,7 +216,8 @@ def set_threads(n: int) -> None:
 def _add_eval(sub) -> None:
     p = sub.add_parser(
         "eval",
-        help="score a trajectory against a reference: ATE RMSE, max, heading RMSE, convergence time",
+        help="score a trajectory against a reference (ATE RMSE, max, heading RMSE, convergence time), or run "
+             "a suite of datasets in every mode against the baseline (--suite)",
         description=(
             "Compare an estimated trajectory with a reference one (both TUM: t x y z qx qy qz qw, map frame). "
             "The estimate is interpolated at each reference time inside its span; no alignment is applied."
