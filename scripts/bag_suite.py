@@ -6,8 +6,8 @@ odometry: ``--set topics.odom=laser`` against the bags' own /odom).
 
 Each dataset's CARMEN log (a synthetic one generated into ``--cache`` first, as ``mcl eval`` does) becomes
 ``<out>/<name>.mcap`` through ``mcl convert`` (/scan, /odom, /tf and /tf_static), and ``<out>/suite.yaml`` lists
-them with the same map, truth, start pose and lost bound, for tracking. The bags are written once (an existing
-one is kept).
+them with the same map, truth, start pose, lost bound and ``set`` keys, for tracking (a dataset's laser, from its
+dataset config or its ``set``, is the one laser of the log written to the bag). The bags are written once (an existing one is kept).
 """
 
 from __future__ import annotations
@@ -44,12 +44,16 @@ def main(argv=None) -> int:
             continue
         bag = a.out / f"{d.name}.mcap"
         if not bag.exists():
-            convert(files["log"], bag)
+            # the dataset's own laser (a dataset config's, or a hunt's set), alone in the bag
+            convert(files["log"], bag, laser=d.laser or d.set.get("laser") or "auto")
             print(f"{bag}", file=sys.stderr)
         pose = d.initial_pose or _truth_start(str(files["truth"]))
         entries.append({"name": d.name, "map": str(files["map"]), "bag": str(bag.resolve()),
                         "truth": str(files["truth"]), "initial_pose": [float(v) for v in pose],
                         "lost_m": float(d.lost_m), "modes": ["tracking"]})
+        own = {k: v for k, v in d.set.items() if k != "laser"}  # a hunt's range cut, say; the laser is the bag's
+        if own:
+            entries[-1]["set"] = own
     doc = {"name": f"{suite.name}-bags", "modes": ["tracking"], "datasets": entries}
     (a.out / "suite.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
     print(f"{a.out / 'suite.yaml'}: {len(entries)} datasets")

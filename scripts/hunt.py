@@ -144,9 +144,11 @@ def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_c
         folder = out / name
         folder.mkdir(parents=True, exist_ok=True)
         one = folder.with_name(name + ".suite.yaml")
+        # the dataset's own keys; a dataset config's laser is a config key too (a suite entry has no laser key)
+        own = {**({"laser": d.laser} if d.laser is not None else {}), **d.set}
         entry = {"name": d.name, "map": d.map, "log": d.log, "truth": d.truth, "lost_m": d.lost_m,
                  **({"initial_pose": list(d.initial_pose)} if d.initial_pose is not None else {}),
-                 **({"laser": d.laser} if d.laser is not None else {}), **({"set": dict(d.set)} if d.set else {})}
+                 **({"set": own} if own else {})}
         one.write_text(yaml.safe_dump({"name": d.name, "datasets": [entry]}, sort_keys=False))
         done = subprocess.run([sys.executable, str(HERE / "degrade_laser.py"), "--suite", str(one), "--seed", str(k),
                                *args, str(folder)], stdout=subprocess.DEVNULL)

@@ -59,3 +59,20 @@ def test_a_real_hunt_log_is_drawn_again_and_degraded(tmp_path):
     held = sum(1 for a, b in zip(made, made[1:]) if (a.odom == b.odom).all())
     original = list(read_carmen(PROJECT_ROOT / "data" / "demo" / "log.clf").scans)
     assert len(made) == len(original) and held >= 3 * 10  # three 3 s stalls at 5 Hz, each 15 scans held
+
+
+def test_a_real_hunt_keeps_a_dataset_configs_laser_as_a_config_key(tmp_path):
+    # a suite entry made from a dataset config gets the config's laser; a suite entry has no laser key, so the hunt's
+    # suite carries it in set (as a laser key, mcl eval refused the whole hunt suite)
+    demo = PROJECT_ROOT / "data" / "demo"
+    cfg = tmp_path / "demo-front.yaml"
+    cfg.write_text(yaml.safe_dump({"map": str(demo / "map.yaml"), "log": str(demo / "log.clf"),
+                                   "truth": str(demo / "truth.tum"), "laser": "FLASER"}))
+    base = tmp_path / "demo.yaml"
+    base.write_text(yaml.safe_dump({"name": "demo", "datasets": [
+        {"name": "demo", "config": str(cfg), "initial_pose": [0.0, 0.0, 0.0]}]}))
+    assert load_suite(base).datasets[0].laser == "FLASER"
+    out = tmp_path / "hunt"
+    assert main(["real", "1000", "1", str(out), "--suite", str(base), "--no-range-cut"]) == 0
+    (d,) = load_suite(out / "suite.yaml").datasets
+    assert d.set == {"laser": "FLASER"}
