@@ -85,6 +85,8 @@ from mcl.maps import OccupancyGrid, load_map, save_map  # noqa: E402
 from mcl.simulate import double_walls, map_frame_poses, rotate_map, spread_windows  # noqa: E402
 from mcl.trajectory import read_tum, write_tum  # noqa: E402
 from mcl.runner import compose, inverse  # noqa: E402
+from mcl.errors import MclError  # noqa: E402
+from mcl.suite import load_suite  # noqa: E402
 
 
 BODY_SIGMA = 0.01  # m: the range noise of a body reading (a laser's at short range)
@@ -319,7 +321,16 @@ def main(argv=None) -> int:
                                         ("--odom-reset-s", a.odom_reset_s, 0, 60, " s")):
         if not (math.isfinite(value) and lo <= value <= hi):
             ap.error(f"{option}: expected {lo:g}..{hi:g}{unit}, got {value:g}")
+    try:
+        load_suite(a.suite)  # a missing or malformed suite: mcl's one error line, naming the file and the entry
+    except MclError as e:
+        ap.error(str(e))
     suite = yaml.safe_load(a.suite.read_text())
+    for i, d in enumerate(suite["datasets"]):
+        if not d.get("log"):
+            ap.error(f"{a.suite}: datasets[{i}] ({d['name']}): no log: this script degrades the CARMEN logs a suite "
+                     "names (a simulate: world or a config: entry is not read here; scripts/hunt.py real resolves "
+                     "config: entries)")
     src = (a.suite.parent / str(suite.get("root", "."))).resolve()  # as mcl.suite: no root, the file's folder
     rng = np.random.default_rng(a.seed)
     for d in suite["datasets"]:

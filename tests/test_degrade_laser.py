@@ -217,6 +217,19 @@ def test_a_map_change_out_of_range_is_one_error_line_and_nothing_written(tmp_pat
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("entry, said", [
+    ({"simulate": {"kind": "office", "seed": 1}}, "datasets[0] (w): no log: this script degrades the CARMEN logs"),
+    ({"lgo": "log.clf"}, "datasets[0] (w): lgo: unknown key (did you mean log?)")])
+def test_a_suite_entry_without_a_log_is_one_error_line_and_nothing_written(tmp_path, capsys, entry, said):
+    # a generated world's entry raised a KeyError traceback
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({"name": "w", "datasets": [{"name": "w", **entry}]}))
+    with pytest.raises(SystemExit) as e:
+        main([str(tmp_path / "out"), "--suite", str(tmp_path / "suite.yaml")])
+    assert e.value.code == 2
+    assert f"error: {tmp_path / 'suite.yaml'}: {said}" in capsys.readouterr().err.strip().splitlines()[-1]
+    assert not (tmp_path / "out").exists()
+
+
 def test_scan_gaps_drop_the_scans_and_the_reference_as_the_simulator_does(tmp_path):
     # --scan-gaps N with the laser left alone: the log is the simulator's own with the same gaps (the windows spread
     # over the scans' span, which is the run's there), byte for byte, and the reference loses the same poses.
