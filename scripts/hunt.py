@@ -20,7 +20,10 @@ run through ``scripts/degrade_laser.py`` with two or three conditions drawn from
 ``OUT_DIR/NAME``; ``OUT_DIR/suite.yaml`` lists them (absolute paths). ``rng8`` is no degradation but the laser read
 to 8 m (``sensor.range_max``, for both configs); ``--no-range-cut`` leaves it out of the draw (the hunts r100-r423
 drew without it, r600 on with it). Without a view, noise or dropout condition the laser is kept as it was (the
-degrader's own defaults narrow it). Modes tracking and kidnapped, each dataset's ``lost_m`` as in the suite.
+degrader's own defaults narrow it). Two conditions of one option may be drawn together (``rs98`` and ``rs102``,
+``fov120`` and ``fov90``, ``ts95`` and ``ts107``, ``os95`` and ``os105``, ``rb+5`` and ``rb-5``): the name lists both,
+the later one in the name is the one applied (argparse keeps an option's last value). The draws are left so, as the
+measurements name their logs. Modes tracking and kidnapped, each dataset's ``lost_m`` as in the suite.
 """
 
 from __future__ import annotations
