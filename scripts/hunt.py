@@ -2,8 +2,9 @@
 where the default config loses track on data it was never tuned on (docs/measurements.md, the hunts of the
 eighty-first session on).
 
-    python scripts/hunt.py synthetic SEED N OUT.yaml [--fast]
+    python scripts/hunt.py synthetic SEED N OUT.yaml [--fast] [--modes tracking,global,kidnapped]
     python scripts/hunt.py real SEED N OUT_DIR [--conditions 2|3] [--no-range-cut] [--suite suites/real.yaml]
+                                               [--modes ...]
     mcl eval --suite OUT.yaml --seeds 1 --jobs 2 --cache WORLDS        # then: the default against the baseline
 
 ``synthetic``: world k of SEED..SEED+N-1 is a ``mcl simulate`` world of a random kind with three conditions drawn
@@ -12,8 +13,8 @@ unmapped and phantom furniture, ground hits, unknown floor, the laser mounted el
 walls, a turned or rescaled map, range scale or bias, reversals, slips, restarts, gaps and stalls), named
 ``KIND-C1-C2-C3-wK``; ``--fast`` leaves the scan rates out and scans at 15, 20 or 30 Hz. The draws are
 ``random.Random(k * 7919)``'s, so a world of the measurements (``corridor-doubled-2hz-mscale-w3726``) is made again
-from its seed (hunts 17 on; the hunts before drew from fewer conditions). Modes tracking and kidnapped, ``lost_m``
-0.5.
+from its seed (hunts 17 on; the hunts before drew from fewer conditions). Modes tracking and kidnapped
+(``--modes tracking,global,kidnapped`` adds global), ``lost_m`` 0.5.
 
 ``real``: log k of SEED..SEED+N-1 is one dataset of ``--suite`` (``suites/real.yaml``: the logs of ../shared/data)
 run through ``scripts/degrade_laser.py`` with two or three conditions drawn from ``REAL_CONDITIONS``, into
@@ -23,7 +24,8 @@ drew without it, r600 on with it). Without a view, noise or dropout condition th
 degrader's own defaults narrow it). Two conditions of one option may be drawn together (``rs98`` and ``rs102``,
 ``fov120`` and ``fov90``, ``ts95`` and ``ts107``, ``os95`` and ``os105``, ``rb+5`` and ``rb-5``): the name lists both,
 the later one in the name is the one applied (argparse keeps an option's last value). The draws are left so, as the
-measurements name their logs. Modes tracking and kidnapped, each dataset's ``lost_m`` as in the suite.
+measurements name their logs. Modes tracking and kidnapped (``--modes`` as for ``synthetic``), each dataset's
+``lost_m`` as in the suite.
 """
 
 from __future__ import annotations
@@ -39,10 +41,11 @@ from pathlib import Path
 import yaml
 
 from mcl.errors import MclError
-from mcl.suite import load_suite
+from mcl.suite import _modes, load_suite
 
 HERE = Path(__file__).resolve().parent
 KINDS = ["office", "rooms", "corridor", "hall", "clutter", "large"]
+HUNT_MODES = ("tracking", "kidnapped")  # the hunts' modes unless --modes says otherwise (global: the eighty-eighth on)
 
 # name: mcl simulate keywords (None: drawn per world, see _synthetic)
 CONDITIONS = {
@@ -116,11 +119,11 @@ def synthetic_world(k: int, fast: bool = False) -> dict:
     return {"name": f"{kind}-{'-'.join(conds)}-w{k}", "simulate": sim}
 
 
-def synthetic(seed: int, n: int, out: Path, fast: bool = False) -> list[str]:
-    """Write the suite of worlds ``seed``..``seed + n - 1`` to ``out``; return their names."""
+def synthetic(seed: int, n: int, out: Path, fast: bool = False, modes=HUNT_MODES) -> list[str]:
+    """Write the suite of worlds ``seed``..``seed + n - 1`` to ``out``, run in ``modes``; return their names."""
     datasets = [synthetic_world(k, fast) for k in range(seed, seed + n)]
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(yaml.safe_dump({"name": f"hunt{seed}", "modes": ["tracking", "kidnapped"], "lost_m": 0.5,
+    out.write_text(yaml.safe_dump({"name": f"hunt{seed}", "modes": list(modes), "lost_m": 0.5,
                                    "datasets": datasets}, sort_keys=False, width=200))
     return [d["name"] for d in datasets]
 
@@ -133,7 +136,8 @@ def real_draw(k: int, datasets: list, conditions: int = 3, range_cut: bool = Tru
     return d, rng.sample(pool, conditions)
 
 
-def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_cut: bool = True) -> list[str]:
+def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_cut: bool = True,
+         modes=HUNT_MODES) -> list[str]:
     """Degrade logs ``seed``..``seed + n - 1`` into ``out`` and write ``out/suite.yaml``; return their names. A bad
     ``suite`` raises ``mcl.suite.load_suite``'s error; a log the degrader refuses, SystemExit naming it."""
     datasets = load_suite(suite).datasets  # the paths resolved against the suite's root
@@ -167,7 +171,7 @@ def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_c
                 x["set"] = {**x.get("set", {}), "sensor.range_max": 8.0}
             entries.append(x)
     (out / "suite.yaml").write_text(yaml.safe_dump({"name": f"realhunt{seed}", "root": "/",
-                                                    "modes": ["tracking", "kidnapped"], "datasets": entries},
+                                                    "modes": list(modes), "datasets": entries},
                                                    sort_keys=False, width=200))
     return [x["name"] for x in entries]
 
@@ -189,15 +193,22 @@ def main(argv=None) -> int:
     r.add_argument("--no-range-cut", action="store_true", help="leave rng8 (the laser read to 8 m) out of the draw")
     r.add_argument("--suite", type=Path, default=HERE.parent / "suites" / "real.yaml",
                    help="the suite whose datasets are drawn from (default suites/real.yaml)")
+    for p in (s, r):
+        p.add_argument("--modes", default=",".join(HUNT_MODES), metavar="M,...",
+                       help=f"the modes the suite names: tracking, global, kidnapped (default {','.join(HUNT_MODES)})")
     a = ap.parse_args(argv)
     if a.n < 1:
         ap.error(f"n: expected at least 1, got {a.n}")
+    try:
+        modes = _modes(a.modes.split(","), "--modes")
+    except MclError as e:
+        ap.error(str(e))
     if a.what == "synthetic":
-        names = synthetic(a.seed, a.n, a.out, a.fast)
+        names = synthetic(a.seed, a.n, a.out, a.fast, modes)
         print(f"{a.out}: {len(names)} worlds")
     else:
         try:
-            names = real(a.seed, a.n, a.out, a.suite, a.conditions, not a.no_range_cut)
+            names = real(a.seed, a.n, a.out, a.suite, a.conditions, not a.no_range_cut, modes)
         except MclError as e:
             ap.error(str(e))  # names the file and the entry
         print(f"{a.out / 'suite.yaml'}: {len(names)} logs")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 
+import pytest
 import yaml
 
 from mcl.config import PROJECT_ROOT
@@ -76,3 +77,15 @@ def test_a_real_hunt_keeps_a_dataset_configs_laser_as_a_config_key(tmp_path):
     assert main(["real", "1000", "1", str(out), "--suite", str(base), "--no-range-cut"]) == 0
     (d,) = load_suite(out / "suite.yaml").datasets
     assert d.set == {"laser": "FLASER"}
+
+
+def test_a_hunt_names_the_modes_asked_for_and_refuses_an_unknown_one(tmp_path, capsys):
+    out = tmp_path / "hunt.yaml"
+    assert main(["synthetic", "3705", "2", str(out), "--modes", "tracking,global,kidnapped"]) == 0
+    assert all(d.modes == ("tracking", "global", "kidnapped") for d in load_suite(out).datasets)
+    with pytest.raises(SystemExit) as e:
+        main(["synthetic", "3705", "2", str(tmp_path / "other.yaml"), "--modes", "tracking,globl"])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].endswith(
+        "error: --modes: unknown mode 'globl' (did you mean global?)")
+    assert not (tmp_path / "other.yaml").exists()
