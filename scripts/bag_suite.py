@@ -7,7 +7,8 @@ odometry: ``--set topics.odom=laser`` against the bags' own /odom).
 Each dataset's CARMEN log (a synthetic one generated into ``--cache`` first, as ``mcl eval`` does) becomes
 ``<out>/<name>.mcap`` through ``mcl convert`` (/scan, /odom, /tf and /tf_static), and ``<out>/suite.yaml`` lists
 them with the same map, truth, start pose, lost bound and ``set`` keys, for tracking (a dataset's laser, from its
-dataset config or its ``set``, is the one laser of the log written to the bag). The bags are written once (an existing one is kept).
+dataset config or its ``set``, is the one laser of the log written to the bag). The bags are written once (an
+existing one is kept).
 """
 
 from __future__ import annotations

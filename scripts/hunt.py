@@ -24,8 +24,9 @@ drew without it, r600 on with it). Without a view, noise or dropout condition th
 degrader's own defaults narrow it). Two conditions of one option may be drawn together (``rs98`` and ``rs102``,
 ``fov120`` and ``fov90``, ``ts95`` and ``ts107``, ``os95`` and ``os105``, ``rb+5`` and ``rb-5``): the name lists both,
 the later one in the name is the one applied (argparse keeps an option's last value). The draws are left so, as the
-measurements name their logs. Modes tracking and kidnapped (``--modes`` as for ``synthetic``), each dataset's
-``lost_m`` as in the suite.
+measurements name their logs. Modes tracking and kidnapped (``--modes`` as for ``synthetic``; a dataset its suite
+runs in fewer modes keeps to those, and one in none of them is left out), each dataset's ``lost_m`` as in the
+suite.
 """
 
 from __future__ import annotations
@@ -144,6 +145,12 @@ def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_c
     entries = []
     for k in range(seed, seed + n):
         d, conds = real_draw(k, datasets, conditions, range_cut)
+        # the modes asked for, as far as the source suite runs the dataset (suites/real.yaml: infinite_corridor has
+        # no global run)
+        own_modes = [m for m in modes if m in d.modes]
+        if not own_modes:
+            print(f"hunt.py: r{k}: {d.name} left out: its suite runs it in {', '.join(d.modes)} only", file=sys.stderr)
+            continue
         args = [a for c in conds for a in REAL_CONDITIONS[c]]
         if not any(c.startswith(("fov", "noise", "drop")) for c in conds):
             args += ["--fov", "180", "--sigma", "0", "--drop", "0"]  # the laser as it was
@@ -169,7 +176,11 @@ def real(seed: int, n: int, out: Path, suite: Path, conditions: int = 3, range_c
             x["name"] = name
             if "rng8" in conds:  # beside the dataset's own settings
                 x["set"] = {**x.get("set", {}), "sensor.range_max": 8.0}
+            if own_modes != list(modes):
+                x["modes"] = own_modes
             entries.append(x)
+    if not entries:
+        raise SystemExit(f"hunt.py: {suite}: no dataset of draws {seed}..{seed + n - 1} runs in {', '.join(modes)}")
     (out / "suite.yaml").write_text(yaml.safe_dump({"name": f"realhunt{seed}", "root": "/",
                                                     "modes": list(modes), "datasets": entries},
                                                    sort_keys=False, width=200))
