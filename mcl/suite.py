@@ -118,6 +118,12 @@ def _modes(value, where: str) -> tuple[str, ...]:
     return tuple(dict.fromkeys(value))
 
 
+def parse_modes(text: str, where: str = "--modes") -> tuple[str, ...]:
+    """A command line's comma-separated modes (``tracking,global``), checked as a suite's ``modes`` are: a
+    ConfigError names ``where`` and the unknown mode."""
+    return _modes([m.strip() for m in text.split(",") if m.strip()], where)
+
+
 def _lost_m(value, where: str) -> float:
     """A suite's or a dataset's ``lost_m``: a positive number of metres."""
     from mcl.yamlfile import finite_number
@@ -1266,7 +1272,7 @@ def run_from_args(args) -> int:
         raise MclError(f"--jobs: expected >= 1, got {args.jobs}")
     modes = None
     if args.modes:
-        modes = _modes([m.strip() for m in args.modes.split(",") if m.strip()], "--modes")
+        modes = parse_modes(args.modes)
     only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
     world = world_overrides(getattr(args, "world", None))
     offset = getattr(args, "start_offset", None)

@@ -1017,7 +1017,7 @@ def run_from_args(args) -> int:
     else:
         if args.suite is None or args.space is None:
             raise MclError("tune: expected SUITE.yaml --space SPACE.yaml (or --resume / --report DIR)")
-        from mcl.suite import _modes, load_suite
+        from mcl.suite import load_suite, parse_modes
 
         seeds = seed_range(args.seeds or "1")
         params = load_space(args.space)
@@ -1028,7 +1028,7 @@ def run_from_args(args) -> int:
             if both:
                 raise ConfigError(f"{args.space}: {both[0]}: not tunable on {suite.path}: its dataset {d.name} sets it "
                                   "(set:), and a trial's value would replace that")
-        modes = list(_modes([m.strip() for m in args.modes.split(",") if m.strip()], "--modes")) if args.modes else None
+        modes = list(parse_modes(args.modes)) if args.modes else None
         study_dir = Path(args.study) if args.study else Path.cwd() / "runs" / f"tune-{suite.name}"
         if (study_dir / STATE_FILE).exists():
             raise MclError(f"--study {study_dir}: a study is there already: --resume {study_dir} goes on with it "

@@ -42,7 +42,7 @@ from pathlib import Path
 import yaml
 
 from mcl.errors import MclError
-from mcl.suite import _modes, load_suite
+from mcl.suite import load_suite, parse_modes
 
 HERE = Path(__file__).resolve().parent
 KINDS = ["office", "rooms", "corridor", "hall", "clutter", "large"]
@@ -211,7 +211,7 @@ def main(argv=None) -> int:
     if a.n < 1:
         ap.error(f"n: expected at least 1, got {a.n}")
     try:
-        modes = _modes(a.modes.split(","), "--modes")
+        modes = parse_modes(a.modes)
     except MclError as e:
         ap.error(str(e))
     if a.what == "synthetic":
