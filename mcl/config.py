@@ -199,6 +199,11 @@ class MotionConfig:
     # (a wheel that slips: it reads travel the robot did not make, and turns it): "match" takes that step from scan
     # matching and moves the odometry after it to go on from there (mcl.odomstall), with a warning; "keep" leaves it
     slips: Literal["match", "keep"] = "keep"
+    # a step whose odometry the stall fill took from scan matching (motion.stalls: fill) has its travel known only
+    # so well: its translation std gets fill_spread times the travel more (in quadrature). Scans seconds apart, or
+    # along a corridor, do not pin the motion, and the match then takes its guess (the velocity before the hold).
+    # 0: the filled step is trusted like the odometry's own
+    fill_spread: float = field(default=0.0, metadata=_rng(0.0))
     # the noise's distribution (mcl.noise), all with the std above: normal (NumPy's exact normal),
     # normal_twelve (sum of twelve uniforms) or triangular (two uniforms)
     noise: Literal["normal", "normal_twelve", "triangular"] = "normal"

@@ -102,6 +102,9 @@ class Control:
     # s since the previous scan, used or gated (None: ``dt``): how long the odometry step took, for the jump test
     # (gated scans stood still, so a step after a long stop is not slow)
     dt_scan: float | None = None
+    # the step (or a scan's since the last update) came from the stall fill's scan matching: its travel is uncertain
+    # (motion.fill_spread)
+    filled: bool = False
 
 
 SCALE_PIN = 0.8  # motion.scale_window: a correction that leaves this much of the spread along the travel pins nothing

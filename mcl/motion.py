@@ -164,6 +164,11 @@ class FaultProposal:
         return k
 
 
+def _fill_spread(control, cfg) -> float:
+    """``motion.fill_spread`` for a step the stall fill took from scan matching (``control.filled``), else 0."""
+    return float(getattr(cfg, "fill_spread", 0.0)) if getattr(control, "filled", False) else 0.0
+
+
 def fault_scales(n: int, fault: FaultProposal | None, k, rng: np.random.Generator) -> np.ndarray | None:
     """(3, n) noise multipliers: the fault component's ``k`` (3,) (``FaultProposal.scales``) for the particles
     drawn from p_k (each with probability ``fault.share``) and 1 for the others; None without a fault proposal."""
@@ -246,13 +251,14 @@ class OdometryMotionModel:
 
     def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None,
                        fallback=None):
-        """``sample`` for a :class:`mcl.filter.Control` (uses its odometry pair)."""
+        """``sample`` for a :class:`mcl.filter.Control` (uses its odometry pair; a filled step's travel with
+        ``fill_spread``)."""
         return self.sample(particles, control.odom_prev, control.odom_now, rng, allowed=allowed, grid=grid,
-                           fault=fault, log_weight=log_weight, fallback=fallback)
+                           fault=fault, log_weight=log_weight, fallback=fallback, spread=_fill_spread(control, self.cfg))
 
     def sample(self, particles, odom_prev, odom_now, rng: np.random.Generator,
                allowed=None, grid=None, out=None, fault: FaultProposal | None = None, log_weight=None,
-               fallback=None):
+               fallback=None, spread: float = 0.0):
         """Move every particle by the odometry step odom_prev -> odom_now, with noise.
 
         particles: (3, N) float64 (x, y, theta); odom_prev, odom_now: (x, y, theta).
@@ -264,6 +270,8 @@ class OdometryMotionModel:
         log_weight, an (N,) float64 array, receives their importance weights (``fault_log_weights``).
         fallback: None, or a mask like ``allowed`` (``allowed_mask(grid, r, unknown=True)``): a particle whose
         every try missed ``allowed`` but whose last try lies in ``fallback`` is kept there (``motion.map_unknown``).
+        spread: the translation's std gets ``spread`` times the travel more, in quadrature (a step the stall fill
+        took from scan matching: ``motion.fill_spread``).
 
         Returns (new (3, N), ok (N,) bool, mean_tries): ok[i] is False when
         particle i never landed in an allowed cell in max_tries tries (its pose
@@ -273,6 +281,9 @@ class OdometryMotionModel:
         p, out = _particles_and_out(particles, out)
         n = p.shape[1]
         deltas, sigmas, dims, kernel, kernel_map = self._step(odom_prev, odom_now)
+        if spread > 0.0:
+            extra = spread * abs(float(deltas[1]))  # deltas[1]: the travel (trans), in both models
+            sigmas = tuple(math.hypot(float(sg), extra) if d in self._TRAVEL else sg for d, sg in enumerate(sigmas))
         noise, idx_all = self._buffers(n)
         kind = getattr(self.cfg, "noise", "normal")
         standard_noise(kind, rng, out=noise)  # normal: rng.standard_normal
@@ -298,6 +309,8 @@ class OdometryMotionModel:
         """The step's turn in each noise dimension, as the noise sees it (a reversing robot's rot1 near pi turned
         by its difference from pi; ``FaultProposal.scales``)."""
         return noise_angle(deltas[0]), 0.0, noise_angle(deltas[2])
+
+    _TRAVEL = (1,)  # the noise stds of the travel, in ``_step``'s order (``fill_spread`` widens them)
 
     def _step(self, odom_prev, odom_now):
         """(the step's deltas, their noise stds, the fault caps' dimensions for ``FaultProposal.scales``, the kernel,
@@ -361,6 +374,8 @@ class OmniMotionModel(OdometryMotionModel):
     def _turned(deltas):
         """The step's turn in each noise dimension (its heading's alone)."""
         return 0.0, 0.0, abs(deltas[2])
+
+    _TRAVEL = (0, 1)  # sigma_trans and sigma_strafe
 
     def _step(self, odom_prev, odom_now):
         """``OdometryMotionModel._step`` of this model: bearing, trans, rot; the heading's noise is the turn's, the
@@ -822,20 +837,23 @@ class VelocityMotionModel:
 
     def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None,
                        fallback=None):
-        """``sample`` for a :class:`mcl.filter.Control` (uses its v, w, dt)."""
+        """``sample`` for a :class:`mcl.filter.Control` (uses its v, w, dt; a filled step's with ``fill_spread``)."""
         return self.sample(particles, control.v, control.w, control.dt, rng, allowed=allowed, grid=grid,
-                           fault=fault, log_weight=log_weight, fallback=fallback)
+                           fault=fault, log_weight=log_weight, fallback=fallback, spread=_fill_spread(control, self.cfg))
 
     def sample(self, particles, v, w, dt, rng: np.random.Generator, allowed=None, grid=None, out=None,
-               fault: FaultProposal | None = None, log_weight=None, fallback=None):
-        """Move every particle by the command (v, w) for dt, with noise. Returns (new, ok, mean_tries); ``fault``
-        and ``log_weight`` as for ``OdometryMotionModel.sample``."""
+               fault: FaultProposal | None = None, log_weight=None, fallback=None, spread: float = 0.0):
+        """Move every particle by the command (v, w) for dt, with noise. Returns (new, ok, mean_tries); ``fault``,
+        ``log_weight`` and ``spread`` (v's std gets ``spread`` |v| more, in quadrature) as for
+        ``OdometryMotionModel.sample``."""
         from mcl.kernels import velocity as _kv
 
         p, out = _particles_and_out(particles, out)
         n = p.shape[1]
         v, w, dt = float(v), float(w), max(float(dt), 0.0)
         sv, sw, sg = velocity_sigmas(v, w, self.cfg)
+        if spread > 0.0:
+            sv = math.hypot(sv, spread * abs(v))
         if self._noise.shape[1] != n:
             self._noise = np.empty((3, n))
             self._all = np.arange(n, dtype=np.int64)

@@ -1005,6 +1005,7 @@ def _run(
     last_odom = None
     last_t = 0.0
     scan_t = None  # the previous scan's time, used or gated (Control.dt_scan)
+    filled = False  # a scan since the last update had its odometry filled by scan matching (Control.filled)
     lasers: set = set()  # the scan sources (a bag's topics; a CARMEN log's one kind) seen to update so far
     left_out = getattr(log, "left_out_lasers", set())  # fused lasers whose mounting misfits (_check_odometry)
     turned = getattr(log, "turned_lasers", {})  # lasers mounted at the yaw their scans fit (_check_odometry)
@@ -1029,6 +1030,7 @@ def _run(
                 bar.update(1)
                 odom = scan.odom
                 laser = scan.kind if isinstance(scan, Scan) else None  # which laser (None: landmarks, depth)
+                filled = filled or getattr(scan, "filled", False)
                 if last_odom is not None:
                     d = math.hypot(odom[0] - last_odom[0], odom[1] - last_odom[1])
                     a = abs(float(wrap_angle(odom[2] - last_odom[2])))
@@ -1072,7 +1074,7 @@ def _run(
                     if v == 0.0 and w == 0.0:  # no velocities in the log: from the odometry pair
                         v, w, dt = velocities_from_odometry(last_odom, odom, dt)
                     control = Control(last_odom, odom, dt=dt, v=v, w=w,
-                                      dt_scan=scan.t - scan_t if scan_t is not None else None)
+                                      dt_scan=scan.t - scan_t if scan_t is not None else None, filled=filled)
                 if seed_from_landmarks and not pf.search.tempering:
                     # the laser settled the search first: its cloud stays (a late landmark observation, a false
                     # positive, re-drew a localized set 4 m off)
@@ -1087,7 +1089,7 @@ def _run(
                     owed.discard(laser)
                 if on_update is not None:
                     on_update(scan.t, pf, info, truth.at(scan.t) if truth is not None else None)
-                last_odom, last_t, scan_t = odom, scan.t, scan.t
+                last_odom, last_t, scan_t, filled = odom, scan.t, scan.t, False
                 mean, cov = info.mean, info.cov
                 spread_full = _spread(info.full_cov)
                 last_mean, last_lost, last_spread = mean, info.lost, spread_full

@@ -1,5 +1,6 @@
 """Odometry motion model (Prob. Rob. Table 5.6) and the map-based model (section 5.5)."""
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -357,3 +358,39 @@ def test_noise_step_makes_a_long_step_a_random_walk_of_short_ones():
         assert wrap_np(p[2]).var() == pytest.approx(heading, rel=tol)
         assert np.hypot(p[0], p[1]).var() == pytest.approx(alphas[2] * 0.2, rel=0.05)  # travel; heading adds ~1 %
     assert wrap_np(one_book[2]).var() == pytest.approx(5 * heading, rel=tol)
+
+
+@pytest.mark.parametrize("model", ["odometry", "velocity"])
+def test_a_filled_step_has_its_travel_widened_by_fill_spread(model):
+    """A step the stall fill took from scan matching (``Control.filled``) moves with its travel's std widened to
+    hypot(sigma, fill_spread * travel); the heading noise is the model's own. 200,000 particles from one seed
+    each way: the travel's std within 5 standard errors of the sample std (5 * sigma / sqrt(2 (N - 1)), 0.8 %); the
+    same noise draws give the same headings to the last bit. Without the flag (or with fill_spread 0) the step is
+    the plain model's."""
+    from mcl.filter import Control
+    from mcl.motion import VelocityMotionModel, velocity_sigmas
+
+    n, spread = 200_000, 0.2  # a travel of 1 m never drawn below 0 (4.5 sigma): its hypot is its size
+    if model == "odometry":
+        cfg = motion_cfg("variance", alphas=(0.1, 0.05, 0.01, 0.03))
+        mm, control = OdometryMotionModel(cfg), Control(np.zeros(3), np.array([1.0, 0.0, 0.0]))
+        sigma = noise_sigmas(*odometry_deltas((0, 0, 0), (1.0, 0.0, 0.0)), cfg)[1]
+    else:
+        cfg = SimpleNamespace(model="velocity", noise_form="variance", noise="normal", max_tries=10,
+                              alpha1=0.01, alpha2=0.0, alpha3=0.0, alpha4=0.0, alpha5=0.0, alpha6=0.0)
+        control = Control(np.zeros(3), np.array([1.0, 0.0, 0.0]), dt=1.0, v=1.0, w=0.0)
+        mm, sigma = VelocityMotionModel(cfg), velocity_sigmas(1.0, 0.0, cfg)[0]
+    cfg.fill_spread = spread
+
+    def moved(filled):
+        new, _, _ = mm.sample_control(np.zeros((3, n)), dataclasses.replace(control, filled=filled),
+                                      np.random.default_rng(7))
+        return new
+
+    plain, filled = moved(False), moved(True)
+    want = math.hypot(sigma, spread * 1.0)
+    for new, sd in ((plain, sigma), (filled, want)):
+        assert np.hypot(new[0], new[1]).std(ddof=1) == pytest.approx(sd, rel=5 / math.sqrt(2 * (n - 1)))
+    np.testing.assert_array_equal(filled[2], plain[2])
+    cfg.fill_spread = 0.0
+    np.testing.assert_array_equal(moved(True), plain)

@@ -33,7 +33,7 @@ BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.es
                  "motion.fault_prob", "sensor.unmapped_skip", "filter.search_refine", "sensor.self_hit_skip",
                  "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset", "motion.sideways", "motion.noise_step",
                  "filter.search_refine_candidates", "motion.stalls",
-                 "motion.jumps", "motion.slips"}
+                 "motion.jumps", "motion.slips", "motion.fill_spread"}
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -59,6 +59,7 @@ def test_baseline_differs_from_default_only_in_the_plain_filter_keys():
     assert baseline["sensor.misfit_laser"] == "keep" and baseline["sensor.mount_yaw"] == "keep"
     assert baseline["sensor.stamp_offset"] == "keep" and baseline["motion.sideways"] == "keep"
     assert baseline["motion.stalls"] == "keep" and default["motion.stalls"] == "fill"
+    assert baseline["motion.fill_spread"] == 0.0 and default["motion.fill_spread"] > 0.0
     assert baseline["motion.jumps"] == "hedge" and default["motion.jumps"] == "match"
     assert baseline["motion.slips"] == "keep" and default["motion.slips"] == "match"
     assert baseline["filter.search_exponent"] == 1.0 and baseline["filter.global_density"] == 0

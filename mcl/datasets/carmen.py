@@ -101,6 +101,8 @@ class Scan:
     # (vx, vy, omega) the robot's velocity over the sweep in its frame at t, from the odometry (mcl.runner sets it
     # when sensor.sweep_time applies); None: the beams are taken as all measured at t
     twist: np.ndarray | None = None
+    # the odometry into this scan was taken from scan matching by the stall fill (mcl.odomstall), not the log's
+    filled: bool = False
 
     @property
     def angles(self) -> np.ndarray:
