@@ -617,14 +617,8 @@ def test_another_lasers_scans_in_a_slip_lie_between_the_filled_ones(tmp_path, ra
     assert turned > 0.1  # as they came, they were that far off the filled track
 
 
-@pytest.mark.skipif(not (SHARED / "fr101").is_dir(), reason=f"real datasets not found at {SHARED}")
-def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
-    # fr101 (a scan every 2-6 s) with a 90-degree laser, its ranges read 2 % short and its odometry held three times
-    # for 3 s (session 89's hunt log r2419). Two scans 5.6 s apart along a corridor do not pin the motion: the fill
-    # takes its guess, the velocity before the hold, 2.84 m where the robot drove 0.82 m. Trusted like odometry
-    # (motion.fill_spread 0) the cloud runs 2 m ahead and the track is lost (max 4.45 m measured at seed 1, 2.5-4.45 m
-    # over seeds 1-5); with the default's spread of the filled steps' travel it holds (0.46 m measured, 0.47-0.73 m
-    # over seeds 1-5; 1 m is the hunts' bound for a real log).
+def _fr101_stalled(tmp_path, *options):
+    """The folder of ``../shared/data/fr101`` run through ``scripts/degrade_laser.py`` with ``options``."""
     import sys
 
     sys.path.insert(0, str(PROJECT_ROOT / "scripts"))
@@ -636,11 +630,22 @@ def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
         "name": "fr101", "root": str(SHARED / "fr101"), "modes": ["tracking"],
         "datasets": [{"name": "fr101", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
     out = tmp_path / "out"
-    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), "--fov", "90", "--range-scale", "0.98",
-                 "--odom-stalls", "3", "--seed", "2419"]) == 0
+    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), *options]) == 0
     (world,) = [p.parent for p in out.glob("*/log.clf")]
+    return world
+
+
+@pytest.mark.skipif(not (SHARED / "fr101").is_dir(), reason=f"real datasets not found at {SHARED}")
+def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
+    # fr101 (a scan every 2-6 s) with a 90-degree laser, its ranges read 2 % short and its odometry held three times
+    # for 3 s (session 89's hunt log r2419). Two scans 5.6 s apart along a corridor do not pin the motion: the fill
+    # takes its guess, the velocity before the hold, 2.84 m where the robot drove 0.82 m. Trusted like odometry
+    # (motion.fill_spread 0) the cloud runs 2 m ahead and the track is lost (max 4.45 m measured at seed 1, 2.5-4.45 m
+    # over seeds 1-5); with the default's spread of the filled steps' travel it holds (0.46 m measured, 0.47-0.73 m
+    # over seeds 1-5; 1 m is the hunts' bound for a real log).
     from mcl.runner import run
 
+    world = _fr101_stalled(tmp_path, "--fov", "90", "--range-scale", "0.98", "--odom-stalls", "3", "--seed", "2419")
     errors = {}
     for spread in (None, 0.0):  # the default's, and none
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
