@@ -375,7 +375,7 @@ class OmniMotionModel(OdometryMotionModel):
         """The step's turn in each noise dimension (its heading's alone)."""
         return 0.0, 0.0, abs(deltas[2])
 
-    _TRAVEL = (0, 1)  # sigma_trans and sigma_strafe
+    _TRAVEL = (0,)  # sigma_trans, along the travel (sigma_strafe, across it, stays the model's)
 
     def _step(self, odom_prev, odom_now):
         """``OdometryMotionModel._step`` of this model: bearing, trans, rot; the heading's noise is the turn's, the

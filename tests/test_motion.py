@@ -360,7 +360,7 @@ def test_noise_step_makes_a_long_step_a_random_walk_of_short_ones():
     assert wrap_np(one_book[2]).var() == pytest.approx(5 * heading, rel=tol)
 
 
-@pytest.mark.parametrize("model", ["odometry", "velocity"])
+@pytest.mark.parametrize("model", ["odometry", "omni", "velocity"])
 def test_a_filled_step_has_its_travel_widened_by_fill_spread(model):
     """A step the stall fill took from scan matching (``Control.filled``) moves with its travel's std widened to
     hypot(sigma, fill_spread * travel); the heading noise is the model's own. 200,000 particles from one seed
@@ -375,6 +375,13 @@ def test_a_filled_step_has_its_travel_widened_by_fill_spread(model):
         cfg = motion_cfg("variance", alphas=(0.1, 0.05, 0.01, 0.03))
         mm, control = OdometryMotionModel(cfg), Control(np.zeros(3), np.array([1.0, 0.0, 0.0]))
         sigma = noise_sigmas(*odometry_deltas((0, 0, 0), (1.0, 0.0, 0.0)), cfg)[1]
+    elif model == "omni":  # the travel along x: its std is sigma_trans; sigma_strafe (across, y) stays
+        from mcl.motion import OmniMotionModel, omni_sigmas
+
+        cfg = motion_cfg("variance", alphas=(0.1, 0.05, 0.01, 0.03))
+        cfg.alpha_strafe = 0.01
+        mm, control = OmniMotionModel(cfg), Control(np.zeros(3), np.array([1.0, 0.0, 0.0]))
+        sigma = omni_sigmas(1.0, 0.0, cfg)[0]
     else:
         cfg = SimpleNamespace(model="velocity", noise_form="variance", noise="normal", max_tries=10,
                               alpha1=0.01, alpha2=0.0, alpha3=0.0, alpha4=0.0, alpha5=0.0, alpha6=0.0)
@@ -390,7 +397,10 @@ def test_a_filled_step_has_its_travel_widened_by_fill_spread(model):
     plain, filled = moved(False), moved(True)
     want = math.hypot(sigma, spread * 1.0)
     for new, sd in ((plain, sigma), (filled, want)):
-        assert np.hypot(new[0], new[1]).std(ddof=1) == pytest.approx(sd, rel=5 / math.sqrt(2 * (n - 1)))
+        travel = new[0] if model == "omni" else np.hypot(new[0], new[1])  # omni: y is the strafe's
+        assert travel.std(ddof=1) == pytest.approx(sd, rel=5 / math.sqrt(2 * (n - 1)))
     np.testing.assert_array_equal(filled[2], plain[2])
+    if model == "omni":  # across the travel: the strafe's noise alone, drawn the same
+        np.testing.assert_array_equal(filled[1], plain[1])
     cfg.fill_spread = 0.0
     np.testing.assert_array_equal(moved(True), plain)
