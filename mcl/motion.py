@@ -166,7 +166,7 @@ class FaultProposal:
 
 def _fill_spread(control, cfg) -> float:
     """``motion.fill_spread`` for a step the stall fill took from scan matching (``control.filled``), else 0."""
-    return float(getattr(cfg, "fill_spread", 0.0)) if getattr(control, "filled", False) else 0.0
+    return float(cfg.fill_spread) if control.filled else 0.0
 
 
 def fault_scales(n: int, fault: FaultProposal | None, k, rng: np.random.Generator) -> np.ndarray | None:

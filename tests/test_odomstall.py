@@ -641,8 +641,8 @@ def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
     # for 3 s (session 89's hunt log r2419). Two scans 5.6 s apart along a corridor do not pin the motion: the fill
     # takes its guess, the velocity before the hold, 2.84 m where the robot drove 0.82 m. Trusted like odometry
     # (motion.fill_spread 0) the cloud runs 2 m ahead and the track is lost (max 4.45 m measured at seed 1, 2.5-4.45 m
-    # over seeds 1-5); with the default's spread of the filled steps' travel it holds (0.46 m measured, 0.47-0.73 m
-    # over seeds 1-5; 1 m is the hunts' bound for a real log).
+    # over seeds 1-5); with the default's spread of the filled steps' travel it holds (0.46 m measured at seed 1,
+    # 0.46-0.73 m over seeds 1-5; 1 m is the hunts' bound for a real log).
     from mcl.runner import run
 
     world = _fr101_stalled(tmp_path, "--fov", "90", "--range-scale", "0.98", "--odom-stalls", "3", "--seed", "2419")
