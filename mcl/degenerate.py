@@ -17,7 +17,10 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
   when its speed since the last scan is at most ``filter.max_odom_speed``
   or ``max_odom_ratio`` times the fastest of the last steps' (a laser silent
   for seconds: the next scan comes metres on at the robot's speed; a glitch
-  moves metres in a scan period). Else the filter hedges: every
+  moves metres in a scan period). A step longer than ``filter.max_odom_step``
+  that ends within ``RESTART_M`` of the odometry's origin is a jump whatever
+  its speed and the recent steps: a base driver that restarted from 0 0 0 while
+  the scans were seconds apart (a sparse log) steps as slowly as a drive. Else the filter hedges: every
   other particle takes the step (the motion model's noise grows with it), the
   others are re-spread by ``filter.respread_std`` where they were (poses off
   the allowed map are drawn again), and the scan decides. Non-finite odometry
@@ -51,6 +54,11 @@ class InputGuard:
     JUMP_HISTORY = 20  # odometry steps taken whose longest sets the relative jump bound
 
     MIN_SPEED_DT = 0.02  # s: a step over less time has no speed to go by (stamps equal or a few ms apart)
+
+    # m: a long step that ends this near the odometry's origin is a restart from 0 0 0 (the reading after it holds the
+    # motion since; 0.5 m is a second and more at an indoor robot's speed), whatever its speed. A drive that returns so
+    # near its odometry's start over a scan gap is hedged instead of taken, and the scan decides
+    RESTART_M = 0.5
 
     def __init__(self, max_odom_step: float, max_odom_ratio: float = 0.0, max_odom_speed: float = 0.0):
         self.max_odom_step = float(max_odom_step)
@@ -107,12 +115,20 @@ class InputGuard:
         recent = self.max_odom_ratio * max(self._speeds) if self._speeds else 0.0
         return max(self.max_odom_speed, recent)
 
-    def observe(self, step: float, dt: float) -> bool:
+    def at_origin(self, pose) -> bool:
+        """Whether the odometry ``pose`` lies within ``RESTART_M`` of the odometry's origin (where a restart leaves it)."""
+        return math.hypot(float(pose[0]), float(pose[1])) <= self.RESTART_M
+
+    def observe(self, step: float, dt: float, end=None) -> bool:
         """Whether an odometry step of ``step`` m over ``dt`` s is a jump: longer than ``jump_bound`` and, when it is
-        timed (dt at least MIN_SPEED_DT), faster than ``speed_bound``. A step within ``jump_bound`` joins the
+        timed (dt at least MIN_SPEED_DT), faster than ``speed_bound``; or longer than ``max_odom_step`` and ending
+        (``end``, the odometry pose it reaches, when given) within ``RESTART_M`` of the odometry's origin (a restart:
+        a sparse log's steps make ``jump_bound`` metres long). A step within ``jump_bound`` joins the
         histories; a longer one at the robot's speed is motion (the scans stopped for a while) but stays out of them:
         the next steps are measured against the scans' own, not against the gap's."""
         timed = dt >= self.MIN_SPEED_DT
+        if step > self.max_odom_step and end is not None and self.at_origin(end):
+            return True  # a restart from 0 0 0, however long the recent steps were
         if step > self.jump_bound():
             return not (timed and step <= self.speed_bound() * dt)
         self._steps.append(step)
@@ -134,10 +150,14 @@ class InputGuard:
         step = math.hypot(b[0] - a[0], b[1] - a[1])
         bound = self.jump_bound()
         dt = float(control.dt if control.dt_scan is None else control.dt_scan)
-        if self.observe(step, dt):
-            speed = (f"; {step / dt:.2f} m/s over {dt:.2f} s, faster than filter.max_odom_speed "
-                     f"{self.max_odom_speed} m/s and max_odom_ratio times the fastest recent step"
-                     if dt >= self.MIN_SPEED_DT and self.max_odom_speed > 0.0 else "")
+        if self.observe(step, dt, b):
+            if self.at_origin(b):
+                speed = f"; to within {self.RESTART_M} m of the odometry's origin, a restart from 0 0 0"
+            elif dt >= self.MIN_SPEED_DT and self.max_odom_speed > 0.0:
+                speed = (f"; {step / dt:.2f} m/s over {dt:.2f} s, faster than filter.max_odom_speed "
+                         f"{self.max_odom_speed} m/s and max_odom_ratio times the fastest recent step")
+            else:
+                speed = ""
             self.event("odometry_jumps", f"odometry jumped {step:.2f} m in one update (> {bound:.2f} m: "
                        f"filter.max_odom_step {self.max_odom_step} m, or max_odom_ratio {self.max_odom_ratio} "
                        f"times the longest recent step{speed}): a glitch or real motion; half the particles take "

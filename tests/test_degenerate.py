@@ -242,6 +242,36 @@ def test_a_long_step_at_the_robots_speed_is_motion_and_a_glitch_is_not():
     assert not jump(fast, 4.5, 3.0) and not jump(fast, 12.0, 3.0) and jump(fast, 14.0, 3.0)
 
 
+def test_a_long_step_back_to_the_odometrys_origin_is_a_restart_whatever_its_speed():
+    # A sparse log (a scan every 5 s) whose base driver restarted between two scans: the odometry goes from
+    # (6.1, -4.9) back to 0 0 0, 7.8 m at 1.6 m/s, a speed the robot could drive, so the speed bound takes it as
+    # motion (a hunt's intel_lab: 9.2 m off). Ending within RESTART_M of the origin makes it a jump; the same step
+    # ending elsewhere stays motion, and a short step to the origin is motion too.
+    from mcl.degenerate import InputGuard
+
+    def jump(guard, start, end, dt=4.92):
+        c = Control(np.array(start, dtype=float), np.array(end, dtype=float), dt=dt)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return guard.check_control(c)[1] is None
+
+    def guard():
+        g = InputGuard(max_odom_step=2.0, max_odom_ratio=3.0, max_odom_speed=2.0)
+        for _ in range(10):
+            assert not jump(g, [0.0, 0.0, 0.0], [0.3, 0.0, 0.0], dt=1.0)
+        return g
+
+    start = [6.09, -4.91, -2.58]
+    assert jump(guard(), start, [0.0, 0.0, 0.0])
+    assert jump(guard(), start, [0.3, 0.35, 0.5])  # the motion since the restart: 0.46 m from the origin
+    assert not jump(guard(), start, [0.5, 0.4, 0.5])  # 0.64 m from it: a drive over a scan gap
+    assert not jump(guard(), start, [12.0, -1.0, 0.0])  # as long (7.6 m), elsewhere: a drive
+    assert not jump(guard(), [1.5, 0.0, 0.0], [0.0, 0.0, 0.0])  # within the length bound: a step like any other
+    g = guard()
+    with pytest.warns(RuntimeWarning, match="within 0.5 m of the odometry's origin"):
+        g.check_control(Control(np.array(start), np.zeros(3), dt=4.92))
+
+
 @pytest.mark.parametrize("odom", [[np.nan, 0.0, 0.0], [0.0, np.inf, 0.0], [0.1, 0.0, np.nan]])
 def test_non_finite_odometry_counts_as_a_jump(odom):
     pf = _pf()
@@ -345,6 +375,63 @@ def test_a_log_with_a_scan_every_two_metres_is_tracked(tmp_path, ratio, speed, j
     ref = truth[:, np.searchsorted(tt, t - 1e-6)]
     err = np.hypot(est[0] - ref[0], est[1] - ref[1])
     assert err.max() < 0.3, err.round(2)  # tracked: 0.03-0.14 m measured over seeds 1-3
+
+
+def _restarted(line: str, at) -> str:
+    """A FLASER line whose odometry restarted from 0 0 0 at the odometry pose ``at``: its laser pose and its
+    odometry pose (the two x y theta after the ranges) taken into the new frame."""
+    from mcl.estimate import compose, inverse
+
+    f = line.split()
+    n = int(f[1])
+    for k in (2 + n, 2 + n + 3):
+        pose = compose(inverse(np.asarray(at)), np.array([float(v) for v in f[k:k + 3]]))
+        f[k:k + 3] = [f"{v:.6f}" for v in pose]
+    return " ".join(f) + "\n"
+
+
+@pytest.mark.skipif(not (DEMO / "log.clf").is_file(), reason="bundled demo data missing")
+@pytest.mark.parametrize("restart_m", [0.5, 0.0])
+def test_a_sparse_log_whose_odometry_restarts_is_tracked(tmp_path, monkeypatch, restart_m):
+    # every 12th scan of the demo (2.4 s apart, up to 1.2 m of odometry between them), the base driver restarting
+    # from 0 0 0 three scans (0.6 s) before the fifth: its odometry steps 2.7 m back to near the origin at about
+    # 1 m/s, a speed the robot could drive. Taken as motion (RESTART_M 0, the rule before) the cloud is carried metres
+    # off; as a restart (InputGuard.RESTART_M) the scans place the robot, matched from the velocity before it.
+    import yaml
+
+    from mcl.degenerate import InputGuard
+    from mcl.runner import run
+    from mcl.trajectory import read_tum
+
+    monkeypatch.setattr(InputGuard, "RESTART_M", restart_m)
+    raw = (DEMO / "log.clf").read_text().splitlines(True)
+    scans = [line for line in raw if line.startswith("FLASER")]
+    lines, at = [line for line in raw if not line.startswith(("FLASER", "ODOM"))], None
+    for k, line in enumerate(scans[:240]):
+        if k == 4 * 12 - 3:
+            f = line.split()
+            at = [float(v) for v in f[2 + int(f[1]) + 3:2 + int(f[1]) + 6]]
+        if k % 12 == 0:
+            lines.append(line if at is None else _restarted(line, at))
+    (tmp_path / "thin.clf").write_text("".join(lines))
+    start = yaml.safe_load((DEMO / "sim.yaml").read_text())["start_pose"]
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"log={tmp_path / 'thin.clf'}", "rerun.mode=off", "filter.global_localization=false",
+        f"filter.initial_pose={start}", "filter.particles=5000"])
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
+    assert s["updates"] == 20, s
+    t, est = read_tum(tmp_path / "out" / "trajectory.tum")
+    tt, truth = read_tum(DEMO / "truth.tum")
+    ref = truth[:, np.searchsorted(tt, t - 1e-6)]
+    err = np.hypot(est[0] - ref[0], est[1] - ref[1])
+    if restart_m:
+        # 0.04-0.07 m at every scan (seed 1); the step matched 1.18 m, as driven
+        assert err.max() < 0.3, err.round(2)
+        assert [w["cause"] for w in s["odometry_stalls"]] == ["jump"]
+    else:
+        assert err.max() > 1.0, err.round(2)  # 3.3-4.2 m for three scans
 
 
 @pytest.mark.skipif(not (DEMO / "log.clf").is_file(), reason="bundled demo data missing")
