@@ -45,8 +45,8 @@ would call a jump and that is faster than ``JUMP_V``, or slower but with the sca
 (``JUMP_OVERLAP``: a restart between scans seconds apart), is taken from scan matching the two scans instead (from
 the velocity before it and from the odometry's own step, or from standing still where the step ends at the
 odometry's origin, since after a restart it says where the robot was, not how it moved; a match that agrees with the
-odometry's own step leaves it; scans over ``MAX_HOLD`` s apart are left to the filter), and the odometry after it
-goes on from there; and a hold that ends in such a jump is filled from the scans,
+odometry's own step leaves it; scans over ``MAX_HOLD`` s apart are left to the filter, the odometry passed on as
+it came from there, so that its guard sees a restart at the origin), and the odometry after it goes on from there; and a hold that ends in such a jump is filled from the scans,
 however its step out compares (it is no catch-up). So is a hold whose fast step out turns the robot over
 ``CATCH_UP_TURN`` rad more or less than the scans did over it: a driver that restarted a metre or two from where its
 odometry held (the odometry had come back near its origin) jumps too short for the guard, and as fast as a catch-up.
@@ -250,7 +250,8 @@ class StallFill:
                     parked = False
                     if guard is not None and own is not None:
                         after_jump, step = self._jump(prev, s, own, step_rate, fix, guard)
-                if self.slips and step is None and not same and span_from is not None:
+                # (a jump left to the filter with the correction dropped ends the span: the scans before it keep theirs)
+                if self.slips and step is None and after_jump is fix and not same and span_from is not None:
                     span.append(s)
                     firsts = sum(h.kind == kind for h in span)
                     # the span's scans: as many as come in SLIP_SPAN s at the median period (one at 5 Hz and slower)
@@ -287,8 +288,12 @@ class StallFill:
         odometry's step from ``prev`` jumped (``_jumped``: a driver that restarted from 0 0 0, a glitch), the step is
         the scans' (guessed from the rates ``entry`` and from ``own``) and the odometry after it goes on from there;
         unless the scans match best at the odometry's own step (a long step that is motion)."""
-        if not _jumped(guard, own, s.t - prev.t, prev, s, self.mount_of(s)) or s.t - prev.t > MAX_HOLD:
-            return fix, None  # scans more than MAX_HOLD s apart are not matched: the filter hedges the jump
+        if not _jumped(guard, own, s.t - prev.t, prev, s, self.mount_of(s)):
+            return fix, None
+        if s.t - prev.t > MAX_HOLD:
+            # scans so far apart are not matched: the filter hedges the jump, and its guard sees the odometry as it
+            # came from here on (a restart at its origin, not where an earlier fill's correction moves it)
+            return np.zeros(3), None
         # after a restart from 0 0 0 the odometry's step is where the robot was, not how it moved: the guesses are the
         # velocity before and standing still (from the step, the demo thinned to a scan every 2.4 s matched 1.41 m
         # where the robot drove 1.18 m, 2.3 m off)

@@ -478,6 +478,18 @@ def test_a_restart_between_scans_far_apart_is_matched_and_their_slow_steps_are_n
     late = [dataclasses.replace(s, t=s.t + 16.2) if k >= 5 else s for k, s in enumerate(scans)]
     fill = StallFill(late, _mount, jumps=JUMPS)
     assert all(a is b for a, b in zip(fill, late)) and not fill.stalls
+    # ... and after the first restart's match has moved the odometry (a correction), a second restart 21 s after the
+    # scan before passes with the odometry as it came, at its origin, so that the filter's guard tells the restart;
+    # with the slip check's span too (aces restarted inside a 21 s gap: 39.3 m off with the correction kept, 0.25 m)
+    zero = inverse(scans[8].odom)
+    second = [dataclasses.replace(s, t=s.t + 16.2, odom=compose(zero, s.odom)) if k >= 8 else s
+              for k, s in enumerate(scans)]
+    for slips in (False, True):
+        fill = StallFill(second, _mount, jumps=JUMPS, slips=slips)
+        out = list(fill)
+        assert [(w.t0, w.cause) for w in fill.stalls] == [(scans[4].t, "jump")]
+        assert np.abs(out[7].odom - second[7].odom).max() > 0.1  # the first match's correction ...
+        assert all(np.allclose(a.odom, b.odom) for a, b in zip(out[8:], second[8:]))  # ... dropped at the second
 
 
 @pytest.fixture(scope="module")
