@@ -20,9 +20,10 @@ Degenerate input never puts a NaN into the particles. Each kind warns once
   moves metres in a scan period). A step longer than ``filter.max_odom_step``
   that ends within ``RESTART_M`` of the odometry's origin is a jump whatever
   its speed and the recent steps: a base driver that restarted from 0 0 0 while
-  the scans were seconds apart (a sparse log) steps as slowly as a drive. Else the filter hedges: every
-  other particle takes the step (the motion model's noise grows with it), the
-  others are re-spread by ``filter.respread_std`` where they were (poses off
+  the scans were seconds apart (a sparse log) steps as slowly as a drive.
+  Else the filter hedges: every other particle takes the step (the motion
+  model's noise grows with it), the others are re-spread by
+  ``filter.respread_std`` where they were (poses off
   the allowed map are drawn again), and the scan decides. Non-finite odometry
   is only re-spread. With ``motion.jumps: match`` a jump faster than 5 m/s, or
   one the scans do not overlap at (a driver that restarted from 0 0 0), is
@@ -116,7 +117,7 @@ class InputGuard:
         return max(self.max_odom_speed, recent)
 
     def at_origin(self, pose) -> bool:
-        """Whether the odometry ``pose`` lies within ``RESTART_M`` of the odometry's origin (where a restart leaves it)."""
+        """Whether the odometry ``pose`` lies within ``RESTART_M`` of its origin (where a restart leaves it)."""
         return math.hypot(float(pose[0]), float(pose[1])) <= self.RESTART_M
 
     def observe(self, step: float, dt: float, end=None) -> bool:
