@@ -47,9 +47,10 @@ the velocity before it and from the odometry's own step, or from standing still 
 odometry's origin, since after a restart it says where the robot was, not how it moved; a match that agrees with the
 odometry's own step leaves it; scans over ``MAX_HOLD`` s apart are left to the filter, the odometry passed on as
 it came from there, so that its guard sees a restart at the origin), and the odometry after it goes on from there;
-and a hold that ends in such a jump is filled from the scans, however its step out compares (it is no catch-up). So is a hold whose fast step out turns the robot over
-``CATCH_UP_TURN`` rad more or less than the scans did over it: a driver that restarted a metre or two from where its
-odometry held (the odometry had come back near its origin) jumps too short for the guard, and as fast as a catch-up.
+and a hold that ends in such a jump is filled from the scans, however its step out compares (it is no catch-up).
+So is a hold whose fast step out turns the robot over ``CATCH_UP_TURN`` rad more or less than the scans did over it:
+a driver that restarted a metre or two from where its odometry held (the odometry had come back near its origin)
+jumps too short for the guard, and as fast as a catch-up.
 Scans of other lasers between the two lie between the first laser's poses around them, by their time (held with the
 slip check's span; with ``slips`` off they keep the odometry as it came).
 
