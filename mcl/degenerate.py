@@ -120,15 +120,15 @@ class InputGuard:
         """Whether the odometry ``pose`` lies within ``RESTART_M`` of its origin (where a restart leaves it)."""
         return math.hypot(float(pose[0]), float(pose[1])) <= self.RESTART_M
 
-    def observe(self, step: float, dt: float, end=None) -> bool:
+    def observe(self, step: float, dt: float, end) -> bool:
         """Whether an odometry step of ``step`` m over ``dt`` s is a jump: longer than ``jump_bound`` and, when it is
         timed (dt at least MIN_SPEED_DT), faster than ``speed_bound``; or longer than ``max_odom_step`` and ending
-        (``end``, the odometry pose it reaches, when given) within ``RESTART_M`` of the odometry's origin (a restart:
+        (``end``, the odometry pose it reaches) within ``RESTART_M`` of the odometry's origin (a restart:
         a sparse log's steps make ``jump_bound`` metres long). A step within ``jump_bound`` joins the
         histories; a longer one at the robot's speed is motion (the scans stopped for a while) but stays out of them:
         the next steps are measured against the scans' own, not against the gap's."""
         timed = dt >= self.MIN_SPEED_DT
-        if step > self.max_odom_step and end is not None and self.at_origin(end):
+        if step > self.max_odom_step and self.at_origin(end):
             return True  # a restart from 0 0 0, however long the recent steps were
         if step > self.jump_bound():
             return not (timed and step <= self.speed_bound() * dt)

@@ -295,10 +295,10 @@ class StallFill:
             # scans so far apart are not matched: the filter hedges the jump, and its guard sees the odometry as it
             # came from here on (a restart at its origin, not where an earlier fill's correction moves it)
             return np.zeros(3), None
-        # after a restart from 0 0 0 the odometry's step is where the robot was, not how it moved: the guesses are the
-        # velocity before and standing still (from the step, the demo thinned to a scan every 2.4 s matched 1.41 m
-        # where the robot drove 1.18 m, 2.3 m off)
-        step = self._match([prev, s], entry, np.zeros(3) if guard.at_origin(s.odom) else own)[-1, 1:4]
+        # after a restart from 0 0 0 the odometry's step is where the robot was, not how it moved: no guess from it,
+        # only the velocity before and standing still (laser_odometry's own); from the step, the demo thinned to a
+        # scan every 2.4 s matched 1.41 m where the robot drove 1.18 m, 2.3 m off
+        step = self._match([prev, s], entry, None if guard.at_origin(s.odom) else own)[-1, 1:4]
         if _agree(step, own):
             return fix, None
         self.stalls.append(Stall(float(prev.t), float(s.t), 1, float(math.hypot(step[0], step[1])),
