@@ -809,7 +809,10 @@ class FaultWindow:
     may be under way: from a lost call that ends at least ``fault_window`` updates of good tracking (not lost, no
     global search) and whose scan contradicts the map at the estimate (at least ``fault_contradiction`` of the
     beams went through a mapped wall: people and furniture the map lacks only shorten readings, so a lost call
-    they cause opens nothing), while the filter stays lost and for ``fault_window`` updates after. A lost call
+    they cause opens nothing), while the filter stays lost and for ``fault_window`` updates after, or
+    ``fault_window_s`` seconds of log time if that comes first (a sparse log's 50 updates span 150 s, and with its
+    scans 3 s apart the fault component's caps, rates times the update's duration, are as wide as a search: a
+    90-degree laser on intel_lab took a fault pose 1 m off 60 s after the lost call). A lost call
     during or just after a global search means a wrong hypothesis, not a slipping one; the search's re-seeds
     handle it, and a search closes the window.
 
@@ -836,6 +839,7 @@ class FaultWindow:
         from mcl.motion import FaultProposal
 
         self.window = int(mc.fault_window)
+        self.window_s = float(mc.fault_window_s)
         self.contradiction = float(mc.fault_contradiction)
         self.search = search
         self.wide = FaultProposal(float(mc.fault_prob), float(mc.fault_share), float(mc.fault_scale))
@@ -852,31 +856,35 @@ class FaultWindow:
         self.held = self.window  # consecutive updates of good tracking before this one
         self.compact = True  # the whole set's position spread within SLIP_SPREAD at the last update
         self.since_lost = None  # updates since the window's last lost update (None: closed)
+        self.since_lost_s = 0.0  # ... and the log time they span
         self.lost_run = 0  # lost updates of the window so far
 
-    def observe(self, lost: bool, contradiction: float = 1.0, spread: float = 0.0) -> None:
+    def observe(self, lost: bool, contradiction: float = 1.0, spread: float = 0.0, dt: float = 0.0) -> None:
         """This update's lost belief (after the filter's ``search`` has seen it), the fraction of its beams that
-        contradict the map at the estimate (``mcl.quality.Fit.contradiction``) and the whole set's position spread
-        (m, the root of its x and y variances)."""
+        contradict the map at the estimate (``mcl.quality.Fit.contradiction``), the whole set's position spread
+        (m, the root of its x and y variances) and the log time since the previous update (s)."""
         self.compact = spread <= SLIP_SPREAD
         if self.search.holding:
             self.held, self.since_lost = 0, None
         elif lost:
             if self.since_lost is not None or (self.held >= self.window and contradiction >= self.contradiction):
                 self.lost_run = self.lost_run + 1 if self.since_lost is not None else 1
-                self.since_lost = 0
+                self.since_lost, self.since_lost_s = 0, 0.0
             self.held = 0
         else:
             self.held += 1
             if self.since_lost is not None:
                 self.since_lost += 1
-                if self.since_lost > self.window:
+                self.since_lost_s += max(float(dt), 0.0)
+                # closed after `window` updates, or `window_s` s: a scan every 3 s keeps 50 updates open for 150 s,
+                # with the fault component's caps (rates times the update's dt) as wide as the search's
+                if self.since_lost > self.window or 0.0 < self.window_s < self.since_lost_s:
                     self.since_lost = None
 
     @property
     def open(self) -> bool:
-        """The window is open: the motion model is the fault mixture (from a lost call until ``window`` updates
-        after the last lost one)."""
+        """The window is open: the motion model is the fault mixture (from a lost call until ``window`` updates,
+        or ``window_s`` seconds, after the last lost one)."""
         return self.since_lost is not None
 
     def proposal(self, dt: float):

@@ -224,6 +224,9 @@ class MotionConfig:
     fault_scale: float = field(default=10.0, metadata=_rng(1.0))
     fault_share: float = field(default=0.05, metadata=_rng(0.0, 1.0, lo_open=True, hi_open=True))
     fault_window: int = field(default=50, metadata=_rng(0, 1_000_000))  # updates after a lost call
+    # ... and at most this many seconds of log time after the window's last lost update (0: no bound): a sparse log's
+    # 50 updates are 150 s
+    fault_window_s: float = field(default=0.0, metadata=_rng(0.0))
     fault_contradiction: float = field(default=0.1, metadata=_rng(0.0, 1.0))  # a lost call opens it from this
     fault_turn_max: float = field(default=0.0, metadata=_rng(0.0))  # rad/s: cap on p_k's heading std per s (0: none)
     fault_shift_max: float = field(default=1.5, metadata=_rng(0.0))  # m/s: cap on p_k's translation std per s (0: none)

@@ -1143,7 +1143,7 @@ class ParticleFilter:
             c = fit.contradiction if fit is not None and fit.beams else 0.0
             cov = info.full_cov if self.faults.slip is not None else None  # the spread gates a wheel's slip alone
             spread = math.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)) if cov is not None else 0.0
-            self.faults.observe(info.lost, c if c == c else 0.0, spread)
+            self.faults.observe(info.lost, c if c == c else 0.0, spread, self._dt)
         if self.recovery is not None:
             self.recovery.observe_lost(info.lost, info.cluster_weight, self._dt, self.quality.refutes(fit),
                                        self.quality.collapsed)

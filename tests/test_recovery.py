@@ -298,8 +298,8 @@ def test_odometry_faults_are_allowed_from_a_lost_call_on_a_held_track_for_the_wi
 
     s = GlobalSearch()
     f = FaultWindow(SimpleNamespace(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=3,
-                                    fault_contradiction=0.1, fault_turn_max=0.0, fault_shift_max=0.0,
-                                    fault_widen_after=0, fault_held_turn_max=0.0, slip_turn=0.0), s)
+                                    fault_window_s=0.0, fault_contradiction=0.1, fault_turn_max=0.0,
+                                    fault_shift_max=0.0, fault_widen_after=0, fault_held_turn_max=0.0, slip_turn=0.0), s)
 
     def upd(lost, cluster_weight=1.0, contradiction=0.2):
         s.observe(lost, cluster_weight)
@@ -344,14 +344,15 @@ def _fault_window(**motion):
 
     from mcl.adaptive import FaultWindow, GlobalSearch
 
-    keys = dict(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=2, fault_contradiction=0.1,
-                fault_turn_max=0.0, fault_shift_max=0.0, fault_widen_after=0, fault_held_turn_max=0.0, slip_turn=0.0)
+    keys = dict(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=2, fault_window_s=0.0,
+                fault_contradiction=0.1, fault_turn_max=0.0, fault_shift_max=0.0, fault_widen_after=0,
+                fault_held_turn_max=0.0, slip_turn=0.0)
     s = GlobalSearch()
     f = FaultWindow(SimpleNamespace(**{**keys, **motion}), s)
 
-    def upd(lost):
+    def upd(lost, dt=0.2):
         s.observe(lost, 1.0)
-        f.observe(lost, 0.2)
+        f.observe(lost, 0.2, 0.0, dt)
 
     def caps(dt=0.2):
         p = f.proposal(dt)
@@ -379,6 +380,76 @@ def test_the_fault_caps_hold_for_a_windows_first_lost_updates_then_it_widens():
         upd(False)
     upd(True)
     assert caps(2.6) == (1.3, 3.9) and caps(0.0) == wide  # no log time: no cap
+
+
+def test_the_fault_window_closes_after_its_seconds_when_they_come_before_its_updates():
+    # motion.fault_window_s = 20: the window closes 50 updates or 20 s of log time after its last lost update,
+    # whichever is first. At 5 Hz the 50 updates come first (10 s); with a scan every 3 s (intel_lab, aces) the
+    # seconds do: 7 updates, where 50 held the fault component (as wide as a search over 3 s) for 150 s
+    for dt, open_for in ((0.2, 50), (3.0, 6), (4.0, 5)):
+        f, upd, caps = _fault_window(fault_window=50, fault_window_s=20.0)
+        for _ in range(50):
+            upd(False, dt)
+        upd(True, dt)  # opens
+        n = 0
+        while True:
+            upd(False, dt)
+            if caps() is None:
+                break
+            n += 1
+        assert n == open_for, (dt, n)
+        # with no bound in seconds (0) the updates alone close it
+        f, upd, caps = _fault_window(fault_window=50, fault_window_s=0.0)
+        for _ in range(50):
+            upd(False, dt)
+        upd(True, dt)
+        for _ in range(50):
+            upd(False, dt)
+            assert caps() is not None
+        upd(False, dt)
+        assert caps() is None
+
+
+INTEL = PROJECT_ROOT.parent / "shared" / "data" / "intel_lab"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (INTEL / "log.clf").is_file(), reason=f"intel_lab not found at {INTEL}")
+def test_a_sparse_logs_fault_window_does_not_stay_open_for_minutes(tmp_path):
+    # intel_lab (a scan every 1-5 s) with a 90-degree laser, 5 cm range noise and a tenth of the readings dropped
+    # (the real hunt's log r3015). A lost call at 2202.8 s, 18 beams with a third through mapped walls, opens the
+    # fault window. Its 50 updates spanned 150 s of this log, and a fault pose (caps: rates times a 3.5 s update, as
+    # wide as a search) 1 m off and turned 12 degrees out-fitted the track at 2262.9 s, 60 s after the call: max
+    # 1.28 m measured at seed 1 (seeds 1-3: 0.62 m median), the baseline 0.32 m. With the window bounded by
+    # motion.fault_window_s (20 s) too: 0.40 m measured (seeds 1-3: at most 0.48 m). Bound: 1 m, the hunts' and the
+    # issue's bound for a real log.
+    import sys
+
+    import yaml
+
+    from mcl.config import load_config
+    from mcl.runner import run
+
+    sys.path.insert(0, str(PROJECT_ROOT / "scripts"))
+    try:
+        from degrade_laser import main
+    finally:
+        sys.path.remove(str(PROJECT_ROOT / "scripts"))
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
+        "name": "intel_lab", "root": str(INTEL), "modes": ["tracking"],
+        "datasets": [{"name": "intel_lab", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
+    assert main([str(tmp_path / "deg"), "--suite", str(tmp_path / "suite.yaml"), "--fov", "90", "--sigma", "0.05",
+                 "--seed", "3015"]) == 0
+    (world,) = [p.parent for p in (tmp_path / "deg").glob("*/log.clf")]
+    worst = {}
+    for window_s in (None, 0.0):  # the default's bound, and none
+        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+            f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}", f"truth={world / 'truth.tum'}", "seed=1",
+            "rerun.mode=off", "filter.initial_pose=[0.600266, -0.032033, -0.354665]",
+            *([] if window_s is None else [f"motion.fault_window_s={window_s}"])])
+        s = run(cfg, tmp_path / f"run-{window_s}", progress=False, echo=lambda msg: None)
+        worst[window_s] = s["eval"]["ate_max"]
+    assert worst[None] < 1.0 and worst[0.0] > 1.0, worst
 
 
 def test_a_track_held_again_inside_the_window_has_the_fault_heading_capped():

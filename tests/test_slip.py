@@ -17,9 +17,9 @@ from mcl.trajectory import read_tum
 
 
 def _motion(**kw):
-    base = dict(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=3, fault_contradiction=0.1,
-                fault_turn_max=0.0, fault_shift_max=0.0, fault_widen_after=0, fault_held_turn_max=0.0,
-                slip_turn=1.5)
+    base = dict(fault_prob=1e-3, fault_share=0.05, fault_scale=10.0, fault_window=3, fault_window_s=0.0,
+                fault_contradiction=0.1, fault_turn_max=0.0, fault_shift_max=0.0, fault_widen_after=0,
+                fault_held_turn_max=0.0, slip_turn=1.5)
     return SimpleNamespace(**{**base, **kw})
 
 
