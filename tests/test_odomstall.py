@@ -14,6 +14,7 @@ from mcl.estimate import compose, inverse
 from mcl.odomstall import StallFill
 from mcl.simulate import simulate
 from mcl.trajectory import read_tum
+from tests.degraded import degraded
 
 
 
@@ -634,24 +635,6 @@ def test_another_lasers_scans_in_a_slip_lie_between_the_filled_ones(tmp_path, ra
     assert turned > 0.1  # as they came, they were that far off the filled track
 
 
-def _fr101_stalled(tmp_path, *options):
-    """The folder of ``../shared/data/fr101`` run through ``scripts/degrade_laser.py`` with ``options``."""
-    import sys
-
-    sys.path.insert(0, str(PROJECT_ROOT / "scripts"))
-    try:
-        from degrade_laser import main
-    finally:
-        sys.path.remove(str(PROJECT_ROOT / "scripts"))
-    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
-        "name": "fr101", "root": str(SHARED / "fr101"), "modes": ["tracking"],
-        "datasets": [{"name": "fr101", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
-    out = tmp_path / "out"
-    assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), *options]) == 0
-    (world,) = [p.parent for p in out.glob("*/log.clf")]
-    return world
-
-
 @pytest.mark.skipif(not (SHARED / "fr101").is_dir(), reason=f"real datasets not found at {SHARED}")
 def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
     # fr101 (a scan every 2-6 s) with a 90-degree laser, its ranges read 2 % short and its odometry held three times
@@ -662,7 +645,7 @@ def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
     # 0.46-0.73 m over seeds 1-5; 1 m is the hunts' bound for a real log).
     from mcl.runner import run
 
-    world = _fr101_stalled(tmp_path, "--fov", "90", "--range-scale", "0.98", "--odom-stalls", "3", "--seed", "2419")
+    world = degraded(tmp_path, "fr101", "--fov", "90", "--range-scale", "0.98", "--odom-stalls", "3", "--seed", "2419")
     errors = {}
     for spread in (None, 0.0):  # the default's, and none
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [

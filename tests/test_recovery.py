@@ -423,24 +423,11 @@ def test_a_sparse_logs_fault_window_does_not_stay_open_for_minutes(tmp_path):
     # 1.28 m measured at seed 1 (seeds 1-3: 0.62 m median), the baseline 0.32 m. With the window bounded by
     # motion.fault_window_s (20 s) too: 0.40 m measured (seeds 1-3: at most 0.48 m). Bound: 1 m, the hunts' and the
     # issue's bound for a real log.
-    import sys
-
-    import yaml
-
     from mcl.config import load_config
     from mcl.runner import run
+    from tests.degraded import degraded
 
-    sys.path.insert(0, str(PROJECT_ROOT / "scripts"))
-    try:
-        from degrade_laser import main
-    finally:
-        sys.path.remove(str(PROJECT_ROOT / "scripts"))
-    (tmp_path / "suite.yaml").write_text(yaml.safe_dump({
-        "name": "intel_lab", "root": str(INTEL), "modes": ["tracking"],
-        "datasets": [{"name": "intel_lab", "map": "map.yaml", "log": "log.clf", "truth": "truth.tum"}]}))
-    assert main([str(tmp_path / "deg"), "--suite", str(tmp_path / "suite.yaml"), "--fov", "90", "--sigma", "0.05",
-                 "--seed", "3015"]) == 0
-    (world,) = [p.parent for p in (tmp_path / "deg").glob("*/log.clf")]
+    world = degraded(tmp_path, "intel_lab", "--fov", "90", "--sigma", "0.05", "--seed", "3015")
     worst = {}
     for window_s in (None, 0.0):  # the default's bound, and none
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
