@@ -33,13 +33,15 @@ def multi_echo(b: BagOut, topic: str, s, echoes, *, frame="laser") -> None:
                                  range_max=s.max_range, ranges=beams, intensities=[]))
 
 
-def odom(b: BagOut, s, stamp=None, child="base_link", pose=None, frame="odom") -> None:
-    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child`` in ``frame``, no velocities."""
+def odom(b: BagOut, s, stamp=None, child="base_link", pose=None, frame="odom", twist=(0.0, 0.0)) -> None:
+    """An Odometry on /odom at scan ``s``: its odometry pose (or ``pose``) of ``child`` in ``frame``, velocities
+    ``twist`` (linear x, angular z; none by default)."""
     cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*(s.odom if pose is None else pose)),
                 covariance=np.zeros(36))
     v3 = lambda x, z: b.msg("geometry_msgs/msg/Vector3", x=x, y=0.0, z=z)  # noqa: E731
     tw = b.msg("geometry_msgs/msg/TwistWithCovariance",
-               twist=b.msg("geometry_msgs/msg/Twist", linear=v3(0.0, 0.0), angular=v3(0.0, 0.0)),
+               twist=b.msg("geometry_msgs/msg/Twist", linear=v3(float(twist[0]), 0.0),
+                           angular=v3(0.0, float(twist[1]))),
                covariance=np.zeros(36))
     h = b.header(s.t if stamp is None else stamp, frame)
     b.write("/odom", "nav_msgs/msg/Odometry", s.t, b.msg("nav_msgs/msg/Odometry", header=h,

@@ -1214,7 +1214,8 @@ def _frames_bag(path, scans, case: str) -> tuple[str, str, list]:
     mount = (0.2, 0.0, 0.0)
     with BagOut(path) as b:
         b.write("/tf_static", TF, scans[0].t, b.msg(TF, transforms=[
-            b.transform(scans[0].t, "base_link" if case == "odometry-topic" else "base_footprint", "laser", mount)]))
+            b.transform(scans[0].t, "base_link" if case in ("odometry-topic", "ekf-beside-wheels") else "base_footprint",
+                        "laser", mount)]))
         for k, s in enumerate(scans):
             base = _compose(tuple(s.odom), _inverse(mount))
             if case == "nav2":
@@ -1225,22 +1226,28 @@ def _frames_bag(path, scans, case: str) -> tuple[str, str, list]:
                     b.transform(s.t, "odom_combined", "base_footprint", base)]))
             elif case == "odometry-topic":
                 _odom(b, s, pose=base, frame="odom_wheel")
+            elif case == "ekf-beside-wheels":  # the wheels' /odom, and an EKF's odom -> base_link on /tf drifting off it
+                _odom(b, s, pose=base)
+                b.write("/tf", TF, s.t, b.msg(TF, transforms=[
+                    b.transform(s.t, "odom", "base_link", _compose(base, (0.03 * k, 0.01 * k, 0.004 * k)))]))
             elif case == "pose-topic":
                 pw = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*base), covariance=np.zeros(36))
                 b.write("/ekf/odom_combined", PWCS, s.t, b.msg(PWCS, header=b.header(s.t, "odom_combined"), pose=pw))
             _laser(b, "/scan", s, frame="laser")
     return {"nav2": ("odom", "/tf", []), "ekf": ("odom_combined", "/tf", []),
-            "odometry-topic": ("odom_wheel", "/odom", []),
+            "odometry-topic": ("odom_wheel", "/odom", []), "ekf-beside-wheels": ("odom", "/tf", []),
             "pose-topic": ("odom_combined", "/ekf/odom_combined", ["topics.odom=/ekf/odom_combined"])}[case]
 
 
-@pytest.mark.parametrize("case", ["namespaced", "nav2", "ekf", "odometry-topic", "pose-topic"])
+@pytest.mark.parametrize("case", ["namespaced", "nav2", "ekf", "odometry-topic", "pose-topic", "ekf-beside-wheels"])
 def test_write_bag_map_to_odom_names_the_odometry_frame_the_bag_was_read_in(world, scans, tmp_path, case):
     # The estimate bag's map -> odom was always named frames.odom ("odom"): with a bag whose odometry is
     # robot1/odom -> robot1/base_link, robot_pose_ekf's odom_combined -> base_footprint, an Odometry in odom_wheel
     # or a pose topic in odom_combined, RViz playing both bags had two trees, map -> odom and the robot's. Now map ->
     # the frame the reader read the odometry in; composed with the input's own odometry pose at each update's stamp
     # (of the frame the odometry moves: base_footprint, robot1/base_link) it places the robot at /amcl_pose.
+    # ekf-beside-wheels: the run reads the wheels' /odom, but /tf's odom -> base_link is an EKF's, up to 1.2 m off
+    # it: map -> odom is computed from /tf's link, the tree it joins (from /odom it placed the robot 1.2 m away).
     bag = tmp_path / f"{case}.bag"
     frame, topic, overrides = _frames_bag(bag, scans, case)
     cfg = load_config(None, overrides)
@@ -1483,6 +1490,68 @@ def test_messages_out_of_order(scans, tmp_path, capsys):
             _odom(b, s)
             _laser(b, "/scan", s, t=s.t - 5.0 if k == 10 else s.t)
     _fails(capsys, tmp_path, bag, match="/scan: messages out of order: message 11")
+
+
+def _odometry_bag(path, scans, broken=(), twist_nan=()) -> None:
+    """/odom and /scan (the laser at the robot's centre) of ``scans``; the Odometry of each scan index in ``broken`` with x NaN, of each in
+    ``twist_nan`` with angular z NaN."""
+    nan = math.nan
+    with BagOut(path) as b:
+        for k, s in enumerate(scans):
+            pose = (nan, s.odom[1], s.odom[2]) if k in broken else None
+            _odom(b, s, pose=pose, twist=(0.0, nan) if k in twist_nan else (0.0, 0.0))
+            _laser(b, "/scan", s, frame="base_link")
+
+
+def test_non_finite_odometry_messages_are_mended_not_refused(scans, tmp_path):
+    # An EKF publishes NaN poses until its first input, a driver a NaN twist now and then: one such message refused
+    # the whole bag ("/odom: non-finite odometry", naming nothing). Now a pose that is not finite is left out (a
+    # warning naming the field, the count and the first stamp; the scan there takes the odometry interpolated
+    # between its neighbours) and a velocity read as 0 (a note: the velocities only deskew the scans); every other
+    # record is the clean bag's to the byte.
+    clean, broken = tmp_path / "clean.mcap", tmp_path / "broken.mcap"
+    _odometry_bag(clean, scans)
+    _odometry_bag(broken, scans, broken={7}, twist_nan={0, 5, 10})
+    a, b = open_bag(clean), open_bag(broken)
+    n = len(a.odometry)
+    assert b.odometry.tobytes() == a.odometry[np.arange(n) != 7].tobytes()
+    (warning,) = b.warnings
+    assert f"/odom: 1 of {n} poses are not finite (x; the first stamped {scans[7].t:.3f})" in warning
+    assert any(f"/odom: 3 of {n} messages carry a non-finite velocity" in note for note in b.notes)
+    for k, (x, y) in enumerate(zip(a.scans, b.scans)):
+        if k == 7:  # between its neighbours' poses (the robot drives on between them)
+            assert np.isfinite(y.odom).all() and 0.0 < np.linalg.norm(y.odom[:2] - x.odom[:2]) < 0.1
+        else:
+            assert y.odom.tobytes() == x.odom.tobytes() and (y.tv, y.rv) == (x.tv, x.rv)
+
+
+def test_odometry_with_no_finite_pose_stops_with_one_line_naming_the_field(scans, tmp_path, capsys):
+    bag = tmp_path / "nan.mcap"
+    _odometry_bag(bag, scans, broken=set(range(len(scans))))
+    _fails(capsys, tmp_path, bag, match=f"/odom: none of its {len(scans)} poses is finite (x)")
+
+
+def test_scans_recorded_out_of_stamp_order_are_read_in_stamp_order(scans, tmp_path):
+    # Each pair of scans recorded swapped (a late message behind a newer one, stamps kept): read in record order,
+    # the filter stepped the odometry back and forth and trajectory.tum went back in time at every pair. Now the
+    # scans come in stamp order, each the clean bag's to the byte.
+    clean, swapped = tmp_path / "clean.mcap", tmp_path / "swapped.mcap"
+    n = 2 * (len(scans) // 2)
+    with BagOut(clean) as b:
+        for s in scans[:n]:
+            _odom(b, s)
+            _laser(b, "/scan", s, frame="base_link")
+    with BagOut(swapped) as b:
+        for s in scans[:n]:
+            _odom(b, s)
+        for k in range(0, n, 2):
+            for s, rec in ((scans[k + 1], scans[k].t), (scans[k], scans[k + 1].t)):
+                _laser(b, "/scan", s, frame="base_link", t=rec, stamp=s.t)
+    a, b = list(open_bag(clean).scans), list(open_bag(swapped).scans)
+    assert len(a) == len(b) == n
+    assert [s.t for s in b] == sorted(s.t for s in b)
+    for x, y in zip(a, b):
+        assert (x.t, x.odom.tobytes(), x.ranges.tobytes()) == (y.t, y.odom.tobytes(), y.ranges.tobytes())
 
 
 def _recompress(src: Path, folder: Path, storage: str, mode: str) -> None:

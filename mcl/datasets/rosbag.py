@@ -49,6 +49,7 @@ range_min, a map's resolution) as the shortest decimal of the float32.
 
 from __future__ import annotations
 
+import heapq
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -152,6 +153,55 @@ def _record_timed(rows: np.ndarray, what: str, path, notes: list) -> np.ndarray:
         rows[:, 0] = rows[:, -1]
         notes.append(f"{path}: {what}: {UNSTAMPED}")
     return rows[:, :-1]
+
+
+def _finite_odometry(odometry: np.ndarray, what: str, path, warnings: list, notes: list) -> np.ndarray:
+    """``odometry`` (rows t, x, y, theta, tv, rv) with what is not finite mended: a velocity read as 0 (a note; the
+    velocities only deskew the scans), a pose left out (a warning; the poses around it are interpolated, and a long
+    run of them is a gap the scans fill). An EKF publishes NaN until its first input, a driver a NaN twist now and
+    then: one such message refused the whole bag. DataError, naming the fields, when no pose is finite."""
+    moving = ~np.isfinite(odometry[:, 4:6])
+    if moving.any():
+        rows = moving.any(axis=1)
+        notes.append(f"{path}: {what}: {int(np.count_nonzero(rows))} of {len(odometry)} messages carry a non-finite "
+                     f"velocity (the first stamped {odometry[rows, 0][0]:.3f}), read as 0 (the velocities only deskew "
+                     "the scans)")
+        odometry[:, 4:6] = np.where(moving, 0.0, odometry[:, 4:6])
+    bad = ~np.isfinite(odometry[:, :4]).all(axis=1)
+    if not bad.any():
+        return odometry
+    fields = ", ".join(name for k, name in enumerate(("stamp", "x", "y", "heading"))
+                       if not np.isfinite(odometry[:, k]).all())
+    if bad.all():
+        raise DataError(f"{path}: {what}: none of its {len(odometry)} poses is finite ({fields})")
+    warnings.append(f"{path}: {what}: {int(np.count_nonzero(bad))} of {len(odometry)} poses are not finite ({fields}; "
+                    f"the first stamped {odometry[bad, 0][0]:.3f}): left out, the odometry between the poses around "
+                    "them interpolated")
+    return odometry[~bad]
+
+
+def _tf_beside(rows: list | None, odometry: np.ndarray, what: str, path) -> tuple | None:
+    """(rows t, x, y, theta, tv, rv of /tf's link ``what``, the largest distance and turn between it and the
+    odometry topic's ``odometry`` at the topic's stamps within the link's span) when /tf holds the odometry's link
+    too and it differs by over 1 cm or 0.01 rad: a robot_localization EKF publishes odom -> base_link on /tf while
+    the wheels' Odometry goes on /odom. The run follows the topic, but tools place the robot through /tf, so an
+    estimate bag's map -> odom must be computed from /tf's link (estimate ∘ link⁻¹) to join that tree (1 m off
+    otherwise). None when /tf has no such link, or it agrees."""
+    if not rows:
+        return None
+    link = _record_timed(np.array(rows, dtype=np.float64), what, path, [])
+    link = link[np.argsort(link[:, 0], kind="stable")]
+    link = link[np.isfinite(link[:, :4]).all(axis=1)]
+    t = odometry[:, 0]
+    inside = (t >= link[0, 0]) & (t <= link[-1, 0]) if len(link) else np.zeros(t.shape, dtype=bool)
+    if not inside.any():
+        return None
+    t = t[inside]
+    th = np.interp(t, link[:, 0], np.unwrap(link[:, 3]))
+    off = float(np.max(np.hypot(np.interp(t, link[:, 0], link[:, 1]) - odometry[inside, 1],
+                                np.interp(t, link[:, 0], link[:, 2]) - odometry[inside, 2])))
+    turn = float(np.max(np.abs(np.angle(np.exp(1j * (th - odometry[inside, 3]))))))
+    return (link, off, turn) if off > 0.01 or turn > 0.01 else None
 
 
 def yaw_of(q) -> float:
@@ -372,9 +422,21 @@ class BagScans:
         try:
             conns = [c for c in reader.connections if c.topic in self.topics]
             index: dict[str, int] = {}
-            for conn, rec, msg in _messages(reader, self.path, conns):
+            # In stamp order: a bag holds messages as they arrived, a second laser's or a late one's behind newer
+            # scans, and the filter would step the odometry back and forth. A stamp never lies more than
+            # REORDER_TOLERANCE before a newer one of its topic (the first pass refused such a bag), so a scan is
+            # let go once a scan that much newer has come: at most that much of the log is held.
+            pending: list[tuple] = []  # heap of (stamp, arrival, scan)
+            newest = -math.inf
+            for seq, (conn, rec, msg) in enumerate(_messages(reader, self.path, conns)):
                 k = index[conn.topic] = index.get(conn.topic, 0) + 1
-                yield self._scan(conn, msg, k, rec)
+                scan = self._scan(conn, msg, k, rec)
+                newest = max(newest, scan.t)
+                heapq.heappush(pending, (scan.t, seq, scan))
+                while pending[0][0] < newest - REORDER_TOLERANCE:
+                    yield heapq.heappop(pending)[2]
+            while pending:
+                yield heapq.heappop(pending)[2]
         finally:
             reader.close()
 
@@ -835,6 +897,9 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     n_maps = 0
     truth_rows: list[tuple] = []
     other_rows: dict[tuple, list] = {}  # (parent, child) -> /tf rows from an odometry frame other than odom -> base
+    # with an odometry topic: (parent, child) -> /tf rows of the links into base_frame or from an odometry frame (an
+    # EKF's odom -> base_link beside the wheels' /odom), the tree an estimate bag's map -> odom must join
+    tf_beside: dict[tuple, list] = {}
     odom_child = None  # the Odometry topic's child_frame_id
     odom_parent_frame = None  # the odometry topic's header.frame_id (an Odometry's, a pose topic's)
     several = tp.scan == "auto" and len(scan_topics) > 1  # lasers to choose among by their mountings
@@ -862,6 +927,9 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
                 parent, child = _frame(ts.header.frame_id), _frame(ts.child_frame_id)
                 if topic == tf_dyn:
                     tf_frames.add(f"{parent} -> {child}")
+                    if odom_topic is not None and (child == base_frame or "odom" in parent):
+                        tf_beside.setdefault((parent, child), []).append(
+                            (stamp_seconds(ts.header.stamp), *_tf_pose(ts.transform), 0.0, 0.0, rec))
                 if topic == tf_dyn and odom_topic is None and parent == odom_frame and child == base_frame:
                     t = stamp_seconds(ts.header.stamp)
                     order.see(topic, t, f" {odom_frame} -> {base_frame}")
@@ -1000,8 +1068,8 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         odom_rows = [(t, 0.0, 0.0, 0.0, 0.0, 0.0, t) for t in span]
     odometry = _record_timed(np.array(odom_rows, dtype=np.float64), odom_topic or tf_odom, path, notes)
     odometry = odometry[np.argsort(odometry[:, 0], kind="stable")]
-    if not np.isfinite(odometry).all():
-        raise DataError(f"{path}: {odom_topic or '/tf'}: non-finite odometry")
+    if not from_scans:
+        odometry = _finite_odometry(odometry, odom_topic or tf_odom, path, warnings, notes)
     offsets: dict[str, np.ndarray | None] = {}
     mirrored: set[str] = set()
     for t in scan_topics:
@@ -1061,6 +1129,13 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         frame_of_odometry = None
     elif odom_topic is not None:  # a topic's own frame (an empty frame_id: frames.odom)
         frame_of_odometry = odom_parent_frame or odom_frame
+        link = (frame_of_odometry, odom_child or base_frame)
+        beside = _tf_beside(tf_beside.get(link), odometry, f"{tf_dyn} {link[0]} -> {link[1]}", path)
+        if beside is not None:
+            recorded, off, turn = beside
+            notes.append(f"{path}: {tf_dyn} {link[0]} -> {link[1]} (an EKF's?) differs from {odom_topic} by up to "
+                         f"{off:.2f} m and {math.degrees(turn):.1f} deg: the run follows {odom_topic}; an estimate "
+                         f"bag's map -> {link[0]} is made to join /tf's tree")
     else:  # the /tf link read: frames.odom, or the namespaced / other odometry frame found above
         frame_of_odometry = odom_frame
     gaps = [] if from_scans else odometry_gaps(odometry, np.array(scan_t, dtype=np.float64))
