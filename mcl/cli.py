@@ -100,7 +100,7 @@ def _add_run(sub) -> None:
 
 def cmd_run(args) -> int:
     from mcl.config import load_config
-    from mcl.runner import check_out_dir, default_out_dir, run
+    from mcl.runner import check_out_dir, default_out_dir, run, summary_json
 
     config_path = args.config
     if args.config_option is not None:
@@ -122,8 +122,10 @@ def cmd_run(args) -> int:
         elif args.map or args.log:
             if not (args.map and args.log):
                 raise MclError("--map and --log go together when no config file is given")
-    if (args.log or args.bag) and args.truth is None:
-        # The config's reference trajectory belongs to the config's log: scored against another, it is noise.
+    set_keys = {item.split("=", 1)[0].strip() for item in args.set}
+    if (args.log or args.bag or set_keys & {"log", "bag"}) and args.truth is None and "truth" not in set_keys:
+        # The config's reference trajectory belongs to the config's log: scored against another, it is noise (a
+        # --set log=... kept the demo's truth, and the run was scored 13.9 m off against it).
         overrides.append("truth=null")
     if args.bag and args.log:
         raise MclError("--bag and --log: give one")
@@ -162,12 +164,12 @@ def cmd_run(args) -> int:
         overrides.append((f"--initial-std {sx!r} {sy!r} {sth!r}", f"filter.initial_std=[{sx!r}, {sy!r}, {sth!r}]"))
     if args.rerun is not None:
         overrides.append((f"--rerun {args.rerun}", f"rerun.mode={args.rerun}"))
+    cfg = load_config(config_path, overrides + list(args.set))
     options = {o[1].split("=", 1)[0]: o[0] for o in overrides if isinstance(o, tuple)}
     for item in args.set:  # a --set is applied last: it wins over an option that sets the same key, and says so
-        key = item.split("=", 1)[0].strip()
+        key = item.split("=", 1)[0].strip()  # (once the config took it: a malformed --set is its error line alone)
         if key in options:
             print(f"mcl: warning: --set {item} overrides {options[key]}", file=sys.stderr)
-    cfg = load_config(config_path, overrides + list(args.set))
     if args.threads is not None:
         set_threads(args.threads)
     out = Path(args.out) if args.out else default_out_dir()
@@ -187,7 +189,7 @@ def cmd_run(args) -> int:
     summary = run(cfg, out, progress=False if args.no_progress else None, initial_pose_override=start_given,
                   write_bag=args.write_bag, compile_note=True)
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print(summary_json(summary))
     if cfg.rerun.mode == "serve" and not summary["interrupted"] and not summary.get("late_signal"):
         # the servers live as long as this process: serve the finished recording until the user is done with it
         # Ctrl-C ends the wait even when the process was started with SIGINT ignored (a background job of a
@@ -262,6 +264,8 @@ def _add_suite_options(p) -> None:
 
 
 def cmd_eval(args) -> int:
+    import numpy as np
+
     from mcl.evaluate import evaluate, format_eval
     from mcl.trajectory import read_tum
 
@@ -277,16 +281,30 @@ def cmd_eval(args) -> int:
         return run_from_args(args)
     if args.estimate is None or args.reference is None:
         raise MclError("eval: expected ESTIMATE REFERENCE (two TUM files) or --suite SUITE.yaml")
+    suite_only = [o for o, v in (("--config", args.config is not None), ("--set", args.set),
+                                 ("--seeds", args.seeds != "1"), ("--jobs", args.jobs != (os.cpu_count() or 1)),
+                                 ("--out", args.out is not None), ("--cache", args.cache is not None),
+                                 ("--modes", args.modes is not None), ("--only", args.only is not None),
+                                 ("--world", args.world), ("--start-offset", args.start_offset is not None),
+                                 ("--no-baseline", not args.baseline), ("--no-progress", args.no_progress)) if v]
+    if suite_only:  # scoring two files runs nothing: a config or a seed given here was silently ignored
+        raise MclError(f"eval: {', '.join(suite_only)}: for --suite, not with ESTIMATE REFERENCE (two files are "
+                       "scored as they are)")
     if args.converged_within is None:
         args.converged_within = 0.3
     if not args.converged_within > 0:
         raise MclError(f"--converged-within: must be positive, got {args.converged_within}")
     t_est, p_est = read_tum(args.estimate)
     t_ref, p_ref = read_tum(args.reference)
+    backs = [int(np.count_nonzero(np.diff(t) < 0)) for t in (t_est, t_ref)]
     for name, t, p in ((args.estimate, t_est, p_est), (args.reference, t_ref, p_ref)):
         if t.size == 0:
             raise MclError(f"{name}: no poses (an empty trajectory): nothing to score")
-        _warn_times(name, t, p)
+        if backs[0] != backs[1] or not backs[0]:
+            _warn_times(name, t, p)
+    if backs[0] == backs[1] > 0:
+        print(f"mcl: note: both trajectories' times go back {backs[0]} time(s) (a clock set back): each run between "
+              "is scored against the other file's run in the same place", file=sys.stderr)
     try:
         r = evaluate(t_est, p_est, t_ref, p_ref, converged_within=args.converged_within)
     except DataError:  # no reference pose inside the estimate's span: say which files and which spans

@@ -29,10 +29,32 @@ def interpolate_poses(t: np.ndarray, poses: np.ndarray, tq: np.ndarray) -> np.nd
     return np.vstack([x, y, wrap_angle(th)])
 
 
+def _pieces(t: np.ndarray) -> list[np.ndarray]:
+    """Indices of the runs of ``t`` between its steps back (a log whose clock was set back while it recorded)."""
+    return np.split(np.arange(t.size), np.flatnonzero(np.diff(t) < 0) + 1)
+
+
 def position_errors(est_t, est_poses, ref_t, ref_poses):
-    """(times, position errors, heading errors) at the reference times inside the estimate's span."""
+    """(times, position errors, heading errors) at the reference times inside the estimate's span.
+
+    Where both clocks step back as often (the log's clock set back, its reference stamped by the same clock), the
+    k-th run of the estimate between steps back is scored against the k-th of the reference, in file order: sorted
+    together, the two runs over the same seconds were interpolated into one another (a log set back 3 s scored
+    0.77 m for a track within 0.05 m of its reference). Otherwise both are scored in time order."""
     est_t = np.asarray(est_t, dtype=np.float64)
     ref_t = np.asarray(ref_t, dtype=np.float64)
+    if est_t.size == 0:
+        return np.empty(0), np.empty(0), np.empty(0)
+    est_runs, ref_runs = _pieces(est_t), _pieces(ref_t)
+    if len(est_runs) > 1 and len(est_runs) == len(ref_runs):
+        parts = [_errors_sorted(est_t[a], est_poses[:, a], ref_t[b], ref_poses[:, b])
+                 for a, b in zip(est_runs, ref_runs)]
+        return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
+    return _errors_sorted(est_t, est_poses, ref_t, ref_poses)
+
+
+def _errors_sorted(est_t, est_poses, ref_t, ref_poses):
+    """:func:`position_errors` with both trajectories taken in time order."""
     if est_t.size == 0:
         return np.empty(0), np.empty(0), np.empty(0)
     order = np.argsort(est_t, kind="stable")

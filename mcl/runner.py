@@ -70,6 +70,23 @@ RUN_OUTPUTS = ("config.yaml", "trajectory.tum", "quality.csv", "summary.json", "
 PARTIAL_RECORDING = "recording.partial.rrd"  # a recording cut short (mcl.viz.partial_recording)
 
 
+def _json_ready(value):
+    """``value`` with every float that is not finite as None, through dicts, lists and tuples: JSON has no NaN or
+    Infinity, and a summary holding one (the odometry interval of a log of one scan) failed other tools' parsers."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(v) for v in value]
+    return value
+
+
+def summary_json(summary: dict) -> str:
+    """summary.json's text (and ``mcl run --json``'s): a value that is not finite written as null."""
+    return json.dumps(_json_ready(summary), indent=2, allow_nan=False)
+
+
 def check_out_dir(out: Path, flag: str = "--out") -> None:
     """Before any work: ``out`` must be a folder mcl can create and write in, empty or holding a run's outputs
     alone (a run again into the same folder replaces them). ConfigError naming ``flag`` otherwise: a file there,
@@ -1244,7 +1261,7 @@ def _run(
         except DataError as e:
             summary["eval"] = {"error": str(e)}
     try:
-        atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+        atomic_write_text(out_dir / "summary.json", summary_json(summary) + "\n")
     except OSError:
         if failure is None:
             raise

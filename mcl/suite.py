@@ -1035,6 +1035,25 @@ def plot_errors(out: Path, rows: list[dict]) -> list[Path]:
 
 # ----------------------------------------------------------------------------- the command
 
+EVAL_OUTPUTS = ("results.json", "results.csv", "table.csv", "table.txt", "plots", "runs", "worlds")
+
+
+def check_eval_out_dir(out: Path) -> None:
+    """Before any run: ``out`` must be new, empty, or an evaluation's folder (its runs, results or world cache in
+    it, and nothing else: an evaluation again into it resumes or replaces them). ConfigError otherwise: an evaluation
+    overwrote a user's results.csv and deleted the PNGs of a plots/ folder it had not made."""
+    if not out.is_dir():
+        return
+    names = sorted(p.name for p in out.iterdir())
+    other = [n for n in names if n not in EVAL_OUTPUTS and not (n.startswith(".") and n.endswith(".tmp"))]
+    if other:
+        more = f", ... ({len(other)} in all)" if len(other) > 4 else ""
+        raise ConfigError(f"--out {out}: the folder holds files that are not an evaluation's outputs "
+                          f"({', '.join(other[:4])}{more}): choose a new or empty folder")
+    if names and not {"results.json", "runs", "worlds"} & set(names):  # worlds: its cache, made before any run
+        raise ConfigError(f"--out {out}: the folder holds {', '.join(names)} but no results.json, runs/ or "
+                          "worlds/: not an mcl evaluation's folder; choose a new or empty folder")
+
 
 def _finished(job: Job) -> dict | None:
     p = Path(job.run_dir) / "row.json"
@@ -1127,6 +1146,7 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     from mcl.trajectory import check_writable_folder
 
     check_writable_folder(out, f"--out {out}")
+    check_eval_out_dir(out)
     if any(j.world is not None for j in job_list):
         make_dir(cache, "--cache")
     make_dir(out, "--out")

@@ -284,3 +284,80 @@ def test_simulate_holonomic_is_said_in_degrees(tmp_path, capsys, value):
     assert main(["simulate", str(tmp_path / "w"), "--holonomic", value]) == 2
     assert _one_error(capsys) == f"mcl: error: --holonomic: expected 0..180 degrees, got {float(value):g}"
     assert not (tmp_path / "w").exists()
+
+
+@pytest.mark.parametrize("option", [["--config", "nosuch.yaml"], ["--set", "filter.partcles=1"], ["--seeds", "3"],
+                                    ["--only", "x"], ["--out", "o"], ["--no-baseline"]])
+def test_eval_of_two_trajectories_refuses_the_options_of_a_suite(tmp_path, capsys, option):
+    # scoring two files runs no config: a missing --config, a misspelt --set or --seeds were ignored without a word
+    est = tmp_path / "est.tum"
+    write_tum(est, np.arange(5.0), np.zeros((3, 5)))
+    assert main(["eval", str(est), str(est), *option]) == 2
+    assert f"eval: {option[0]}: for --suite, not with ESTIMATE REFERENCE" in _one_error(capsys)
+    assert not (tmp_path / "o").exists()
+
+
+def test_eval_scores_each_run_between_clocks_set_back_against_the_references_run(tmp_path, capsys):
+    # A log whose clock was set back 3 s, its reference stamped by the same clock: sorted together, the two runs
+    # over the same seconds were interpolated into one another (0.77 m for a track 0.05 m from its reference). Now
+    # the k-th run of each is scored against the other's k-th: the track's own 0.05 m, and a note says so.
+    t = np.concatenate([np.arange(0.0, 5.0, 0.2), np.arange(2.0, 7.0, 0.2)])  # back 3 s at the 26th pose
+    ref = np.vstack([np.arange(t.size) * 0.2, np.zeros(t.size), np.zeros(t.size)])  # driving on at 1 m/s
+    est = ref + np.array([[0.0], [0.05], [0.0]])
+    a, b = tmp_path / "est.tum", tmp_path / "ref.tum"
+    write_tum(a, t, est)
+    write_tum(b, t, ref)
+    assert main(["eval", str(a), str(b), "--json"]) == 0
+    out = capsys.readouterr()
+    import json
+
+    r = json.loads(out.out)
+    assert r["ate_max"] == pytest.approx(0.05, abs=1e-9) and r["scored"] == t.size
+    assert "both trajectories' times go back 1 time(s)" in out.err and "warning" not in out.err
+
+
+def test_eval_suite_refuses_an_out_folder_it_did_not_make(tmp_path, capsys):
+    # an evaluation into a folder of the user's overwrote its results.csv and deleted the PNGs in its plots/
+    from mcl.config import PROJECT_ROOT
+
+    out = tmp_path / "o"
+    (out / "plots").mkdir(parents=True)
+    (out / "plots" / "mine.png").write_bytes(b"png")
+    (out / "results.csv").write_text("mine\n")
+    suite = str(PROJECT_ROOT / "suites" / "smoke.yaml")
+    assert main(["eval", "--suite", suite, "--out", str(out), "--no-progress"]) == 2
+    assert "but no results.json, runs/ or worlds/: not an mcl evaluation's folder" in _one_error(capsys)
+    (out / "notes.txt").write_text("mine\n")
+    assert main(["eval", "--suite", suite, "--out", str(out), "--no-progress"]) == 2
+    assert "the folder holds files that are not an evaluation's outputs (notes.txt)" in _one_error(capsys)
+    assert (out / "plots" / "mine.png").read_bytes() == b"png" and (out / "results.csv").read_text() == "mine\n"
+
+
+def test_a_set_of_another_log_drops_the_configs_reference(world, tmp_path, capsys):
+    # --set log=... kept the default config's truth (the demo's): the run was scored 13.9 m off against it
+    assert main(["run", "--set", f"map={world / 'map.yaml'}", "--set", f"log={world / 'log.clf'}", "--particles",
+                 "300", "--initial-pose", "1", "2", "0", "--rerun", "off", "--no-progress", "--out",
+                 str(tmp_path / "r")]) == 0
+    import yaml
+
+    assert yaml.safe_load((tmp_path / "r" / "config.yaml").read_text())["truth"] is None
+
+
+def test_a_malformed_set_is_one_error_line_without_a_warning_before_it(world, tmp_path, capsys):
+    assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--particles", "300",
+                 "--rerun", "off", "--no-progress", "--out", str(tmp_path / "r"), "--set", "filter.particles"]) == 2
+    err = capsys.readouterr().err
+    assert err == "mcl: error: --set filter.particles: expected section.key=value\n"  # no "overrides" warning first
+
+
+def test_summary_json_writes_a_value_that_is_not_finite_as_null(world, tmp_path, capsys):
+    # a log of two scans has no odometry interval to measure (NaN): summary.json held NaN, which JSON has not
+    import json
+
+    log = tmp_path / "short.clf"
+    log.write_text("".join((world / "log.clf").read_text().splitlines(keepends=True)[:9]))
+    assert main(["run", "--map", str(world / "map.yaml"), "--log", str(log), "--particles", "300",
+                 "--initial-pose", "1", "2", "0", "--rerun", "off", "--no-progress", "--out", str(tmp_path / "r")]) == 0
+    text = (tmp_path / "r" / "summary.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    assert json.loads(text)["time_offset_check"]["odometry_interval"] is None
