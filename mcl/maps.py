@@ -527,6 +527,13 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     if yaw != 0.0:
         notes = (f"{where}: origin yaw {yaw:g} rad: the map is turned about its lower-left corner, as ROS "
                  "map_server defines the origin (AMCL ignores the yaw)",)
+    grey = int(np.count_nonzero(colour == UNKNOWN_GREY * n)) if mode != "raw" and not negate else 0
+    if grey >= 0.01 * colour.size and (255 - UNKNOWN_GREY) / 255 < free_th:
+        # map_saver writes unknown cells grey 205 (p = 0.196); nav2's saves free_thresh 0.25 beside them, and
+        # map_server (AMCL's too) then reads them free: a global search spread over every unknown cell
+        notes += (f"{where}: {100.0 * grey / colour.size:.0f}% of the image is grey {UNKNOWN_GREY}, map_saver's "
+                  f"unknown, read as free under free_thresh {free_th:g} (as map_server reads it; nav2's map_saver "
+                  "writes 0.25): if those cells are unknown, set free_thresh: 0.196",)
     if mode == "scale":  # 1..99 are the pixels between the thresholds: neither free nor occupied (AMCL's reading)
         return OccupancyGrid(occupancy, resolution, corner, where, 0.99, 0.01, notes)
     return OccupancyGrid(occupancy, resolution, corner, where, occ_th, free_th, notes)
@@ -569,6 +576,9 @@ def axis_aligned(occupancy: np.ndarray, resolution: float, origin, yaw: float, l
         band = out[r0:r0 + py.shape[0]]
         band[inside] = occupancy[v[inside], u[inside]]
     return out, (left, bottom)
+
+
+UNKNOWN_GREY = 205  # map_saver's pixel for an unknown cell (ROS 1 and nav2)
 
 
 def _classify(colour: np.ndarray, n: int, alpha: np.ndarray | None, mode: str, negate: bool,
