@@ -465,9 +465,22 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, int, np.ndarray
     return colour, n, alpha
 
 
+_IMAGE_MAGIC = ((b"P2", "PGM"), (b"P5", "PGM"), (b"\x89PNG", "PNG"), (b"\xff\xd8\xff", "JPEG"), (b"BM", "BMP"),
+                (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"))
+
+
 def load_map(path: str | os.PathLike) -> OccupancyGrid:
     """Load a ROS map_server map (YAML + PGM/PNG) into an :class:`OccupancyGrid`."""
     where = str(path)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        head = b""  # read_yaml says why
+    kind = next((k for magic, k in _IMAGE_MAGIC if head.startswith(magic)), None)
+    if kind is not None:  # it said "not a UTF-8 text file" or "invalid YAML" of the image's bytes
+        raise DataError(f"{where}: a {kind} image, not a map: give the map_server YAML that names it (image:, "
+                        "resolution:, origin:, ...)")
     doc = read_yaml(path, DataError)
     if not isinstance(doc, dict):
         raise DataError(f"{where}: expected a YAML mapping with keys image, resolution, origin, ...")

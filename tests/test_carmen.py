@@ -321,3 +321,18 @@ def test_the_few_fields_of_a_line_read_as_numpy_read_them(tmp_path):
 def test_a_bad_small_field_is_named_as_before(tmp_path, line, kind, msg):
     with pytest.raises(DataError, match=rf"log\.clf:2: {kind}: {msg}"):
         read_carmen(write(tmp_path, [ODOM_A, line, FLASER]))
+
+
+def test_a_log_whose_ipc_timestamps_are_all_the_same_is_timed_by_the_logger(tmp_path):
+    # a logger that never set the ipc_timestamp (0 throughout): every scan was read at t = 0 (one reference pose
+    # scored, 4 m "off"); the logger's own timestamps (the last field) now stand in, the ODOM lines' too, with a note
+    flaser = "FLASER 4 1.0 2.0 3.0 4.0 {x} 0 0 {x} 0 0 0.0 host {t}"
+    lines = ["ODOM 0 0 0 0 0 0 0.0 host 0.0", flaser.format(x=0.0, t=0.1), "ODOM 0.5 0 0 0 0 0 0.0 host 0.5",
+             flaser.format(x=0.6, t=0.6), "ODOM 1.0 0 0 0 0 0 0.0 host 1.0", flaser.format(x=1.1, t=1.1)]
+    log = read_carmen(write(tmp_path, lines))
+    assert [s.t for s in log.laser_stream()] == [0.1, 0.6, 1.1]
+    assert log.odometry[:, 0].tolist() == [0.0, 0.5, 1.0]
+    assert any("every laser line has the ipc_timestamp 0; the logger timestamps" in n for n in log.notes)
+    stamped = [ln.replace(" 0.0 host", f" {ln.split()[-1]} host") for ln in lines]  # ipc = logger: as before
+    log = read_carmen(write(tmp_path, stamped, name="b.clf"))
+    assert [s.t for s in log.laser_stream()] == [0.1, 0.6, 1.1] and not any("every laser line has" in n for n in log.notes)

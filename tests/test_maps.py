@@ -742,3 +742,14 @@ def test_map_savers_unknown_grey_read_as_free_is_noted(tmp_path, free, noted):
         [f"{tmp_path / 'm.yaml'}: 75% of the image is grey 205, map_saver's unknown, read as free under free_thresh "
          "0.25 (as map_server reads it; nav2's map_saver writes 0.25): if those cells are unknown, set free_thresh: "
          "0.196"] if noted else [])
+
+
+@pytest.mark.parametrize("fmt,kind", [("pgm", "PGM"), ("p2", "PGM"), ("png", "PNG")])
+def test_an_image_given_as_the_map_says_to_give_its_yaml(tmp_path, fmt, kind):
+    # --map map.pgm said "not a UTF-8 text file" (a P2 image: "invalid YAML" at its third line)
+    write_map(tmp_path, PIX, fmt=fmt)
+    image = tmp_path / ("m.pgm" if fmt == "p2" else f"m.{fmt}")
+    with pytest.raises(DataError) as e:
+        load_map(image)
+    assert str(e.value) == (f"{image}: a {kind} image, not a map: give the map_server YAML that names it (image:, "
+                            "resolution:, origin:, ...)")

@@ -435,6 +435,8 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
     params: dict[str, str] = {}
     damaged: list[tuple[int, str]] = []  # lines whose keyword looks like a known one damaged (skipped)
     parsers = _PARSERS
+    logged: list[float] = []  # the ODOM lines' logger timestamps (the last field)
+    scan_logged: list[float] = []  # the scans'
     for lineno, raw in enumerate(_lines(text), start=1):
         parts = raw.split()
         if not parts:
@@ -444,6 +446,7 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
         try:
             if word == "ODOM":
                 odom_rows.append(_parse_odom(parts))
+                logged.append(float(parts[-1]))
                 continue
             if word == "LANDMARK":
                 landmarks.append(_parse_landmark(parts, lineno))
@@ -458,6 +461,7 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
                     damaged.append((lineno, word))
                 continue
             scans.append(parser(parts, word, lineno))
+            scan_logged.append(float(parts[-1]))  # a number: the parser read it (_timestamp)
         except _Bad as e:
             if lineno == last and not ends_with_newline:
                 warnings.append(f"{name}:{lineno}: truncated last line skipped ({e})")
@@ -474,9 +478,17 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
         raise DataError(f"{name}: no laser messages (FLASER, RLASER, ROBOTLASER1, ROBOTLASER2, RAWLASER1..4)"
                         + ("" if need_laser else " and no ODOM lines"))
     odometry = np.array(odom_rows, dtype=np.float64).reshape(-1, 6)
+    notes: list[str] = []
+    if len(scans) > 1 and len({s.t for s in scans}) == 1 and len(set(scan_logged)) > 1:
+        # every ipc_timestamp the same (a logger that never set them, 0 throughout): the scans could not be timed
+        # (every one at t = 0, one reference pose scored); the logger's own timestamps stand in
+        notes.append(f"{name}: every laser line has the ipc_timestamp {scans[0].t:g}; the logger timestamps (the "
+                     "last field) stand in for them, and for the ODOM lines'")
+        scans = [dataclasses.replace(s, t=t) for s, t in zip(scans, scan_logged)]
+        if odometry.shape[0]:
+            odometry[:, 0] = logged
     scans = _fill_odom(scans, odometry, name)
     scans = _param_max_range(scans, params)
-    notes: list[str] = []
     scans = _detected_max_range(scans, name, notes)
     landmarks = _landmark_odom(landmarks, odometry, name)
     return Log(name, scans, odometry, skipped, warnings, landmarks, notes)
