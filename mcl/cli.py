@@ -72,7 +72,11 @@ def _add_run(sub) -> None:
     p.add_argument("--truth", help="reference trajectory (TUM) to score the run against")
     p.add_argument("--truth-topic", metavar="TOPIC", help="bag: reference poses from this topic (topics.truth)")
     p.add_argument("--out", help="output folder (default: a fresh folder under runs/)")
-    p.add_argument("--particles", type=int, help="number of particles (filter.particles)")
+    p.add_argument("--particles", type=int,
+                   help="particles (filter.particles): with KLD sampling (the default) the count drawn at a global "
+                        "start and KLD's cap, the set shrinking once the cloud converges (tracking: about 5,000); "
+                        "with --set filter.kld=false the fixed count. A global re-seed's updates hold up to twice "
+                        "as many (the kept cloud and as many fresh poses)")
     p.add_argument("--seed", type=int, help="random seed: the same seed gives the same trajectory")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--initial-pose", nargs=3, type=float, metavar=("X", "Y", "THETA"), help="start pose for tracking (m, m, rad)")

@@ -1192,8 +1192,11 @@ class ParticleFilter:
         if self.kld is not None:
             self.kld.schedule(p, inject)
             return
-        n_inj = draw_injected(self.n, p, self.rng)
-        idx = resample(fc.resampling, self.logw, self.rng, n=self.n - n_inj)
+        # a fixed N again: a re-seed doubled the set (_reseed), and without KLD sampling nothing else draws it back
+        # (a global run with --particles 2000 and kld off kept 4,000 for 297 of its 299 updates)
+        n_total = min(self.n, fc.particles)
+        n_inj = draw_injected(n_total, p, self.rng)
+        idx = resample(fc.resampling, self.logw, self.rng, n=n_total - n_inj)
         new = np.take(self.particles, idx, axis=1)  # a quarter of fancy indexing's time
         if n_inj:
             new = np.concatenate([new, inject(n_inj)], axis=1)

@@ -1855,3 +1855,26 @@ def test_a_fast_lasers_lost_updates_re_seed_only_once_they_span_the_floor():
     assert not due_after(10, 1 / 15, 1.8) and not due_after(27, 1 / 15, 1.8)  # 0.6 s, 1.73 s
     assert due_after(28, 1 / 15, 1.8)  # 1.8 s
     assert due_after(4, 1.0, 1.8)  # a sparse log: recovery_global_after_s (3 s) first, as before
+
+
+def test_without_kld_sampling_a_global_search_keeps_a_fixed_n_after_its_reseed(tmp_path):
+    # A global re-seed doubles the set (the kept cloud and as many fresh poses); KLD sampling draws it back, and
+    # without it nothing did: a global run with filter.particles 2000 and kld off kept 4,000 for 38 of its 40
+    # updates. Now the next resample draws it back to filter.particles; the run still localizes.
+    import collections
+
+    from mcl.config import load_config
+    from mcl.runner import run
+    from mcl.simulate import simulate
+
+    data = tmp_path / "w"
+    simulate(data, seed=3, duration=8.0)
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={data / 'map.yaml'}", f"log={data / 'log.clf'}", f"truth={data / 'truth.tum'}", "rerun.mode=off",
+        "filter.global_localization=true", "filter.particles=2000", "filter.kld=false", "seed=1"])
+    summary = run(cfg, tmp_path / "r", progress=False, echo=lambda m: None)
+    rows = (tmp_path / "r" / "quality.csv").read_text().splitlines()[1:]
+    counts = collections.Counter(int(r.split(",")[6]) for r in rows if r.split(",")[1] == "1")
+    assert summary["reseeds"] >= 1  # the set was doubled once at least
+    assert set(counts) <= {2000, 4000} and counts[4000] <= 3, counts  # the doubled set for the re-seed's updates
+    assert summary["eval"]["ate_max"] < 0.3
