@@ -361,3 +361,11 @@ def test_summary_json_writes_a_value_that_is_not_finite_as_null(world, tmp_path,
     text = (tmp_path / "r" / "summary.json").read_text()
     assert "NaN" not in text and "Infinity" not in text
     assert json.loads(text)["time_offset_check"]["odometry_interval"] is None
+
+
+def test_a_set_path_is_relative_to_where_it_was_typed(world, tmp_path, capsys, monkeypatch):
+    # --set log=w/x.clf was looked for in, and named from, the default config's folder (configs/w/x.clf)
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--set", "log=w/x.clf",
+                 "--rerun", "off", "--no-progress", "--out", str(tmp_path / "r")]) == 2
+    assert _one_error(capsys) == f"mcl: error: {tmp_path / 'w' / 'x.clf'}: cannot read: No such file or directory"
