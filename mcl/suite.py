@@ -1293,7 +1293,9 @@ def run_from_args(args) -> int:
     modes = None
     if args.modes:
         modes = parse_modes(args.modes)
-    only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
+    only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only is not None else None
+    if only == []:  # --only '' selected every dataset
+        raise ConfigError("--only: names no dataset (give NAME,... or a pattern such as 'corridor-*')")
     world = world_overrides(getattr(args, "world", None))
     offset = getattr(args, "start_offset", None)
     if offset is not None and not all(math.isfinite(v) for v in offset):

@@ -369,3 +369,14 @@ def test_a_set_path_is_relative_to_where_it_was_typed(world, tmp_path, capsys, m
     assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--set", "log=w/x.clf",
                  "--rerun", "off", "--no-progress", "--out", str(tmp_path / "r")]) == 2
     assert _one_error(capsys) == f"mcl: error: {tmp_path / 'w' / 'x.clf'}: cannot read: No such file or directory"
+
+
+@pytest.mark.parametrize("only", ["", " , "])
+def test_eval_suite_refuses_an_only_that_names_nothing(tmp_path, capsys, only):
+    # --only '' ran every dataset of the suite
+    from mcl.config import PROJECT_ROOT
+
+    assert main(["eval", "--suite", str(PROJECT_ROOT / "suites" / "smoke.yaml"), "--only", only,
+                 "--out", str(tmp_path / "o")]) == 2
+    assert "--only: names no dataset" in _one_error(capsys)
+    assert not (tmp_path / "o").exists()
