@@ -217,6 +217,8 @@ def load_space(path: str | os.PathLike) -> list[Param]:
                 raise ConfigError(f"{where}: step: must be positive, got {step}")
             if log:
                 raise ConfigError(f"{where}: step: not with log: true")
+            if integer and (high - low) % step:  # optuna shrank the range to a multiple, with a warning alone
+                raise ConfigError(f"{where}: step: high - low ({high - low}) is not a multiple of {step}")
             if not integer and not math.isclose((high - low) / step, round((high - low) / step)):
                 raise ConfigError(f"{where}: step: high - low ({high - low:g}) is not a multiple of {step:g}")
         params.append(Param(key, "int" if integer else "float", low=low, high=high, log=log,
@@ -520,12 +522,19 @@ def _open_study(study_dir: Path, s: Settings, create: bool):
     from optuna.storages.journal import JournalFileBackend
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    if not create and not (study_dir / "journal.log").is_file():  # (optuna's backend would make an empty one)
+        raise ConfigError(f"{study_dir / 'journal.log'}: holds no study (empty or removed): start a new one with "
+                          "--study")
     _check_journal(study_dir / "journal.log")
     storage = JournalStorage(JournalFileBackend(str(study_dir / "journal.log")))
     directions = ["minimize"] * len(s.objectives)
     if create:
         return optuna.create_study(storage=storage, study_name=STUDY_NAME, directions=directions, load_if_exists=True)
-    return optuna.load_study(storage=storage, study_name=STUDY_NAME)
+    try:
+        return optuna.load_study(storage=storage, study_name=STUDY_NAME)
+    except KeyError:  # an empty or removed journal.log (the advice above, taken): no study to go on with
+        raise ConfigError(f"{study_dir / 'journal.log'}: holds no study (empty or removed): start a new one with "
+                          "--study") from None
 
 
 def _sampler(s: Settings, asked: int):
@@ -986,6 +995,8 @@ def run_from_args(args) -> int:
             raise MclError(f"--{name}: expected >= 1, got {getattr(args, name)}")
     if args.trials is not None and args.trials < 1:
         raise MclError(f"--trials: expected >= 1, got {args.trials}")
+    if getattr(args, "seed", None) is not None and args.seed < 0:  # the sampler's seed: a traceback after study.json
+        raise MclError(f"--seed: expected >= 0, got {args.seed}")
     echo = print
     existing = args.resume or args.report
     if existing:

@@ -103,6 +103,8 @@ BAD_SPACES = [
     ({"filter.initial_std": {"low": 0.1, "high": 0.2}}, ["filter.initial_std", "not a number"]),
     ({"filter": {"particles": {"choices": [1000]}}, "filter.particles": {"choices": [2000]}},
      ["filter.particles", "given twice"]),  # nested and dotted: the last one once won silently
+    # an int step that does not divide the range: optuna shrank it to [30, 30] with a warning, the key never tuned
+    ({"sensor.max_beams": {"low": 30, "high": 40, "step": 100}}, ["sensor.max_beams", "step", "not a multiple of 100"]),
 ]
 
 
@@ -241,6 +243,14 @@ def test_resume_after_k_trials_reaches_the_same_best(serial, files, capsys):
         assert f"the study's settings are in {study}/study.json; not with {option[0]}" in err, err
 
 
+def test_a_negative_seed_is_refused_before_the_study_is_made(files, tmp_path, capsys):
+    # --seed -1 crashed in the sampler after study.json was written, and --resume crashed the same way for good
+    study = tmp_path / "neg"
+    assert main(_args(files, study, "--seed", "-1")) == 2
+    assert "--seed: expected >= 0, got -1" in capsys.readouterr().err
+    assert not study.exists()
+
+
 def test_a_journal_cut_short_resumes_and_a_corrupt_one_is_one_line(files, capsys):
     # A full disk cut the journal's last record; --resume appended onto the cut line and crashed (JSONDecodeError),
     # and --resume and --report failed for good. Now the cut record is dropped with a warning and the study goes on;
@@ -260,6 +270,12 @@ def test_a_journal_cut_short_resumes_and_a_corrupt_one_is_one_line(files, capsys
     journal.write_bytes(b"".join(good[:2]) + b"{not json\n" + b"".join(good[2:]))
     assert main(["tune", "--report", str(study), "--no-progress"]) == 2
     assert f"mcl: error: {journal}:3: not a journal record (JSON)" in capsys.readouterr().err
+    # its advice taken (the file moved away, or emptied): one line, not optuna's KeyError
+    for emptied in (True, False):
+        journal.write_bytes(b"") if emptied else journal.unlink()
+        assert main(["tune", "--resume", str(study), "--no-progress"]) == 2
+        assert f"mcl: error: {journal}: holds no study (empty or removed)" in capsys.readouterr().err
+    assert not journal.exists()  # not made again, empty
 
 
 @pytest.mark.parametrize("sig, jobs", [("SIGINT", "1"), ("SIGTERM", "2")])
