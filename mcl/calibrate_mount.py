@@ -77,16 +77,28 @@ def calibrate(scans, laser_pose=None) -> dict:
     """{laser: (OdometryCheck, hand_eye result or the DataError's text)} for each laser of ``scans`` (fused lasers
     each on their own), the check's pairs taken with each laser where a run puts it (``laser_pose``: the config's
     ``sensor.laser_pose``)."""
-    from mcl.odomcheck import check_each_laser, run_mount
+    from mcl.odomcheck import YAW, check_each_laser, run_mount
+
+    from mcl.estimate import compose
 
     out = {}
-    for laser, check in check_each_laser(scans, lambda s: run_mount(s, laser_pose)).items():
-        if check.verdict is not None:
+    checks = check_each_laser(scans, lambda s: run_mount(s, laser_pose))
+    for laser, check in checks.items():
+        measured = check
+        if check.verdict in YAW:
+            # a laser turned a quarter or half turn from its mounting (one mounted backwards, its log silent on it):
+            # what this command is for. The pairs are matched again with the laser turned so (matched as given,
+            # their motions are wrong: the fit read a scale of 0.02 and a yaw of -20 +- 102 degrees)
+            turn = np.array([0.0, 0.0, YAW[check.verdict]])
+            again = check_each_laser(scans, lambda s: compose(run_mount(s, laser_pose), turn)).get(laser)
+            if again is not None and again.verdict is None:
+                measured = again
+        if measured.verdict is not None:
             out[laser] = (check, f"{check.describe()}: the scans fit another motion than the odometry's; mend that "
                                  "first (mcl run says how)")
             continue
         try:
-            out[laser] = (check, hand_eye(check.motions))
+            out[laser] = (check, hand_eye(measured.motions))
         except DataError as e:
             out[laser] = (check, str(e))
     return out

@@ -104,3 +104,16 @@ def test_the_hand_eye_fit_is_exact_on_exact_motions_and_says_when_pairs_disagree
     text = format_yaml({"FLASER": (OdometryCheck(60), {**fit, "pairs": 30})}, "x.clf")
     assert "\n# FLASER: only 30 of 60 pairs agree: the matches are unsure (an open hall, a corridor); distrust x and " \
            "y\n" in text, text
+
+
+@pytest.mark.parametrize("mount", [(-0.2, 0.0, math.pi), (0.1, 0.05, math.pi / 2)])
+def test_a_laser_mounted_backwards_or_sideways_is_found_where_it_is(mount):
+    # The odometry check says the laser is turned half (a quarter) turn from its mounting: the command refused
+    # ("mend that first"), though finding that mounting is what it is for. Now it matches the pairs again with the
+    # laser turned so, and fits; tolerances as above.
+    (check, fit), = calibrate(_moved(read_carmen(DEMO / "log.clf").scans, mount), (0.0, 0.0, 0.0)).values()
+    assert check.verdict == ("half" if mount[2] == math.pi else "left")
+    assert isinstance(fit, dict), fit
+    got = fit["laser_pose"]
+    assert abs(got[0] - mount[0]) < 0.03 and abs(got[1] - mount[1]) < 0.03, fit
+    assert abs(math.degrees(math.remainder(got[2] - mount[2], math.tau))) < 1.0, fit
