@@ -689,3 +689,23 @@ def test_a_robot_kidnapped_in_a_sparse_hall_is_called_lost_on_its_pooled_scans(t
     # with it, those whose returns lie mostly on open floor call the kidnap lost at 40.4 s even unpooled)
     lost0, back0 = after_kidnap(0, "quality.occluded_open=1.0")
     assert lost0 == [] and back0.size == 0, (lost0[:3], back0[:3])
+
+
+def test_a_low_match_refutes_a_kidnapped_track_but_not_one_a_crowd_crept_over():
+    # occlusion_match: a lost scan matching under it refutes the estimate, and the spread starts at once. 24 people
+    # closing round a robot in an office over 2 s took the match from 0.70 to 0.29, nothing through walls: refuted,
+    # the spread took the estimate 1.1 m off (generated world w4347). In an episode that began on such a crept fit
+    # (no score of the last five reached occluded_prior), the match alone refutes nothing; a held track whose fit
+    # drops at once (a kidnap) is refuted as before, and so is a scan through walls.
+    cfg = SimpleNamespace(**{**vars(QCFG), "occluded_below": 0.4, "occluded_prior": 0.7, "occlusion_match": 0.45,
+                             "contradiction_above": 0.1, "occluded_depth": 1.0})
+    crowd = ScanQuality(_box_grid(), cfg)
+    crowd.reset(lost=False)
+    crept = [Fit(60, m, 0.0, 0.0) for m in (0.69, 0.63, 0.53, 0.48, 0.32, 0.35, 0.30)]
+    assert _feed(crowd, crept) == [False] * 6 + [True]
+    assert not crowd.refutes(Fit(60, 0.29, 0.0, 0.0))
+    assert crowd.refutes(Fit(60, 0.29, 0.12, 0.12))  # through walls: refuted whatever came before
+    kidnap = ScanQuality(_box_grid(), cfg)
+    kidnap.reset(lost=False)
+    assert _feed(kidnap, [Fit(60, 0.95, 0.0, 0.0)] * 5 + [Fit(60, 0.30, 0.0, 0.0)] * 3)[-1]
+    assert kidnap.refutes(Fit(60, 0.29, 0.0, 0.0))
