@@ -728,10 +728,16 @@ def run_job(job: Job) -> dict:
     row = {"dataset": job.dataset, "mode": job.mode, "config": job.config, "seed": job.seed}
     out = Path(job.run_dir)
     t0, c0 = time.perf_counter(), time.process_time()
+    said: list[str] = []  # the run's own warning lines (a range window that leaves the laser nothing to score)
+
+    def echo(msg: str) -> None:
+        if msg.startswith("mcl: warning: "):
+            said.append(msg.removeprefix("mcl: warning: "))
+
     try:
         with warnings.catch_warnings(record=True) as caught:  # the log's warnings go into the row
             warnings.simplefilter("always")
-            summary = run(job.cfg, out, progress=False, echo=lambda msg: None, initial_pose_override=True,  # the mode's start
+            summary = run(job.cfg, out, progress=False, echo=echo, initial_pose_override=True,  # the mode's start
                           kidnap_filter_at=(_mid_truth(job.cfg.truth), KIDNAP_M) if job.kidnap_filter else None)
     except KeyboardInterrupt:
         return {**row, "interrupted": True}
@@ -760,7 +766,7 @@ def run_job(job: Job) -> dict:
         "ate_rmse": ate["ate_rmse"], "ate_max": ate["ate_max"], "lost_m": job.lost_m, "kidnap_t": kidnap_t,
         "wall_s": wall, "cpu_s": cpu, "particles": float(summary["particles_mean"]), "updates": summary["updates"],
         "scans": summary["scans"], "scored": int(np.size(tq)), "run_dir": str(out), "fingerprint": job.fingerprint,
-        "warnings": sorted({str(w.message) for w in caught}),
+        "warnings": sorted({str(w.message) for w in caught} | set(said)),
     })
     atomic_write_text(out / "row.json", json.dumps(row, indent=1) + "\n")
     if summary.get("late_signal"):

@@ -287,6 +287,7 @@ def objective_values(rows: list[dict]) -> dict:
     v["lost_runs"] = sum(("error" in r or bool(r.get("lost")) or r.get("rmse") is None) for r in rows)
     v["runs"] = len(rows)
     v["errors"] = [f"{r['dataset']}/{r['mode']}/seed{r['seed']}: {r['error']}" for r in rows if "error" in r]
+    v["warnings"] = sorted({w for r in rows for w in r.get("warnings", ())})  # the runs' own (said once a study)
     v["failed_runs"] = len(v["errors"])
     v["rmse_median"] = float(statistics.median(raw)) if raw else None  # raw RMSE over the runs, lost ones too
     return v
@@ -660,6 +661,7 @@ def optimise(tuner: Tuner, *, trials: int, executor, progress=None, echo=print) 
     def n_finished():
         return sum(t.state.is_finished() for t in states())
 
+    said: set[str] = set()  # the runs' warnings said so far (tqdm.write: a trial that starves the laser)
     bar = tqdm(total=trials, initial=min(n_finished(), trials), unit="trial", dynamic_ncols=True,
                disable=(None if progress is None else not progress))
     bar.set_postfix_str(_best_text(study, s))
@@ -691,6 +693,10 @@ def optimise(tuner: Tuner, *, trials: int, executor, progress=None, echo=print) 
                         study.tell(live, state=TrialState.FAIL)
                         tqdm.write(f"trial {t.number}: {err}", file=sys.stderr)
                     else:
+                        for w in fig.get("warnings", ()):  # a trial whose values starve the laser is said, once
+                            if w not in said:
+                                said.add(w)
+                                tqdm.write(f"trial {t.number}: warning: {w}", file=sys.stderr)
                         for k in FIGURES:
                             live.set_user_attr(k, fig[k])
                         values = [fig[o] for o in s.objectives]

@@ -1105,3 +1105,17 @@ def test_start_offset_moves_every_tracking_and_kidnapped_start_and_not_the_globa
     cfg = yaml.safe_load((tmp_path / "o" / "runs" / "w" / "tracking" / "default" / "seed1" / "config.yaml").read_text())
     x, y, th = sim["start_pose"]
     assert cfg["filter"]["initial_pose"] == pytest.approx([x + 0.7, y - 0.2, (th + 0.3 + np.pi) % (2 * np.pi) - np.pi])
+
+
+def test_a_runs_own_warning_lines_reach_its_row(evaluated, tmp_path):
+    # A range window that leaves the laser nothing to score is a warning line of the run (its echo): the suite
+    # dropped it, row.json said "warnings": [], and a tune trial whose values did this was "complete" without a
+    # word. Now the run's warning lines join the row's warnings.
+    suite = _write(tmp_path / "w.yaml", {"name": "w", "modes": ["tracking"], "datasets": [
+        {"name": "starved", "simulate": {"seed": 4, "duration": 15}, "set": {"sensor.range_min": 53.0,
+                                                                               "sensor.range_max": 80.0}}]})
+    out = tmp_path / "out"
+    assert main(["eval", "--suite", str(suite), "--out", str(out), "--cache", str(evaluated["tmp"] / "worlds"),
+                 "--jobs", "1", "--no-baseline", "--set", "filter.particles=500", "--no-progress"]) == 0
+    (row,) = _rows(out)
+    assert any(w.startswith("sensor.range_min (53..80 m) leaves 0 of the first scans'") for w in row["warnings"]), row
