@@ -317,3 +317,18 @@ def test_a_reference_sparser_than_the_scans_is_warned_about(sim, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", MclWarning)
         pairs_from_log(d / "log.clf", d / "truth.tum")  # at the scans' rate: no warning
+
+
+def test_a_reference_stamped_a_frame_late_is_warned_about(sim, tmp_path):
+    # A truth one scan period late passes the stamp check (it lies on the next scan's stamps) and fitted alpha3 4x
+    # too large without a word. Its steps match the odometry's a period earlier: warned (the truth as recorded is
+    # not: test_a_reference_sparser_than_the_scans_is_warned_about).
+    from mcl.errors import MclWarning
+    from mcl.trajectory import read_tum, write_tum
+
+    d = sim / "noisy"
+    t, poses = read_tum(d / "truth.tum")
+    late = tmp_path / "late.tum"
+    write_tum(late, t + 0.2, poses)
+    with pytest.warns(MclWarning, match=r"its poses move as the odometry does 0\.2 s earlier .* stamped late"):
+        pairs_from_log(d / "log.clf", late)
