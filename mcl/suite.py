@@ -1296,6 +1296,10 @@ def run_from_args(args) -> int:
     seeds = seed_range(args.seeds)
     if args.jobs < 1:
         raise MclError(f"--jobs: expected >= 1, got {args.jobs}")
+    cores = os.cpu_count() or 1
+    if args.jobs > cores:  # accepted (a run may wait on its disk), but said: the runs share the cores
+        print(f"mcl: warning: --jobs {args.jobs} on {cores} cores: the runs share them, each slower (their wall "
+              "and CPU figures then tell the machine's load, not the config's cost)", file=sys.stderr)
     modes = None
     if args.modes:
         modes = parse_modes(args.modes)

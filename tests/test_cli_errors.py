@@ -380,3 +380,15 @@ def test_eval_suite_refuses_an_only_that_names_nothing(tmp_path, capsys, only):
                  "--out", str(tmp_path / "o")]) == 2
     assert "--only: names no dataset" in _one_error(capsys)
     assert not (tmp_path / "o").exists()
+
+
+def test_eval_suite_says_when_jobs_outnumber_the_cores(tmp_path, capsys):
+    # --jobs 99 on two cores was taken without a word: 99 runs sharing two cores, each one's wall time the load's
+    import os
+
+    from mcl.config import PROJECT_ROOT
+
+    jobs = (os.cpu_count() or 1) + 1
+    assert main(["eval", "--suite", str(PROJECT_ROOT / "suites" / "smoke.yaml"), "--jobs", str(jobs), "--only",
+                 "nosuch", "--out", str(tmp_path / "o")]) == 2
+    assert f"mcl: warning: --jobs {jobs} on {os.cpu_count() or 1} cores: the runs share them" in capsys.readouterr().err
