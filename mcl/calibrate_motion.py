@@ -112,25 +112,28 @@ def pairs_from_log(log_path, truth_path):
         raise DataError(f"{truth_path}: only {matched} of its {t.size} reference poses inside the odometry's time "
                         f"span are stamped within 1 ms of an ODOM line or scan of {log_path}: is it this log's truth?")
     scan_t = np.unique([s.t for s in log.scans])
-    if scan_t.size > 2 and t.size > 2:
-        ref_dt, scan_dt = float(np.median(np.diff(t))), float(np.median(np.diff(scan_t)))
-        if scan_dt > 0.0 and ref_dt > 1.5 * scan_dt:
+    scan_dt = float(np.median(np.diff(scan_t))) if scan_t.size > 2 else 0.0
+    if scan_dt > 0.0 and t.size > 2:
+        ref_dt = float(np.median(np.diff(t)))
+        if ref_dt > 1.5 * scan_dt:
             # the alphas are the odometry's error over the reference spacing (module doc): a 1 Hz reference of a
             # 5 Hz log gave alpha1 0.033 where its 5 Hz reference gave 0.164, ready to paste without a word
             warnings.warn(f"{truth_path}: its poses are {ref_dt:.3g} s apart, the scans of {log_path} {scan_dt:.3g} s: "
                           f"the alphas describe the odometry's error over {ref_dt:.3g} s, and a filter that updates "
                           "every scan wants larger ones (a reference at the scans' rate gives them)", MclWarning,
                           stacklevel=2)
-    if scan_t.size > 2 and t.size > 10:
-        _check_lag(odo, t, poses, float(np.median(np.diff(scan_t))), truth_path)
+    if scan_dt > 0.0 and t.size > 10:
+        _check_lag(odo, t, poses, scan_dt, truth_path)
     odom = interpolate_odometry(odo, t)
     return odom[:, :-1], odom[:, 1:], poses[:, :-1], poses[:, 1:], t[:-1]
 
 
 def _steps(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each consecutive pair's translation (m) and signed turn (rad): the motion, in any frame."""
+    from mcl.estimate import wrap_angle
+
     d = np.diff(poses, axis=1)
-    return np.hypot(d[0], d[1]), np.angle(np.exp(1j * d[2]))
+    return np.hypot(d[0], d[1]), wrap_angle(d[2])
 
 
 def _check_lag(odo: np.ndarray, t: np.ndarray, poses: np.ndarray, period: float, truth_path) -> None:
@@ -139,8 +142,6 @@ def _check_lag(odo: np.ndarray, t: np.ndarray, poses: np.ndarray, period: float,
     are compared with the odometry's over the same times, and over times shifted by -2..2 periods."""
     from mcl.datasets.carmen import interpolate_odometry
 
-    if not period > 0.0:
-        return
     trans, turn = _steps(poses)
     inside = (t >= odo[0, 0] + 2.5 * period) & (t <= odo[-1, 0] - 2.5 * period)
     keep = inside[:-1] & inside[1:]

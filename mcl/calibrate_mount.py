@@ -77,13 +77,11 @@ def calibrate(scans, laser_pose=None) -> dict:
     """{laser: (OdometryCheck, hand_eye result or the DataError's text)} for each laser of ``scans`` (fused lasers
     each on their own), the check's pairs taken with each laser where a run puts it (``laser_pose``: the config's
     ``sensor.laser_pose``)."""
+    from mcl.estimate import compose
     from mcl.odomcheck import YAW, check_each_laser, run_mount
 
-    from mcl.estimate import compose
-
     out = {}
-    checks = check_each_laser(scans, lambda s: run_mount(s, laser_pose))
-    for laser, check in checks.items():
+    for laser, check in check_each_laser(scans, lambda s: run_mount(s, laser_pose)).items():
         measured = check
         if check.verdict in YAW:
             # a laser turned a quarter or half turn from its mounting (one mounted backwards, its log silent on it):

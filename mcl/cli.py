@@ -250,7 +250,7 @@ def _add_suite_options(p) -> None:
     g.add_argument("--seeds", default="1", metavar="K",
                    help="seeds 1..K per run (default 1), or A-B: seeds A..B alone (fresh seeds; --seeds B on the same --out "
                         "then tables them all)")
-    g.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="J", help="parallel runs (default: the cores)")
+    g.add_argument("--jobs", type=int, metavar="J", help="parallel runs (default: the cores)")
     g.add_argument("--out", help="output folder (default runs/suite-NAME); a rerun with the same folder resumes")
     g.add_argument("--cache", help="folder of the generated synthetic worlds (default OUT/worlds)")
     g.add_argument("--modes", metavar="M,...", help="only these modes: tracking,global,kidnapped")
@@ -268,9 +268,7 @@ def _add_suite_options(p) -> None:
 
 
 def cmd_eval(args) -> int:
-    import numpy as np
-
-    from mcl.evaluate import evaluate, format_eval
+    from mcl.evaluate import evaluate, format_eval, steps_back_paired
     from mcl.trajectory import read_tum
 
     if args.suite is not None:
@@ -286,7 +284,7 @@ def cmd_eval(args) -> int:
     if args.estimate is None or args.reference is None:
         raise MclError("eval: expected ESTIMATE REFERENCE (two TUM files) or --suite SUITE.yaml")
     suite_only = [o for o, v in (("--config", args.config is not None), ("--set", args.set),
-                                 ("--seeds", args.seeds != "1"), ("--jobs", args.jobs != (os.cpu_count() or 1)),
+                                 ("--seeds", args.seeds != "1"), ("--jobs", args.jobs is not None),
                                  ("--out", args.out is not None), ("--cache", args.cache is not None),
                                  ("--modes", args.modes is not None), ("--only", args.only is not None),
                                  ("--world", args.world), ("--start-offset", args.start_offset is not None),
@@ -300,14 +298,14 @@ def cmd_eval(args) -> int:
         raise MclError(f"--converged-within: must be positive, got {args.converged_within}")
     t_est, p_est = read_tum(args.estimate)
     t_ref, p_ref = read_tum(args.reference)
-    backs = [int(np.count_nonzero(np.diff(t) < 0)) for t in (t_est, t_ref)]
+    paired = steps_back_paired(t_est, t_ref)
     for name, t, p in ((args.estimate, t_est, p_est), (args.reference, t_ref, p_ref)):
         if t.size == 0:
             raise MclError(f"{name}: no poses (an empty trajectory): nothing to score")
-        if backs[0] != backs[1] or not backs[0]:
+        if not paired:
             _warn_times(name, t, p)
-    if backs[0] == backs[1] > 0:
-        print(f"mcl: note: both trajectories' times go back {backs[0]} time(s) (a clock set back): each run between "
+    if paired:
+        print(f"mcl: note: both trajectories' times go back {paired} time(s) (a clock set back): each run between "
               "is scored against the other file's run in the same place", file=sys.stderr)
     try:
         r = evaluate(t_est, p_est, t_ref, p_ref, converged_within=args.converged_within)

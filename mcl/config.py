@@ -861,24 +861,26 @@ def load_config(path: str | Path | None = None, overrides: list | tuple = ()) ->
         key = _printable(".".join(keys))  # as an error message spells it
         set_by.pop(key, None)
         set_by[key] = given
-    # a path a --set (or an option) gave is the user's, relative to where they typed it, not to the config's
-    # folder: --set log=w/x.clf was looked for, and named when missing, as configs/w/x.clf
+    def base_of(key: str) -> Path | None:
+        """A path a --set (or an option) gave is the user's, relative to where they typed it, not to the config's
+        folder: --set log=w/x.clf was looked for, and named when missing, as configs/w/x.clf."""
+        return None if key in set_by else base
+
     for k in PATH_KEYS:
         if isinstance(data.get(k), str):
             try:
-                data[k] = _resolve_path(data[k], None if k in set_by else base)
+                data[k] = _resolve_path(data[k], base_of(k))
             except (RuntimeError, ValueError):  # ~user that does not exist; a NUL byte
                 raise ConfigError(f"{where(k)}{k}: not a usable path: {data[k]!r}") from None
     for sec, key in (("planes", "depth"), ("planes", "map")):
         if isinstance(data.get(sec), dict) and isinstance(data[sec].get(key), str):
             try:
-                data[sec][key] = _resolve_path(data[sec][key], None if f"{sec}.{key}" in set_by else base)
+                data[sec][key] = _resolve_path(data[sec][key], base_of(f"{sec}.{key}"))
             except (RuntimeError, ValueError):
                 raise ConfigError(f"{where(f'{sec}.{key}')}{sec}.{key}: not a usable path") from None
     if isinstance(data.get("landmarks"), dict) and isinstance(data["landmarks"].get("map"), str):
         try:
-            data["landmarks"]["map"] = _resolve_path(data["landmarks"]["map"],
-                                                     None if "landmarks.map" in set_by else base)
+            data["landmarks"]["map"] = _resolve_path(data["landmarks"]["map"], base_of("landmarks.map"))
         except (RuntimeError, ValueError):
             raise ConfigError(f"{where('landmarks.map')}landmarks.map: not a usable path") from None
     # a bad value names where it came from: the --set that gave it (or its section), else the file; a check

@@ -34,6 +34,13 @@ def _pieces(t: np.ndarray) -> list[np.ndarray]:
     return np.split(np.arange(t.size), np.flatnonzero(np.diff(t) < 0) + 1)
 
 
+def steps_back_paired(est_t, ref_t) -> int:
+    """How often both trajectories' times step back when they do so as often (0 otherwise, or when neither does):
+    then :func:`position_errors` scores the k-th run between steps back of one against the k-th of the other."""
+    a, b = (int(np.count_nonzero(np.diff(np.asarray(t, dtype=np.float64)) < 0)) for t in (est_t, ref_t))
+    return a if a == b else 0
+
+
 def position_errors(est_t, est_poses, ref_t, ref_poses):
     """(times, position errors, heading errors) at the reference times inside the estimate's span.
 
@@ -45,18 +52,15 @@ def position_errors(est_t, est_poses, ref_t, ref_poses):
     ref_t = np.asarray(ref_t, dtype=np.float64)
     if est_t.size == 0:
         return np.empty(0), np.empty(0), np.empty(0)
-    est_runs, ref_runs = _pieces(est_t), _pieces(ref_t)
-    if len(est_runs) > 1 and len(est_runs) == len(ref_runs):
+    if steps_back_paired(est_t, ref_t):
         parts = [_errors_sorted(est_t[a], est_poses[:, a], ref_t[b], ref_poses[:, b])
-                 for a, b in zip(est_runs, ref_runs)]
+                 for a, b in zip(_pieces(est_t), _pieces(ref_t))]
         return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
     return _errors_sorted(est_t, est_poses, ref_t, ref_poses)
 
 
 def _errors_sorted(est_t, est_poses, ref_t, ref_poses):
-    """:func:`position_errors` with both trajectories taken in time order."""
-    if est_t.size == 0:
-        return np.empty(0), np.empty(0), np.empty(0)
+    """:func:`position_errors` with both trajectories (the estimate not empty) taken in time order."""
     order = np.argsort(est_t, kind="stable")
     est_t, est_poses = est_t[order], est_poses[:, order]
     inside = (ref_t >= est_t[0] - 1e-9) & (ref_t <= est_t[-1] + 1e-9)

@@ -465,6 +465,8 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, int, np.ndarray
     return colour, n, alpha
 
 
+UNKNOWN_GREY = 205  # map_saver's pixel for an unknown cell (ROS 1 and nav2)
+# what --map given an image instead of its YAML starts with
 _IMAGE_MAGIC = ((b"P2", "PGM"), (b"P5", "PGM"), (b"\x89PNG", "PNG"), (b"\xff\xd8\xff", "JPEG"), (b"BM", "BMP"),
                 (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"))
 
@@ -589,9 +591,6 @@ def axis_aligned(occupancy: np.ndarray, resolution: float, origin, yaw: float, l
         band = out[r0:r0 + py.shape[0]]
         band[inside] = occupancy[v[inside], u[inside]]
     return out, (left, bottom)
-
-
-UNKNOWN_GREY = 205  # map_saver's pixel for an unknown cell (ROS 1 and nav2)
 
 
 def _classify(colour: np.ndarray, n: int, alpha: np.ndarray | None, mode: str, negate: bool,

@@ -91,20 +91,15 @@ def check_out_dir(out: Path, flag: str = "--out") -> None:
     """Before any work: ``out`` must be a folder mcl can create and write in, empty or holding a run's outputs
     alone (a run again into the same folder replaces them). ConfigError naming ``flag`` otherwise: a file there,
     a folder holding other files (a user's trajectory.tum is not overwritten), no permission."""
-    from mcl.trajectory import check_writable_folder
+    from mcl.trajectory import check_folder_holds, check_writable_folder
 
     out = Path(out)
     check_writable_folder(out, f"{flag} {out}")
-    if out.is_dir():
-        names = sorted(p.name for p in out.iterdir())
-        other = [n for n in names if n.removesuffix(".partial") not in RUN_OUTPUTS and n != PARTIAL_RECORDING]
-        if other:
-            more = f", ... ({len(other)} in all)" if len(other) > 4 else ""
-            raise ConfigError(f"{flag} {out}: the folder holds files that are not a run's outputs "
-                              f"({', '.join(other[:4])}{more}): choose a new or empty folder")
-        if names and "config.yaml" not in names:  # a trajectory.tum of the user's own, say
-            raise ConfigError(f"{flag} {out}: the folder holds {', '.join(names)} but no config.yaml: not an "
-                              "mcl run's folder; choose a new or empty folder")
+    names = check_folder_holds(out, flag, lambda n: n.removesuffix(".partial") in RUN_OUTPUTS
+                               or n == PARTIAL_RECORDING, "a run's outputs")
+    if names and "config.yaml" not in names:  # a trajectory.tum of the user's own, say
+        raise ConfigError(f"{flag} {out}: the folder holds {', '.join(names)} but no config.yaml: not an "
+                          "mcl run's folder; choose a new or empty folder")
 
 
 def _failure_text(failure: BaseException, out_dir: Path | None = None) -> str:

@@ -1048,14 +1048,10 @@ def check_eval_out_dir(out: Path) -> None:
     """Before any run: ``out`` must be new, empty, or an evaluation's folder (its runs, results or world cache in
     it, and nothing else: an evaluation again into it resumes or replaces them). ConfigError otherwise: an evaluation
     overwrote a user's results.csv and deleted the PNGs of a plots/ folder it had not made."""
-    if not out.is_dir():
-        return
-    names = sorted(p.name for p in out.iterdir())
-    other = [n for n in names if n not in EVAL_OUTPUTS and not (n.startswith(".") and n.endswith(".tmp"))]
-    if other:
-        more = f", ... ({len(other)} in all)" if len(other) > 4 else ""
-        raise ConfigError(f"--out {out}: the folder holds files that are not an evaluation's outputs "
-                          f"({', '.join(other[:4])}{more}): choose a new or empty folder")
+    from mcl.trajectory import check_folder_holds
+
+    names = check_folder_holds(out, "--out", lambda n: n in EVAL_OUTPUTS or (n.startswith(".") and n.endswith(".tmp")),
+                               "an evaluation's outputs")
     if names and not {"results.json", "runs", "worlds"} & set(names):  # worlds: its cache, made before any run
         raise ConfigError(f"--out {out}: the folder holds {', '.join(names)} but no results.json, runs/ or "
                           "worlds/: not an mcl evaluation's folder; choose a new or empty folder")
@@ -1294,11 +1290,12 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
 def run_from_args(args) -> int:
     """``mcl eval --suite`` from the parsed command line (mcl.cli)."""
     seeds = seed_range(args.seeds)
-    if args.jobs < 1:
-        raise MclError(f"--jobs: expected >= 1, got {args.jobs}")
     cores = os.cpu_count() or 1
-    if args.jobs > cores:  # accepted (a run may wait on its disk), but said: the runs share the cores
-        print(f"mcl: warning: --jobs {args.jobs} on {cores} cores: the runs share them, each slower (their wall "
+    jobs = cores if args.jobs is None else args.jobs
+    if jobs < 1:
+        raise MclError(f"--jobs: expected >= 1, got {jobs}")
+    if jobs > cores:  # accepted (a run may wait on its disk), but said: the runs share the cores
+        print(f"mcl: warning: --jobs {jobs} on {cores} cores: the runs share them, each slower (their wall "
               "and CPU figures then tell the machine's load, not the config's cost)", file=sys.stderr)
     modes = None
     if args.modes:
@@ -1310,7 +1307,7 @@ def run_from_args(args) -> int:
     offset = getattr(args, "start_offset", None)
     if offset is not None and not all(math.isfinite(v) for v in offset):
         raise MclError(f"--start-offset: expected three finite numbers, got {' '.join(map(str, offset))}")
-    return evaluate_suite(args.suite, config=args.config, sets=args.set, seeds=seeds, jobs=args.jobs,
+    return evaluate_suite(args.suite, config=args.config, sets=args.set, seeds=seeds, jobs=jobs,
                           out=args.out, cache=args.cache, modes=modes, only=only, baseline=args.baseline, world=world,
                           progress=False if args.no_progress else None,
                           start_offset=tuple(offset) if offset is not None else None)

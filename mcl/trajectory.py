@@ -78,6 +78,23 @@ def check_writable_folder(out: str | os.PathLike, what: str) -> None:
         raise ConfigError(f"{what}: cannot write in {parent} (permission denied)")
 
 
+def check_folder_holds(out: Path, flag: str, ours, what: str) -> list[str]:
+    """The names in ``out`` (sorted; none when it is no folder yet) when each is ``ours(name)``; ConfigError naming
+    ``flag`` otherwise, listing the first four others: ``what`` (a run's outputs, an evaluation's) would be written
+    over a user's files."""
+    from mcl.errors import ConfigError
+
+    if not out.is_dir():
+        return []
+    names = sorted(p.name for p in out.iterdir())
+    other = [n for n in names if not ours(n)]
+    if other:
+        more = f", ... ({len(other)} in all)" if len(other) > 4 else ""
+        raise ConfigError(f"{flag} {out}: the folder holds files that are not {what} ({', '.join(other[:4])}{more}): "
+                          "choose a new or empty folder")
+    return names
+
+
 def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:
     """Write ``text`` to ``path`` atomically (see :func:`atomic_write_bytes`)."""
     atomic_write_bytes(path, text.encode(encoding))

@@ -523,19 +523,19 @@ def _open_study(study_dir: Path, s: Settings, create: bool):
     from optuna.storages.journal import JournalFileBackend
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    if not create and not (study_dir / "journal.log").is_file():  # (optuna's backend would make an empty one)
-        raise ConfigError(f"{study_dir / 'journal.log'}: holds no study (empty or removed): start a new one with "
-                          "--study")
-    _check_journal(study_dir / "journal.log")
-    storage = JournalStorage(JournalFileBackend(str(study_dir / "journal.log")))
+    journal = study_dir / "journal.log"
+    no_study = ConfigError(f"{journal}: holds no study (empty or removed): start a new one with --study")
+    if not create and not journal.is_file():  # (optuna's backend would make an empty one)
+        raise no_study
+    _check_journal(journal)
+    storage = JournalStorage(JournalFileBackend(str(journal)))
     directions = ["minimize"] * len(s.objectives)
     if create:
         return optuna.create_study(storage=storage, study_name=STUDY_NAME, directions=directions, load_if_exists=True)
     try:
         return optuna.load_study(storage=storage, study_name=STUDY_NAME)
-    except KeyError:  # an empty or removed journal.log (the advice above, taken): no study to go on with
-        raise ConfigError(f"{study_dir / 'journal.log'}: holds no study (empty or removed): start a new one with "
-                          "--study") from None
+    except KeyError:  # an emptied journal.log (the advice of _check_journal, taken): no study to go on with
+        raise no_study from None
 
 
 def _sampler(s: Settings, asked: int):

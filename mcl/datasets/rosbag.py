@@ -187,6 +187,9 @@ def _tf_beside(rows: list | None, odometry: np.ndarray, what: str, path) -> tupl
     the wheels' Odometry goes on /odom. The run follows the topic, but tools place the robot through /tf, so an
     estimate bag's map -> odom must be computed from /tf's link (estimate ∘ link⁻¹) to join that tree (1 m off
     otherwise). None when /tf has no such link, or it agrees."""
+    from mcl.datasets.carmen import interpolate_odometry
+    from mcl.estimate import wrap_angle
+
     if not rows:
         return None
     link = _record_timed(np.array(rows, dtype=np.float64), what, path, [])
@@ -196,11 +199,9 @@ def _tf_beside(rows: list | None, odometry: np.ndarray, what: str, path) -> tupl
     inside = (t >= link[0, 0]) & (t <= link[-1, 0]) if len(link) else np.zeros(t.shape, dtype=bool)
     if not inside.any():
         return None
-    t = t[inside]
-    th = np.interp(t, link[:, 0], np.unwrap(link[:, 3]))
-    off = float(np.max(np.hypot(np.interp(t, link[:, 0], link[:, 1]) - odometry[inside, 1],
-                                np.interp(t, link[:, 0], link[:, 2]) - odometry[inside, 2])))
-    turn = float(np.max(np.abs(np.angle(np.exp(1j * (th - odometry[inside, 3]))))))
+    at = interpolate_odometry(link, t[inside])  # /tf's pose at the topic's stamps
+    off = float(np.max(np.hypot(at[0] - odometry[inside, 1], at[1] - odometry[inside, 2])))
+    turn = float(np.max(np.abs(wrap_angle(at[2] - odometry[inside, 3]))))
     return (link, off, turn) if off > 0.01 or turn > 0.01 else None
 
 
