@@ -92,12 +92,9 @@ def pairs_from_log(log_path, truth_path):
     order = np.argsort(t, kind="stable")
     t, poses = t[order], poses[:, order]
     log = read_carmen(log_path, need_laser=False)  # ODOM lines are enough
-    odo = np.asarray(log.odometry, dtype=np.float64)
+    odo = log_odometry(log)
     if odo.size == 0:
-        rows = [(s.t, *s.odom[:3]) for s in log.scans if s.odom is not None]
-        if not rows:
-            raise DataError(f"{log_path}: no odometry (no ODOM lines and no scan poses)")
-        odo = np.array([(r[0], r[1], r[2], r[3], 0.0, 0.0) for r in rows])
+        raise DataError(f"{log_path}: no odometry (no ODOM lines and no scan poses)")
     t0, t1 = odo[:, 0].min(), odo[:, 0].max()
     keep = (t >= t0) & (t <= t1)
     t, poses = t[keep], poses[:, keep]
@@ -123,9 +120,19 @@ def pairs_from_log(log_path, truth_path):
                           "every scan wants larger ones (a reference at the scans' rate gives them)", MclWarning,
                           stacklevel=2)
     if scan_dt > 0.0 and t.size > 10:
-        _check_lag(odo, t, poses, scan_dt, truth_path)
+        check_lag(odo, t, poses, scan_dt, truth_path)
     odom = interpolate_odometry(odo, t)
     return odom[:, :-1], odom[:, 1:], poses[:, :-1], poses[:, 1:], t[:-1]
+
+
+def log_odometry(log) -> np.ndarray:
+    """A CARMEN log's odometry as (K, 6) rows (t, x, y, theta, v, omega): its ODOM lines, or, for logs without
+    them (mit_csail), its scans' own odometry poses with zero velocities; (0, 6) when it has neither."""
+    odo = np.asarray(log.odometry, dtype=np.float64)
+    if odo.size == 0:
+        odo = np.array([(s.t, *s.odom[:3], 0.0, 0.0) for s in log.scans if s.odom is not None],
+                       dtype=np.float64).reshape(-1, 6)
+    return odo
 
 
 def _steps(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -136,10 +143,12 @@ def _steps(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.hypot(d[0], d[1]), wrap_angle(d[2])
 
 
-def _check_lag(odo: np.ndarray, t: np.ndarray, poses: np.ndarray, period: float, truth_path) -> None:
+def check_lag(odo: np.ndarray, t: np.ndarray, poses: np.ndarray, period: float, truth_path,
+              fitted: str = "The alphas are") -> None:
     """Warn when the reference moves as the odometry does only shifted in time by a scan period or two: a truth
-    stamped a frame late fitted alpha3 4x too large without a word. The pairs' motions (translation and signed turn)
-    are compared with the odometry's over the same times, and over times shifted by -2..2 periods."""
+    stamped a frame late fitted alpha3 4x too large without a word (and calibrate sensor's sigma_hit 2x). The pairs'
+    motions (translation and signed turn) are compared with the odometry's over the same times, and over times
+    shifted by -2..2 periods. ``fitted`` names what the caller fits, for the warning."""
     from mcl.datasets.carmen import interpolate_odometry
 
     trans, turn = _steps(poses)
@@ -157,8 +166,8 @@ def _check_lag(odo: np.ndarray, t: np.ndarray, poses: np.ndarray, period: float,
     if best != 0 and misfit[best] < LAG_RATIO * misfit[0]:
         warnings.warn(f"{truth_path}: its poses move as the odometry does {abs(best) * period:.3g} s "
                       f"{'later' if best > 0 else 'earlier'} (the steps' mean misfit {misfit[best]:.3g} against "
-                      f"{misfit[0]:.3g} as stamped): is the reference stamped {'early' if best > 0 else 'late'}? The "
-                      "alphas are fitted as stamped", MclWarning, stacklevel=3)
+                      f"{misfit[0]:.3g} as stamped): is the reference stamped {'early' if best > 0 else 'late'}? "
+                      f"{fitted} fitted as stamped", MclWarning, stacklevel=3)
 
 
 def bag_message(path) -> str:

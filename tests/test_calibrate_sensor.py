@@ -244,3 +244,16 @@ def test_a_likelihood_field_sigma_on_its_upper_bound_is_flagged():
         else:
             _check_fit(fit, 0.9, cfg)
             assert fit.bounds == {}
+
+
+def test_a_reference_stamped_a_frame_late_is_warned_about(sim_log, tmp_path):
+    # A truth one scan period (0.2 s) late lies on the next scan's stamps, so every scan finds a reference pose, and
+    # the beam fit gave sigma_hit 0.115 m for the simulator's 0.05 (z_rand 0.08 for 0) without a word. Its steps
+    # match the log's odometry a period earlier: warned, as calibrate motion warns (the truth as recorded is not:
+    # test_calibrate_recovers_the_simulator_noise turns warnings into errors).
+    cfg = load_config(None, [f"map={sim_log / 'map.yaml'}", f"log={sim_log / 'log.clf'}",
+                             f"truth={_moved_truth(sim_log, tmp_path / 'late.tum', dt=0.2)}"])
+    with pytest.warns(MclWarning, match=r"late.tum: its poses move as the odometry does 0\.2 s earlier .* stamped "
+                                        r"late\? The sensor model is fitted as stamped"):
+        fit = calibrate_sensor(cfg, "beam")
+    assert fit.params["sigma_hit"] > 0.09  # the lag's blur, which the warning is about
