@@ -7,8 +7,12 @@ for N particles at once, with the refinements of ROS AMCL's
 * the odometry step is split into rot1, trans, rot2 (``odometry_deltas``);
   when the robot moved less than 1 cm, rot1 = 0 (atan2 of a tiny vector is
   noise);
-* the rotation noise uses the smaller of |rot| and |rot -+ pi|, so a robot
-  driving backwards (rot1 ~ pi) gets small noise, not pi-sized noise;
+* a step backwards (|rot1| > pi/2) is read forwards for the noise, as the
+  same motion (rot1 -+ pi, -trans, rot2 +- pi) (``noise_rotations``), so a
+  robot driving backwards (rot1 ~ pi) gets small noise, not pi-sized noise.
+  AMCL folds each rotation alone (min(|rot|, |rot -+ pi|)), which gives a
+  turn on the spot by pi (rot1 = 0, rot2 = pi, as after a scan gap or an
+  odometry stall) no noise at all;
 * ``noise_form="variance"`` (book and AMCL):
       sigma_rot1^2  = alpha1 rot1^2 + alpha2 trans^2
       sigma_trans^2 = alpha3 trans^2 + alpha4 (rot1^2 + rot2^2)
@@ -83,9 +87,15 @@ def odometry_deltas(odom_prev, odom_now) -> tuple[float, float, float]:
     return rot1, trans, rot2
 
 
-def noise_angle(rot: float) -> float:
-    """min(|rot|, |rot -+ pi|): the rotation a reversing robot really made, for the noise."""
-    return min(abs(angle_diff(rot, 0.0)), abs(angle_diff(rot, math.pi)))
+def noise_rotations(rot1: float, rot2: float) -> tuple[float, float]:
+    """(|rot1|, |rot2|) as the noise sees them: the turns the robot really made. A step backwards (|rot1| > pi/2)
+    is the same motion as (rot1 -+ pi, -trans, rot2 +- pi), whose rotations are pi - |rot1| and pi - |rot2|, so a
+    reversing robot (rot1 ~ pi, rot2 ~ -pi) gets small noise, not pi-sized noise. AMCL folds each rotation alone,
+    min(|rot|, |rot -+ pi|), which also folds a turn on the spot (rot1 = 0): a turn by pi got no noise at all."""
+    r1, r2 = abs(angle_diff(rot1, 0.0)), abs(angle_diff(rot2, 0.0))
+    if r1 > 0.5 * math.pi:
+        return math.pi - r1, math.pi - r2
+    return r1, r2
 
 
 def noise_trans(trans, cfg):
@@ -107,11 +117,10 @@ def noise_sigmas(rot1: float, trans: float, rot2: float, cfg) -> tuple[float, fl
     """Standard deviations (sigma_rot1, sigma_trans, sigma_rot2) of the noise on the deltas.
 
     ``cfg`` needs alpha1..alpha4 and noise_form ("variance" or "std"); the
-    rotations enter as min(|rot|, |rot -+ pi|) (see the module docstring).
+    rotations enter as ``noise_rotations`` reads them (a step backwards read forwards).
     """
     a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
-    r1 = noise_angle(rot1)
-    r2 = noise_angle(rot2)
+    r1, r2 = noise_rotations(rot1, rot2)
     t = noise_trans(trans, cfg)
     if cfg.noise_form == "variance":
         return (math.sqrt(a1 * r1 * r1 + a2 * t * t),
@@ -307,8 +316,9 @@ class OdometryMotionModel:
     @staticmethod
     def _turned(deltas):
         """The step's turn in each noise dimension, as the noise sees it (a reversing robot's rot1 near pi turned
-        by its difference from pi; ``FaultProposal.scales``)."""
-        return noise_angle(deltas[0]), 0.0, noise_angle(deltas[2])
+        by its difference from pi: ``noise_rotations``; ``FaultProposal.scales``)."""
+        r1, r2 = noise_rotations(deltas[0], deltas[2])
+        return r1, 0.0, r2
 
     _TRAVEL = (1,)  # the noise stds of the travel, in ``_step``'s order (``fill_spread`` widens them)
 
@@ -496,15 +506,17 @@ def odometry_deltas_array(x_prev, x_new, min_trans: float = ROT1_MIN_TRANS):
     return rot1, trans, rot2
 
 
-def _noise_angle_np(rot):
-    r = np.abs(_wrap_np(rot))
-    return np.minimum(r, np.pi - r)  # min(|rot|, |rot -+ pi|), as noise_angle
+def noise_rotations_array(rot1, rot2):
+    """Vectorised ``noise_rotations``."""
+    r1, r2 = np.abs(_wrap_np(rot1)), np.abs(_wrap_np(rot2))
+    back = r1 > 0.5 * np.pi
+    return np.where(back, np.pi - r1, r1), np.where(back, np.pi - r2, r2)
 
 
 def noise_sigmas_array(rot1, trans, rot2, cfg):
     """Vectorised ``noise_sigmas``: (sigma_rot1, sigma_trans, sigma_rot2) arrays, same rules."""
     a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
-    r1, r2, t = _noise_angle_np(rot1), _noise_angle_np(rot2), np.asarray(noise_trans(trans, cfg), dtype=np.float64)
+    (r1, r2), t = noise_rotations_array(rot1, rot2), np.asarray(noise_trans(trans, cfg), dtype=np.float64)
     if cfg.noise_form == "variance":
         return (np.sqrt(a1 * r1 * r1 + a2 * t * t), np.sqrt(a3 * t * t + a4 * (r1 * r1 + r2 * r2)),
                 np.sqrt(a1 * r2 * r2 + a2 * t * t))

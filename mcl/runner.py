@@ -95,8 +95,10 @@ def check_out_dir(out: Path, flag: str = "--out") -> None:
 
     out = Path(out)
     check_writable_folder(out, f"{flag} {out}")
-    names = check_folder_holds(out, flag, lambda n: n.removesuffix(".partial") in RUN_OUTPUTS
-                               or n == PARTIAL_RECORDING, "a run's outputs")
+    # a run's outputs are files: a folder named recording.rrd was a traceback after the earlier outputs were gone
+    names = check_folder_holds(out, flag, lambda n: (n.removesuffix(".partial") in RUN_OUTPUTS
+                                                     or n == PARTIAL_RECORDING) and (out / n).is_file(),
+                               "a run's outputs")
     if names and "config.yaml" not in names:  # a trajectory.tum of the user's own, say
         raise ConfigError(f"{flag} {out}: the folder holds {', '.join(names)} but no config.yaml: not an "
                           "mcl run's folder; choose a new or empty folder")
@@ -233,6 +235,7 @@ class Truth:
     def __init__(self, t: np.ndarray, poses: np.ndarray):
         order = np.argsort(t, kind="stable")
         self.t, self.poses = t[order], poses[:, order]
+        self.spacing = float(np.median(np.diff(self.t))) if self.t.size > 1 else 0.0
 
     def at(self, t: float) -> np.ndarray | None:
         i = int(np.searchsorted(self.t, t))
@@ -240,6 +243,25 @@ class Truth:
             if 0 <= j < self.t.size and abs(self.t[j] - t) <= 1e-3:
                 return self.poses[:, j]
         return None
+
+    def near(self, t: float) -> np.ndarray | None:
+        """The reference at ``t``: ``at``, else interpolated between the two poses around ``t`` when they are at most
+        1.5 of the reference's median spacing apart (a 10 Hz reference on its own clock; a gap in it is not
+        bridged). For the recording: ``at`` alone left a reference not stamped at the scans, which the evaluation
+        scores by interpolation, without truth in the recording."""
+        exact = self.at(t)
+        if exact is not None or self.t.size < 2:
+            return exact
+        i = int(np.searchsorted(self.t, t))
+        if i == 0 or i == self.t.size:
+            return None
+        t0, t1 = self.t[i - 1], self.t[i]
+        if not 0.0 < t1 - t0 <= 1.5 * self.spacing:
+            return None
+        a, b = self.poses[:, i - 1], self.poses[:, i]
+        f = (t - t0) / (t1 - t0)
+        return np.array([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]),
+                         float(wrap_angle(a[2] + f * float(wrap_angle(b[2] - a[2]))))])
 
 
 @contextmanager
@@ -778,10 +800,12 @@ class _UpdateRecording:
         mean, cov = info.mean, info.cov
         if self.odom_to_map is None:
             self.odom_to_map = compose(mean, inverse(odom))
-        ref = self.truth.at(scan.t) if self.truth is not None else None
+        ref = self.truth.near(scan.t) if self.truth is not None else None
         stats = {
             "ess": info.ess,
-            "particles": float(pf.n),  # the set drawn below (a re-seed grows it at its resample)
+            # N weighted in this update, as quality.csv and the summary count it (pf.n, the set a re-seed grows at
+            # its resample, said 10,000 where they said 5,000)
+            "particles": float(info.particles),
             "inject_p": info.inject_p,
             "tries": info.tries,
             "spread/full": _spread(info.full_cov),
@@ -997,7 +1021,7 @@ def _run(
 
             log_landmark_map(viz, landmark_map)
         if truth is not None:
-            viz.log_truth_path(truth.poses)
+            viz.log_truth_path(truth.poses, truth.t)
     recording = _UpdateRecording(viz, cfg, grid, truth, landmark_map, plane_sensor) if viz is not None else None
 
     stage_totals = {"predict": 0.0, "correct": 0.0, "estimate": 0.0, "resample": 0.0, "viz": 0.0}

@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from mcl.errors import ConfigError
-from mcl.motion import noise_angle
+from mcl.motion import noise_rotations
 
 __all__ = ["simulate", "make_world", "World", "add_arguments", "run_from_args", "simulator_stamp"]
 
@@ -474,8 +474,8 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6, odom_ra
         rot1 = 0.0 if trans < min_trans else _wrap(math.atan2(y1 - y0, x1 - x0) - t0)
         rot2 = _wrap(t1 - t0 - rot1)
         # the noise scales with the rotation the robot really made: a backward step reads rot1 ~ pi, rot2 ~ -pi
-        # (the filter's motion model folds them the same way, mcl.motion.noise_angle)
-        n1, n2 = noise_angle(rot1), noise_angle(rot2)
+        # (the filter's motion model reads them the same way, mcl.motion.noise_rotations)
+        n1, n2 = noise_rotations(rot1, rot2)
         r1 = rot1 - z[0] * math.sqrt(a1 * n1 ** 2 + a2 * trans ** 2)
         tr = trans - z[1] * math.sqrt(a3 * trans ** 2 + a4 * (n1 ** 2 + n2 ** 2))
         r2 = rot2 - z[2] * math.sqrt(a1 * n2 ** 2 + a2 * trans ** 2)

@@ -563,6 +563,7 @@ class RerunLogger:
         self._calls = 0
         self._flushed_at = 0.0  # time.monotonic() of the last flush of the buffered columns (live modes)
         self._skipped_shown = False  # world/scan/skipped holds points (a step without must clear them)
+        self._scan_shown = False  # world/scan holds points (a step without returns must clear them)
         self._time_kind: str | None = None
         self._stat_names: list[str] = []
         self._bounds = None  # the world view's frame, from the map (log_map)
@@ -604,14 +605,20 @@ class RerunLogger:
             if self.path is None:
                 raise ValueError("rerun mode 'save' needs a path for the .rrd file")
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            rec.save(self.path)
+            try:
+                rec.save(self.path)
+            except RuntimeError as e:  # "Failed to create file: Is a directory": one error naming the recording
+                raise OSError(errno.EIO, f"cannot open the recording ({e})", str(self.path)) from None
         elif mode == "spawn":
             rr.spawn(connect=False, executable_path=viewer, recording=rec)
             sinks: list[Any] = [rr.GrpcSink()]
             if self.path is not None:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
                 sinks.append(rr.FileSink(self.path))
-            rec.set_sinks(*sinks)
+            try:
+                rec.set_sinks(*sinks)
+            except RuntimeError as e:
+                raise OSError(errno.EIO, f"cannot open the recording ({e})", str(self.path)) from None
         else:  # serve
             # Rerun's own ports (9876, 9090) when free, else free ones: a second run or an open viewer holds them,
             # and the server thread then died at the run's end (a traceback, no summary)
@@ -715,16 +722,25 @@ class RerunLogger:
         img = np.concatenate(bands[::-1]) if len(bands) > 1 else bands[0]
         _log_grid_image(rec, "world/likelihood_field", grid, img, "RGBA", _DRAW_ORDER["map"] + 1.0, k)
 
-    def log_truth_path(self, poses: np.ndarray) -> None:
-        """Static full true path (3, M); per-step truth trails are then not logged."""
+    def log_truth_path(self, poses: np.ndarray, t: np.ndarray | None = None) -> None:
+        """Static full true path (3, M), at times ``t`` (M,) if given; per-step truth trails are then not logged."""
         rec = self._live()
         if rec is None:
             return
         p = np.asarray(poses, dtype=np.float64)
-        # broken where the robot jumps (a kidnap): one line across the map through its walls read as a path
+        # broken where the robot jumps (a kidnap): one line across the map through its walls read as a path. A step
+        # over 10 median steps (and 1 m); with times, only when it is as fast too: a scan gap of 2 s drove 1.1 m at
+        # the robot's own speed, and the path was cut there
         step = np.hypot(*np.diff(p[:2], axis=1)) if p.shape[1] > 1 else np.zeros(0)
         jump = max(1.0, 10.0 * float(np.median(step))) if step.size else np.inf
-        cuts = np.flatnonzero(step > jump) + 1
+        far = step > jump
+        if t is not None and step.size:
+            dt = np.diff(np.asarray(t, dtype=np.float64))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                speed = np.where(dt > 0.0, step / np.where(dt > 0.0, dt, 1.0), np.inf)
+            moving = speed[np.isfinite(speed) & (step > 0.0)]
+            far &= speed > 10.0 * (float(np.median(moving)) if moving.size else 0.0)
+        cuts = np.flatnonzero(far) + 1
         strips = [np.ascontiguousarray(q[:2].T, dtype=np.float32) for q in np.split(p, cuts, axis=1)]
         rec.log(
             "world/truth",
@@ -780,9 +796,14 @@ class RerunLogger:
         if self.particles_max > 0 and call % self.particles_every == 0:
             self._log_particles(rec, particles, weights)
         self._log_estimate(rec, estimate, cov)
-        if self.log_scan and scan_world is not None:
-            s = np.asarray(scan_world, dtype=np.float64)
+        if self.log_scan and (scan_world is not None or self._scan_shown):
+            # a step without returns (all beyond range, an update from landmarks alone) clears the last scan: it
+            # was drawn from another pose, and stayed on screen for the rest of the run
+            s = np.asarray(scan_world, dtype=np.float64) if scan_world is not None else np.zeros((2, 0))
             self._buffer_rows("world/scan", "Points2D", dict(positions=_xy32(s)))
+            self._scan_shown = s.shape[1] > 0
+            if expected_world is None:
+                self._buffer_rows("world/scan/expected", "Points2D", dict(positions=_xy32(np.zeros((2, 0)))))
         if self.log_scan and (skipped_world is not None or self._skipped_shown):
             k = np.asarray(skipped_world, dtype=np.float64) if skipped_world is not None else np.zeros((2, 0))
             self._buffer_rows("world/scan/skipped", "Points2D", dict(positions=_xy32(k)))
@@ -815,13 +836,17 @@ class RerunLogger:
         self._flush_columns(rec)
         if self._blueprint_key is None:
             self._send_blueprint_to(rec)
+        missed = None  # why a spawned viewer did not take the recording's end
         try:
             if self.mode == "spawn":  # a viewer that died (closed, its display gone) must not hold the run for good
                 rec.flush(timeout_sec=SPAWN_FLUSH_S)
             else:
                 rec.flush()
         except RuntimeError as e:  # the file sink failed (a full disk): one error naming the recording
-            self._cut_short(str(e))
+            if self.mode != "spawn" or self.path is None:
+                self._cut_short(str(e))
+            # the viewer's sink timed out, or the file's failed: the file, checked whole below, tells which
+            missed = str(e)
         if self.mode == "serve":
             # Disconnecting, or dropping the stream with this logger when the run returns, shuts the gRPC server
             # down before a viewer could read the buffered data: keep the stream for the rest of the process.
@@ -832,7 +857,12 @@ class RerunLogger:
         # limit, a full disk) is only logged by rerun: the run ended with exit 0 and "Open the recording with" a
         # recording.rrd cut short (`rerun rrd verify`: "Missing RRD footer")
         if self.path is not None and self.path.exists() and not recording_is_whole(self.path):
-            self._cut_short("its end could not be written")
+            self._cut_short(missed or "its end could not be written")
+        if missed is not None and not self.path.exists():
+            self._cut_short(missed)
+        if missed is not None:  # a viewer gone before the run's end lost nothing: the .rrd has it all
+            print(f"mcl: note: the Rerun viewer did not take the recording's end ({missed}); {self.path} holds all "
+                  f"of it (rerun {self.path})", file=sys.stderr)
 
     def _cut_short(self, why: str) -> None:
         """The recording could not be written whole: leave it as ``recording.partial.rrd`` and raise OSError."""

@@ -95,6 +95,28 @@ def test_a_run_again_into_its_folder_replaces_the_earlier_runs_outputs(world, tm
     assert json.loads((out / "summary.json").read_text())["seed"] == 2
 
 
+def test_a_folder_named_as_an_output_is_refused_before_the_earlier_outputs_go(world, tmp_path, capsys):
+    # An earlier run's folder holding a folder named recording.rrd: the earlier outputs were deleted, then the
+    # recording could not be opened (a RuntimeError traceback, exit 1). Now it is refused first, in one line.
+    out = tmp_path / "again"
+    assert _run(world, out) == 0
+    before = {q.name: q.read_bytes() for q in out.iterdir()}
+    (out / "recording.rrd").mkdir()
+    assert _run(world, out, "--rerun", "save", "--seed", "2") == 2
+    (line,) = _error_lines(capsys)
+    assert "holds files that are not a run's outputs (recording.rrd)" in line
+    assert {q.name: q.read_bytes() for q in out.iterdir() if q.is_file()} == before
+
+
+def test_a_recording_that_cannot_be_opened_is_one_os_error(tmp_path):
+    from mcl.viz import RerunLogger
+
+    (tmp_path / "recording.rrd").mkdir()
+    with pytest.raises(OSError, match="cannot open the recording") as e:
+        RerunLogger("save", tmp_path / "recording.rrd")
+    assert e.value.filename == str(tmp_path / "recording.rrd")
+
+
 def test_a_map_without_a_free_cell_is_refused_before_anything_is_written(world, tmp_path, capsys):
     import yaml
 
@@ -257,3 +279,58 @@ def test_the_summary_line_says_a_run_that_never_settled_in_words():
     assert "never within 0.3 m for good (5 reference" in format_eval({**r, "convergence_time": None})
     assert "after never" not in format_eval({**r, "convergence_time": None})
     assert "converged within 0.3 m after 2.0 s (" in format_eval({**r, "convergence_time": 2.0})
+
+
+def test_the_recordings_particle_count_is_quality_csvs(world, tmp_path):
+    # A global run re-seeds on its first update: quality.csv and the summary counted the 5,000 particles weighted,
+    # the recording's stats/particles the 10,000 the re-seed had grown the set to. Now both count those weighted.
+    import csv
+
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    out = tmp_path / "global"
+    assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--global",
+                 "--particles", "2000", "--threads", "1", "--rerun", "save", "--no-progress", "--out", str(out)]) == 0
+    with open(out / "quality.csv") as f:
+        want = [float(r["particles"]) for r in csv.DictReader(f) if r["updated"] == "1"]
+    got = []
+    for c in RrdReader(out / "recording.rrd").stream().to_chunks():
+        if c.entity_path == "/stats/particles" and not c.is_static:
+            b = c.to_record_batch()
+            got += list(zip(b.column("step").cast(pa.int64()).to_pylist(),
+                            [v[0] for v in b.column("Scalars:scalars").to_pylist()]))
+    assert [v for _, v in sorted(got)] == want
+    assert len(set(want)) > 1  # the set's size changed in the run, or the test would show nothing
+
+
+def test_a_reference_off_the_scans_stamps_is_in_the_recording_interpolated(world, tmp_path):
+    # A 10 Hz reference 0.05 s off the scans' stamps is scored (by interpolation), but the recording had no truth
+    # pose and no error series at any step: it looked truth only up within 1 ms of each scan.
+    import numpy as np
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    from mcl.trajectory import read_tum, write_tum
+
+    t, poses = read_tum(world / "truth.tum")
+    tq = np.arange(t[0] + 0.05, t[-1], 0.1)
+    off = np.stack([np.interp(tq, t, poses[0]), np.interp(tq, t, poses[1]), np.interp(tq, t, np.unwrap(poses[2]))])
+    write_tum(tmp_path / "off.tum", tq, off)
+
+    def errors(truth, out):
+        assert _run(world, out, "--truth", str(truth), "--rerun", "save") == 0
+        e = {}
+        for c in RrdReader(out / "recording.rrd").stream().to_chunks():
+            if c.entity_path == "/stats/error/position" and not c.is_static:
+                b = c.to_record_batch()
+                e.update(zip(b.column("step").cast(pa.int64()).to_pylist(),
+                             [v[0] for v in b.column("Scalars:scalars").to_pylist()]))
+        return e
+
+    at_scans, off_scans = errors(world / "truth.tum", tmp_path / "at"), errors(tmp_path / "off.tum", tmp_path / "off")
+    # every update inside the reference's span (its first and last may not be), and the same errors as with the
+    # reference at the scans (the same run: the reference plays no part in the filter) within the interpolation's
+    # few millimetres
+    assert len(off_scans) >= len(at_scans) - 2
+    assert max(abs(v - at_scans[k]) for k, v in off_scans.items()) < 0.01

@@ -71,6 +71,18 @@ def test_straight_line_when_w_is_zero_is_finite_and_exact():
     assert np.all(np.isfinite(new)) and ok.all()
 
 
+def test_no_time_is_no_motion():
+    # dt = 0 (two scans on one stamp, or a clock stepped back: the runner takes dt as 0) with the log's own tv / rv,
+    # which a ROBOTLASER1 line or a bag's twist carries: sin(w dt / 2) / (w dt / 2) was 0 / 0, a ZeroDivisionError
+    # that ended the run
+    p = particles(np.random.default_rng(1), 1000)
+    model = VelocityMotionModel(vcfg())
+    for dt in (0.0, -0.5):  # negative: taken as 0
+        new, ok, _ = model.sample(p, 0.5, 0.3, dt, np.random.default_rng(0))
+        assert ok.all()
+        np.testing.assert_array_equal(new, p)
+
+
 def test_tiny_w_agrees_with_the_straight_line():
     p = np.array([[0.0], [0.0], [0.2]])
     a, b = np.empty_like(p), np.empty_like(p)

@@ -536,6 +536,15 @@ def test_the_true_path_is_broken_where_the_robot_jumps(tmp_path):
     with RerunLogger("save", path) as log:
         log.log_truth_path(np.stack([np.linspace(0, 2, 50), np.zeros(50), np.zeros(50)]))
     assert [len(s) for s in rows(path, "/world/truth", None)[0][1]["LineStrips2D:strips"]] == [50]
+    # with times: a scan gap of 2.2 s that drove 1.1 m at the robot's speed is no jump (it was cut); a kidnap is
+    t = np.concatenate([0.1 * np.arange(30), 5.2 + 0.1 * np.arange(30)])
+    gap = np.concatenate([0.05 * np.arange(30), 1.45 + 1.1 + 0.05 * np.arange(30)])
+    with RerunLogger("save", path) as log:
+        log.log_truth_path(np.stack([gap, np.zeros(60), np.zeros(60)]), t)
+    assert [len(s) for s in rows(path, "/world/truth", None)[0][1]["LineStrips2D:strips"]] == [60]
+    with RerunLogger("save", path) as log:
+        log.log_truth_path(np.stack([x, np.zeros(60), np.zeros(60)]), 0.1 * np.arange(60))
+    assert [len(s) for s in rows(path, "/world/truth", None)[0][1]["LineStrips2D:strips"]] == [30, 30]
 
 
 def test_close_is_idempotent_and_rejects_logging_after(tmp_path):
@@ -771,3 +780,45 @@ def test_a_stream_with_no_file_that_fails_is_one_error_naming_the_recording_not_
             log._cut_short("the viewer went away")
         log.path = path
     assert e.value.filename == "the recording" and "could not be sent (the viewer went away)" in str(e.value)
+
+
+def test_a_spawned_viewer_gone_before_the_end_loses_nothing_the_file_has_it_all(tmp_path, capsys):
+    # A viewer that died (its display gone) timed the gRPC flush out: the run exited 2, "cannot write", with a whole
+    # recording renamed recording.partial.rrd. The file sink has it all: now a note, the file kept under its name.
+    path = tmp_path / "recording.rrd"
+    log = RerunLogger("save", path)
+    log.log_step(0, 1.0, particles=np.zeros((3, 4)), weights=np.full(4, 0.25), estimate=np.zeros(3), cov=np.eye(3))
+
+    class _ViewerGone:  # the stream, whose flush to the viewer times out
+        def __init__(self, rec):
+            self._rec = rec
+
+        def flush(self, **_kw):
+            self._rec.flush()
+            raise RuntimeError("Flush timed out")
+
+        def __getattr__(self, name):
+            return getattr(self._rec, name)
+
+    log.mode, log._rec = "spawn", _ViewerGone(log._rec)
+    log.close()
+    assert path.is_file() and viz.recording_is_whole(path) and not viz.partial_recording(path).exists()
+    err = capsys.readouterr().err
+    assert "the Rerun viewer did not take the recording's end (Flush timed out)" in err and str(path) in err
+    assert len(rows(path, "/world/estimate", "step")) == 1  # the step is in the file
+
+
+def test_a_step_without_returns_clears_the_last_scan(tmp_path):
+    # A hall under a 3 m laser: steps 53-98 of 99 had no returns, and step 52's scan (drawn from step 52's pose)
+    # stayed on screen to the end. A step without one clears the scan and the expected scan; none before the
+    # first scan logs nothing.
+    path = tmp_path / "noreturn.rrd"
+    scans = {1: np.ones((2, 6)), 3: np.ones((2, 4))}
+    with RerunLogger("save", path) as log:
+        for k in range(6):
+            s = scans.get(k)
+            log.log_step(k, 1.0 + k, particles=np.zeros((3, 4)), weights=np.full(4, 0.25), estimate=np.zeros(3),
+                         cov=np.eye(3), scan_world=s, expected_world=s)
+    for entity in ("/world/scan", "/world/scan/expected"):
+        r = rows(path, entity, "step")
+        assert [(t, len(c["Points2D:positions"])) for t, c in r] == [(1, 6), (2, 0), (3, 4), (4, 0)], entity

@@ -33,7 +33,7 @@ W_STRAIGHT = 1e-9  # rad/s: below this |w_hat| the motion is a straight line
 @njit(cache=True)
 def _move(x, y, th, v_hat, w_hat, g_hat, dt):
     half = 0.5 * w_hat * dt
-    if abs(w_hat) < W_STRAIGHT:
+    if abs(w_hat) < W_STRAIGHT or half == 0.0:  # a straight line, or no time (dt = 0: no motion, not 0 / 0)
         s = 1.0
     else:
         s = math.sin(half) / half
