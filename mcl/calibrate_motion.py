@@ -174,7 +174,7 @@ def bag_message(path) -> str:
     """The one line for a ROS bag given where a CARMEN log is needed."""
     from pathlib import Path
 
-    return (f"{path}: a ROS bag; the calibrate commands read CARMEN logs: convert it first with "
+    return (f"{path}: a ROS bag; calibrate motion and calibrate sensor read CARMEN logs: convert it first with "
             f"`mcl convert {path} {Path(path).with_suffix('.clf')}`")
 
 

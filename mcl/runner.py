@@ -1313,7 +1313,13 @@ def _run(
         text += f" Not scored: {summary['eval']['error']}."
     text += f" Outputs in {out_dir}."
     if summary["outputs"]["recording"]:
-        text += f" Open the recording with: rerun {summary['outputs']['recording']}"
+        import shutil
+
+        from mcl.viz import viewer_executable
+
+        # `rerun` when it is on PATH, else the viewer beside this Python (a venv used without activating it)
+        viewer = "rerun" if shutil.which("rerun") else (viewer_executable() or "rerun")
+        text += f" Open the recording with: {viewer} {summary['outputs']['recording']}"
     summary["text"] = text
     echo(text)
     return summary

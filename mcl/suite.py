@@ -1149,6 +1149,8 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
 
     check_writable_folder(out, f"--out {out}")
     check_eval_out_dir(out)
+    if Path(cache).parent == Path(out):  # the default cache, OUT/worlds: "--cache /proc/x/worlds" named an option
+        make_dir(out, "--out")           # never typed for an --out that cannot be made
     if any(j.world is not None for j in job_list):
         make_dir(cache, "--cache")
     make_dir(out, "--out")

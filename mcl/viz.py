@@ -269,7 +269,7 @@ def _free_port(preferred: int) -> int:
     raise OSError("no free TCP port for the Rerun server")
 
 
-def _viewer_executable() -> str | None:
+def viewer_executable() -> str | None:
     """The ``rerun`` viewer: on PATH, else beside this Python (a venv used without being activated)."""
     import shutil
 
@@ -584,7 +584,7 @@ class RerunLogger:
         if mode == "off":
             return
 
-        viewer = _viewer_executable() if mode == "spawn" else None
+        viewer = viewer_executable() if mode == "spawn" else None
         display = mode == "spawn" and has_display()  # once: it may wait half a second on a remote X server
         if mode == "spawn" and (not display or viewer is None):
             self.path = self.path or Path(f"{app_id}.rrd")

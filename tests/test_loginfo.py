@@ -24,8 +24,9 @@ def test_the_demo_log_s_messages_laser_and_checks(capsys):
         assert f"\n  {kind:<6}  {n:>8}\n" in text, (kind, n, text)
     assert "\nlaser FLASER: 351 scans, 181 beams over 180 degrees from -90, maximum range 5 m, laser pose " \
            "[0.0, 0.0, 0.0]\n" in text, text
+    # the ODOM lines' span beside the scans', as bag info gives them (the README said so; it was not printed)
     assert "\n  scans:        FLASER (351 scans)\n  odometry:     ODOM lines (701)\n  stamps:       scans " \
-           "0.000..70.000 s\n  robot itself: no beam reads it (sensor.self_hit_skip)\n  sideways:     0.1% of the " \
+           "0.000..70.000 s, odometry 0.000..70.000 s\n  robot itself: no beam reads it (sensor.self_hit_skip)\n  sideways:     0.1% of the " \
            "odometry's 30.6 m goes across the robot's heading: a differential drive's (motion.model odometry)\n" \
            "  odometry check: the scans " \
            "fit the odometry as recorded (52 of 60 pairs of scans); the laser's yaw +0.4 +- 0.3 degrees from its " \

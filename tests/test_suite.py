@@ -367,8 +367,9 @@ def test_bad_suite_files_exit_2_naming_file_and_key(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and err.startswith(f"mcl: error: --cache {tmp_path / 'file' / 'c'}: "), err
     assert not (tmp_path / "o").exists()
     # an --out that is a file (or below one) is said as --out, not as the default cache inside it ("--cache
-    # OUT/worlds: Not a directory", an option not given)
-    for bad in (tmp_path / "file", tmp_path / "file" / "x"):
+    # OUT/worlds: Not a directory", an option not given); so is one that cannot be made (/proc/x: the check of its
+    # folder passes as root, and the default cache was made first: "--cache /proc/x/worlds")
+    for bad in (tmp_path / "file", tmp_path / "file" / "x", *([Path("/proc/mcl-x")] if Path("/proc").is_dir() else [])):
         assert main(["eval", "--suite", str(path), "--out", str(bad)]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and err.startswith(f"mcl: error: --out {bad}: "), err

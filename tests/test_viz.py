@@ -391,11 +391,11 @@ def test_the_viewer_is_found_beside_this_python_without_an_activated_venv(monkey
     # `.venv/bin/mcl run --rerun spawn` with the venv not activated: `rerun` is not on PATH (a traceback before)
     from pathlib import Path
 
-    from mcl.viz import _viewer_executable
+    from mcl.viz import viewer_executable
 
     monkeypatch.setenv("PATH", "/nonexistent")
     beside = Path(sys.executable).parent / "rerun"
-    assert _viewer_executable() == (str(beside) if beside.exists() else None)
+    assert viewer_executable() == (str(beside) if beside.exists() else None)
 
 
 def test_serve_keeps_serving_after_the_run_on_a_free_port_until_ctrl_c(tmp_path):

@@ -141,6 +141,9 @@ def log_info(path, laser: str = "auto", sensor=None) -> dict:
             "odometry": (f"ODOM lines ({odo.shape[0]})" if odo.shape[0] else
                          "the laser lines' own poses (no ODOM lines)"),
             "scan_span_s": [_round(t.min()), _round(t.max())],
+            # the ODOM lines' span beside the scans', as `mcl bag info` gives the odometry's (None: the laser
+            # lines' own poses, which span the scans)
+            "odometry_span_s": [_round(odo[:, 0].min()), _round(odo[:, 0].max())] if odo.shape[0] else None,
             "notes": list(log.notes),
             **scan_checks(scans, odo if odo.shape[0] else None, sensor),
         }
@@ -169,7 +172,9 @@ def format_log_info(info: dict) -> str:
         lines.append(f"  scans:        {', '.join(u['lasers'])} ({u['scans']} scans)")
         lines.append(f"  odometry:     {u['odometry']}")
         a, b = u["scan_span_s"]
-        lines.append(f"  stamps:       scans {a:.3f}..{b:.3f} s")
+        odo = u.get("odometry_span_s")
+        lines.append(f"  stamps:       scans {a:.3f}..{b:.3f} s" + (f", odometry {odo[0]:.3f}..{odo[1]:.3f} s" if odo
+                                                                     else ""))
         lines += check_lines(u)
         lines += [f"  note: {m}" for m in u["notes"]]
     lines += [f"  warning: {m}" for m in info["warnings"]]
