@@ -131,6 +131,16 @@ def _fit_lambda(r, z, zs, lam0):
     return math.sqrt(lo * hi)
 
 
+def _check_readings(**arrays) -> None:
+    """ValueError naming an input that holds a NaN, an infinity or a negative value: one such reading made every
+    weight of the fit NaN without a word (``collect`` leaves them out; the fits are public)."""
+    for name, a in arrays.items():
+        bad = ~np.isfinite(a) | (a < 0.0)
+        if np.any(bad):
+            raise ValueError(f"{name}: {int(np.count_nonzero(bad))} of {a.size} values are not finite and >= 0 (the "
+                             f"first: {float(a[bad][0])!r}): leave out readings without a return")
+
+
 def fit_beam(z, zs, zmax, *, init=None, max_iter=1000, tol=1e-10) -> FitResult:
     """EM for (z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short) from readings z with expectations z*.
 
@@ -141,6 +151,7 @@ def fit_beam(z, zs, zmax, *, init=None, max_iter=1000, tol=1e-10) -> FitResult:
     z = np.asarray(z, dtype=np.float64)
     zs = np.asarray(zs, dtype=np.float64)
     zmax = np.broadcast_to(np.asarray(zmax, dtype=np.float64), z.shape)
+    _check_readings(z=z, zs=zs, zmax=zmax)
     if z.size < 10:
         raise DataError(f"calibrate sensor: only {z.size} usable readings (need at least 10)")
     p = dict(z_hit=0.7, z_short=0.1, z_max=0.1, z_rand=0.1, sigma_hit=0.2, lambda_short=0.5)
@@ -208,7 +219,9 @@ def fit_likelihood_field(d, dmax, *, init=None, max_iter=1000, tol=1e-10) -> tup
 
     Returns (w_hit, w_rand, sigma, iterations, mean log-likelihood, converged).
     """
-    d = np.minimum(np.asarray(d, dtype=np.float64), dmax)
+    d = np.asarray(d, dtype=np.float64)
+    _check_readings(d=d)
+    d = np.minimum(d, dmax)
     if d.size < 10:
         raise DataError(f"calibrate sensor: only {d.size} usable readings (need at least 10)")
     p = dict(w_hit=0.8, sigma=0.2)

@@ -223,8 +223,9 @@ def sample_observation(pose, m_xy, sigma_range, sigma_bearing, rng, size=None):
     """Noisy (range, bearing) of landmarks at ``m_xy`` (2, K) seen from ``pose`` (x, y, theta).
 
     The generative side of the model's p_det: Gaussian noise on the exact range
-    and bearing; the bearing wrapped to [-pi, pi). ``size`` adds a leading axis
-    of independent draws. Returns (ranges, bearings).
+    and bearing; the bearing wrapped to (-pi, pi] (arctan2's; only its square
+    enters the model). ``size`` adds a leading axis of independent draws.
+    Returns (ranges, bearings).
     """
     m = np.asarray(m_xy, dtype=np.float64).reshape(2, -1)
     x, y, th = (float(v) for v in pose)

@@ -593,9 +593,15 @@ def log_motion_model_odometry(x_new, u, x_prev, cfg, *, sigma_from: str = "odome
     d1, dtr, d2 = odometry_residuals(rot1, trans, rot2, h1, ht, h2)
     out = _noise_log_density(kind, (d1, dtr, d2), (s1, st, s2), fault)
     if jacobian:
-        with np.errstate(divide="ignore"):
-            out = out - np.log(ht)
+        out = _over_jacobian(out, ht)
     return out
+
+
+def _over_jacobian(log_density, jac):
+    """log(density / |jac|), and -inf where the density is 0 whatever the Jacobian: a pose outside a bounded noise's
+    support where the Jacobian vanishes too (a turn on the spot) gave -inf - (-inf) = NaN."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.isneginf(log_density), -np.inf, log_density - np.log(jac))
 
 
 def _noise_log_density(kind: str, residuals, sigmas, fault: FaultProposal | None, **caps) -> np.ndarray:
@@ -727,7 +733,11 @@ def log_motion_model_velocity(x_new, u, x_prev, cfg, *, jacobian: bool = True,
 
     u: (v, w, dt) or a ``Control``. The noise stds come from the commanded
     (v, w) (``velocity_sigmas``), so this is exactly the density that
-    ``VelocityMotionModel`` samples from. jacobian=True divides by
+    ``VelocityMotionModel`` samples from, where the arc swept is at most half a
+    turn (|w_hat dt| <= pi): two poses are joined by arcs of every number of
+    turns, and Table 5.1 (``velocity_inverse``) scores the shortest, as the
+    book does; a sampler drawing |w dt| > pi (31 rad/s at 10 Hz) reaches poses
+    this density does not give. jacobian=True divides by
     |d(x', y', theta') / d(v, w, gamma)| = |v_hat| dt^4 sinc(w_hat dt / 2)^2 / 2
     to give a density over poses; it is infinite where v_hat = 0 (turning on
     the spot maps a 2-D set of controls onto one point). fault: the
@@ -739,9 +749,7 @@ def log_motion_model_velocity(x_new, u, x_prev, cfg, *, jacobian: bool = True,
     out = _noise_log_density(kind, (v - v_hat, w - w_hat, g_hat), velocity_sigmas(v, w, cfg), fault,
                               turns=(1, 2), shifts=(0,), dt=dt)
     if jacobian:
-        jac = np.abs(v_hat) * dt ** 4 * 0.5 * _sinc(0.5 * w_hat * dt) ** 2
-        with np.errstate(divide="ignore"):
-            out = out - np.log(jac)
+        out = _over_jacobian(out, np.abs(v_hat) * dt ** 4 * 0.5 * _sinc(0.5 * w_hat * dt) ** 2)
     return out
 
 
@@ -893,8 +901,13 @@ class VelocityMotionModel:
 # ----------------------------------------------------------------------------- map-based density
 
 
-def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np.ndarray:
+def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, *, normalize: bool = True,
+                          **kw) -> np.ndarray:
     """p(x_t | u_t, x_{t-1}, m) = eta p(x_t | u_t, x_{t-1}) p(x_t | m) over N hypotheses (seed 5.5), (N,).
+
+    ``normalize=False`` is the seed's ``motion_model_with_map`` literally: the product p(x_t | u_t, x_{t-1})
+    p(x_t | m), p(x_t | m) taken as 1 on allowed cells and 0 elsewhere (the seed's constant, left unnormalised), so
+    each hypothesis' value is its own, whatever the others. The default normalises over the given set, as below.
 
     p(x_t | m) is 0 for a hypothesis whose cell is not in ``allowed`` (default
     ``allowed_mask(grid, cfg.robot_radius)``, unknown cells too when
@@ -926,6 +939,8 @@ def motion_model_with_map(x_new, u, x_prev, grid, cfg, allowed=None, **kw) -> np
     free = np.zeros(xn.shape[1], dtype=bool)
     free[inside] = mask[iy[inside].astype(np.int64), ix[inside].astype(np.int64)] != 0
     logp = np.where(free, logp, -np.inf)
+    if not normalize:
+        return np.exp(logp)
     top = np.max(logp) if logp.size else -np.inf
     if not np.isfinite(top):
         return np.zeros(xn.shape[1])

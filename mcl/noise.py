@@ -61,24 +61,41 @@ def _check_kind(kind: str) -> None:
 # --------------------------------------------------------------------------- densities
 
 
+def _positive(sigma) -> np.ndarray:
+    """sigma as float64, ValueError where it is not > 0: a density of std 0 was NaN everywhere, and one of std -1 a
+    negative density (callers that may reach 0 floor it first, as the motion densities do with SIGMA_MIN)."""
+    sigma = np.asarray(sigma, dtype=np.float64)
+    if np.any(sigma <= 0.0):
+        raise ValueError(f"sigma must be > 0, got {float(np.min(sigma))!r}")
+    return sigma
+
+
+def _non_negative(sigma) -> np.ndarray:
+    """sigma as float64 for a sampler, ValueError where it is negative (std 0 samples 0)."""
+    sigma = np.asarray(sigma, dtype=np.float64)
+    if np.any(sigma < 0.0):
+        raise ValueError(f"sigma must be >= 0, got {float(np.min(sigma))!r}")
+    return sigma
+
+
 def prob_normal(a, sigma):
     """Density at a of the zero-mean normal with standard deviation sigma (> 0)."""
     a = np.asarray(a, dtype=np.float64)
-    sigma = np.asarray(sigma, dtype=np.float64)
+    sigma = _positive(sigma)
     return np.exp(-0.5 * (a / sigma) ** 2) / (math.sqrt(2.0 * math.pi) * sigma)
 
 
 def log_prob_normal(a, sigma):
     """log prob_normal(a, sigma), without underflow in the tails."""
     a = np.asarray(a, dtype=np.float64)
-    sigma = np.asarray(sigma, dtype=np.float64)
+    sigma = _positive(sigma)
     return -0.5 * (a / sigma) ** 2 - np.log(sigma) - _LOG_SQRT_2PI
 
 
 def prob_triangular(a, sigma):
     """Density at a of the zero-mean triangular distribution with std sigma: support |a| <= sqrt(6) sigma."""
     a = np.asarray(a, dtype=np.float64)
-    sigma = np.asarray(sigma, dtype=np.float64)
+    sigma = _positive(sigma)
     return np.maximum(0.0, 1.0 / (_SQRT6 * sigma) - np.abs(a) / (6.0 * sigma * sigma))
 
 
@@ -118,14 +135,14 @@ def prob_normal_twelve(a, sigma):
     density is f_S(a / sigma + 6) / sigma; zero for |a| > 6 sigma.
     """
     a = np.asarray(a, dtype=np.float64)
-    sigma = np.asarray(sigma, dtype=np.float64)
+    sigma = _positive(sigma)
     return _irwin_hall_pdf(a / sigma + 6.0) / sigma
 
 
 def cdf(kind: str, a, sigma):
     """CDF of the zero-mean noise ``kind`` with std sigma (for binning tests and plots)."""
     _check_kind(kind)
-    z = np.asarray(a, dtype=np.float64) / np.asarray(sigma, dtype=np.float64)
+    z = np.asarray(a, dtype=np.float64) / _positive(sigma)
     if kind == "normal":
         from scipy.special import ndtr
 
@@ -161,7 +178,7 @@ def log_density(kind: str, a, sigma):
 
 def sample_normal_exact(sigma, rng: np.random.Generator, size=None):
     """Normal noise with std sigma from NumPy's exact sampler (the default)."""
-    return np.asarray(sigma, dtype=np.float64) * rng.standard_normal(size)
+    return _non_negative(sigma) * rng.standard_normal(size)
 
 
 def sample_normal_twelve(sigma, rng: np.random.Generator, size=None):
@@ -169,12 +186,12 @@ def sample_normal_twelve(sigma, rng: np.random.Generator, size=None):
     z = np.zeros(size) if size is not None else 0.0
     for _ in range(12):
         z = z + rng.uniform(-1.0, 1.0, size)
-    return np.asarray(sigma, dtype=np.float64) * 0.5 * z
+    return _non_negative(sigma) * 0.5 * z
 
 
 def sample_triangular(sigma, rng: np.random.Generator, size=None):
     """sqrt(6)/2 * (rand(-sigma, sigma) + rand(-sigma, sigma)): triangular with std sigma (seed 002)."""
-    s = np.asarray(sigma, dtype=np.float64)
+    s = _non_negative(sigma)
     return 0.5 * _SQRT6 * (s * rng.uniform(-1.0, 1.0, size) + s * rng.uniform(-1.0, 1.0, size))
 
 

@@ -257,3 +257,21 @@ def test_a_reference_stamped_a_frame_late_is_warned_about(sim_log, tmp_path):
                                         r"late\? The sensor model is fitted as stamped"):
         fit = calibrate_sensor(cfg, "beam")
     assert fit.params["sigma_hit"] > 0.09  # the lag's blur, which the warning is about
+
+
+def test_a_reading_that_is_no_number_is_refused_not_a_nan_fit():
+    # one NaN reading made every weight NaN (converged False, no word); the fits are public functions
+    from mcl.calibrate_sensor import fit_beam, fit_likelihood_field
+
+    rng = np.random.default_rng(0)
+    zs = rng.uniform(1.0, 5.0, 500)
+    z = zs + rng.normal(0.0, 0.05, 500)
+    assert np.isfinite(list(fit_beam(z, zs, 10.0).params.values())).all()
+    z[3] = np.nan
+    with pytest.raises(ValueError, match=r"^z: 1 of 500 values are not finite and >= 0 \(the first: nan\)"):
+        fit_beam(z, zs, 10.0)
+    d = np.abs(rng.normal(0.0, 0.1, 500))
+    assert np.isfinite(fit_likelihood_field(d, 2.0)[:3]).all()
+    d[0] = -0.1
+    with pytest.raises(ValueError, match=r"^d: 1 of 500"):
+        fit_likelihood_field(d, 2.0)

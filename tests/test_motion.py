@@ -86,6 +86,26 @@ def test_reversing_robot_gets_small_noise():
     assert np.mean(new[0]) == pytest.approx(-0.5 * math.cos(0.3), abs=0.01)
 
 
+@pytest.mark.parametrize("turn", [1.5, 3.0, math.pi, -2.5])
+def test_a_turn_on_the_spot_gets_the_noise_of_its_turn_however_large(turn):
+    # Below 1 cm of travel rot1 = 0 and rot2 is the whole turn. AMCL's fold min(|rot|, |rot -+ pi|), meant for a
+    # step backwards, folded that turn too: a half turn on the spot (a scan gap, an odometry stall) got no noise at
+    # all (sigma_rot2 7e-16 for pi, 0.03 for 3 rad, against 0.70 and 0.67 for sqrt(alpha1) |turn|, Table 5.6).
+    cfg = motion_cfg()
+    a1, a4 = 0.1, 0.03
+    r1, t, r2 = odometry_deltas((0.0, 0.0, 0.2), (0.0, 0.0, 0.2 + turn))
+    assert r1 == 0.0 and t == 0.0 and abs(r2) == pytest.approx(abs(turn), abs=1e-12)
+    s1, st, s2 = noise_sigmas(r1, t, r2, cfg)
+    assert s1 == 0.0 and s2 == pytest.approx(math.sqrt(a1) * abs(turn), rel=1e-9)
+    assert st == pytest.approx(math.sqrt(a4) * abs(turn), rel=1e-9)
+    rng = np.random.default_rng(3)  # and the sampled headings spread by it (20,000 draws: the std within 2 %)
+    p = np.zeros((3, 20_000))
+    p[2] = 0.2
+    new, _, _ = OdometryMotionModel(cfg).sample(p, (0.0, 0.0, 0.2), (0.0, 0.0, 0.2 + turn), rng)
+    spread = np.std(wrap_np(new[2] - 0.2 - r2))
+    assert spread == pytest.approx(math.sqrt(a1) * abs(turn), rel=0.02)
+
+
 # ---------------------------------------------------------------- kernels against NumPy
 
 @pytest.mark.parametrize("form", ["variance", "std"])

@@ -264,6 +264,23 @@ def test_map_based_density():
     assert np.all(motion_model_with_map(hyp[:, :2], u, xp, grid, c, allowed=np.zeros_like(mask)) == 0.0)
     pv = motion_model_with_map(hyp, (0.5, 0.0, 1.0), xp, grid, cfg("velocity"))
     assert pv.sum() == pytest.approx(1.0) and pv[1] == 0.0
+    # normalize=False: the seed's algorithm literally, p(x | u, x') p(x | m) with p(x | m) the free indicator: each
+    # hypothesis' own value, whatever the others (normalised, one hypothesis alone was 1 wherever it lay)
+    raw = motion_model_with_map(hyp, u, xp, grid, c, normalize=False)
+    np.testing.assert_allclose(raw[[0, 2]], free, rtol=1e-12)
+    assert raw[1] == 0.0 and raw[3] == 0.0 and raw[4] == 0.0
+    alone = motion_model_with_map(hyp[:, [2]], u, xp, grid, c, normalize=False)
+    assert alone[0] == pytest.approx(free[1], rel=1e-12)  # a density over poses, not 1
+
+
+def test_a_density_is_minus_infinity_outside_a_bounded_noise_never_nan():
+    # At x_new = x_prev the Jacobian vanishes (log 0 = -inf); where a bounded noise's density is 0 there too, the
+    # log density was -inf - (-inf) = NaN. A pose outside the noise's support has density 0 whatever the Jacobian.
+    tri = cfg(noise="triangular", alphas=(0.05, 0.02, 0.01, 0.001))  # sigma_trans 0.1 m: support 0.245 m
+    out = log_motion_model_odometry(np.zeros(3), (np.zeros(3), np.array([1.0, 0.0, 0.0])), np.zeros(3), tri)
+    assert out.tolist() == [-np.inf]
+    twelve = cfg("velocity", noise="normal_twelve")
+    assert log_motion_model_velocity(np.array([0.0, 0.0, 1.0]), (0.0, 1.0, 1.0), np.zeros(3), twelve) == -np.inf
 
 
 # ----------------------------------------------------------------------- odometry faults (FaultProposal)

@@ -155,3 +155,20 @@ def test_normal_twelve_density_is_irwin_hall():
 def test_unknown_kind_is_an_error():
     with pytest.raises(ValueError, match="motion.noise"):
         noise.standard_noise("gauss", np.random.default_rng(0), (3,))
+
+
+def test_a_std_that_is_not_positive_is_refused():
+    # std 0 gave NaN at every point, std -1 a negative density (prob_normal(0.5, -1) = -0.352) and a decreasing CDF
+    from mcl import noise
+
+    for f in (noise.prob_normal, noise.log_prob_normal, noise.prob_triangular, noise.prob_normal_twelve):
+        for bad in (0.0, -1.0, [0.5, 0.0]):
+            with pytest.raises(ValueError, match="sigma must be > 0"):
+                f(0.5, bad)
+    with pytest.raises(ValueError, match="sigma must be > 0"):
+        noise.cdf("normal", 0.5, -1.0)
+    rng = np.random.default_rng(0)
+    for f in (noise.sample_normal_exact, noise.sample_normal_twelve, noise.sample_triangular):
+        assert np.all(f(0.0, rng, 5) == 0.0)  # std 0: no noise
+        with pytest.raises(ValueError, match="sigma must be >= 0"):
+            f(-0.1, rng, 5)
