@@ -165,6 +165,17 @@ def top_k(values: np.ndarray, k: int) -> np.ndarray:
     return np.sort(np.concatenate([above, np.flatnonzero(values == kth)[: k - above.size]]))
 
 
+
+def _start_array(name: str, value, shape: tuple) -> np.ndarray:
+    """A start pose's mean, std or covariance as float64 of ``shape``; ValueError naming it otherwise, or when it is
+    not finite (a NaN start gave every estimate NaN, and ``init_gaussian(mean, 0.1)`` an IndexError)."""
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: expected finite numbers, got {a.tolist()}")
+    return a
+
 class ParticleFilter:
     """MCL over a (3, N) particle array with log weights."""
 
@@ -283,9 +294,12 @@ class ParticleFilter:
 
     def init_gaussian(self, mean, std) -> None:
         """Particles drawn from N(mean, diag(std^2)): tracking from a known pose."""
+        mean, std = _start_array("mean", mean, (3,)), _start_array("std", std, (3,))
+        if np.any(std < 0.0):
+            raise ValueError(f"std: expected stds >= 0, got {std.tolist()}")
         n = self.cfg.filter.particles
-        p = self.rng.standard_normal((3, n)) * np.asarray(std, dtype=np.float64)[:, None]
-        p += np.asarray(mean, dtype=np.float64)[:, None]
+        p = self.rng.standard_normal((3, n)) * std[:, None]
+        p += mean[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
         self._start_tracking()
@@ -315,12 +329,12 @@ class ParticleFilter:
     def init_gaussian_cov(self, mean, cov) -> None:
         """Particles drawn from N(mean, cov) with a full 3x3 covariance (x, y, theta), e.g. a ROS /initialpose:
         mean + S z with S S^T = cov (symmetric square root, so a singular cov is fine)."""
-        c = np.asarray(cov, dtype=np.float64)
+        mean, c = _start_array("mean", mean, (3,)), _start_array("cov", cov, (3, 3))
         c = 0.5 * (c + c.T)
         w, v = np.linalg.eigh(c)
         root = (v * np.sqrt(np.clip(w, 0.0, None))) @ v.T
         n = self.cfg.filter.particles
-        p = root @ self.rng.standard_normal((3, n)) + np.asarray(mean, dtype=np.float64)[:, None]
+        p = root @ self.rng.standard_normal((3, n)) + mean[:, None]
         p[2] = wrap_angle(p[2])
         self._set(np.ascontiguousarray(p))
         self._start_tracking()

@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from mcl.errors import DataError
+from mcl.parallel import check_out
 from mcl.yamlfile import finite_number, read_yaml
 
 __all__ = [
@@ -209,6 +210,8 @@ class LandmarkModel:
             raise ValueError(f"particles: expected shape (3, N), got {p.shape}")
         if out is None:
             out = np.empty(p.shape[1])
+        else:
+            check_out(out, (p.shape[1],))
         if prepared is None:
             out[:] = 0.0
             return out

@@ -90,8 +90,18 @@ class OccupancyGrid:
     @classmethod
     def from_occupancy(cls, occupancy, resolution: float, origin, path: str = "<memory>",
                        occupied_thresh: float = 0.65, free_thresh: float = 0.196) -> "OccupancyGrid":
-        """Build a grid in memory from an int8 (H, W) array whose row 0 is the bottom."""
-        occ = np.ascontiguousarray(np.asarray(occupancy, dtype=np.int8))
+        """Build a grid in memory from an (H, W) array of ROS occupancy values (-1 unknown, 0..100 the occupancy in
+        per cent, as a nav_msgs/OccupancyGrid) whose row 0 is the bottom; copied, so a later change of the caller's
+        array does not leave the cached fields stale. Any other value is a ValueError: a bool wall mask, a float
+        probability grid or an image's 0/254 pixels were cast to int8 as they came (walls free, 254 unknown)."""
+        a = np.asarray(occupancy)
+        if a.dtype == np.bool_ or not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.floating)):
+            raise ValueError(f"{path}: occupancy must hold numbers -1..100 (a ROS OccupancyGrid's), got dtype {a.dtype}"
+                             " (a wall mask: np.where(mask, 100, 0))")
+        if a.size and (not np.all(np.isfinite(a)) or a.min() < -1 or a.max() > 100 or np.any(a != np.round(a))):
+            raise ValueError(f"{path}: occupancy must hold whole numbers -1..100 (a ROS OccupancyGrid's), got "
+                             f"values in {a.min().item()!r}..{a.max().item()!r} (an image: load_map reads its map.yaml)")
+        occ = np.array(a, dtype=np.int8, order="C")  # a copy
         if occ.ndim != 2 or occ.shape[0] == 0 or occ.shape[1] == 0:
             raise ValueError(f"{path}: occupancy must be a non-empty 2D array, got shape {occ.shape}")
         if not (math.isfinite(resolution) and resolution > 0):

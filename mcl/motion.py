@@ -62,6 +62,7 @@ import numpy as np
 from mcl.kernels import motion as _k
 from mcl.maps import byte_mask
 from mcl.noise import log_density, standard_noise
+from mcl.parallel import check_out
 
 ROT1_MIN_TRANS = 0.01  # m: below this translation rot1 is set to 0 (AMCL)
 
@@ -78,8 +79,11 @@ def odometry_deltas(odom_prev, odom_now) -> tuple[float, float, float]:
     rot2 = (theta_now - theta_prev) - rot1, angles wrapped into (-pi, pi].
     When trans < 1 cm, rot1 = 0 and rot2 carries the whole turn (AMCL).
     """
-    x0, y0, t0 = (float(v) for v in odom_prev[:3])
-    x1, y1, t1 = (float(v) for v in odom_now[:3])
+    for name, pose in (("odom_prev", odom_prev), ("odom_now", odom_now)):
+        if np.shape(pose) != (3,):  # a log's odometry row (t, x, y, theta, v, w) read t as x
+            raise ValueError(f"{name}: expected an odometry pose (x, y, theta), got shape {np.shape(pose)}")
+    x0, y0, t0 = (float(v) for v in odom_prev)
+    x1, y1, t1 = (float(v) for v in odom_now)
     dx, dy = x1 - x0, y1 - y0
     trans = math.hypot(dx, dy)
     rot1 = 0.0 if trans < ROT1_MIN_TRANS else angle_diff(math.atan2(dy, dx), t0)
@@ -791,9 +795,12 @@ def _particles_and_out(particles, out):
         raise ValueError(f"particles: expected shape (3, N), got {p.shape}")
     if out is None:
         out = np.empty_like(p)
-    elif out is p or np.shares_memory(out, p):
-        raise ValueError("out must not share memory with particles")
+    else:
+        check_out(out, p.shape)
+        if out is p or np.shares_memory(out, p):
+            raise ValueError("out must not share memory with particles")
     return p, out
+
 
 
 def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, allowed, grid, out, scales=None,

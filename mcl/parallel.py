@@ -15,6 +15,7 @@ A seed gives the same trajectory whatever the thread count; on another machine i
 from __future__ import annotations
 
 import numba
+import numpy as np
 
 PARALLEL_MIN_WORK = 4_000_000  # particle-beam steps (likelihood field: ~10 ms serial on this machine)
 
@@ -59,3 +60,12 @@ def numeric_platform() -> dict:
         "llvmlite": llvmlite.__version__,
         "numpy_simd": [t for t in getattr(umath, "__cpu_dispatch__", []) if on.get(t)],
     }
+
+
+def check_out(out, shape) -> None:
+    """ValueError unless ``out`` is a writeable C-contiguous float64 array of ``shape``: the kernels write into it
+    unchecked (a buffer reused after KLD sampling changed N was written past its end: a segfault)."""
+    if not (isinstance(out, np.ndarray) and out.dtype == np.float64 and out.shape == tuple(shape)
+            and out.flags.c_contiguous and out.flags.writeable):
+        got = f"{out.dtype} {out.shape}" if isinstance(out, np.ndarray) else type(out).__name__
+        raise ValueError(f"out: expected a writeable C-contiguous float64 array of shape {tuple(shape)}, got {got}")

@@ -37,7 +37,7 @@ from mcl.kernels.raycast import cast_rays_serial, segments_blocked
 from mcl.kernels.segments import small_segments
 from mcl.estimate import compose
 from mcl.maps import byte_mask
-from mcl.parallel import choose
+from mcl.parallel import check_out, choose
 
 
 def no_return_range(range_max: float, max_range) -> float:
@@ -476,6 +476,8 @@ class LikelihoodField:
         e_cells = np.ascontiguousarray(e * self.inv_res)
         if out is None:
             out = np.empty(p.shape[1])
+        else:
+            check_out(out, (p.shape[1],))
         kernel = choose(likelihood_field_loglik, likelihood_field_loglik_serial, p.shape[1] * e_cells.shape[1])
         table = self.search_table() if searching else self.table
         kernel(p, e_cells, table, self.origin[0], self.origin[1], self.inv_res, self.offmap, self.exponent, out)
@@ -840,6 +842,8 @@ class BeamModel:
         ranges, angles, lp, zmax = observation
         if out is None:
             out = np.empty(p.shape[1])
+        else:
+            check_out(out, (p.shape[1],))
         ox, oy = self.origin
         work = p.shape[1] * ranges.shape[0]
         if self.table is not None:

@@ -242,3 +242,19 @@ def test_a_likelihood_field_with_z_hit_0_is_refused_unless_the_laser_is_off():
     assert load_config(None, ["sensor.likelihood_field.z_hit=0", "sensor.model=beam"]).sensor.model == "beam"
     assert not load_config(None, ["sensor.likelihood_field.z_hit=0", "sensor.use=false", "landmarks.use=true",
                                   "landmarks.map=m.yaml"]).sensor.use
+
+
+def test_replace_validates_as_a_config_file_does():
+    # mcl.config.replace was dataclasses.replace: alpha1=-1 failed three steps later ("math domain error"),
+    # particles=0 as a ZeroDivisionError, a misspelt resampling inside the first resample
+    from mcl.config import replace
+
+    cfg = load_config(None)
+    for section, kw, said in ((cfg.motion, {"alpha1": -1}, "motion.alpha1: -1.0 is out of range"),
+                              (cfg.filter, {"particles": 0}, "filter.particles: 0 is out of range"),
+                              (cfg.filter, {"particles": 1000.5}, "filter.particles: expected an integer"),
+                              (cfg.filter, {"resampling": "sistematic"}, "did you mean systematic"),
+                              (cfg, {"seed": -1}, "seed: -1 is out of range")):
+        with pytest.raises(ConfigError, match=re.escape(said)):
+            replace(section, **kw)
+    assert replace(cfg.motion, alpha1=0.2).alpha1 == 0.2 and replace(cfg, seed=5) == Config(seed=5)

@@ -521,3 +521,20 @@ def test_a_corridor_whose_laser_falls_silent_is_followed_through_the_gaps(tmp_pa
     assert jumps == 0 and err < 1.0
     err, jumps = max_error(0.0)
     assert jumps == 2 and err > 3.0
+
+
+def test_a_start_that_is_no_pose_is_refused_before_any_draw():
+    # init_gaussian([nan, 10, 0], ...) gave every estimate NaN without a word, init_gaussian(mean, 0.1) an
+    # IndexError; the random stream is untouched by a refused start
+    cfg = load_config(None, ["filter.particles=100", "filter.kld=false", "filter.recovery=false", "rerun.mode=off"])
+    pf = ParticleFilter(cfg, _grid())
+    state = pf.rng.bit_generator.state
+    for mean, std, said in (([np.nan, 1.0, 0.0], [0.1] * 3, "mean: expected finite numbers"),
+                            ([1.0, 1.0, 0.0], 0.1, r"std: expected shape \(3,\)"),
+                            ([1.0, 1.0], [0.1] * 3, r"mean: expected shape \(3,\)"),
+                            ([1.0, 1.0, 0.0], [0.1, -0.1, 0.1], "std: expected stds >= 0")):
+        with pytest.raises(ValueError, match=said):
+            pf.init_gaussian(mean, std)
+    with pytest.raises(ValueError, match=r"cov: expected shape \(3, 3\)"):
+        pf.init_gaussian_cov([1.0, 1.0, 0.0], np.eye(2))
+    assert pf.rng.bit_generator.state == state

@@ -753,3 +753,22 @@ def test_an_image_given_as_the_map_says_to_give_its_yaml(tmp_path, fmt, kind):
         load_map(image)
     assert str(e.value) == (f"{image}: a {kind} image, not a map: give the map_server YAML that names it (image:, "
                             "resolution:, origin:, ...)")
+
+
+def test_an_occupancy_that_is_no_ros_grid_is_refused_and_the_callers_array_is_copied():
+    # A bool wall mask gave 0 occupied cells, a uint8 image's 0/254 walls free and free space unknown (254 -> -2), a
+    # float probability grid 0 occupied: cast to int8 as they came. And the grid kept the caller's array, so a
+    # later change of it left the cached distance field stale.
+    from mcl.maps import OccupancyGrid
+
+    walls = np.zeros((20, 30), dtype=bool)
+    walls[0, :] = True
+    for bad, what in ((walls, "dtype bool"), (np.where(walls, 0, 254).astype(np.uint8), "0..254"),
+                      (np.where(walls, 0.9, 0.1), "0.1..0.9"), (np.full((20, 30), np.nan), "nan")):
+        with pytest.raises(ValueError, match=what):
+            OccupancyGrid.from_occupancy(bad, 0.1, (0.0, 0.0))
+    occ = np.where(walls, 100, 0).astype(np.int16)
+    g = OccupancyGrid.from_occupancy(occ, 0.1, (0.0, 0.0))
+    assert g.occupied.sum() == 30 and g.occupancy.dtype == np.int8
+    occ[5, 5] = 100
+    assert g.occupancy[5, 5] == 0  # a copy

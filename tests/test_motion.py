@@ -54,6 +54,14 @@ def test_odometry_deltas_forward_turn_and_in_place():
     assert r2 == pytest.approx(-6.0 + 2 * math.pi)  # wrapped through +-pi
 
 
+def test_an_odometry_pose_must_be_x_y_theta():
+    # a log's odometry row (t, x, y, theta, v, w) was read as its first three: t taken as x, without a word
+    with pytest.raises(ValueError, match=r"odom_prev: expected an odometry pose \(x, y, theta\), got shape \(6,\)"):
+        odometry_deltas((0.1, 1.0, 2.0, 0.0, 0.3, 0.0), (1.0, 2.0, 0.1))
+    with pytest.raises(ValueError, match=r"odom_now: .* got shape \(2,\)"):
+        odometry_deltas((1.0, 2.0, 0.1), (1.0, 2.0))
+
+
 def test_noise_sigmas_both_forms():
     cfg_v, cfg_s = motion_cfg("variance"), motion_cfg("std")
     a1, a2, a3, a4 = 0.1, 0.05, 0.2, 0.03
@@ -424,3 +432,16 @@ def test_a_filled_step_has_its_travel_widened_by_fill_spread(model):
         np.testing.assert_array_equal(filled[1], plain[1])
     cfg.fill_spread = 0.0
     np.testing.assert_array_equal(moved(True), plain)
+
+
+def test_an_out_buffer_of_another_shape_is_refused_not_written_past():
+    # mm.sample(P, u0, u1, rng, out=np.empty((3, 10))) for 20,000 particles wrote past the buffer: a segfault
+    model = OdometryMotionModel(motion_cfg())
+    p = random_particles(np.random.default_rng(0), 200)
+    u0, u1 = (0.0, 0.0, 0.0), (0.3, 0.0, 0.1)
+    for bad in (np.empty((3, 10)), np.empty((3, 200), dtype=np.float32), np.empty((200, 3)).T):
+        with pytest.raises(ValueError, match=r"^out: expected a writeable C-contiguous float64 array of shape \(3, 200\)"):
+            model.sample(p, u0, u1, np.random.default_rng(1), out=bad)
+    out = np.empty((3, 200))
+    new, ok, _ = model.sample(p, u0, u1, np.random.default_rng(1), out=out)
+    assert new is out and ok.all()

@@ -681,3 +681,18 @@ def test_a_run_says_when_a_map_drawn_solid_takes_the_depth_tolerance_off():
     assert _solid_map_note(cfg, thin) is None and _solid_map_note(cfg, solid_grid(0.1)) is None
     for key in ("interior_tolerance=0.05", "surface=face", "interior=zero"):
         assert _solid_map_note(load_config(default, [f"sensor.likelihood_field.{key}"]), solid) is None, key
+
+
+def test_an_out_buffer_of_another_shape_is_refused_not_written_past():
+    # A buffer reused after KLD sampling changed N: the kernel wrote N values into 3 (a segfault, or an array of
+    # shape (-4577948489428762624,) first). Now a ValueError naming out; the right buffer is filled.
+    lf = LikelihoodField(box_grid(), sensor_cfg())
+    p = np.zeros((3, 50))
+    p[0], p[1] = 1.0, 0.5
+    e = np.array([[1.0, 0.5], [0.0, 0.3]])
+    for bad in (np.empty(3), np.empty(50, dtype=np.float32), np.empty(100)[::2], np.empty((50, 1))):
+        with pytest.raises(ValueError, match=r"^out: expected a writeable C-contiguous float64 array of shape \(50,\)"):
+            lf.log_likelihood(p, e, out=bad)
+    good = np.empty(50)
+    assert lf.log_likelihood(p, e, out=good) is good
+    np.testing.assert_allclose(good, lf.log_likelihood(p, e))

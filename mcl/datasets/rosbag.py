@@ -757,7 +757,9 @@ def _grid_from_msg(path, topic, msg):
 
     info = msg.info
     w, h = int(info.width), int(info.height)
-    data = np.asarray(msg.data, dtype=np.int8)
+    # values off ROS's -1..100 (a publisher's -2 or 101..127) read as a map_server does: negative unknown, over 100
+    # occupied
+    data = np.clip(np.asarray(msg.data, dtype=np.int8), -1, 100)
     if w <= 0 or h <= 0 or data.size != w * h:
         raise DataError(f"{path}: {topic}: OccupancyGrid of {w} x {h} cells holds {data.size} values")
     res = f32(info.resolution)
