@@ -125,10 +125,12 @@ def _data_replaced(config_path, set_items, *, log=None, map_=None, truth=None, s
         with warnings.catch_warnings():  # the config as given, for its start alone (the run's load says the rest)
             warnings.simplefilter("ignore")
             try:
-                start = load_config(config_path, []).filter
+                own = load_config(config_path, [])
             except MclError:
-                start = None  # the run's load gives the error
-        if start is not None and start.initial_pose is not None and not start.global_localization:
+                own = None  # the run's load gives the error
+        # only a config with data of its own has a pose of that data (a file of filter settings alone keeps it)
+        if (own is not None and (own.log or own.bag) and own.filter.initial_pose is not None
+                and not own.filter.global_localization):
             out.append("filter.initial_pose=null")
     return out
 
@@ -558,7 +560,8 @@ def _add_convert(sub) -> None:
     p = sub.add_parser(
         "convert", help="a ROS bag to a CARMEN log, or a CARMEN log to a ROS bag (.bag, .db3, .mcap)",
         description="Convert between a ROS bag and a CARMEN log, keeping everything mcl uses: scan stamps, ranges, "
-        "beam geometry, maximum range, odometry (pose and velocities) at each scan, laser mounting pose. A log "
+        "beam geometry, maximum range, odometry (pose and velocities) at each scan, laser mounting pose (a log's ODOM "
+        "lines between scans are left out: a run on the bag cannot fit sensor.time_offset as one on the log can). A log "
         "becomes /scan (LaserScan), /odom (Odometry) and odom -> base_link on /tf (as a ROS robot records them: "
         "ROS AMCL and RViz need the /tf), base_link -> laser on /tf_static; a bag becomes ROBOTLASER1 + ODOM lines. "
         "Fused lasers are each kept, on their own mountings: a log's front and rear lasers (FLASER and RLASER, or "

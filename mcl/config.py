@@ -28,7 +28,7 @@ from typing import Any, Literal
 import yaml
 
 from mcl.errors import ConfigError
-from mcl.yamlfile import finite_number, read_yaml
+from mcl.yamlfile import finite_number, load_text, read_yaml
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
@@ -748,7 +748,7 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     if not key or any(not part for part in key.split(".")):
         raise ConfigError(f"--set {_printable(text)}: expected section.key=value")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else None
+        value = load_text(raw) if raw.strip() else None
     except yaml.YAMLError:
         value = raw
     return key.split("."), value

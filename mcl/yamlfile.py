@@ -46,6 +46,28 @@ class _Loader(SAFE_LOADER):
                 seen.add(key)
 
 
+# An integer with leading zeros is decimal, as YAML 1.2 and the command line read it: YAML 1.1 (PyYAML) read
+# `seed: 010` as octal 8 where `--seed 010` is 10, and refused `08` (neither octal nor a number). 0o, 0x, 0b keep
+# their bases.
+_LEADING_ZEROS = re.compile(r"^[-+]?0[0-9_]+$")
+
+
+def _construct_int(loader, node):
+    text = loader.construct_scalar(node)
+    if _LEADING_ZEROS.match(text):
+        return int(text.replace("_", ""), 10)
+    return yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
+
+
+_Loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+_Loader.add_implicit_resolver("tag:yaml.org,2002:int", _LEADING_ZEROS, list("-+0"))
+
+
+def load_text(text: str):
+    """A YAML document from text, read as ``read_yaml`` reads a file (a ``--set`` value)."""
+    return yaml.load(text, Loader=_Loader)
+
+
 def read_yaml(path: str | os.PathLike, error: type[MclError]):
     """The parsed document of a YAML file. Any problem raises ``error`` with one line naming
     the file (and the line of a syntax error or a duplicate key): unreadable, not UTF-8, invalid YAML, a key given

@@ -258,3 +258,14 @@ def test_replace_validates_as_a_config_file_does():
         with pytest.raises(ConfigError, match=re.escape(said)):
             replace(section, **kw)
     assert replace(cfg.motion, alpha1=0.2).alpha1 == 0.2 and replace(cfg, seed=5) == Config(seed=5)
+
+
+def test_an_integer_with_leading_zeros_is_decimal_everywhere(tmp_path):
+    # `--seed 010` ran seed 10, `--set seed=010` and a config's `seed: 010` seed 8 (YAML 1.1 octal), and `08` was
+    # refused: one spelling, two trajectories. Now decimal in all three, as YAML 1.2 reads it.
+    f = tmp_path / "c.yaml"
+    f.write_text("seed: 010\nfilter:\n  particles: 0800\n")
+    cfg = load_config(f, [])
+    assert cfg.seed == 10 and cfg.filter.particles == 800
+    assert load_config(None, ["seed=010"]).seed == 10 and load_config(None, ["seed=08"]).seed == 8
+    assert load_config(None, ["seed=0x10"]).seed == 16  # an explicit base keeps it
