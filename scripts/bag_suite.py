@@ -49,8 +49,10 @@ def main(argv=None) -> int:
             convert(files["log"], bag, laser=d.laser or d.set.get("laser") or "auto")
             print(f"{bag}", file=sys.stderr)
         pose = d.initial_pose or _truth_start(str(files["truth"]))
-        entries.append({"name": d.name, "map": str(files["map"]), "bag": str(bag.resolve()),
-                        "truth": str(files["truth"]), "initial_pose": [float(v) for v in pose],
+        # absolute paths: the suite is read from its own folder (a relative --cache gave map and truth paths that
+        # did not resolve from there)
+        entries.append({"name": d.name, "map": str(Path(files["map"]).resolve()), "bag": str(bag.resolve()),
+                        "truth": str(Path(files["truth"]).resolve()), "initial_pose": [float(v) for v in pose],
                         "lost_m": float(d.lost_m), "modes": ["tracking"]})
         own = {k: v for k, v in d.set.items() if k != "laser"}  # a hunt's range cut, say; the laser is the bag's
         if own:

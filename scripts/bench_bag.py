@@ -1,11 +1,12 @@
 """Bag replay speed and memory (issue 9): a 10-minute recording with a 40 Hz laser, as CARMEN and as bags.
 
 A synthetic world (mcl.simulate) driven for DURATION s with odometry and a 1081-beam, 270-degree laser at 40 Hz
-(24,000 scans) is written as a CARMEN log and converted to MCAP, ROS 1 and db3 bags. Each is then, in a fresh
-process (so the peak resident memory is its own):
+(24,000 scans) is written as a CARMEN log and converted to MCAP, ROS 1 and db3 bags. In a fresh process each (so
+the peak resident memory is its own):
 
-* read: every scan record produced (CARMEN: read_carmen; bag: open_bag + the scan stream);
-* run: ``mcl run`` end to end (300 particles, rerun off, one thread) on the world's map.
+* read, each of the four: every scan record produced (CARMEN: read_carmen; bag: open_bag + the scan stream);
+* run, the CARMEN log and the MCAP bag: ``mcl run`` end to end (300 particles, rerun off, one thread) on the world's
+  map.
 
 Prints wall time and peak RSS of each, and whether the runs' trajectories are byte-identical.
 

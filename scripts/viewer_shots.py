@@ -4,7 +4,7 @@
     python scripts/viewer_shots.py runs/x/recording.rrd --steps 0,2,252,349 --out shots/
 
 Writes ``full_stepNNNN.png`` (the whole window, 1920 x 1080), ``world_stepNNNN.png`` (the World view alone) and
-``robot_stepNNNN.png`` (the view that follows the estimate) per
+``robot_stepNNNN.png`` (the view that follows the estimate; the blueprint has it on maps over 60 m across only) per
 step, and one PNG per time-series panel at the last step. The recording is loaded, then paused at each step (the
 blueprint plays on load, and a headless viewer plays about 6x faster than real time). Rerun 0.41's
 ``rerun.experimental.ViewerClient``; about 1 s a screenshot with the software renderer.

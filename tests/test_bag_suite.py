@@ -42,3 +42,14 @@ def test_a_bag_keeps_its_datasets_laser_and_set_keys(tmp_path):
     front, hunted, both = load_suite(out / "suite.yaml").datasets
     assert front.set == {"sensor.range_max": 8.0} and hunted.set == {} and both.set == {}
     assert [len(_scan_topics(d.bag)) for d in (front, hunted, both)] == [1, 1, 2]
+
+
+def test_a_relative_cache_gives_a_suite_that_reads_from_its_own_folder(tmp_path, monkeypatch):
+    # `bag_suite.py S bags --cache ev/worlds`: the bag's path was made absolute, the map's and truth's not, and the
+    # suite (read from bags/) named files that are not there
+    src = tmp_path / "sim.yaml"
+    src.write_text(yaml.safe_dump({"name": "sim", "datasets": [{"name": "w", "simulate": {"seed": 7, "duration": 5}}]}))
+    monkeypatch.chdir(tmp_path)
+    assert main([str(src), "bags", "--cache", "ev/worlds"]) == 0
+    (d,) = load_suite(tmp_path / "bags" / "suite.yaml").datasets
+    assert Path(d.map).is_absolute() and Path(d.map).is_file() and Path(d.truth).is_file() and Path(d.bag).is_file()
