@@ -35,11 +35,14 @@ def test_a_slip_doubts_the_turn_alone_and_in_proportion_to_it():
     # a straight step has no turn to doubt: the plain model
     s = noise_sigmas(0.0, 0.07, 0.0, cfg)
     assert [float(v) for v in slip.scales(s, turned=(0.0, 0.0, 0.0))] == [1.0, 1.0, 1.0]
-    # never wider than fault_scale times the model's: a 3 rad turn on the spot
+    # never wider than fault_scale times the model's: a 3 rad turn on the spot, doubted at 5 times its turn (its own
+    # std is sqrt(alpha1) 3 = 0.67 rad: 1.5 times the turn is 6.7 of it, under the cap)
     s = noise_sigmas(0.0, 0.0, 3.0, cfg)
-    assert float(slip.scales(s, turned=(0.0, 0.0, 3.0))[2]) == 10.0
-    # a reversing robot's rot1 near pi turned by its difference from pi, as its noise (OdometryMotionModel._turned)
-    assert OdometryMotionModel._turned((math.pi - 0.1, 0.07, 0.1)) == pytest.approx((0.1, 0.0, 0.1))
+    assert float(slip.scales(s, turned=(0.0, 0.0, 3.0))[2]) == pytest.approx(1.5 * 3.0 / s[2])
+    assert float(FaultProposal(1e-3, 0.05, 10.0, turn_rel=5.0).scales(s, turned=(0.0, 0.0, 3.0))[2]) == 10.0
+    # a reversing robot's rot1 near pi turned by its difference from pi, as its noise (OdometryMotionModel._turned):
+    # 0.07 m back, turning 0.1 rad, then 0.2 rad more (rot2 = -(pi - 0.2) as read)
+    assert OdometryMotionModel._turned((math.pi - 0.1, 0.07, -(math.pi - 0.2))) == pytest.approx((0.1, 0.0, 0.2))
     # a density (no step's turn given) is the plain model's
     assert [float(v) for v in slip.scales(s)] == [1.0, 1.0, 1.0]
 
