@@ -910,8 +910,8 @@ def replace(cfg: Any, **changes: Any) -> Any:
     (ConfigError naming the key): unchecked, ``alpha1=-1`` failed three steps later as "math domain error",
     ``particles=0`` as a ZeroDivisionError. A whole ``Config`` gets the checks across keys too."""
     new = dataclasses.replace(cfg, **changes)
-    prefix = next((f"{f.name}." for f in dataclasses.fields(Config) if typing.get_type_hints(Config)[f.name]
-                   is type(cfg)), "")
+    hints = typing.get_type_hints(Config)
+    prefix = next((f"{name}." for name, tp in hints.items() if tp is type(cfg)), "")
     built = _build(type(new), to_dict(new), prefix)
     if isinstance(built, Config):
         _cross_checks(built)

@@ -802,7 +802,6 @@ def _particles_and_out(particles, out):
     return p, out
 
 
-
 def _sample_with_map(move, move_map, n, noise, idx_all, rng, kind, max_tries, allowed, grid, out, scales=None,
                      fallback=None):
     """Map-based sampling (seed 5.5) shared by the models: move all, then redraw the rejected.

@@ -258,10 +258,9 @@ class Truth:
         t0, t1 = self.t[i - 1], self.t[i]
         if not 0.0 < t1 - t0 <= 1.5 * self.spacing:
             return None
-        a, b = self.poses[:, i - 1], self.poses[:, i]
-        f = (t - t0) / (t1 - t0)
-        return np.array([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]),
-                         float(wrap_angle(a[2] + f * float(wrap_angle(b[2] - a[2]))))])
+        from mcl.evaluate import interpolate_poses
+
+        return interpolate_poses(self.t[i - 1:i + 1], self.poses[:, i - 1:i + 1], np.array([t]))[:, 0]
 
 
 @contextmanager

@@ -1149,11 +1149,15 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
 
     check_writable_folder(out, f"--out {out}")
     check_eval_out_dir(out)
-    if Path(cache).parent == Path(out):  # the default cache, OUT/worlds: "--cache /proc/x/worlds" named an option
-        make_dir(out, "--out")           # never typed for an --out that cannot be made
+    # the default cache, OUT/worlds, after --out: "--cache /proc/x/worlds" named an option never typed for an --out
+    # that cannot be made
+    inside = Path(cache).parent == Path(out)
+    if inside:
+        make_dir(out, "--out")
     if any(j.world is not None for j in job_list):
         make_dir(cache, "--cache")
-    make_dir(out, "--out")
+    if not inside:
+        make_dir(out, "--out")
     ctx = multiprocessing.get_context("spawn")  # fresh workers: no numba threads inherited from a fork
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init) if jobs > 1 else None
     results: dict[str, dict] = {}

@@ -42,6 +42,7 @@ import os
 import sys
 import time
 import uuid
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Mapping
 from urllib.parse import quote
@@ -605,20 +606,16 @@ class RerunLogger:
             if self.path is None:
                 raise ValueError("rerun mode 'save' needs a path for the .rrd file")
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            try:
+            with self._opening():
                 rec.save(self.path)
-            except RuntimeError as e:  # "Failed to create file: Is a directory": one error naming the recording
-                raise OSError(errno.EIO, f"cannot open the recording ({e})", str(self.path)) from None
         elif mode == "spawn":
             rr.spawn(connect=False, executable_path=viewer, recording=rec)
             sinks: list[Any] = [rr.GrpcSink()]
             if self.path is not None:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
                 sinks.append(rr.FileSink(self.path))
-            try:
+            with self._opening():
                 rec.set_sinks(*sinks)
-            except RuntimeError as e:
-                raise OSError(errno.EIO, f"cannot open the recording ({e})", str(self.path)) from None
         else:  # serve
             # Rerun's own ports (9876, 9090) when free, else free ones: a second run or an open viewer holds them,
             # and the server thread then died at the run's end (a traceback, no summary)
@@ -863,6 +860,15 @@ class RerunLogger:
         if missed is not None:  # a viewer gone before the run's end lost nothing: the .rrd has it all
             print(f"mcl: note: the Rerun viewer did not take the recording's end ({missed}); {self.path} holds all "
                   f"of it (rerun {self.path})", file=sys.stderr)
+
+    @contextmanager
+    def _opening(self):
+        """Rerun's failure to open the file sink ("Failed to create file: Is a directory") as one OSError naming the
+        recording, not a RuntimeError traceback."""
+        try:
+            yield
+        except RuntimeError as e:
+            raise OSError(errno.EIO, f"cannot open the recording ({e})", str(self.path)) from None
 
     def _cut_short(self, why: str) -> None:
         """The recording could not be written whole: leave it as ``recording.partial.rrd`` and raise OSError."""

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mcl.errors import DataError
+from mcl.estimate import wrap_angle
 
 __all__ = ["Scan", "Landmarks", "Log", "read_carmen", "interpolate_odometry", "flaser_angle_increment", "LASER_KINDS",
            "FRONT_REAR"]
@@ -269,9 +270,11 @@ def _steady_mounting(scans: list[Scan]) -> list[Scan]:
         offs = np.array([scans[k].laser_offset for k in idx])
         if len(idx) < 2 or np.all(offs == offs[0]):
             continue
-        mid = np.median(offs, axis=0)
-        dev = np.abs(offs - mid)
-        dev[:, 2] = np.abs(np.arctan2(np.sin(offs[:, 2] - mid[2]), np.cos(offs[:, 2] - mid[2])))
+        # headings about the first's (a laser looking back jitters across +-pi, where a plain median is ~0)
+        turn = wrap_angle(offs[:, 2] - offs[0, 2])
+        heading = offs[0, 2] + np.median(turn)
+        mid = np.array([*np.median(offs[:, :2], axis=0), heading if abs(heading) <= math.pi else wrap_angle(heading)])
+        dev = np.abs(np.column_stack([offs[:, :2] - mid[:2], wrap_angle(offs[:, 2] - mid[2])]))
         if dev.max() > MOUNT_JITTER:
             continue
         if out is scans:
