@@ -545,6 +545,9 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     colour, n, alpha = _read_image(img_path, where)
 
     occupancy = _classify(colour, n, alpha, mode, bool(negate), occ_th, free_th)
+    # map_saver's unknown grey read as free (below): counted as classified, an opaque alpha channel averaged in
+    grey = (int(np.count_nonzero((colour == UNKNOWN_GREY * n) & (occupancy == 0)))
+            if mode != "raw" and not negate else 0)
     # Image row 0 is the top; the grid's row 0 is the bottom.
     occupancy = np.ascontiguousarray(occupancy[::-1])
     occupancy, corner = axis_aligned(occupancy, resolution, (vals[0], vals[1]), yaw, label=where)
@@ -552,13 +555,18 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     if yaw != 0.0:
         notes = (f"{where}: origin yaw {yaw:g} rad: the map is turned about its lower-left corner, as ROS "
                  "map_server defines the origin (AMCL ignores the yaw)",)
-    grey = int(np.count_nonzero(colour == UNKNOWN_GREY * n)) if mode != "raw" and not negate else 0
-    if grey >= 0.01 * colour.size and (255 - UNKNOWN_GREY) / 255 < free_th:
+    if grey >= 0.01 * colour.size:
         # map_saver writes unknown cells grey 205 (p = 0.196); nav2's saves free_thresh 0.25 beside them, and
-        # map_server (AMCL's too) then reads them free: a global search spread over every unknown cell
-        notes += (f"{where}: {100.0 * grey / colour.size:.0f}% of the image is grey {UNKNOWN_GREY}, map_saver's "
-                  f"unknown, read as free under free_thresh {free_th:g} (as map_server reads it; nav2's map_saver "
-                  "writes 0.25): if those cells are unknown, set free_thresh: 0.196",)
+        # map_server (AMCL's too) then reads them free: a global search spread over every unknown cell. An opaque
+        # alpha channel, averaged in as trinary mode does, makes them 217.5 (p = 0.147): free under 0.196 too
+        if alpha is not None and mode == "trinary":
+            notes += (f"{where}: {100.0 * grey / colour.size:.0f}% of the image is grey {UNKNOWN_GREY}, map_saver's "
+                      "unknown, read as free: trinary mode averages the alpha channel in (as map_server does), so "
+                      "an opaque grey 205 is 217.5: if those cells are unknown, save the image without alpha",)
+        else:
+            notes += (f"{where}: {100.0 * grey / colour.size:.0f}% of the image is grey {UNKNOWN_GREY}, map_saver's "
+                      f"unknown, read as free under free_thresh {free_th:g} (as map_server reads it; nav2's "
+                      "map_saver writes 0.25): if those cells are unknown, set free_thresh: 0.196",)
     if mode == "scale":  # 1..99 are the pixels between the thresholds: neither free nor occupied (AMCL's reading)
         return OccupancyGrid(occupancy, resolution, corner, where, 0.99, 0.01, notes)
     return OccupancyGrid(occupancy, resolution, corner, where, occ_th, free_th, notes)

@@ -428,3 +428,32 @@ def test_eval_suite_says_when_jobs_outnumber_the_cores(tmp_path, capsys):
     assert main(["eval", "--suite", str(PROJECT_ROOT / "suites" / "smoke.yaml"), "--jobs", str(jobs), "--only",
                  "nosuch", "--out", str(tmp_path / "o")]) == 2
     assert f"mcl: warning: --jobs {jobs} on {os.cpu_count() or 1} cores: the runs share them" in capsys.readouterr().err
+
+
+def test_a_map_read_into_nothing_a_laser_can_match_is_refused_or_warned_of(world, tmp_path, capsys):
+    # ROS map_server reads both of these as they are, and so did mcl, without a word: the demo's image with
+    # `mode: raw` (0 is free there, so no cell is occupied) ran lost at 5.6 m ATE; the image inverted (negate the wrong
+    # way round: the walls free, the floor occupied) at 9.5 m. The first is one error line before anything is written;
+    # the second a warning (a floor plan's black outside also has more occupied cells than free, but an open floor).
+    from PIL import Image
+
+    text = (world / "map.yaml").read_text()
+    raw = tmp_path / "raw.yaml"
+    raw.write_text(text.replace("map.pgm", str(world / "map.pgm")) + "mode: raw\n")
+    out = tmp_path / "out"
+    assert main(["run", "--map", str(raw), "--log", str(world / "log.clf"), "--out", str(out), "--rerun", "off",
+                 "--no-progress", "--particles", "500"]) == 2
+    assert (f"{raw}: no occupied cell (" in (err := _one_error(capsys))
+            and "nothing for the laser to match (check mode, negate and occupied_thresh" in err)
+    assert not out.exists()
+    pixels = np.asarray(Image.open(world / "map.pgm"))
+    Image.fromarray((255 - pixels).astype(np.uint8)).save(tmp_path / "inverted.pgm")
+    inverted = tmp_path / "inverted.yaml"
+    inverted.write_text(text.replace("map.pgm", "inverted.pgm"))
+    for yaml_path, warned in ((inverted, True), (world / "map.yaml", False)):
+        assert main(["run", "--map", str(yaml_path), "--log", str(world / "log.clf"), "--out", str(tmp_path / "o"),
+                     "--rerun", "off", "--no-progress", "--particles", "500"]) == 0
+        said = [ln for ln in capsys.readouterr().err.splitlines() if "the free space is thin strips" in ln]
+        assert len(said) == int(warned), said
+        if warned:
+            assert said[0].startswith(f"mcl: warning: {inverted}: ") and "walls read as free? (negate" in said[0]

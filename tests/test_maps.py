@@ -744,6 +744,25 @@ def test_map_savers_unknown_grey_read_as_free_is_noted(tmp_path, free, noted):
          "0.196"] if noted else [])
 
 
+def test_an_opaque_alpha_channels_unknown_grey_read_as_free_is_noted(tmp_path):
+    # An RGBA PNG (GIMP, a web tool) of map_saver's grey 205, opaque: trinary mode averages the alpha in (217.5, p =
+    # 0.147), so under the default free_thresh 0.196 every unknown cell is free, as map_server reads it; the note's
+    # test looked at 205 alone and said nothing. A transparent 205 (153.75) is unknown and is not noted.
+    pixels = np.full((20, 20, 4), 205, dtype=np.uint8)
+    pixels[..., 3] = 255
+    pixels[5:15, 5:15, :3] = 254
+    grid = load_map(write_map(tmp_path, pixels, fmt="png"))
+    assert int(np.count_nonzero(grid.unknown)) == 0
+    assert [n for n in grid.notes if "grey 205" in n] == [
+        f"{tmp_path / 'm.yaml'}: 75% of the image is grey 205, map_saver's unknown, read as free: trinary mode "
+        "averages the alpha channel in (as map_server does), so an opaque grey 205 is 217.5: if those cells are "
+        "unknown, save the image without alpha"]
+    pixels[..., 3] = 0
+    pixels[5:15, 5:15, 3] = 255
+    grid = load_map(write_map(tmp_path, pixels, fmt="png", name="t"))
+    assert int(np.count_nonzero(grid.unknown)) == 300 and not [n for n in grid.notes if "grey 205" in n]
+
+
 @pytest.mark.parametrize("fmt,kind", [("pgm", "PGM"), ("p2", "PGM"), ("png", "PNG")])
 def test_an_image_given_as_the_map_says_to_give_its_yaml(tmp_path, fmt, kind):
     # --map map.pgm said "not a UTF-8 text file" (a P2 image: "invalid YAML" at its third line)

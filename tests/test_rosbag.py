@@ -1671,6 +1671,26 @@ def test_corrupt_bag(scans, tmp_path, capsys, kind):
     _fails(capsys, tmp_path, bag, match="truncated or corrupt")
 
 
+def test_an_mcap_of_ros1_messages_is_named_not_called_corrupt(tmp_path, capsys):
+    # `mcap convert in.bag out.mcap` (Foxglove's advice) writes profile ros1, which rosbags does not read: it was
+    # reported as "truncated or corrupt?". The smallest such file: magic, a Header of profile ros1, an empty
+    # DataEnd, a Footer, magic.
+    import struct
+
+    def record(op, body):
+        return bytes([op]) + struct.pack("<Q", len(body)) + body
+
+    def text(x):
+        return struct.pack("<I", len(x)) + x.encode()
+
+    magic = b"\x89MCAP0\r\n"
+    bag = tmp_path / "converted.mcap"
+    bag.write_bytes(magic + record(0x01, text("ros1") + text("test")) + record(0x0F, struct.pack("<I", 0))
+                    + record(0x02, struct.pack("<QQI", 0, 0, 0)) + magic)
+    err = _fails(capsys, tmp_path, bag, match="an MCAP file of ROS 1 messages (profile ros1")
+    assert "give the .bag itself" in err and "corrupt" not in err
+
+
 def test_bag_without_map_needs_map(scans, tmp_path, capsys):
     bag = tmp_path / "nomap.mcap"
     write_scans(bag, scans)
@@ -1766,6 +1786,43 @@ def test_an_initial_pose_given_after_the_robot_moved_is_carried_back_to_the_firs
     assert any("/initialpose: stamped" in n and "carried back" in n for n in src.notes), src.notes
 
 
+def test_a_zero_stamped_initial_pose_in_a_simulators_bag_is_timed_on_the_scans_clock(world, scans, tmp_path):
+    # A simulator's bag (`ros2 bag record` without --use-sim-time): header stamps from 0 on the simulated clock,
+    # record times on the wall clock. `ros2 topic pub /initialpose` sends stamp 0, and its record time was taken as its
+    # stamp: 1.7e9 s "after the first scan", carried back through the odometry clamped at its end (a start 9.8 m
+    # off, or off the map). Its record time is now moved onto the scans' clock by their lag, and carried back as a
+    # stamped one is (the same bound as the test above). A pose stamped on another clock than the odometry's is
+    # taken at the first scan, with a warning.
+    wall = 1.7e9
+    t_ref, ref = read_tum(world / "truth.tum")
+    k = 30
+    at = np.array([np.interp(scans[k].t, t_ref, ref[i]) for i in range(3)])
+    first = ref[:, np.argmin(np.abs(t_ref - scans[0].t))]
+    assert math.hypot(*(at[:2] - first[:2])) > 1.0
+    for stamp, name in ((0.0, "zero"), (scans[k].t + wall, "wall")):
+        bag = tmp_path / f"sim-{name}.mcap"
+        with BagOut(bag) as b:
+            for i, s in enumerate(scans):
+                _odom(b, types.SimpleNamespace(t=s.t + wall, odom=s.odom), stamp=s.t)
+                _laser(b, "/scan", s, t=s.t + wall, stamp=s.t)
+                if i == k:
+                    cov = b.msg("geometry_msgs/msg/PoseWithCovariance", pose=b.pose(*at),
+                                covariance=np.eye(6).ravel() * 0.01)
+                    b.write("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", s.t + wall,
+                            b.msg("geometry_msgs/msg/PoseWithCovarianceStamped", header=b.header(stamp, "map"),
+                                  pose=cov))
+        src = open_bag(bag)
+        got = src.initial_pose[0]
+        if name == "zero":
+            assert math.hypot(got[0] - first[0], got[1] - first[1]) < 0.3
+            assert abs(math.remainder(got[2] - first[2], 2 * math.pi)) < 0.2
+            assert any("/initialpose: stamped" in n and "carried back" in n for n in src.notes), src.notes
+        else:
+            np.testing.assert_allclose(got, at)
+            assert any("/initialpose: stamped" in w and "outside the odometry's" in w and "another clock" in w
+                       for w in src.warnings), src.warnings
+
+
 def test_a_truth_topic_in_another_frame_is_warned_about_and_the_summary_names_the_topic(world, scans, tmp_path):
     # `--truth-topic /odom` scored the run against the odometry's frame (17 m) without a word, and summary.json said
     # "truth": null for a run scored against a topic. Now a reference in a frame other than the map's is a warning,
@@ -1819,3 +1876,23 @@ def test_write_bag_says_when_the_input_holds_a_localizers_map_to_odom_already(wo
                          "estimate.bag, RViz receives two parents of odom_combined and shows each in turn"]
     else:
         assert notes == []
+
+
+def test_the_same_odometry_on_odom_and_tf_with_a_repeated_stamp_is_not_called_an_ekfs():
+    # One message stamped 0.5 s early lands on an earlier one's stamp, on /odom and on /tf alike. Interpolating /tf's
+    # link at that stamp gives one of the two poses, and the other topic row was 0.24 m from it: a note said /tf's
+    # link "(an EKF's?) differs from /odom", and an estimate bag's map -> odom would have been computed from /tf.
+    # Each row is now compared with the nearest pose /tf holds at its stamp. A link that really differs still does.
+    from mcl.datasets.rosbag import _tf_beside
+
+    t = 0.1 * np.arange(20)
+    t[10] = t[5]  # the early stamp
+    rows = np.column_stack([t, 0.05 * np.arange(20), np.zeros(20), 0.01 * np.arange(20), np.zeros(20), np.zeros(20),
+                            100.0 + 0.1 * np.arange(20)])
+    odometry = rows[np.argsort(rows[:, 0], kind="stable"), :6]
+    assert np.ptp(rows[[5, 10], 1]) > 0.2
+    assert _tf_beside([tuple(r) for r in rows], odometry, "odom -> base_link", "b.bag") is None
+    drifted = rows.copy()
+    drifted[:, 1] += 0.002 * np.arange(20) ** 2  # an EKF's link drifting off the wheels' (up to 0.72 m)
+    got = _tf_beside([tuple(r) for r in drifted], odometry, "odom -> base_link", "b.bag")
+    assert got is not None and got[1] == pytest.approx(0.722, abs=1e-9)

@@ -73,6 +73,7 @@ SCAN_TYPES = (LASER, ECHOES, CLOUD)
 ODOM = "nav_msgs/msg/Odometry"
 GRID = "nav_msgs/msg/OccupancyGrid"
 PWCS = "geometry_msgs/msg/PoseWithCovarianceStamped"
+ODOM_SPAN_SLACK = 1.0  # s: an /initialpose stamped farther outside the odometry's span is on another clock
 POSE = "geometry_msgs/msg/PoseStamped"
 TF = "tf2_msgs/msg/TFMessage"
 # ROS 1 before Hydro (2013) published transforms as tf/tfMessage: the same fields (TransformStamped[] transforms)
@@ -200,8 +201,19 @@ def _tf_beside(rows: list | None, odometry: np.ndarray, what: str, path) -> tupl
     if not inside.any():
         return None
     at = interpolate_odometry(link, t[inside])  # /tf's pose at the topic's stamps
-    off = float(np.max(np.hypot(at[0] - odometry[inside, 1], at[1] - odometry[inside, 2])))
-    turn = float(np.max(np.abs(wrap_angle(at[2] - odometry[inside, 3]))))
+    rows_in = odometry[inside]
+    dist = np.hypot(at[0] - rows_in[:, 1], at[1] - rows_in[:, 2])
+    dturn = np.abs(wrap_angle(at[2] - rows_in[:, 3]))
+    # a stamp /tf holds twice (a message stamped early onto an earlier one's): interpolation gives one of its poses;
+    # each topic row is compared with the nearest of them (the same message on both was called an EKF's)
+    lo = np.searchsorted(link[:, 0], rows_in[:, 0], side="left")
+    hi = np.searchsorted(link[:, 0], rows_in[:, 0], side="right")
+    for i in np.flatnonzero(hi - lo > 1):
+        same = link[lo[i]:hi[i]]
+        d = np.hypot(same[:, 1] - rows_in[i, 1], same[:, 2] - rows_in[i, 2])
+        j = int(np.argmin(d + np.abs(wrap_angle(same[:, 3] - rows_in[i, 3]))))
+        dist[i], dturn[i] = d[j], abs(float(wrap_angle(same[j, 3] - rows_in[i, 3])))
+    off, turn = float(np.max(dist)), float(np.max(dturn))
     return (link, off, turn) if off > 0.01 or turn > 0.01 else None
 
 
@@ -279,7 +291,11 @@ def _open_reader(path: Path):
         reader = AnyReader([_storage(path)], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
     except Exception as e:  # the library's readers raise many kinds for a damaged file
-        raise DataError(f"{path}: cannot read the bag (truncated or corrupt?): {_why(e)}") from None
+        why = _why(e)
+        if "profile is not ros2" in why.lower():  # `mcap convert` of a ROS 1 bag: rosbags reads ROS 2 MCAP only
+            raise DataError(f"{path}: an MCAP file of ROS 1 messages (profile ros1, as `mcap convert` writes a .bag): "
+                            "not read; give the .bag itself") from None
+        raise DataError(f"{path}: cannot read the bag (truncated or corrupt?): {why}") from None
     return reader
 
 
@@ -896,6 +912,7 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     scan_rec: list[float] = []  # each scan's record time, and its topic (for a topic whose stamps are all 0)
     scan_of: list[str] = []
     grid = initial = map_msg = None
+    init_t = init_rec = None
     init_frame = truth_frame = ""
     n_maps = 0
     truth_rows: list[tuple] = []
@@ -971,7 +988,10 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         if topic == init_topic and initial is None:
             initial = (np.array(_pose_msg(msg)), _cov3(msg.pose.covariance))
             init_frame = _frame(msg.header.frame_id)
-            init_t = stamp_seconds(msg.header.stamp) or rec  # RViz stamps it; a zero stamp: when it was recorded
+            # RViz stamps it; a zero stamp (``ros2 topic pub /initialpose``): when it was recorded, on the scans'
+            # clock (below)
+            init_t = stamp_seconds(msg.header.stamp) or None
+            init_rec = rec
         if topic == truth_topic:
             if not truth_rows:
                 truth_frame = _frame(msg.header.frame_id)
@@ -1021,6 +1041,11 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
     for t in sorted(unstamped):
         notes.append(f"{path}: {t}: {UNSTAMPED}")
     scan_t = [r if o in unstamped else v for v, r, o in zip(scan_t, scan_rec, scan_of)]
+    if initial is not None and init_t is None:
+        # a zero stamp: its record time moved onto the scans' stamps by their median lag behind them (a simulator's
+        # bag: header stamps from 0 on its clock, record times on the wall clock)
+        lag = [r - v for v, r in zip(scan_t, scan_rec) if v]
+        init_t = init_rec - (float(np.median(lag)) if lag else 0.0)
     if from_scans:
         odom_rows, other_rows = [], {}
     pick = None
@@ -1159,7 +1184,13 @@ def _first_pass(path: Path, reader, tp, fr, progress: bool | None = False, laser
         t_first = float(min(scan_t))
         a, b = odometry_at(odometry, init_t)[0], odometry_at(odometry, t_first)[0]
         d = compose(inverse(a), b)
-        if math.hypot(float(d[0]), float(d[1])) > 0.05 or abs(float(d[2])) > 0.05:
+        span = (float(odometry[0, 0]), float(odometry[-1, 0]))
+        if not span[0] - ODOM_SPAN_SLACK <= init_t <= span[1] + ODOM_SPAN_SLACK:
+            # on another clock than the odometry (a wall-clock stamp in a simulator's bag): where the robot was then
+            # is unknown, so it is taken as where the robot was at the first scan
+            warnings.append(f"{path}: {init_topic}: stamped {init_t:.3f} s, outside the odometry's "
+                            f"{span[0]:.3f}-{span[1]:.3f} s (another clock?): taken as the pose at the first scan")
+        elif math.hypot(float(d[0]), float(d[1])) > 0.05 or abs(float(d[2])) > 0.05:
             start = compose(initial[0], d)
             gap = init_t - t_first
             notes.append(f"{path}: {init_topic}: stamped {abs(gap):.1f} s {'after' if gap > 0 else 'before'} the "
