@@ -264,6 +264,9 @@ class LikelihoodFieldConfig:
     interior_cap: float | None = field(default=None, metadata=_rng(0.0))  # m
     # the same choice while the laser is tempered (a global search, or lost recovery spreading poses)
     search_interior: Literal["zero", "depth"] = "zero"
+    # ... but with zero, the parts of obstacles at least twice this wide (m) score their depth while searching: a floor
+    # plan's black outside, unknown space painted occupied (mcl.maps.OccupancyGrid.solid_regions); 0: off
+    search_solid: float = field(default=1.5, metadata=_rng(0.0))
     # where a wall's surface lies in its cells: centre (a SLAM map marks the cell its returns fall in: d from cell
     # centres) or face (a map drawn from a floor plan or CAD, or by mcl simulate: the surface is the cells' edge, d to
     # the faces on both sides; interior_tolerance null is 0 there)

@@ -198,6 +198,23 @@ class OccupancyGrid:
             d[y0:y1, x0:x1][mine] = metres
         return d
 
+    def solid_regions(self, depth: float) -> np.ndarray | None:
+        """(H, W) bool: the occupied cells of the obstacles' parts at least 2 ``depth`` m wide (the morphological
+        opening of the occupied cells by a disc of radius ``depth``: within ``depth`` of a cell that deep inside), or
+        None when no cell is that deep. Not a wall or furniture but a region the laser never sees into: a floor plan's
+        black outside, unknown space painted occupied. One transform of the map when there is such a cell."""
+        core = None
+        for y0, y1, x0, x1, mine, metres in self.surface_patches(0.0):
+            deep = metres >= depth
+            if deep.any():
+                if core is None:
+                    core = np.zeros(self.occupancy.shape, dtype=bool)
+                core[y0:y1, x0:x1][mine] = deep
+        if core is None:
+            return None
+        reach = depth / self.resolution + 1.0  # cells: the depth counts from the face cell (less one cell)
+        return (_edt_squared(~core) <= reach * reach) & self.occupied
+
     def surface_patches(self, tolerance: float = 0.0) -> list:
         """Where ``surface_distance(tolerance)`` differs from ``distance``: (y0, y1, x0, x1, mine, metres) per tile,
         ``mine`` the (y1 - y0, x1 - x0) bool mask of the tile's cells set to the float32 ``metres`` (cached per

@@ -452,12 +452,26 @@ class LikelihoodField:
 
     def search_table(self) -> np.ndarray:
         """The table scored while the filter searches or is lost: ``search_interior``'s field."""
-        interior = getattr(self.cfg, "interior", "zero")
-        search = getattr(self.cfg, "search_interior", interior)
-        if search == interior:
-            return self.table
         if self._search_table is None:
-            self._search_table = self._make_table(self._grid, search)
+            interior = getattr(self.cfg, "interior", "zero")
+            search = getattr(self.cfg, "search_interior", interior)
+            table = self.table if search == interior else self._make_table(self._grid, search)
+            solid = float(getattr(self.cfg, "search_solid", 0.0) or 0.0)
+            find = getattr(self._grid, "solid_regions", None)  # (tests' stand-in grids have none)
+            regions = find(solid) if find is not None and search == "zero" and solid > 0.0 else None
+            if regions is not None:
+                # the solid regions' cells as the depth field has them (its tolerance): a search's pose that lays
+                # returns metres deep into a floor plan's black outside is not a fit (AMCL's field: a perfect one)
+                table = table.copy() if table is self.table else table
+                _, patches = field_rows(self._grid, self.cfg, "depth")
+                for y0, y1, x0, x1, mine, metres in patches:
+                    inside = regions[y0:y1, x0:x1][mine]
+                    if inside.any():
+                        cells = table[y0:y1, x0:x1]
+                        values = cells[mine]
+                        values[inside] = point_log_likelihood(metres[inside], self.cfg)
+                        cells[mine] = values
+            self._search_table = table
         return self._search_table
 
     def log_likelihood(self, particles, endpoints, out=None, searching: bool = False) -> np.ndarray:
