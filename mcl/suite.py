@@ -387,7 +387,14 @@ def make_world(outdir: str, kw: dict) -> str:
     old = signal.signal(signal.SIGINT, signal.default_int_handler) if _IN_WORKER else None
     try:
         simulate(tmp, **kw)
-        os.replace(tmp, out)
+        try:
+            os.replace(tmp, out)
+        except OSError:
+            if not (out / "sim.yaml").is_file():
+                raise
+            # another evaluation sharing the --cache made the same world first (it is the same: one seed, one
+            # set of parameters): use theirs
+            shutil.rmtree(tmp, ignore_errors=True)
     except (MclError, RuntimeError) as e:
         shutil.rmtree(tmp, ignore_errors=True)
         raise MclError(f"world {out.name}: {e}") from None
@@ -1293,8 +1300,25 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     return 2 if errors else 0
 
 
+PER_RUN_KEYS = ("map", "log", "bag", "truth", "seed", "filter.initial_pose", "filter.global_localization")
+
+
+def check_sets(sets) -> None:
+    """ConfigError for a ``--set`` of a key the suite sets for each run: the dataset's files, the mode's start, the
+    seed (--seeds) and the recording (off). Taken as given, ``seed``, ``filter.initial_pose`` and ``rerun.mode`` were
+    ignored without a word, and ``truth`` scored every dataset against one file."""
+    for text in sets:
+        key = str(text).split("=", 1)[0].strip()
+        if key in PER_RUN_KEYS or key.split(".")[0] == "rerun":
+            how = {"seed": "give --seeds", "filter.initial_pose": "each mode starts its own way",
+                   "filter.global_localization": "each mode starts its own way"}.get(
+                key, "runs record nothing" if key.startswith("rerun") else "each dataset names its own")
+            raise ConfigError(f"--set {key}: the suite sets it for each run ({how})")
+
+
 def run_from_args(args) -> int:
     """``mcl eval --suite`` from the parsed command line (mcl.cli)."""
+    check_sets(args.set)
     seeds = seed_range(args.seeds)
     cores = os.cpu_count() or 1
     jobs = cores if args.jobs is None else args.jobs

@@ -31,6 +31,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import difflib
+import fnmatch
 import io
 import json
 import math
@@ -379,6 +380,23 @@ def _ray_call(fn, item):
     return fn(item)
 
 
+RAY_CONNECT_S = 5.0  # s: a --ray HOST:PORT that takes longer to accept a connection is not reached
+
+
+def _reachable(address: str) -> None:
+    """A --ray HOST:PORT (a cluster's head) that accepts no TCP connection within RAY_CONNECT_S: one error line at
+    once (ray.init retried for 14 minutes, printing 61 lines of its log). Other forms (ray://, auto) go to Ray."""
+    import socket
+
+    host, sep, port = address.rpartition(":")
+    if "://" in address or not sep or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host or "127.0.0.1", int(port)), timeout=RAY_CONNECT_S).close()
+    except OSError as e:
+        raise MclError(f"--ray {address}: cannot connect: nothing answers there ({e.strerror or e})") from None
+
+
 class _Ray:
     """Runs as Ray tasks (one CPU each) on the cluster at ``address`` (auto: the one this machine belongs to,
     else a local one started here). Datasets and the study folder are read and written by path: on a cluster
@@ -403,6 +421,7 @@ class _Ray:
                     except ConnectionError:
                         ray.init(**kw)
                 else:
+                    _reachable(self.address)
                     ray.init(address=self.address, **kw)
             except Exception as e:  # noqa: BLE001 - ray's own errors: one line
                 raise MclError(f"--ray {self.address}: cannot connect: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
@@ -531,7 +550,7 @@ def _open_study(study_dir: Path, s: Settings, create: bool):
     storage = JournalStorage(JournalFileBackend(str(journal)))
     directions = ["minimize"] * len(s.objectives)
     if create:
-        return optuna.create_study(storage=storage, study_name=STUDY_NAME, directions=directions, load_if_exists=True)
+        return optuna.create_study(storage=storage, study_name=STUDY_NAME, directions=directions, load_if_exists=False)
     try:
         return optuna.load_study(storage=storage, study_name=STUDY_NAME)
     except KeyError:  # an emptied journal.log (the advice of _check_journal, taken): no study to go on with
@@ -559,15 +578,19 @@ class Tuner:
         self.params = s.params()
         names = [d.name for d in self.suite.datasets]
         for opt, given in (("--only", s.only), ("--held-out", s.held_out)):
-            for n in given:
-                if n not in names:
+            for n in given:  # a name or a shell pattern ('corridor-*'), as mcl eval --only takes
+                if not any(fnmatch.fnmatchcase(name, n) for name in names):
                     hint = difflib.get_close_matches(n, names, n=1)
                     raise ConfigError(f"{opt}: no dataset {n!r} in {self.suite.path}"
                                       + (f" (did you mean {hint[0]}?)" if hint else ""))
-        datasets = [d for d in self.suite.datasets if not s.only or d.name in s.only]
+
+        def named(name: str, given: list[str]) -> bool:
+            return any(fnmatch.fnmatchcase(name, n) for n in given)
+
+        datasets = [d for d in self.suite.datasets if not s.only or named(d.name, s.only)]
         self.all = [d.name for d in datasets]
-        self.tuning = [d.name for d in datasets if not (d.held_out or d.name in s.held_out)]
-        self.held_out = [d.name for d in datasets if d.held_out or d.name in s.held_out]
+        self.tuning = [d.name for d in datasets if not (d.held_out or named(d.name, s.held_out))]
+        self.held_out = [d.name for d in datasets if d.held_out or named(d.name, s.held_out)]
         if not self.tuning:
             raise ConfigError(f"{self.suite.path}: every dataset is held_out: nothing left to tune on")
         self.modes = tuple(s.modes) if s.modes else None
@@ -1034,7 +1057,9 @@ def run_from_args(args) -> int:
     else:
         if args.suite is None or args.space is None:
             raise MclError("tune: expected SUITE.yaml --space SPACE.yaml (or --resume / --report DIR)")
-        from mcl.suite import load_suite, parse_modes
+        from mcl.suite import check_sets, load_suite, parse_modes
+
+        check_sets(args.set)
 
         seeds = seed_range(args.seeds or "1")
         params = load_space(args.space)
@@ -1050,6 +1075,7 @@ def run_from_args(args) -> int:
         if (study_dir / STATE_FILE).exists():
             raise MclError(f"--study {study_dir}: a study is there already: --resume {study_dir} goes on with it "
                            "(or give another --study)")
+        _check_study_dir(study_dir)
         if args.config is not None and not Path(args.config).is_file():
             raise ConfigError(f"--config: no such file {args.config}")
         s = Settings(suite=str(Path(args.suite).resolve()),
@@ -1063,31 +1089,64 @@ def run_from_args(args) -> int:
                      cache=str(Path(args.cache).resolve() if args.cache else (study_dir / "worlds").resolve()),
                      held_out=_names(args.held_out), only=_names(args.only))
         tuner = Tuner(study_dir, s)
-        if not tuner.plan({}, study_dir / "trials" / "base", tuner.tuning):  # the base config checks too
+        jobs = tuner.plan({}, study_dir / "trials" / "base", tuner.tuning)  # the base config checks too
+        if not jobs:
             raise ConfigError(f"{tuner.suite.path}: no run to tune on (modes {args.modes} not in any tuned dataset)")
+        if modes:
+            missing = [m for m in modes if m not in {j.mode for j in jobs}]
+            if missing:  # as mcl eval says it
+                echo(f"mcl: note: --modes {','.join(missing)}: not run (no tuned dataset names it)", file=sys.stderr)
         s.fingerprint = fingerprint(s)
-        make_dir(study_dir, "--study")  # first: a --study that cannot be made is said as --study, not as its cache
-        if any(d.simulate is not None for d in tuner.suite.datasets):
-            make_dir(Path(s.cache), "--cache")
-        atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")
-        _open_study(study_dir, s, create=True)
     tuner = Tuner(study_dir, s)
     progress = False if args.no_progress else None
-    interrupted = False
+    interrupted = cut = False
     with _executor(args.jobs, args.ray) as executor:
+        if not existing:  # made once the executor is up: a --ray that fails leaves no empty study behind
+            make_dir(study_dir, "--study")  # first: a --study that cannot be made is said as --study
+            if any(d.simulate is not None for d in tuner.suite.datasets):
+                make_dir(Path(s.cache), "--cache")
+            atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")
+            _open_study(study_dir, s, create=True)
         tuner.make_worlds(executor, echo)
-        if not args.report:
-            from mcl.suite import TermAsInterrupt
+        from mcl.suite import TermAsInterrupt
 
-            try:
-                with TermAsInterrupt():  # SIGTERM (kill, timeout, a batch scheduler) stops the study as Ctrl-C does
-                    optimise(tuner, trials=s.trials, executor=executor, progress=progress, echo=echo)
-            except KeyboardInterrupt:
-                interrupted = True
-        write_outputs(tuner, executor, heldout=not interrupted, echo=echo)
+        try:
+            with TermAsInterrupt():  # SIGTERM (kill, timeout, a batch scheduler) stops the study as Ctrl-C does
+                if not args.report:
+                    try:
+                        optimise(tuner, trials=s.trials, executor=executor, progress=progress, echo=echo)
+                    except KeyboardInterrupt:
+                        interrupted = True
+                write_outputs(tuner, executor, heldout=not interrupted, echo=echo)
+        except KeyboardInterrupt:  # the held-out runs, plots, best.yaml: cut, and said
+            cut = True
+    study = _open_study(study_dir, s, create=False)
+    n = sum(t.state.is_finished() for t in study.get_trials(deepcopy=False))
+    if cut:
+        echo(f"interrupted while writing the study's outputs (held-out runs, best.yaml, summary.txt): mcl tune "
+             f"--report {study_dir} writes them again" + ("" if interrupted or n >= s.trials else
+                                                            f"; --resume {study_dir} goes on with the trials"))
+        return 130
     if interrupted:
-        study = _open_study(study_dir, s, create=False)
-        n = sum(t.state.is_finished() for t in study.get_trials(deepcopy=False))
         echo(f"interrupted after {n} trials: mcl tune --resume {study_dir} goes on where it stopped")
         return 130
+    if best_trial(study, s) is None or all(t.user_attrs.get("failed_runs", 0) >= t.user_attrs.get("runs", 1) > 0
+                                           for t in _complete(study)):
+        raise MclError(f"--study {study_dir}: every trial failed (trials.csv's error column says why)")
     return 0
+
+
+def _check_study_dir(study_dir: Path) -> None:
+    """A --study folder that holds files a study did not write (a user's own best.yaml or trials.csv, which the
+    study would replace), or a study's journal without its study.json (appended to, it mixed two studies' trials):
+    one error line before anything is written."""
+    if not study_dir.is_dir():
+        return
+    if (study_dir / "journal.log").exists():
+        raise MclError(f"--study {study_dir}: holds a journal.log without its {STATE_FILE} (a study's, half "
+                       "removed?): give another --study, or remove the folder")
+    ours = {"best.yaml", "trials.csv", "summary.txt", "pareto.csv", "plots", "trials", "worlds", "heldout"}
+    theirs = sorted(p.name for p in study_dir.iterdir() if p.name in ours)
+    if theirs:
+        raise MclError(f"--study {study_dir}: holds {', '.join(theirs)} of no study (a study writes these): give "
+                       "another --study, or an empty folder")

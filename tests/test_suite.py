@@ -29,7 +29,7 @@ CONFIGS = PROJECT_ROOT / "configs"
 # configs/baseline.yaml is configs/default.yaml with exactly these keys changed: the plain fixed-N filter.
 # When default.yaml changes another key, baseline.yaml follows it (this test says which key drifted).
 BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.estimate", "motion.map_rejection",
-                 "filter.search_exponent", "filter.global_density", "sensor.likelihood_field.interior",
+                 "filter.search_exponent", "filter.global_density", "sensor.likelihood_field.interior", "sensor.likelihood_field.search_solid",
                  "motion.fault_prob", "sensor.unmapped_skip", "filter.search_refine", "sensor.self_hit_skip",
                  "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset", "motion.sideways", "motion.noise_step",
                  "filter.search_refine_candidates", "motion.stalls",
@@ -1120,3 +1120,40 @@ def test_a_runs_own_warning_lines_reach_its_row(evaluated, tmp_path):
                  "--jobs", "1", "--no-baseline", "--set", "filter.particles=500", "--no-progress"]) == 0
     (row,) = _rows(out)
     assert any(w.startswith("sensor.range_min (53..80 m) leaves 0 of the first scans'") for w in row["warnings"]), row
+
+
+def test_a_world_another_evaluation_made_first_in_a_shared_cache_is_used(tmp_path, monkeypatch):
+    # Two evaluations comparing configs over one --cache both make a world that is missing; the second to finish
+    # could not rename its copy onto the first's ("Directory not empty", naming the temporary folder) and exited 2.
+    # The world is the same (one seed, one set of parameters): the first's is used and the copy dropped.
+    import mcl.simulate
+    from mcl.suite import make_world
+
+    real = mcl.simulate.simulate
+    out = tmp_path / "cache" / "w"
+
+    def racing(folder, **kw):
+        real(folder, **kw)
+        shutil.copytree(folder, out)  # the other evaluation finished first
+
+    monkeypatch.setattr(mcl.simulate, "simulate", racing)
+    assert make_world(str(out), {"seed": 3, "duration": 2.0}) == str(out)
+    assert (out / "sim.yaml").is_file() and sorted(p.name for p in out.parent.iterdir()) == ["w"]
+
+
+@pytest.mark.parametrize("text,why", [("seed=5", "give --seeds"), ("filter.initial_pose=[1, 1, 0]", "each mode starts"),
+                                      ("rerun.mode=save", "runs record nothing"),
+                                      ("truth=x.tum", "each dataset names its own")])
+@pytest.mark.parametrize("command", ["eval", "tune"])
+def test_a_set_of_a_key_the_suite_sets_for_each_run_is_refused(tmp_path, capsys, text, why, command):
+    # `mcl eval --set seed=5` ran seed 1 (the plan sets each run's seed after the --set), filter.initial_pose and
+    # rerun.mode were ignored, truth= scored every dataset against one file; all without a word. One line now.
+    suite = PROJECT_ROOT / "suites" / "smoke.yaml"
+    out = tmp_path / "out"
+    args = (["eval", "--suite", str(suite), "--out", str(out)] if command == "eval" else
+            ["tune", str(suite), "--space", str(PROJECT_ROOT / "suites" / "tune-space.yaml"), "--study", str(out)])
+    assert main([*args, "--set", text]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    key = text.split("=")[0]
+    assert err == [f"mcl: error: --set {key}: the suite sets it for each run ({why}{err[0].split(why, 1)[1]}"]
+    assert not out.exists()

@@ -22,6 +22,7 @@ import yaml
 
 from mcl.cli import main
 from mcl.config import load_config
+from mcl.errors import ConfigError, MclError
 from mcl.tune import LOST_PENALTY, load_space, objective_values
 
 RANGE_SIGMA = 0.1
@@ -170,6 +171,8 @@ def test_bad_objective_held_out_and_missing_ray(files, tmp_path, capsys, monkeyp
     assert main(_args(files, tmp_path / "b", "--trials", "1", "--ray", "auto")) == 2
     err = capsys.readouterr().err
     assert "--ray" in err and "pip install 'mcl[cluster]'" in err and err.count("\n") == 1
+    # no empty study is left behind (the same command, without --ray, was then refused: "a study is there")
+    assert not (tmp_path / "b").exists()
 
 
 def test_lost_runs_are_penalised_not_dropped():
@@ -432,3 +435,80 @@ def test_suite_held_out_key(tmp_path):
     p.write_text(yaml.safe_dump(doc))
     with pytest.raises(ConfigError, match=r"datasets\[1\] \(b\): held_out: expected true or false"):
         load_suite(p)
+
+
+def test_a_study_whose_every_trial_fails_exits_2(files, tmp_path, capsys):
+    # Every trial failing (here every run: the one dataset's log is no log) exited 0 with "No trial finished yet"
+    # or a best.yaml scored on the penalty alone. The outputs are written (trials.csv says why), then one error line.
+    from mcl.config import PROJECT_ROOT
+
+    demo = PROJECT_ROOT / "data" / "demo"
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(yaml.safe_dump({**SUITE, "datasets": [
+        {"name": "nolog", "map": str(demo / "map.yaml"), "log": str(demo / "map.yaml"), "truth": str(demo / "truth.tum")}]}))
+    study = tmp_path / "study"
+    assert main(["tune", str(suite), "--space", str(files / "space.yaml"), "--config", str(files / "base.yaml"),
+                 "--study", str(study), "--trials", "1", "--batch", "1", "--jobs", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == f"mcl: error: --study {study}: every trial failed (trials.csv's error column says why)"
+    (row,) = _trials(study)
+    assert row["failed_runs"] == row["runs"] == "1" and "no laser messages" in row["error"]
+
+
+def test_a_study_folder_is_checked_before_anything_is_written(files, tmp_path, capsys):
+    # --study over a user's own best.yaml replaced it without a word (mcl eval --out refuses such a folder); a
+    # journal.log left without its study.json took the new study's trials beside the old ones'. One line each.
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "best.yaml").write_text("seed: 7\n")
+    assert main(_args(files, mine, "--trials", "1")) == 2
+    assert f"--study {mine}: holds best.yaml of no study" in capsys.readouterr().err
+    assert (mine / "best.yaml").read_text() == "seed: 7\n" and sorted(p.name for p in mine.iterdir()) == ["best.yaml"]
+    half = tmp_path / "half"
+    half.mkdir()
+    (half / "journal.log").write_text("")
+    assert main(_args(files, half, "--trials", "1")) == 2
+    assert f"--study {half}: holds a journal.log without its study.json" in capsys.readouterr().err
+    assert sorted(p.name for p in half.iterdir()) == ["journal.log"]
+
+
+def test_only_and_held_out_take_patterns_and_an_unreachable_ray_head_is_one_line(files, tmp_path, capsys):
+    from mcl.tune import Settings, Tuner, _reachable
+
+    def settings(**kw):
+        return Settings(suite=str(files / "suite.yaml"), space=[], config=None, sets=[], objectives=["rmse"], seeds=1,
+                        modes=None, batch=1, seed=0, trials=1, cache=str(files / "worlds"), **kw)
+
+    t = Tuner(tmp_path / "t", settings(only=["off*"], held_out=["*-held"]))
+    assert t.tuning == ["office"] and t.held_out == ["office-held"]
+    with pytest.raises(ConfigError, match=r"--only: no dataset 'hall\*'"):
+        Tuner(tmp_path / "t", settings(only=["hall*"]))
+    # nothing listens on port 1: ray.init retried for 14 minutes; now one line within RAY_CONNECT_S
+    with pytest.raises(MclError, match="--ray 127.0.0.1:1: cannot connect: nothing answers there"):
+        _reachable("127.0.0.1:1")
+    _reachable("ray://127.0.0.1:1")  # Ray's client protocol and auto go to Ray as before
+    _reachable("auto")
+
+
+def test_a_ctrl_c_while_the_outputs_are_written_says_so(files, tmp_path, capsys, monkeypatch):
+    # Ctrl-C during the held-out runs or the plots (after the last trial) printed "mcl: interrupted" alone, with no
+    # summary.txt and sometimes no best.yaml. It now says the outputs were cut and how to write them: --report.
+    import mcl.tune
+
+    real = mcl.tune.write_outputs
+    calls = []
+
+    def cut(*a, **kw):
+        calls.append(1)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        return real(*a, **kw)
+
+    monkeypatch.setattr(mcl.tune, "write_outputs", cut)
+    study = tmp_path / "study"
+    assert main(_args(files, study, "--trials", "1", "--batch", "1", "--jobs", "1")) == 130
+    out = capsys.readouterr().out
+    assert f"interrupted while writing the study's outputs (held-out runs, best.yaml, summary.txt): mcl tune --report {study} writes them again" in out
+    assert not (study / "summary.txt").exists()
+    assert main(["tune", "--report", str(study)]) == 0
+    assert (study / "summary.txt").is_file() and (study / "best.yaml").is_file()
