@@ -112,20 +112,26 @@ def _failure_text(failure: BaseException, out_dir: Path | None = None) -> str:
 
 
 def _lock_out_dir(out_dir: Path) -> int | None:
-    """An exclusive lock on the run's folder for as long as the run writes there (flock on the folder itself: no
-    lock file, released by the kernel if the process dies). ConfigError when another run holds it: two runs into
+    """An exclusive lock on the run's folder for as long as the run writes there (``lock_folder``). Two runs into
     one folder would delete each other's recording and mix their config.yaml, trajectory and summary."""
+    return lock_folder(out_dir, f"--out {out_dir}: another mcl run is writing in this folder now: wait for it to "
+                                "end, or choose another folder")
+
+
+def lock_folder(folder: Path, busy: str) -> int | None:
+    """An exclusive lock on ``folder`` (flock on the folder itself: no lock file, released by the kernel if the
+    process dies; the caller closes the returned descriptor when done; None where there is no flock). ConfigError
+    ``busy`` when another process holds it."""
     try:
         import fcntl
     except ImportError:  # not POSIX
         return None
-    fd = os.open(out_dir, os.O_RDONLY)
+    fd = os.open(folder, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         os.close(fd)
-        raise ConfigError(f"--out {out_dir}: another mcl run is writing in this folder now: wait for it to end, or "
-                          "choose another folder") from None
+        raise ConfigError(busy) from None
     return fd
 
 

@@ -1015,7 +1015,26 @@ def _load_settings(study_dir: Path) -> Settings:
 
 
 def run_from_args(args) -> int:
-    """``mcl tune`` from the parsed command line (mcl.cli)."""
+    """``mcl tune`` from the parsed command line (mcl.cli). The study folder is locked while the study runs (two
+    --resume of one study at once told the same trials twice)."""
+    locks: list[int] = []
+    try:
+        return _run_from_args(args, locks)
+    finally:
+        for fd in locks:
+            os.close(fd)
+
+
+def _lock_study(study_dir: Path, locks: list) -> None:
+    from mcl.runner import lock_folder
+
+    fd = lock_folder(study_dir, f"--study {study_dir}: another mcl tune is working on this study now: wait for it to "
+                                "end (two at once told the same trials twice)")
+    if fd is not None:
+        locks.append(fd)
+
+
+def _run_from_args(args, locks: list) -> int:
     from mcl.suite import make_dir, seed_range
     from mcl.trajectory import atomic_write_text
 
@@ -1040,6 +1059,7 @@ def run_from_args(args) -> int:
                            f"{existing}/{STATE_FILE}; not with {', '.join(given)}")
         study_dir = Path(existing)
         s = _load_settings(study_dir)
+        _lock_study(study_dir, locks)
         if s.fingerprint:
             now = fingerprint(s)  # the suite gone: one error line naming it (--report reads it too)
             changed = [f"the suite file {s.suite}" if k == "suite" else
@@ -1099,27 +1119,39 @@ def run_from_args(args) -> int:
         s.fingerprint = fingerprint(s)
     tuner = Tuner(study_dir, s)
     progress = False if args.no_progress else None
-    interrupted = cut = False
     with _executor(args.jobs, args.ray) as executor:
         if not existing:  # made once the executor is up: a --ray that fails leaves no empty study behind
             make_dir(study_dir, "--study")  # first: a --study that cannot be made is said as --study
+            _lock_study(study_dir, locks)
             if any(d.simulate is not None for d in tuner.suite.datasets):
                 make_dir(Path(s.cache), "--cache")
             atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")
             _open_study(study_dir, s, create=True)
-        tuner.make_worlds(executor, echo)
-        from mcl.suite import TermAsInterrupt
+        interrupted, cut = _study(tuner, executor, args, s, progress, echo)
+    return _ending(study_dir, s, interrupted, cut, echo)
 
-        try:
-            with TermAsInterrupt():  # SIGTERM (kill, timeout, a batch scheduler) stops the study as Ctrl-C does
-                if not args.report:
-                    try:
-                        optimise(tuner, trials=s.trials, executor=executor, progress=progress, echo=echo)
-                    except KeyboardInterrupt:
-                        interrupted = True
-                write_outputs(tuner, executor, heldout=not interrupted, echo=echo)
-        except KeyboardInterrupt:  # the held-out runs, plots, best.yaml: cut, and said
-            cut = True
+
+def _study(tuner: Tuner, executor, args, s: Settings, progress, echo) -> tuple[bool, bool]:
+    """The worlds, the trials (unless --report) and the outputs: (the trials interrupted, the outputs cut)."""
+    from mcl.suite import TermAsInterrupt
+
+    interrupted = cut = False
+    tuner.make_worlds(executor, echo)
+    try:
+        with TermAsInterrupt():  # SIGTERM (kill, timeout, a batch scheduler) stops the study as Ctrl-C does
+            if not args.report:
+                try:
+                    optimise(tuner, trials=s.trials, executor=executor, progress=progress, echo=echo)
+                except KeyboardInterrupt:
+                    interrupted = True
+            write_outputs(tuner, executor, heldout=not interrupted, echo=echo)
+    except KeyboardInterrupt:  # the held-out runs, plots, best.yaml: cut, and said
+        cut = True
+    return interrupted, cut
+
+
+def _ending(study_dir: Path, s: Settings, interrupted: bool, cut: bool, echo) -> int:
+    """The exit status, and the line that says how to go on after an interruption."""
     study = _open_study(study_dir, s, create=False)
     n = sum(t.state.is_finished() for t in study.get_trials(deepcopy=False))
     if cut:

@@ -1406,7 +1406,9 @@ def test_bag_info_names_the_topics_a_run_could_score_against(scans, tmp_path, ca
     from mcl.maps import OccupancyGrid, save_map
 
     world.mkdir()
-    save_map(OccupancyGrid.from_occupancy(np.zeros((400, 400), np.int8), 0.05, (-10.0, -10.0)), world / "map.yaml")
+    occupancy = np.zeros((400, 400), np.int8)
+    occupancy[0] = 100  # a wall (a map with none is refused: nothing for the laser to match)
+    save_map(OccupancyGrid.from_occupancy(occupancy, 0.05, (-10.0, -10.0)), world / "map.yaml")
     common = ["run", "--map", str(world / "map.yaml"), "--bag", str(bag), "--rerun", "off", "--particles", "300",
               "--no-progress", "--initial-pose", "0", "0", "0"]
     assert main([*common, "--out", str(tmp_path / "a")]) == 0

@@ -1157,3 +1157,22 @@ def test_a_set_of_a_key_the_suite_sets_for_each_run_is_refused(tmp_path, capsys,
     key = text.split("=")[0]
     assert err == [f"mcl: error: --set {key}: the suite sets it for each run ({why}{err[0].split(why, 1)[1]}"]
     assert not out.exists()
+
+
+def test_two_evaluations_into_one_out_folder_are_refused_while_one_runs(tmp_path, capsys):
+    # Two `mcl eval` into the same --out at once counted each other's runs as failed, and whichever wrote
+    # results.csv last decided what it said. The folder is locked while an evaluation runs: the second is one line.
+    from mcl.runner import lock_folder
+
+    out = tmp_path / "out"
+    out.mkdir()
+    fd = lock_folder(out, "held")  # another evaluation, running
+    try:
+        assert main(["eval", "--suite", str(PROJECT_ROOT / "suites" / "smoke.yaml"), "--out", str(out),
+                     "--cache", str(tmp_path / "cache"), "--no-progress", "--jobs", "1"]) == 2
+    finally:
+        os.close(fd)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"mcl: error: --out {out}: another mcl eval is writing in this folder now: wait for it to end, or "
+                   "choose another --out"]
+    assert list(out.iterdir()) == []

@@ -512,3 +512,24 @@ def test_a_ctrl_c_while_the_outputs_are_written_says_so(files, tmp_path, capsys,
     assert not (study / "summary.txt").exists()
     assert main(["tune", "--report", str(study)]) == 0
     assert (study / "summary.txt").is_file() and (study / "best.yaml").is_file()
+
+
+def test_two_resumes_of_one_study_at_once_are_refused(serial, files, tmp_path, capsys):
+    # Two `--resume` of one study at once told the same trials twice: one crashed with a traceback, the other
+    # recorded a trial scored on the first's locked run folders. The study folder is locked while a study runs.
+    import shutil
+
+    from mcl.runner import lock_folder
+
+    study = tmp_path / "study"
+    shutil.copytree(serial, study)
+    before = (study / "journal.log").read_bytes(), (study / "study.json").read_bytes()
+    fd = lock_folder(study, "held")
+    try:
+        assert main(["tune", "--resume", str(study), "--trials", str(TRIALS + 1), "--jobs", "1", "--no-progress"]) == 2
+    finally:
+        os.close(fd)
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"mcl: error: --study {study}: another mcl tune is working on this study now: wait for it to end (two at "
+        "once told the same trials twice)"]
+    assert ((study / "journal.log").read_bytes(), (study / "study.json").read_bytes()) == before  # nothing written
