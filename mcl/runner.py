@@ -749,6 +749,8 @@ def _check_start_pose(grid, pose, where: str, echo) -> None:
              "there")
 
 
+ERROR_CODES_M = 0.02  # m: readings under this, 1 % of them or more, are a driver's error codes (no laser reads 2 cm)
+MM_SUSPECT_M = 200.0  # m: first scans whose median reading lies farther are read in millimetres, most likely
 FLOOR_INTERIOR = 0.6  # a floor's free cells with free neighbours on all four sides: 0.81-0.97 on every map measured
 
 
@@ -759,12 +761,11 @@ def _check_map(grid, echo) -> None:
     reads both as they are, and the filter then searched a map of nothing, or of walls (ATE 5.6 and 9.5 m on the
     demo's log). A floor plan's black outside has more occupied than free cells too, but its floor is open."""
     occupied = int(np.count_nonzero(grid.occupied))
-    if occupied == 0:
-        free = int(np.count_nonzero(grid.free))
+    free = int(np.count_nonzero(grid.free))
+    if occupied == 0 and free > 0:  # (no free cell either: the filter's own line says there is nowhere to localize)
         raise DataError(f"{grid.path}: no occupied cell ({free} free, {grid.occupancy.size - free} unknown): nothing "
                         "for the laser to match (check mode, negate and occupied_thresh against the image)")
     f = grid.free
-    free = int(np.count_nonzero(f))
     if occupied <= free or free == 0:
         return
     inner = int(np.count_nonzero(f[1:-1, 1:-1] & f[:-2, 1:-1] & f[2:, 1:-1] & f[1:-1, :-2] & f[1:-1, 2:]))
@@ -777,7 +778,7 @@ def _check_map(grid, echo) -> None:
 MOUNT_WARN_M = 3.0  # m: a laser mounted farther than this from the robot's centre is a frame mistake, not a robot
 
 
-def _check_first_scans(scans, sensor, echo, first: int = 200) -> None:
+def _check_first_scans(scans, sensor, echo, first: int = 200) -> float | None:
     """Warnings from the first ``first`` scans, before the run (a bag's scans are a stream: the first ones only,
     as for the recording), for settings that would leave the filter silently blind or wrong:
 
@@ -786,17 +787,30 @@ def _check_first_scans(scans, sensor, echo, first: int = 200) -> None:
       and under the scan's own no-return value; scans with none (open floor) say nothing either way. Under 1 %
       scored counts as none: a log's stray readings of a few centimetres are no laser.
     - the laser mounted more than ``MOUNT_WARN_M`` from the robot's centre (``sensor.laser_pose``, or the
-      log's / bag's own mounting): a tf chain through the wrong frame, a pose given in the map frame."""
+      log's / bag's own mounting): a tf chain through the wrong frame, a pose given in the map frame;
+    - readings in millimetres: a median over ``MM_SUSPECT_M``, or readings far beyond the laser's own maximum.
+
+    Returns the ``sensor.range_min`` to run with when 1 % or more of the readings lie under ``ERROR_CODES_M`` (a
+    driver's error codes; said in a note), else None."""
     from mcl.sensors import valid_returns
 
     lo, hi, returns, scored, beyond, mount = math.inf, -math.inf, 0, 0, 0, None
+    readings, far, tiny, own, medians = 0, 0, 0, math.inf, []
     for s in itertools.islice(scans, first):
         offset = sensor.laser_pose if sensor.laser_pose is not None else getattr(s, "laser_offset", None)
         if offset is not None and mount is None and math.hypot(float(offset[0]), float(offset[1])) > MOUNT_WARN_M:
             mount = offset
         r = np.asarray(getattr(s, "ranges", ()), dtype=np.float64)
         with np.errstate(invalid="ignore"):
-            ret = r[np.isfinite(r) & (r > 0.0) & ((r < float(s.max_range)) if s.max_range is not None else True)]
+            positive = r[np.isfinite(r) & (r > 0.0)]
+            ret = positive[(positive < float(s.max_range)) if s.max_range is not None else slice(None)]
+        readings += positive.size
+        tiny += int(np.count_nonzero(positive < ERROR_CODES_M))
+        if s.max_range is not None and positive.size:
+            own = min(own, float(s.max_range))
+            far += int(np.count_nonzero(positive > 1.5 * float(s.max_range)))  # not a no-return marker's value
+        if positive.size:
+            medians.append(float(np.median(positive)))
         if ret.size:
             lo, hi = min(lo, float(ret.min())), max(hi, float(ret.max()))
             returns += ret.size
@@ -807,12 +821,30 @@ def _check_first_scans(scans, sensor, echo, first: int = 200) -> None:
         echo(f"mcl: warning: {where} puts the laser {math.hypot(float(mount[0]), float(mount[1])):.2f} m from the "
              f"robot's centre ({float(mount[0]):.3f}, {float(mount[1]):.3f}): a robot's laser sits within a metre or "
              "two; check the frames (a tf chain through the wrong frame, a pose in the map frame)")
+    floor = None
+    if readings and tiny >= 0.01 * readings and sensor.range_min < ERROR_CODES_M:
+        # a Hokuyo URG driver's error codes (0-19 mm) written as metres: scored as returns at the laser, they made
+        # a global search 6.7 m off (0.31 m with them left out)
+        floor = ERROR_CODES_M
+        echo(f"{tiny} of the first scans' {readings} readings lie under {100 * ERROR_CODES_M:g} cm (a laser's error "
+             f"codes, as a Hokuyo URG driver writes them): taken as no returns (sensor.range_min {ERROR_CODES_M:g})")
+    if medians and float(np.median(medians)) > MM_SUSPECT_M:
+        echo(f"mcl: warning: the first scans' readings lie at {float(np.median(medians)):.0f} m (median): a laser in "
+             "a building reads metres; readings in millimetres? (mcl reads ranges in metres)")
+    if readings and returns < 0.01 * readings and far >= 0.5 * readings:
+        # the readings far beyond the laser's own no-return range (a log's PARAM or its line's maximum), not at it
+        # (open floor): a maximum in metres over readings in millimetres left the filter predicting, without a word
+        echo(f"mcl: warning: {returns} of the first scans' {readings} readings lie under the laser's own no-return "
+             f"range ({own:g} m, as the log gives it): the rest are no returns and the filter predicts (readings in "
+             "millimetres?)")
+        return floor
     if returns == 0 or scored >= 0.01 * returns:
-        return
+        return floor
     key = "sensor.range_max" if 2 * beyond >= returns - scored else "sensor.range_min"  # what cut most of them
     echo(f"mcl: warning: {key} ({sensor.range_min:g}..{sensor.range_max:g} m) leaves {scored} of the first scans' "
          f"{returns} returns to score (they lie at {lo:.2f}..{hi:.2f} m): the laser weighs (almost) nothing and the "
          "filter predicts")
+    return floor
 
 
 class _UpdateRecording:
@@ -970,7 +1002,9 @@ def _run(
              "below one on a wall, so a global search or a recovery settles on whatever place has no such beam (the "
              "demo's global start: 2.9 m off over 1-50 s, against 0.06 m)")
     if cfg.sensor.use:
-        _check_first_scans(scans, cfg.sensor, echo)
+        floor = _check_first_scans(scans, cfg.sensor, echo)
+        if floor is not None:  # error codes taken as no returns (config.yaml says so: a repeat runs the same)
+            cfg = dataclasses.replace(cfg, sensor=dataclasses.replace(cfg.sensor, range_min=floor))
     updates = _updates(scans, marks_all)
     plane_sensor = None
     if cfg.planes.use:

@@ -336,3 +336,21 @@ def test_a_log_whose_ipc_timestamps_are_all_the_same_is_timed_by_the_logger(tmp_
     stamped = [ln.replace(" 0.0 host", f" {ln.split()[-1]} host") for ln in lines]  # ipc = logger: as before
     log = read_carmen(write(tmp_path, stamped, name="b.clf"))
     assert [s.t for s in log.laser_stream()] == [0.1, 0.6, 1.1] and not any("every laser line has" in n for n in log.notes)
+
+
+def test_a_laser_lines_maximum_range_of_0_is_unknown_and_odd_flaser_fans_are_noted(tmp_path):
+    # A ROBOTLASER1 whose max_range field is 0 made every reading a no-return: the run only predicted, without a
+    # word (0.30 m and 8.5 deg off, the odometry's). Not positive is unknown now: the config decides. FLASER lines
+    # do not say their angles: 1081 beams (a UTM-30LX over 270 degrees) were read as a 180-degree fan in silence.
+    zero = ROBOTLASER1.replace(" 0.75 30.0 ", " 0.75 0 ")
+    log = read_carmen(write(tmp_path, [zero]))
+    assert log.scans[0].max_range is None
+    assert read_carmen(write(tmp_path, [ROBOTLASER1], name="b.clf")).scans[0].max_range == 30.0
+    ranges = " ".join(["2.0"] * 1081)
+    path = write(tmp_path, [f"FLASER 1081 {ranges} 1 2 0 1 2 0 10.5 host 0.1"], name="utm.clf")
+    assert [n for n in read_carmen(path).notes if "beams a line" in n] == [
+        f"{path}: FLASER: 1081 beams a line: FLASER lines do not say their angles and are read as a 180-degree fan "
+        "(a SICK's); a laser of another field of view needs ROBOTLASER1 or RAWLASER lines, which say it"]
+    sick = " ".join(["2.0"] * 181)
+    path = write(tmp_path, [f"FLASER 181 {sick} 1 2 0 1 2 0 10.5 host 0.1"], name="sick.clf")
+    assert not [n for n in read_carmen(path).notes if "beams a line" in n]

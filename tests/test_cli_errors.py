@@ -233,6 +233,25 @@ def test_a_range_window_that_leaves_the_laser_nothing_to_score_warns_naming_the_
     out = []
     _check_first_scans(empty, SensorConfig(range_max=0.05), out.append)
     assert out == []
+    # readings in millimetres under a maximum range in metres (a log's PARAM 12, a line's max field): every one a
+    # no-return, and the run predicted without a word (0.30 m, the odometry's). Now two warnings say why.
+    # a Hokuyo URG driver's error codes (0-19 mm) written as metres, a third of the beams: scored as returns at the
+    # laser (a global search 6.7 m off). 1 % or more under 2 cm: taken as no returns, said in a note; the demo's 5
+    # stray centimetre readings of 31,435 are no error codes (above: no line, no floor).
+    codes = [SimpleNamespace(ranges=np.array([2.6, 0.004, 3.1, 0.011, 4.9, 2.2]), max_range=5.0)] * 50
+    out = []
+    assert _check_first_scans(codes, SensorConfig(), out.append) == 0.02
+    assert out == ["100 of the first scans' 300 readings lie under 2 cm (a laser's error codes, as a Hokuyo URG driver "
+                   "writes them): taken as no returns (sensor.range_min 0.02)"]
+    assert _check_first_scans(codes, SensorConfig(range_min=0.05), []) is None  # the user's own floor stands
+    assert _check_first_scans(scans, SensorConfig(), []) is None
+    mm = [SimpleNamespace(ranges=r[[0, 2, 3, 4]] * 1000.0, max_range=12.0)] * 60
+    out = []
+    _check_first_scans(mm, SensorConfig(), out.append)
+    assert out == ["mcl: warning: the first scans' readings lie at 4000 m (median): a laser in a building reads metres; "
+                   "readings in millimetres? (mcl reads ranges in metres)",
+                   "mcl: warning: 0 of the first scans' 240 readings lie under the laser's own no-return range (12 m, "
+                   "as the log gives it): the rest are no returns and the filter predicts (readings in millimetres?)"]
 
 
 

@@ -142,3 +142,23 @@ def test_reading_a_log_holds_about_its_scans_not_copies_of_its_text(tmp_path):
         tracemalloc.stop()
     assert len(read.scans) == 12 * len(read_carmen(demo).scans)
     assert peak <= 2.5 * held, (peak, held)
+
+
+def test_a_marker_under_stray_readings_or_under_a_second_marker_is_found():
+    # A 3 m laser marks a third of its beams 3.00 m. Two stray readings of 200 m set the top of the range, and the
+    # spike, far under 90 % of it, was not taken: the no-returns scored as walls 3 m away (7.03 m RMSE). Mixed with a
+    # 0.2 % of 65.53 m error codes, the codes alone were taken (64.87 m) and the 3.00 m no-returns were walls (0.46
+    # m). A spike with (almost) no reading above it but other spikes' is at the top too.
+    rng = np.random.default_rng(11)
+    real = np.round(rng.uniform(0.3, 2.95, size=40_000), 2)
+    marks = np.full(20_000, 3.00)
+    stray = np.concatenate([real, marks, [200.0, 200.0]])
+    nr = detect_no_return(stray)
+    assert nr is not None and nr.threshold == pytest.approx(0.99 * 3.0) and nr.spikes[0] == 3.0
+    codes = np.concatenate([real, marks, np.full(120, 65.53)])
+    nr = detect_no_return(codes)
+    assert nr is not None and nr.threshold == pytest.approx(0.99 * 3.0) and nr.spikes == (3.0, 65.53)
+    assert nr.count == 20_120
+    # a robot standing still repeats a short reading with most of the readings above it: still no marker
+    still = np.concatenate([np.round(rng.uniform(0.3, 8.0, size=40_000), 2), np.full(5_000, 3.0), [200.0]])
+    assert detect_no_return(still) is None

@@ -353,15 +353,21 @@ def _parse_robotlaser(parts: list[str], kind: str, lineno: int) -> Scan:
     _pose_check(rest, "pose/velocity", kind)
     t = _timestamp(parts, kind)
     laser, robot = rest[0:3], np.array(rest[3:6])
-    return Scan(t, ranges, config[1], config[3], config[4], robot,
+    return Scan(t, ranges, config[1], config[3], _max_field(config[4]), robot,
                 _offset(laser, rest[3:6], kind), rest[6], rest[7], kind, lineno)
+
+
+def _max_field(v: float) -> float | None:
+    """A ROBOTLASER / RAWLASER line's maximum range field: None (unknown: the config decides) when it is not
+    positive. A driver that writes 0 there made every reading a no-return: the run only predicted, without a word."""
+    return float(v) if v > 0.0 else None
 
 
 def _parse_rawlaser(parts: list[str], kind: str, lineno: int) -> Scan:
     config, ranges, _ = _parse_laser_config(parts, kind, 3)
     _pose_check(config[1:5], "beam geometry", kind)
     t = _timestamp(parts, kind)
-    return Scan(t, ranges, config[1], config[3], config[4], None, None,
+    return Scan(t, ranges, config[1], config[3], _max_field(config[4]), None, None,
                 0.0, 0.0, kind, lineno)
 
 
@@ -521,6 +527,12 @@ def read_carmen(path: str | os.PathLike, *, need_laser: bool = True) -> Log:
     scans = _steady_mounting(scans)
     scans = _param_max_range(scans, params)
     scans = _detected_max_range(scans, name, notes)
+    for kind in _MAX_RANGE_PARAMS:
+        counts = sorted({s.ranges.size for s in scans if s.kind == kind} - {0, 1, 180, 181, 360, 361})
+        if counts:  # read as a SICK's half turn whatever the laser (a UTM-30LX's 1081 over 270 degrees: lost)
+            notes.append(f"{name}: {kind}: {counts[0]} beams a line: {kind} lines do not say their angles and are read "
+                         "as a 180-degree fan (a SICK's); a laser of another field of view needs ROBOTLASER1 or "
+                         "RAWLASER lines, which say it")
     landmarks = _landmark_odom(landmarks, odometry, name)
     return Log(name, scans, odometry, skipped, warnings, landmarks, notes)
 

@@ -18,8 +18,12 @@ centimetre that often: the sensor's noise spreads it). So:
    median bin of the 2 m around it (the median, so that a band of
    neighbouring spikes such as 51.05-51.25 m does not hide itself);
 3. only spikes at the top of the range count (at or above ``top_fraction`` of
-   the largest reading): a robot standing still in front of a wall repeats a
-   short reading, never one near the sensor's maximum;
+   the largest reading, or with at most ``stray_share`` of the readings above
+   them outside other spikes): a robot standing still in front of a wall
+   repeats a short reading, never one near the sensor's maximum. The second
+   form keeps a 3 m laser's spike at 3.00 m when two stray readings of 200 m
+   lie above it, or a log's second marker at 65.53 m (its longest real reading
+   then set the top, and the 3 m no-returns scored as walls: 7 m off);
 4. there must be real readings to tell the marker from (5 % of all at least);
 5. readings at or above ``(1 - margin)`` times the lowest such spike are no
    return (the 1 % margin takes in the stray readings just below the marker
@@ -92,7 +96,7 @@ def _blocks(ranges):
 
 
 def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, spike_ratio: float = 20.0,
-                     top_fraction: float = 0.9, margin: float = 0.01) -> NoReturn | None:
+                     top_fraction: float = 0.9, margin: float = 0.01, stray_share: float = 1e-3) -> NoReturn | None:
     """The no-return marker of a set of readings (an array of any shape, metres, or a list of such arrays: a log's
     scans, taken a block at a time), or None when there is no spike.
 
@@ -110,12 +114,19 @@ def detect_no_return(ranges, *, min_share: float = 1e-3, min_count: int = 20, sp
             top = max(top, int(cm.max()))
     if total == 0:
         return None
-    cand = np.flatnonzero((hist >= max(min_count, min_share * total)) & (np.arange(hist.size) >= top_fraction * top))
+    cand = np.flatnonzero(hist >= max(min_count, min_share * total))  # at most 1 / min_share bins
     if cand.size == 0:
         return None
     # the median bin of the 2 m around each candidate: robust to a band of spikes narrower than the window
     around = np.array([np.median(hist[max(v - 100, 0):v + 101]) for v in cand])  # a few candidates, not beams
     spikes = cand[hist[cand] >= spike_ratio * np.maximum(around, 1.0)]
+    if spikes.size == 0:
+        return None
+    # at the top: near the largest reading, or with (almost) no reading above but other spikes' (step 3)
+    rest = hist.copy()
+    rest[spikes] = 0
+    above = np.cumsum(rest[::-1])[::-1] - rest  # readings in the bins above each bin, spikes left out
+    spikes = spikes[(spikes >= top_fraction * top) | (above[spikes] <= stray_share * total)]
     if spikes.size == 0:
         return None
     threshold = (1.0 - margin) * spikes[0] / 100.0
