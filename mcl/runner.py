@@ -52,6 +52,21 @@ def _spread(cov) -> float:
     return float(math.sqrt(max(float(cov[0, 0]), float(cov[1, 1]), 0.0)))
 
 
+def _fresh_dir(out: Path) -> Path:
+    """``out`` made now, or the next name free (``default_out_dir``'s: NAME-2, NAME-3, ...): two runs without --out
+    started in the same second both chose one folder (named before their data loaded), and the later deleted the
+    earlier's outputs."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stem, k = out.name, 1
+    while True:
+        try:
+            out.mkdir()
+            return out
+        except FileExistsError:
+            k += 1
+            out = out.with_name(f"{stem}-{k}")
+
+
 def default_out_dir(root: Path | None = None) -> Path:
     """A fresh folder under runs/ named by the start time."""
     root = root or Path.cwd() / "runs"
@@ -97,11 +112,19 @@ def check_out_dir(out: Path, flag: str = "--out") -> None:
     check_writable_folder(out, f"{flag} {out}")
     # a run's outputs are files: a folder named recording.rrd was a traceback after the earlier outputs were gone
     names = check_folder_holds(out, flag, lambda n: (n.removesuffix(".partial") in RUN_OUTPUTS
-                                                     or n == PARTIAL_RECORDING) and (out / n).is_file(),
-                               "a run's outputs")
+                                                     or n == PARTIAL_RECORDING or _atomic_leftover(n))
+                               and (out / n).is_file(), "a run's outputs")
     if names and "config.yaml" not in names:  # a trajectory.tum of the user's own, say
         raise ConfigError(f"{flag} {out}: the folder holds {', '.join(names)} but no config.yaml: not an "
                           "mcl run's folder; choose a new or empty folder")
+
+
+def _atomic_leftover(name: str) -> bool:
+    """A temporary file of a run's atomic write (``mcl.trajectory.atomic_write_text``: ``.summary.json.XXXX.tmp``)
+    left by a run killed while it wrote: a run's own, cleared by the next run (it refused the folder)."""
+    if not (name.startswith(".") and name.endswith(".tmp")):
+        return False
+    return any(name.startswith(f".{output}.") for output in RUN_OUTPUTS)
 
 
 def _failure_text(failure: BaseException, out_dir: Path | None = None) -> str:
@@ -142,6 +165,9 @@ def _clear_run_outputs(out_dir: Path) -> None:
         for p in (out_dir / name, out_dir / f"{name}.partial"):
             if p.is_file():
                 p.unlink()
+    for p in out_dir.iterdir():
+        if _atomic_leftover(p.name) and p.is_file():
+            p.unlink()
     if (out_dir / PARTIAL_RECORDING).is_file():
         (out_dir / PARTIAL_RECORDING).unlink()
 
@@ -715,8 +741,8 @@ def _kidnap(pf, truth, t: float, estimate, min_distance: float) -> dict:
 def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
-    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``kidnap_filter_at``, ``write_bag``, ``compile_note``,
-    ``on_update`` (see :func:`_run`). SIGINT and
+    Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``fresh`` (``out_dir`` is a default name: made new,
+    or the next free name), ``kidnap_filter_at``, ``write_bag``, ``compile_note``, ``on_update`` (see :func:`_run`). SIGINT and
     SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true. A signal
     that came after the summary was made (the run is whole) sets ``summary["late_signal"]`` instead.
     """
@@ -838,6 +864,11 @@ def _check_first_scans(scans, sensor, echo, first: int = 200) -> float | None:
              f"range ({own:g} m, as the log gives it): the rest are no returns and the filter predicts (readings in "
              "millimetres?)")
         return floor
+    if returns and scored >= 0.01 * returns and beyond >= max(20, 0.01 * returns):
+        # a laser that reads farther than sensor.range_max (a 100 m lidar under the default 80 m): said, not dropped
+        # in silence
+        echo(f"{beyond} of the first scans' {returns} returns lie at or beyond sensor.range_max ({sensor.range_max:g} "
+             f"m; they reach {hi:.2f} m): left out (a larger sensor.range_max scores them)")
     if returns == 0 or scored >= 0.01 * returns:
         return floor
     key = "sensor.range_max" if 2 * beyond >= returns - scored else "sensor.range_min"  # what cut most of them
@@ -936,6 +967,7 @@ def _run(
     progress: bool | None = None,
     initial_pose_override: bool = False,
     echo=None,
+    fresh: bool = False,
     kidnap_filter_at: tuple[float, float] | None = None,
     write_bag: bool = False,
     compile_note: bool = False,
@@ -1046,6 +1078,8 @@ def _run(
     signals.defer()  # outputs from here on: a signal stops the loop only, and everything is closed
     out_dir = Path(out_dir)
     try:
+        if fresh:  # a default folder (no --out): made new here, another run started in the same second takes the next
+            out_dir = _fresh_dir(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         signals.lock_fd = _lock_out_dir(out_dir)  # released as run() returns
         _clear_run_outputs(out_dir)
@@ -1242,7 +1276,8 @@ def _run(
             except (OSError, RuntimeError) as e:
                 failure = failure if failure is not None else e
     loop_time = time.perf_counter() - loop0
-    interrupted = interrupted or signals.caught  # also a signal while the outputs were closed
+    # a signal while the outputs were closed, after the loop ran to its end: the run is whole (run() says it came
+    # late: summary["late_signal"]); it was called interrupted, with every pose and step there
 
     n_up = max(counts["updates"], 1)
     # motion.stalls: fill, motion.jumps: match and motion.slips: match (mcl.odomstall): the holds, jumps and slips

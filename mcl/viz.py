@@ -554,6 +554,7 @@ class RerunLogger:
             raise ValueError(f"particles_every must be >= 1, got {particles_every}")
         self.mode = mode
         self.path: Path | None = Path(path) if path is not None else None
+        self._file: Path | None = None  # the file being written (_writing)
         self.particles_max = int(particles_max)
         self.particles_every = int(particles_every)
         self.log_scan = bool(log_scan)
@@ -607,13 +608,13 @@ class RerunLogger:
                 raise ValueError("rerun mode 'save' needs a path for the .rrd file")
             self.path.parent.mkdir(parents=True, exist_ok=True)
             with self._opening():
-                rec.save(self.path)
+                rec.save(self._writing())
         elif mode == "spawn":
             rr.spawn(connect=False, executable_path=viewer, recording=rec)
             sinks: list[Any] = [rr.GrpcSink()]
             if self.path is not None:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
-                sinks.append(rr.FileSink(self.path))
+                sinks.append(rr.FileSink(self._writing()))
             with self._opening():
                 rec.set_sinks(*sinks)
         else:  # serve
@@ -853,13 +854,26 @@ class RerunLogger:
         # The file sink writes its last buffer and the footer when disconnected, and a failure there (a file size
         # limit, a full disk) is only logged by rerun: the run ended with exit 0 and "Open the recording with" a
         # recording.rrd cut short (`rerun rrd verify`: "Missing RRD footer")
-        if self.path is not None and self.path.exists() and not recording_is_whole(self.path):
+        file = self._file
+        if file is not None and file.exists() and not recording_is_whole(file):
             self._cut_short(missed or "its end could not be written")
-        if missed is not None and not self.path.exists():
+        if missed is not None and file is not None and not file.exists():
             self._cut_short(missed)
+        if file is not None and file.exists():  # whole: under its final name only now
+            os.replace(file, self.path)
         if missed is not None:  # a viewer gone before the run's end lost nothing: the .rrd has it all
             print(f"mcl: note: the Rerun viewer did not take the recording's end ({missed}); {self.path} holds all "
                   f"of it (rerun {self.path})", file=sys.stderr)
+
+    def _writing(self) -> Path:
+        """The file the recording is written to while the run goes on: ``recording.partial.rrd`` (``partial_recording``),
+        renamed to ``recording.rrd`` by :meth:`close` once whole. Written under its final name, a run killed (kill
+        -9, out of memory) left a ``recording.rrd`` without its footer, which no reader opens."""
+        if self.path.is_dir():  # it could never be renamed there
+            raise OSError(errno.EISDIR, "cannot open the recording (a folder has its name)", str(self.path))
+        self._file = partial_recording(self.path)
+        self._file.unlink(missing_ok=True)  # an earlier run's, cut short
+        return self._file
 
     @contextmanager
     def _opening(self):
@@ -874,9 +888,7 @@ class RerunLogger:
         """The recording could not be written whole: leave it as ``recording.partial.rrd`` and raise OSError."""
         if self.path is None:  # a stream with no file (a live viewer's): nothing is left behind
             raise OSError(errno.EIO, f"the recording could not be sent ({why})", "the recording") from None
-        cut = partial_recording(self.path)
-        if self.path.exists():  # cut short: not under its final name, but still an .rrd (the viewer opens no other)
-            os.replace(self.path, cut)
+        cut = partial_recording(self.path)  # the file written all along (_writing): it keeps that name
         raise OSError(errno.EIO, f"the recording could not be written ({why}); what was written is in "
                       f"{cut.name} (rerun {cut.name} shows it)", str(self.path)) from None
 

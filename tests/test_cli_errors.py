@@ -245,6 +245,12 @@ def test_a_range_window_that_leaves_the_laser_nothing_to_score_warns_naming_the_
                    "writes them): taken as no returns (sensor.range_min 0.02)"]
     assert _check_first_scans(codes, SensorConfig(range_min=0.05), []) is None  # the user's own floor stands
     assert _check_first_scans(scans, SensorConfig(), []) is None
+    # a 100 m lidar under the default range_max (80 m): its far returns were dropped without a word
+    far = [SimpleNamespace(ranges=np.array([2.6, 85.0, 3.1, 92.5]), max_range=100.0)] * 30
+    out = []
+    _check_first_scans(far, SensorConfig(), out.append)
+    assert out == ["60 of the first scans' 120 returns lie at or beyond sensor.range_max (80 m; they reach 92.50 m): "
+                   "left out (a larger sensor.range_max scores them)"]
     mm = [SimpleNamespace(ranges=r[[0, 2, 3, 4]] * 1000.0, max_range=12.0)] * 60
     out = []
     _check_first_scans(mm, SensorConfig(), out.append)

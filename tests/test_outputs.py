@@ -108,6 +108,25 @@ def test_a_folder_named_as_an_output_is_refused_before_the_earlier_outputs_go(wo
     assert {q.name: q.read_bytes() for q in out.iterdir() if q.is_file()} == before
 
 
+def test_a_recording_carries_its_final_name_only_once_whole(tmp_path):
+    # The recording was written straight to recording.rrd: a run killed (kill -9, out of memory) left one without its
+    # footer, which no reader opens, under the name of a whole one. It is written as recording.partial.rrd and renamed
+    # when closed whole; an earlier run's partial file is replaced.
+    import numpy as np
+
+    from mcl.viz import RerunLogger, recording_is_whole
+
+    path = tmp_path / "recording.rrd"
+    partial = tmp_path / "recording.partial.rrd"
+    partial.write_bytes(b"an earlier run's, cut short")
+    logger = RerunLogger("save", path)
+    logger.log_step(0, 0.0, particles=np.zeros((3, 10)), weights=np.full(10, 0.1), estimate=np.zeros(3),
+                    cov=np.eye(3))
+    assert not path.exists() and partial.exists()  # killed here: no recording.rrd
+    logger.close()
+    assert path.is_file() and recording_is_whole(path) and not partial.exists()
+
+
 def test_a_recording_that_cannot_be_opened_is_one_os_error(tmp_path):
     from mcl.viz import RerunLogger
 
@@ -334,3 +353,59 @@ def test_a_reference_off_the_scans_stamps_is_in_the_recording_interpolated(world
     # few millimetres
     assert len(off_scans) >= len(at_scans) - 2
     assert max(abs(v - at_scans[k]) for k, v in off_scans.items()) < 0.01
+
+
+def test_a_run_without_out_takes_a_folder_of_its_own_even_when_another_started_in_the_same_second(world, tmp_path):
+    # The default folder (runs/<time>) was named before the data loaded and made after: two runs started in the same
+    # second both wrote into it, and the later deleted the earlier's outputs (both exited 0, both said "Outputs in"
+    # the one folder). The default folder is made new when the outputs begin, or the next name is taken.
+    from mcl.config import load_config
+    from mcl.runner import run
+
+    taken = tmp_path / "runs" / "20261206-224500"
+    taken.mkdir(parents=True)
+    (taken / "config.yaml").write_text("the other run's\n")
+    cfg = load_config(None, [f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}", "rerun.mode=off",
+                             "filter.particles=300", "filter.kld=false"])
+    summary = run(cfg, taken, progress=False, echo=lambda *_: None, fresh=True)
+    assert (taken / "config.yaml").read_text() == "the other run's\n"
+    second = tmp_path / "runs" / "20261206-224500-2"
+    assert summary["outputs"]["trajectory"] == str(second / "trajectory.tum") and (second / "trajectory.tum").is_file()
+
+
+def test_a_temporary_file_of_a_run_killed_while_it_wrote_is_cleared_by_the_next(world, tmp_path, capsys):
+    # A run killed inside an atomic write leaves `.summary.json.XXXX.tmp`: every later run into that folder was
+    # refused ("holds files that are not a run's outputs"). It is the run's own: the next run clears it. A user's
+    # hidden file is still no run's.
+    out = tmp_path / "killed"
+    assert _run(world, out) == 0
+    (out / ".summary.json.k3j9x2.tmp").write_text("{")
+    assert _run(world, out, "--seed", "2") == 0
+    assert not (out / ".summary.json.k3j9x2.tmp").exists() and json.loads((out / "summary.json").read_text())["seed"] == 2
+    (out / ".notes.tmp").write_text("mine")
+    assert _run(world, out) == 2
+    assert "holds files that are not a run's outputs (.notes.tmp)" in _error_lines(capsys)[0]
+
+
+def test_a_signal_while_a_finished_runs_outputs_close_is_late_not_an_interruption(world, tmp_path, monkeypatch):
+    # A Ctrl-C while the outputs were closed, after the last update: every pose and step was there, yet the summary
+    # said interrupted and the exit status was 130. The run is whole: the signal is reported as late.
+    import signal
+
+    from mcl.config import load_config
+    from mcl.runner import run
+    from mcl.trajectory import TumWriter
+
+    close = TumWriter.close
+
+    def signalled(self):
+        os.kill(os.getpid(), signal.SIGINT)
+        return close(self)
+
+    monkeypatch.setattr(TumWriter, "close", signalled)
+    cfg = load_config(None, [f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}", "rerun.mode=off",
+                             "filter.particles=300", "filter.kld=false"])
+    summary = run(cfg, tmp_path / "o", progress=False, echo=lambda *_: None)
+    assert summary["interrupted"] is False and summary["late_signal"] is True
+    rows = (tmp_path / "o" / "trajectory.tum").read_text().splitlines()
+    assert len(rows) == summary["scans"] > 30
