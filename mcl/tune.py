@@ -244,7 +244,7 @@ def param_overrides(params: dict) -> list[str]:
 
 
 def parse_objectives(text: str) -> list[str]:
-    names = [n.strip() for n in str(text).split(",") if n.strip()]
+    names = [n.strip().lower() for n in str(text).split(",") if n.strip()]  # RMSE as rmse
     if not names:
         raise MclError("--objective: expected one or more of " + ", ".join(OBJECTIVES))
     for n in names:

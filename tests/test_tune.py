@@ -533,3 +533,12 @@ def test_two_resumes_of_one_study_at_once_are_refused(serial, files, tmp_path, c
         f"mcl: error: --study {study}: another mcl tune is working on this study now: wait for it to end (two at "
         "once told the same trials twice)"]
     assert ((study / "journal.log").read_bytes(), (study / "study.json").read_bytes()) == before  # nothing written
+
+
+def test_objective_names_are_read_in_any_case():
+    # `--objective RMSE` was "unknown objective 'RMSE'" with no hint (difflib is case-sensitive)
+    from mcl.tune import parse_objectives
+
+    assert parse_objectives("RMSE, Particles") == ["rmse", "particles"]
+    with pytest.raises(MclError, match="names an objective twice"):
+        parse_objectives("rmse,RMSE")
