@@ -22,7 +22,7 @@ def test_the_demo_log_s_messages_laser_and_checks(capsys):
     for kind in ("FLASER", "ODOM", "PARAM"):
         n = sum(ln.startswith(kind + " ") for ln in lines)
         assert f"\n  {kind:<6}  {n:>8}\n" in text, (kind, n, text)
-    assert "\nlaser FLASER: 351 scans, 181 beams over 180 degrees from -90, maximum range 5 m, laser pose " \
+    assert "\nlaser FLASER: 351 scans, 181 beams over 180 degrees from -90, no return at 5 m and beyond, laser pose " \
            "[0.0, 0.0, 0.0]\n" in text, text
     # the ODOM lines' span beside the scans', as bag info gives them (the README said so; it was not printed)
     assert "\n  scans:        FLASER (351 scans)\n  odometry:     ODOM lines (701)\n  stamps:       scans " \

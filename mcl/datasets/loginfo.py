@@ -159,11 +159,13 @@ def format_log_info(info: dict) -> str:
     w = max((len(k) for k in info["messages"]), default=0)
     lines += [f"  {k:<{w}}  {v:>8}" for k, v in info["messages"].items()]
     for kind, d in info["lasers"].items():
-        rmax = "none given (sensor.range_max)" if d["max_range"] is None else f"{d['max_range']:g} m"
+        # the scans' max_range is where a reading means no return (the log's PARAM, a line's field, or the
+        # threshold found under a no-return marker: 49.5 m under 50.00 m), not the laser's reach
+        rmax = "none given (sensor.range_max)" if d["max_range"] is None else f"at {d['max_range']:g} m and beyond"
         pose = "not given (sensor.laser_pose)" if d["laser_pose"] is None else str(d["laser_pose"])
         beams = d["beams"] if isinstance(d["beams"], int) else f"{d['beams'][0]}..{d['beams'][-1]}"
         lines.append(f"laser {kind}: {d['scans']} scans, {beams} beams over {d['fov_deg']:g} degrees from "
-                     f"{d['angle_min_deg']:g}, maximum range {rmax}, laser pose {pose}")
+                     f"{d['angle_min_deg']:g}, no return {rmax}, laser pose {pose}")
     u = info["mcl_uses"]
     lines.append("mcl would use:")
     if "error" in u:
