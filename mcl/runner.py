@@ -1276,8 +1276,7 @@ def _run(
             except (OSError, RuntimeError) as e:
                 failure = failure if failure is not None else e
     loop_time = time.perf_counter() - loop0
-    # a signal while the outputs were closed, after the loop ran to its end: the run is whole (run() says it came
-    # late: summary["late_signal"]); it was called interrupted, with every pose and step there
+    interrupted = interrupted or signals.caught  # also a signal while the outputs were closed
 
     n_up = max(counts["updates"], 1)
     # motion.stalls: fill, motion.jumps: match and motion.slips: match (mcl.odomstall): the holds, jumps and slips

@@ -386,26 +386,3 @@ def test_a_temporary_file_of_a_run_killed_while_it_wrote_is_cleared_by_the_next(
     assert _run(world, out) == 2
     assert "holds files that are not a run's outputs (.notes.tmp)" in _error_lines(capsys)[0]
 
-
-def test_a_signal_while_a_finished_runs_outputs_close_is_late_not_an_interruption(world, tmp_path, monkeypatch):
-    # A Ctrl-C while the outputs were closed, after the last update: every pose and step was there, yet the summary
-    # said interrupted and the exit status was 130. The run is whole: the signal is reported as late.
-    import signal
-
-    from mcl.config import load_config
-    from mcl.runner import run
-    from mcl.trajectory import TumWriter
-
-    close = TumWriter.close
-
-    def signalled(self):
-        os.kill(os.getpid(), signal.SIGINT)
-        return close(self)
-
-    monkeypatch.setattr(TumWriter, "close", signalled)
-    cfg = load_config(None, [f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}", "rerun.mode=off",
-                             "filter.particles=300", "filter.kld=false"])
-    summary = run(cfg, tmp_path / "o", progress=False, echo=lambda *_: None)
-    assert summary["interrupted"] is False and summary["late_signal"] is True
-    rows = (tmp_path / "o" / "trajectory.tum").read_text().splitlines()
-    assert len(rows) == summary["scans"] > 30
