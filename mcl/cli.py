@@ -608,13 +608,15 @@ def cmd_convert(args) -> int:
             raise MclError(f"--initial-pose: ({args.initial_pose[0]:g}, {args.initial_pose[1]:g}) lies outside the "
                            f"map {args.map}")
         initial = (np.array(args.initial_pose), np.diag([0.01, 0.01, 0.01]))
+    if args.mount and not all(math.isfinite(v) for v in args.mount):  # a bag mcl itself refused ("no pose finite")
+        raise MclError(f"--mount: expected finite X Y THETA, got {' '.join(map(str, args.mount))}")
     out = Path(args.out)
     if kind_of_output(out) == "clf":
-        given = [o for o, v in (("--map", args.map), ("--truth", args.truth), ("--initial-pose", args.initial_pose))
-                 if v]
-        if given:
+        given = [o for o, v in (("--map", args.map), ("--truth", args.truth), ("--initial-pose", args.initial_pose),
+                                ("--mount", args.mount), ("--odom", args.odom != "both")) if v]
+        if given:  # (--mount and --odom were ignored without a word)
             raise MclError(f"{', '.join(given)}: written into a bag only; a CARMEN log ({out.name}) holds no map, "
-                           "reference or initial pose")
+                           "reference, initial pose, mounting of its own or odometry topics")
     if out.exists():
         raise MclError(f"{args.out}: exists already")
     if not out.parent.is_dir():  # a mistyped folder is not made

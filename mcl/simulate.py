@@ -43,6 +43,7 @@ import argparse
 import hashlib
 import math
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -875,8 +876,11 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     n_ticks = int(round(duration * odom_rate)) + 1
     kidnap_tick = None
     if kidnap_at is not None:
+        # (NaN or inf was a traceback in int(round()); the last tick is where the drive ends, not the duration)
+        last = (n_ticks - 2) / odom_rate
+        _check(_real(kidnap_at) and 0.0 < kidnap_at, "kidnap_at", f"must lie inside (0, {last:g}] s, got {kidnap_at}")
         kidnap_tick = int(round(kidnap_at * odom_rate))
-        _check(0 < kidnap_tick < n_ticks - 1, "kidnap_at", f"must lie inside (0, {duration}) s, got {kidnap_at}")
+        _check(0 < kidnap_tick < n_ticks - 1, "kidnap_at", f"must lie inside (0, {last:g}] s, got {kidnap_at}")
     if _check_only:
         return None
 
@@ -1699,6 +1703,10 @@ def run_from_args(args: argparse.Namespace) -> int:
         fmt = getattr(args, "format", "clf")
         if fmt != "clf":
             write_log_as_bag(tmp, fmt, sweep=args.scan_sweep)
+            if getattr(args, "landmarks", 0):  # the bag holds no LANDMARK lines: said, not dropped in silence
+                print(f"mcl: note: --landmarks with --format {fmt}: the detections are not in the bag (no bag message "
+                      "carries them); landmarks.yaml is written, and --format clf keeps them in the log",
+                      file=sys.stderr)
         _swap_world(tmp, out)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -28,6 +28,9 @@ def _one_error(capsys) -> str:
     ([], "missing/x.mcap", "the folder {tmp}/missing does not exist"),  # a mistyped folder is not made
     (["--map", "{world}/map.yaml"], "x.clf", "--map: written into a bag only; a CARMEN log (x.clf) holds no map"),
     (["--initial-pose", "nan", "0", "0"], "x.mcap", "--initial-pose: expected finite X Y THETA, got nan 0.0 0.0"),
+    # a NaN mounting wrote a bag mcl itself then refused; --mount and --odom into a CARMEN log were ignored
+    (["--mount", "nan", "0", "0"], "x.mcap", "--mount: expected finite X Y THETA, got nan 0.0 0.0"),
+    (["--mount", "0.1", "0", "0", "--odom", "tf"], "x.clf", "--mount, --odom: written into a bag only"),
     # a reference on another clock was written without a word (the run then said "not scored")
     (["--truth", "{world}/late.tum"], "x.mcap", "{world}/late.tum: no pose lies within the scans' time span"),
     (["--map", "{world}/map.yaml", "--initial-pose", "1000", "1000", "0"], "x.mcap",

@@ -442,6 +442,8 @@ def test_scan_rate_sets_the_lasers_and_odometrys_clocks_and_keeps_the_drive(sim,
 
 @pytest.mark.parametrize("kw, key", [
     (dict(kidnap_at=100.0), "kidnap_at"),
+    (dict(kidnap_at=float("nan")), "kidnap_at"),  # was a ValueError traceback in int(round())
+    (dict(kidnap_at=float("inf")), "kidnap_at"),  # was an OverflowError traceback
     (dict(duration=-1.0), "duration"),
     (dict(n_beams=1), "n_beams"),
     (dict(range_max=0.0), "range_max"),
@@ -1005,3 +1007,17 @@ def test_a_mounted_lasers_bag_carries_the_mounting_on_tf_static(tmp_path):
     off = np.asarray(src.laser_offsets["/scan"], dtype=float)
     np.testing.assert_allclose(off[:2], MOUNT[:2], atol=2e-6)
     assert abs(_wrap(off[2] - MOUNT[2])) < 2e-6
+
+
+def test_landmarks_left_out_of_a_bag_are_said(tmp_path, capsys):
+    # A bag has no message for LANDMARK detections: `mcl simulate --landmarks 5 --format mcap` and `mcl convert` of
+    # a log with LANDMARK lines dropped them in silence (a run with landmarks.use on the bag was then refused).
+    from mcl.cli import main
+
+    assert main(["simulate", str(tmp_path / "b"), "--duration", "4", "--landmarks", "5", "--format", "mcap"]) == 0
+    assert "--landmarks with --format mcap: the detections are not in the bag" in capsys.readouterr().err
+    assert main(["simulate", str(tmp_path / "c"), "--duration", "4", "--landmarks", "5"]) == 0
+    capsys.readouterr()
+    assert main(["convert", str(tmp_path / "c" / "log.clf"), str(tmp_path / "c.mcap")]) == 0
+    err = capsys.readouterr().err
+    assert "LANDMARK lines not written: a bag has no message for them" in err

@@ -447,6 +447,9 @@ def convert(src, out, *, topics=None, frames=None, odom: str = "both", mount=Non
         scans = _with_odometry_velocities(log.laser_stream(laser), log.odometry)
         for note in log.notes:
             echo(note)
+        if log.landmarks and out_kind != "clf":  # no bag message carries them: said, not dropped in silence
+            echo(f"mcl: note: {src}: {len(log.landmarks)} LANDMARK lines not written: a bag has no message for them "
+                 "(a run with landmarks.use needs the CARMEN log)")
     if truth is not None and isinstance(scans, list) and scans and len(truth[0]):  # a log's scans (a bag's: mcl run)
         t0, t1 = scans[0].t, scans[-1].t
         if not np.any((truth[0] >= t0) & (truth[0] <= t1)):  # written, it would score nothing: another clock

@@ -588,7 +588,7 @@ def _detected_max_range(scans: list[Scan], name: str, notes: list[str]) -> list[
         if nr is None:
             notes.append(f"{name}: {kind}: no no-return value found in the readings; sensor.range_max decides")
             continue
-        notes.append(f"{name}: {kind}: {nr.describe()}: readings >= {nr.threshold:.2f} m are taken as no return")
+        notes.append(f"{name}: {kind}: {nr.describe()}")
         if out is scans:
             out = list(scans)
         for k in idx:

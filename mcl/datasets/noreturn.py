@@ -51,7 +51,9 @@ class NoReturn:
     total: int  # finite positive readings looked at
 
     def describe(self) -> str:
-        """e.g. 'no-return readings at 50.00 m and 51.14-51.15 m (13,213 of 155,841, 8.5 %)'."""
+        """e.g. 'a no-return marker at 50.00 m and 51.14-51.15 m: readings >= 49.50 m (13,213 of 155,841, 8.5 %) are
+        taken as no return'. The count is of every reading at or past the threshold: the marker's and the few real
+        readings within the 1 % margin below it (aces: 631, of which 620 read 50.00 m)."""
         lo = self.spikes[0]
         if len(self.spikes) == 1:
             at = f"{lo:.2f} m"
@@ -66,7 +68,8 @@ class NoReturn:
             groups.append((start, prev))
             at = " and ".join(f"{a:.2f} m" if a == b else f"{a:.2f}-{b:.2f} m" for a, b in groups)
         share = 100.0 * self.count / max(self.total, 1)
-        return f"no-return readings at {at} ({self.count:,} of {self.total:,} readings, {share:.1f} %)"
+        return (f"a no-return marker at {at}: readings >= {self.threshold:.2f} m ({self.count:,} of {self.total:,}, "
+                f"{share:.1f} %) are taken as no return")
 
 
 _BLOCK = 1 << 20  # readings a block: 8 MB of float64
