@@ -151,7 +151,10 @@ def run_from_args(args) -> int:
     cfg = load_config(args.config, list(args.set))
     if args.log:
         from mcl.datasets.carmen import read_carmen
+        from mcl.datasets.rosbag import is_bag
 
+        if is_bag(args.log):  # ("log.bag:2: not UTF-8 text" before)
+            raise DataError(f"{args.log}: a ROS bag: give it with --bag")
         source = args.log
         scans = read_carmen(args.log).laser_stream(cfg.laser)
     else:

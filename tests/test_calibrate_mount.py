@@ -117,3 +117,13 @@ def test_a_laser_mounted_backwards_or_sideways_is_found_where_it_is(mount):
     got = fit["laser_pose"]
     assert abs(got[0] - mount[0]) < 0.03 and abs(got[1] - mount[1]) < 0.03, fit
     assert abs(math.degrees(math.remainder(got[2] - mount[2], math.tau))) < 1.0, fit
+
+
+def test_a_bag_given_as_the_log_is_named(tmp_path, capsys):
+    # `calibrate mount --log run.bag` said "run.bag:2: not UTF-8 text", as if a CARMEN log were damaged
+    from mcl.datasets.bagwrite import convert
+
+    bag = tmp_path / "run.mcap"
+    convert(DEMO / "log.clf", bag, echo=lambda *_: None)
+    assert main(["calibrate", "mount", "--log", str(bag)]) == 2
+    assert capsys.readouterr().err.strip() == f"mcl: error: {bag}: a ROS bag: give it with --bag"
