@@ -100,16 +100,21 @@ def pairs_from_log(log_path, truth_path):
     t, poses = t[keep], poses[:, keep]
     if t.size < 2:
         raise DataError(f"{truth_path}: fewer than 2 reference poses inside the log's odometry time span")
+    scan_t = np.unique([s.t for s in log.scans])
+    scan_dt = float(np.median(np.diff(scan_t))) if scan_t.size > 2 else 0.0
+    ref_dt = float(np.median(np.diff(t))) if t.size > 2 else 0.0
     # the reference must be this log's: stamped at its ODOM lines or scans (a truth on another clock can overlap it)
     stamps = np.unique(np.concatenate([odo[:, 0], [s.t for s in log.scans]]))
     i = np.clip(np.searchsorted(stamps, t), 1, stamps.size - 1) if stamps.size > 1 else np.zeros(t.size, int)
     gap = np.minimum(np.abs(stamps[i] - t), np.abs(stamps[np.maximum(i - 1, 0)] - t))
     matched = int(np.count_nonzero(gap <= STAMP_TOL))
-    if matched < 0.5 * t.size:
+    if matched < 0.5 * t.size and 0.0 < ref_dt <= DENSE_REFERENCE * scan_dt:
+        # a reference denser than the scans on its own clock (motion capture): taken at the scans (a reference
+        # stamped at the log's ODOM lines keeps its own spacing: the alphas are over it)
+        t, poses = _at_scans(t, poses, scan_t, ref_dt, truth_path, log_path)
+    elif matched < 0.5 * t.size:
         raise DataError(f"{truth_path}: only {matched} of its {t.size} reference poses inside the odometry's time "
                         f"span are stamped within 1 ms of an ODOM line or scan of {log_path}: is it this log's truth?")
-    scan_t = np.unique([s.t for s in log.scans])
-    scan_dt = float(np.median(np.diff(scan_t))) if scan_t.size > 2 else 0.0
     if scan_dt > 0.0 and t.size > 2:
         ref_dt = float(np.median(np.diff(t)))
         if ref_dt > 1.5 * scan_dt:
@@ -123,6 +128,29 @@ def pairs_from_log(log_path, truth_path):
         check_lag(odo, t, poses, scan_dt, truth_path)
     odom = interpolate_odometry(odo, t)
     return odom[:, :-1], odom[:, 1:], poses[:, :-1], poses[:, 1:], t[:-1]
+
+
+# a reference on its own clock whose poses come this many scan periods apart or closer (motion capture at 100 Hz
+# beside a 40 Hz laser and slower) is taken at the scans; a sparser one must be stamped at the log's: a truth of
+# twice the scans' rate 50 ms late is another clock, refused
+DENSE_REFERENCE = 0.4
+
+
+def _at_scans(t, poses, scan_t, ref_dt: float, truth_path, log_path):
+    """(t, poses) of a reference denser than the scans (a motion-capture system at 50-200 Hz on its own clock)
+    taken at the scans' stamps inside its span, interpolated between its two poses around each (none across a gap
+    over 1.5 of its spacing): the pairs a filter updating every scan sees. Its stamps never met the log's within
+    1 ms, and it was refused as "is it this log's truth?". Said in a warning."""
+    from mcl.evaluate import interpolate_poses
+
+    inside = scan_t[(scan_t >= t[0]) & (scan_t <= t[-1])]
+    i = np.clip(np.searchsorted(t, inside), 1, t.size - 1)
+    inside = inside[t[i] - t[i - 1] <= 1.5 * ref_dt]
+    if inside.size < 2:
+        raise DataError(f"{truth_path}: fewer than 2 scans of {log_path} inside its poses' time span")
+    warnings.warn(f"{truth_path}: its poses are {ref_dt:.3g} s apart, denser than the scans of {log_path}: taken at "
+                  f"the {inside.size} scans inside its span, interpolated", MclWarning, stacklevel=3)
+    return inside, interpolate_poses(t, poses, inside)
 
 
 def log_odometry(log) -> np.ndarray:

@@ -288,7 +288,7 @@ def collect(cfg, *, model: str):
     from mcl.sensors import field_distance
     from mcl.trajectory import read_tum
 
-    from mcl.calibrate_motion import bag_message
+    from mcl.calibrate_motion import DENSE_REFERENCE, bag_message
     from mcl.errors import ConfigError
 
     if cfg.log is None and cfg.bag is not None:
@@ -303,8 +303,16 @@ def collect(cfg, *, model: str):
     scans = _choose_scans(log, cfg.laser)
     ox, oy, res = float(grid.origin[0]), float(grid.origin[1]), float(grid.resolution)
     rays_x, rays_y, rays_a, zs_list, zmax_list, used = [], [], [], [], [], 0
+    scan_t = np.unique([sc.t for sc in scans])
+    scan_dt = float(np.median(np.diff(scan_t))) if scan_t.size > 2 else 0.0
+    # a reference denser than the scans (motion capture on its own clock): interpolated at each scan; its stamps
+    # never met the scans' within 1 ms and it was refused
+    dense = 0.0 < truth.spacing <= DENSE_REFERENCE * scan_dt
+    if dense:
+        warnings.warn(f"{cfg.truth}: its poses are {truth.spacing:.3g} s apart, denser than the scans of {cfg.log}: "
+                      "taken at each scan, interpolated", MclWarning, stacklevel=2)
     for scan in scans:
-        ref = truth.at(scan.t)
+        ref = truth.near(scan.t) if dense else truth.at(scan.t)
         if ref is None:
             continue
         used += 1
@@ -327,7 +335,10 @@ def collect(cfg, *, model: str):
         zmax_list.append(np.full(r.size, zmax))
     if used == 0:
         raise DataError(f"{cfg.truth}: no reference pose matches a scan time of {cfg.log} (within 1 ms)")
-    span = int(np.count_nonzero((truth.t >= scans[0].t - 1e-3) & (truth.t <= scans[-1].t + 1e-3))) if scans else 0
+    if dense:  # the scans inside the reference's span, each of which found a pose unless in a gap of it
+        span = int(np.count_nonzero((scan_t >= truth.t[0]) & (scan_t <= truth.t[-1])))
+    else:
+        span = int(np.count_nonzero((truth.t >= scans[0].t - 1e-3) & (truth.t <= scans[-1].t + 1e-3))) if scans else 0
     if used < 0.5 * span:  # a truth on another clock that overlaps the log's: a few stamps match by chance
         raise DataError(f"{cfg.truth}: only {used} of its {span} reference poses inside the scans' time span match a "
                         f"scan time of {cfg.log} (within 1 ms): is it this log's truth?")

@@ -358,3 +358,39 @@ def test_a_pair_no_noise_explains_is_left_out_of_the_fit(capsys):
     texts = [str(w.message) for w in said]
     assert any(t.startswith("calibrate motion: 1 of 350 pairs left out: no noise explains them") and "the worst at t = 49.800 s" in t
                for t in texts), texts
+
+
+def test_a_reference_denser_than_the_scans_is_taken_at_the_scans(tmp_path):
+    # A motion-capture reference at 50 Hz on its own clock (3.7 ms off the scans): none of its stamps meets a scan's
+    # within 1 ms, and calibrate motion and calibrate sensor refused it ("only 0 of its ... is it this log's
+    # truth?"). Taken at the scans, interpolated (with a warning), it fits what the reference at the scans fits:
+    # the alphas within 15 % (interpolating a 50 Hz path between ticks: millimetres), sigma_hit within 2 %.
+    import warnings
+
+    from mcl.calibrate_motion import fit_odometry_alphas, pairs_from_log
+    from mcl.errors import MclWarning
+    from mcl.evaluate import interpolate_poses
+    from mcl.trajectory import read_tum, write_tum
+
+    demo = Path(__file__).resolve().parents[1] / "data" / "demo"
+    t, p = read_tum(demo / "truth.tum")
+    tq = np.arange(t[0] + 0.0037, t[-1], 0.02)
+    write_tum(tmp_path / "mocap.tum", tq, interpolate_poses(t, p, tq))
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always", MclWarning)
+        dense = pairs_from_log(demo / "log.clf", tmp_path / "mocap.tum")
+    assert any("denser than the scans" in str(w.message) for w in said)
+    exact = pairs_from_log(demo / "log.clf", demo / "truth.tum")
+    a = fit_odometry_alphas(*dense[:4], t=dense[4], noise_step=0.3)["alphas"]
+    b = fit_odometry_alphas(*exact[:4], t=exact[4], noise_step=0.3)["alphas"]
+    assert np.allclose(a, b, rtol=0.15), (a, b)
+    from mcl.calibrate_sensor import calibrate_sensor
+    from mcl.config import load_config
+
+    sigma = []
+    for truth in (tmp_path / "mocap.tum", demo / "truth.tum"):
+        cfg = load_config(None, [f"map={demo / 'map.yaml'}", f"log={demo / 'log.clf'}", f"truth={truth}"])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MclWarning)
+            sigma.append(calibrate_sensor(cfg, "likelihood_field").params["sigma_hit"])
+    assert sigma[0] == pytest.approx(sigma[1], rel=0.02), sigma
