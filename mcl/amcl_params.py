@@ -929,7 +929,7 @@ def convert(path: str | Path) -> Conversion:
         try:
             load_config(f)
         except ConfigError as e:
-            msg = str(e).removeprefix(f"{f}: ")
+            msg = re.sub(rf"^{re.escape(str(f))}(:\d+)?: ", "", str(e))  # (the file's line: of a temporary file)
             entry = next((x for x in c.entries if msg.startswith(x.key + ":")), None) or next(
                 (x for x in c.entries if re.search(rf"(?<![\w.]){re.escape(x.key)}(?!\w)", msg)), None)
             if entry is None or not entry.sources:

@@ -768,6 +768,18 @@ def _related(a: str, b: str) -> bool:
 DATA_KEYS = (*PATH_KEYS, "laser", "landmarks.map", "planes.depth", "planes.map")
 
 
+def _at_line(path: Path, error: str) -> str:
+    """``path``, or ``path:LINE`` when ``error`` begins with a dotted key the file gives (its line): "my.yaml:12:
+    filter.particels: unknown key (did you mean particles?)". A key only default.yaml gives has no line here."""
+    from mcl.yamlfile import key_line
+
+    key = error.split(":", 1)[0].strip()
+    if not key or " " in key:
+        return str(path)
+    line = key_line(path, key.split("[", 1)[0])
+    return f"{path}:{line}" if line is not None else str(path)
+
+
 def _over_defaults(loaded: dict, path: Path) -> dict:
     """A config file's keys laid over ``configs/default.yaml``'s (the documented, corpus-chosen defaults), so that
     a key the file does not give takes the value default.yaml shows, not the code's plain one (a file with a map
@@ -854,14 +866,16 @@ def load_config(path: str | Path | None = None, overrides: list | tuple = ()) ->
             try:
                 _build(Config, copy.deepcopy(data), "")
             except ConfigError as e:
-                raise ConfigError(f"{path}: {e}") from None
+                raise ConfigError(f"{_at_line(path, str(e))}: {e}") from None
     set_by: dict[str, str] = {}  # dotted key -> what gave it its value: "--set text", or the option; last given last
 
     def where(*keys: str) -> str:
         """The prefix of an error about ``keys``: the last --set (or option) that gave one of them, in itself or
         with its section, else the file (none: the defaults)."""
         given = next((w for k, w in reversed(set_by.items()) if any(_related(k, c) for c in keys)), None)
-        return f"{given}: " if given is not None else f"{path}: " if path is not None else ""
+        if given is not None:
+            return f"{given}: "
+        return f"{_at_line(path, keys[0] if keys else '')}: " if path is not None else ""
 
     for item in overrides:
         given, text = item if isinstance(item, tuple) else (f"--set {_printable(item)}", item)

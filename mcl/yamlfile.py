@@ -126,3 +126,23 @@ def finite_number(value, label: str, error: type[MclError]) -> float:
     if not math.isfinite(v):
         raise error(f"{label}: expected a finite number, got {v!r}")
     return v
+
+
+def key_line(path: str | os.PathLike, dotted: str) -> int | None:
+    """The 1-based line of the key ``dotted`` (``filter.particles``; nested mappings) in the YAML file ``path``, or
+    of its deepest section the file gives; None when the file gives none of it or cannot be read. For an error
+    about a key (unknown, of the wrong type) to name its line, as a syntax error's does."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            node = yaml.compose(f.read(), Loader=SAFE_LOADER)
+    except (OSError, ValueError, yaml.YAMLError):
+        return None
+    line = None
+    for part in dotted.split("."):
+        if not isinstance(node, yaml.MappingNode):
+            break
+        hit = next(((k, v) for k, v in node.value if isinstance(k, yaml.ScalarNode) and k.value == part), None)
+        if hit is None:
+            break
+        line, node = hit[0].start_mark.line + 1, hit[1]
+    return line

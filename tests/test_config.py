@@ -137,10 +137,10 @@ def test_a_bad_value_names_the_set_that_gave_it_else_the_file(tmp_path):
     assert str(e.value).startswith("--set sensor.beam.sigma_hit=-1: sensor.beam.sigma_hit: ") and "good.yaml" not in str(e.value)
     with pytest.raises(ConfigError) as e:
         load_config(p, ["sensor.beam.sigma_hit=-1"])  # the file is checked on its own first (issue 11)
-    assert str(e.value).startswith(f"{p}: sensor.beam.z_hit: expected a number")
+    assert str(e.value).startswith(f"{p}:4: sensor.beam.z_hit: expected a number")  # with its line
     with pytest.raises(ConfigError) as e:
         load_config(p, ["sensor.beam.sigma_hit=0.2"])  # the file's own bad value
-    assert str(e.value).startswith(f"{p}: sensor.beam.z_hit: expected a number")
+    assert str(e.value).startswith(f"{p}:4: sensor.beam.z_hit: expected a number")
     with pytest.raises(ConfigError) as e:
         load_config(None, ["filter.initial_std=[1, 2]"])
     assert str(e.value).startswith("--set filter.initial_std=[1, 2]: filter.initial_std: ")
@@ -181,7 +181,7 @@ def test_an_error_a_set_causes_names_the_set(tmp_path):
         load_config(None, ["sensor.range_max=3", "sensor.range_min=5", "sensor.range_max=3"])
     # a check the --set has no part in still names the file
     bad = write(tmp_path, "sensor:\n  range_min: 5\n  range_max: 4\n", "bad.yaml")
-    with pytest.raises(ConfigError, match=rf"^{re.escape(str(bad))}: sensor.range_min: 5.0 must be below"):
+    with pytest.raises(ConfigError, match=rf"^{re.escape(str(bad))}:2: sensor.range_min: 5.0 must be below"):
         load_config(bad, ["filter.particles=10"])
     assert load_config(bad, ["sensor.range_max=10"]).sensor.range_max == 10
 
@@ -269,3 +269,16 @@ def test_an_integer_with_leading_zeros_is_decimal_everywhere(tmp_path):
     assert cfg.seed == 10 and cfg.filter.particles == 800
     assert load_config(None, ["seed=010"]).seed == 10 and load_config(None, ["seed=08"]).seed == 8
     assert load_config(None, ["seed=0x10"]).seed == 16  # an explicit base keeps it
+
+
+def test_a_config_files_bad_key_names_its_line(tmp_path):
+    # An unknown key, a value of the wrong type or out of range named the file and the key, not the line (a syntax
+    # error and a duplicate key did): the key's line now, the deepest section the file gives otherwise.
+    p = write(tmp_path, "seed: 3\nfilter:\n  kld: true\n  particels: 500\n", "typo.yaml")
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value) == f"{p}:4: filter.particels: unknown key (did you mean particles?)"
+    p = write(tmp_path, "filter:\n  particles: 100\nsensor:\n  likelihood_field:\n    sigma_hit: -1\n", "r.yaml")
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value).startswith(f"{p}:5: sensor.likelihood_field.sigma_hit: -1.0 is out of range")

@@ -69,13 +69,13 @@ def test_a_bad_value_in_the_config_file_is_rejected_even_when_an_option_override
     bad.write_text("filter:\n  particles: lots\n")
     rc = main(["run", str(bad), "--particles", "100", "--rerun", "off", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err.strip()
-    assert rc == 2 and err == f"mcl: error: {bad}: filter.particles: expected an integer, got 'lots'", err
+    assert rc == 2 and err == f"mcl: error: {bad}:2: filter.particles: expected an integer, got 'lots'", err
     assert not (tmp_path / "out").exists()
     from mcl.config import load_config
     from mcl.errors import ConfigError
 
     bad.write_text("filter:\n  particels: 100\n")
-    with pytest.raises(ConfigError, match=r"bad.yaml: filter.particels: unknown key \(did you mean particles\?\)"):
+    with pytest.raises(ConfigError, match=r"bad.yaml:2: filter.particels: unknown key \(did you mean particles\?\)"):
         load_config(bad, ["filter.particels=200"])
     # a value the file leaves valid may still be replaced, and a bad --set still names the --set
     bad.write_text("filter:\n  particles: 300\n")
