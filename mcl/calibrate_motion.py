@@ -282,7 +282,7 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     spread = 1.4826 * float(np.median(np.abs(ll - med)))
     bad = ~(ll >= med - max(OUTLIER_NATS, 10.0 * spread))  # (a pair of density 0 too)
     if not bad.any() or bad.sum() > OUTLIER_SHARE * ll.size:  # none, or too many to be faults: the fit as it is
-        return _public(_fit_odometry_alphas(op, on, xp, xn, t=t, **kw)) if bad.any() else _said(first)
+        return _said(first)
     drop = np.flatnonzero(used)[bad]
     keep = np.ones(op.shape[1], dtype=bool)
     keep[drop] = False
@@ -337,6 +337,8 @@ def _fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="vari
 
     noise_step: ``motion.noise_step`` of the model fitted (0: the book's dtrans^2 for every step length).
     """
+    from scipy.special import expit
+
     check_min_trans(min_trans)
     op, on, xp, xn = (np.asarray(a, dtype=np.float64) for a in (odom_prev, odom_now, x_prev, x_now))
     still = _still(xp, xn) & _still(op, on)
@@ -349,8 +351,8 @@ def _fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="vari
     fit_p = p_turn is None
 
     def unpack(z):  # log-alphas, and p_turn = P_TURN_MAX * logistic(z[4])
-        # (Nelder-Mead is unbounded: exp(-z) overflowed past z = -710; the logistic taken stably)
-        return np.exp(z[:4]), (P_TURN_MAX * _logistic(float(z[4])) if fit_p else float(p_turn))
+        # (Nelder-Mead is unbounded: exp(-z) overflowed past z = -710; scipy's logistic does not)
+        return np.exp(z[:4]), (P_TURN_MAX * float(expit(z[4])) if fit_p else float(p_turn))
 
     def lls(z):
         a, p = unpack(z)
@@ -391,14 +393,6 @@ def _fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="vari
 
 
 ALPHA_NAMES = ("alpha1", "alpha2", "alpha3", "alpha4", "alpha_strafe")
-
-
-def _logistic(z: float) -> float:
-    """1 / (1 + exp(-z)) without overflow for any float z."""
-    if z >= 0.0:
-        return 1.0 / (1.0 + math.exp(-z))
-    e = math.exp(z)
-    return e / (1.0 + e)
 
 
 def _maximise(lls, nll, z0, n_alpha: int, extra_bounds: list, names) -> tuple:

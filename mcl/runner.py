@@ -68,15 +68,9 @@ def _fresh_dir(out: Path) -> Path:
 
 
 def default_out_dir(root: Path | None = None) -> Path:
-    """A fresh folder under runs/ named by the start time."""
-    root = root or Path.cwd() / "runs"
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = root / stamp
-    k = 1
-    while out.exists():
-        k += 1
-        out = root / f"{stamp}-{k}"
-    return out
+    """The folder under runs/ named by the start time; ``run(..., fresh=True)`` makes it, or the next free name
+    (``_fresh_dir``), when the outputs begin."""
+    return (root or Path.cwd() / "runs") / datetime.now().strftime("%Y%m%d-%H%M%S")
 
 
 # what a run writes into its folder (mcl.runner._run), and the partial files of its line writers

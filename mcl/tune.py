@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mcl.errors import ConfigError, MclError
+from mcl.suite import PER_RUN_KEYS
 
 LOST_PENALTY = 3.0  # a lost run's RMSE counts this many times its dataset's lost_m
 NEVER_S = 60.0  # s: the convergence time of a run that never converged (twice mcl.suite.WITHIN_S)
@@ -60,8 +61,7 @@ OBJECTIVES = {
 }
 SPEC_KEYS = ("low", "high", "log", "step", "choices")
 # keys the suite sets per dataset, or that do not change the filter
-FIXED = ("map", "log", "bag", "truth", "laser", "seed", "filter.initial_pose", "filter.global_localization",
-         "landmarks.map", "planes.depth", "planes.map")
+FIXED = PER_RUN_KEYS + ("laser", "landmarks.map", "planes.depth", "planes.map")  # (a dataset's own, or a run's)
 NOT_TUNED_SECTIONS = ("rerun", "topics", "frames", "eval")
 STUDY_NAME = "mcl-tune"
 STATE_FILE = "study.json"
