@@ -152,6 +152,17 @@ def lock_folder(folder: Path, busy: str) -> int | None:
     return fd
 
 
+@contextmanager
+def folder_lock(folder: Path, busy: str):
+    """``lock_folder`` held for a ``with`` block (or an ExitStack's life): released however the block ends."""
+    fd = lock_folder(folder, busy)
+    try:
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)
+
+
 def _clear_run_outputs(out_dir: Path) -> None:
     """A run into a folder that holds an earlier run's outputs: those go first (a recording left from a run with
     rerun.mode save beside the new run's trajectory would belong to another run)."""

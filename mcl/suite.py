@@ -38,6 +38,7 @@ unreadable, its truth not overlapping the log) is a row with its ``error``, coun
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import difflib
@@ -1125,18 +1126,14 @@ def evaluate_suite(suite_path, *, config=None, sets=(), seeds=1, jobs=1, out=Non
     ``warn`` the errors). A failed run is a row with its ``error`` (not saved in its folder: a resume runs it
     again), counted as lost. Returns the exit status (0, 130 interrupted, 2 when a run failed). ``--out`` is locked
     while it runs: two evaluations into one folder counted each other's runs as failed."""
-    locks: list[int] = []
-    try:
+    with contextlib.ExitStack() as held:  # the --out lock, once taken
         return _evaluate_suite(suite_path, config=config, sets=sets, seeds=seeds, jobs=jobs, out=out, cache=cache,
                                modes=modes, only=only, baseline=baseline, world=world, progress=progress, echo=echo,
-                               warn=warn, start_offset=start_offset, locks=locks)
-    finally:
-        for fd in locks:
-            os.close(fd)
+                               warn=warn, start_offset=start_offset, held=held)
 
 
 def _evaluate_suite(suite_path, *, config, sets, seeds, jobs, out, cache, modes, only, baseline, world, progress,
-                    echo, warn, start_offset, locks) -> int:
+                    echo, warn, start_offset, held: contextlib.ExitStack) -> int:
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
     import multiprocessing
@@ -1178,12 +1175,10 @@ def _evaluate_suite(suite_path, *, config, sets, seeds, jobs, out, cache, modes,
         make_dir(cache, "--cache")
     if not inside:
         make_dir(out, "--out")
-    from mcl.runner import lock_folder
+    from mcl.runner import folder_lock
 
-    fd = lock_folder(out, f"--out {out}: another mcl eval is writing in this folder now: wait for it to end, or "
-                          "choose another --out")
-    if fd is not None:
-        locks.append(fd)
+    held.enter_context(folder_lock(out, f"--out {out}: another mcl eval is writing in this folder now: wait for it "
+                                        "to end, or choose another --out"))
     ctx = multiprocessing.get_context("spawn")  # fresh workers: no numba threads inherited from a fork
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init) if jobs > 1 else None
     results: dict[str, dict] = {}

@@ -41,7 +41,7 @@ import statistics
 import sys
 import typing
 import warnings
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -1017,24 +1017,18 @@ def _load_settings(study_dir: Path) -> Settings:
 def run_from_args(args) -> int:
     """``mcl tune`` from the parsed command line (mcl.cli). The study folder is locked while the study runs (two
     --resume of one study at once told the same trials twice)."""
-    locks: list[int] = []
-    try:
-        return _run_from_args(args, locks)
-    finally:
-        for fd in locks:
-            os.close(fd)
+    with ExitStack() as held:  # the --study lock, once taken
+        return _run_from_args(args, held)
 
 
-def _lock_study(study_dir: Path, locks: list) -> None:
-    from mcl.runner import lock_folder
+def _lock_study(study_dir: Path, held: ExitStack) -> None:
+    from mcl.runner import folder_lock
 
-    fd = lock_folder(study_dir, f"--study {study_dir}: another mcl tune is working on this study now: wait for it to "
-                                "end (two at once told the same trials twice)")
-    if fd is not None:
-        locks.append(fd)
+    held.enter_context(folder_lock(study_dir, f"--study {study_dir}: another mcl tune is working on this study now: "
+                                              "wait for it to end (two at once told the same trials twice)"))
 
 
-def _run_from_args(args, locks: list) -> int:
+def _run_from_args(args, held: ExitStack) -> int:
     from mcl.suite import make_dir, seed_range
     from mcl.trajectory import atomic_write_text
 
@@ -1059,7 +1053,7 @@ def _run_from_args(args, locks: list) -> int:
                            f"{existing}/{STATE_FILE}; not with {', '.join(given)}")
         study_dir = Path(existing)
         s = _load_settings(study_dir)
-        _lock_study(study_dir, locks)
+        _lock_study(study_dir, held)
         if s.fingerprint:
             now = fingerprint(s)  # the suite gone: one error line naming it (--report reads it too)
             changed = [f"the suite file {s.suite}" if k == "suite" else
@@ -1122,7 +1116,7 @@ def _run_from_args(args, locks: list) -> int:
     with _executor(args.jobs, args.ray) as executor:
         if not existing:  # made once the executor is up: a --ray that fails leaves no empty study behind
             make_dir(study_dir, "--study")  # first: a --study that cannot be made is said as --study
-            _lock_study(study_dir, locks)
+            _lock_study(study_dir, held)
             if any(d.simulate is not None for d in tuner.suite.datasets):
                 make_dir(Path(s.cache), "--cache")
             atomic_write_text(study_dir / STATE_FILE, json.dumps(dataclasses.asdict(s), indent=1) + "\n")
