@@ -162,7 +162,9 @@ class FilterConfig:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class MotionConfig:
-    """Odometry motion model (Prob. Rob. Table 5.6, sample_motion_model_odometry)."""
+    """Odometry motion model (Prob. Rob. Table 5.6, sample_motion_model_odometry; with ``noise_step`` 0.3 m by
+    default, a step over 0.3 m has the translation-driven noise of a random walk of 0.3 m steps: ``noise_step=0``
+    is the book's table exactly)."""
 
     # odometry: sample_motion_model_odometry (Table 5.6); velocity: sample_motion_model_velocity (Table 5.3);
     # omni: the odometry of an omnidirectional base (ROS AMCL's omni model, mcl.motion.OmniMotionModel)
@@ -680,57 +682,72 @@ def _cross_checks(cfg: Config) -> None:
 
         if is_bag(cfg.log):
             raise _CrossCheckError(f"log: {cfg.log} is a ROS bag: give it as bag (--bag on the command line)")
-    if not cfg.topics.cloud_z[0] <= cfg.topics.cloud_z[1]:
-        raise _CrossCheckError(f"topics.cloud_z: expected [min, max], got {list(cfg.topics.cloud_z)}")
-    if cfg.topics.scan == "" or cfg.topics.odom == "":
-        raise _CrossCheckError("topics.scan: empty topic name", "topics.odom")
-    s = cfg.sensor
-    if s.range_min >= s.range_max:
-        raise _CrossCheckError(f"sensor.range_min: {s.range_min} must be below sensor.range_max ({s.range_max})",
-                               "sensor.range_max")
-    if s.likelihood_field.z_hit + s.likelihood_field.z_rand <= 0:
-        raise _CrossCheckError("sensor.likelihood_field.z_hit: z_hit + z_rand must be positive",
-                               "sensor.likelihood_field.z_rand")
-    if s.use and s.model == "likelihood_field" and s.likelihood_field.z_hit <= 0:  # every pose alike: no laser
-        raise _CrossCheckError("sensor.likelihood_field.z_hit: 0 makes every pose score alike (the scan would "
-                               "correct nothing); for a run without the laser set sensor.use: false",
-                               "sensor.model", "sensor.use")
-    lm = cfg.landmarks
-    if lm.z_det + lm.z_fp <= 0:
-        raise _CrossCheckError("landmarks.z_det: z_det + z_fp must be positive", "landmarks.z_fp")
-    if lm.use and lm.map is None:
-        raise _CrossCheckError("landmarks.map: landmarks.use is true but no landmark map is given", "landmarks.use")
-    pc = cfg.planes
-    if pc.z_det + pc.z_fp <= 0:
-        raise _CrossCheckError("planes.z_det: z_det + z_fp must be positive", "planes.z_fp")
-    if pc.use and pc.depth is None:
-        raise _CrossCheckError("planes.depth: planes.use is true but no depth folder is given", "planes.use")
+    for section in (cfg.topics, cfg.sensor, cfg.landmarks, cfg.planes):
+        _section_checks(section)
+    s, lm, pc = cfg.sensor, cfg.landmarks, cfg.planes
     if not s.use and not lm.use and not pc.use:
         raise _CrossCheckError("sensor.use: false needs landmarks.use: true or planes.use: true (nothing else to "
                                "correct with)", "landmarks.use", "planes.use")
-    b = s.beam
-    total = b.z_hit + b.z_short + b.z_max + b.z_rand
-    if abs(total - 1.0) > 1e-6:
-        raise _CrossCheckError(
-            f"sensor.beam.z_hit: the beam model's mixture weights z_hit + z_short + z_max + z_rand must sum to 1, "
-            f"got {b.z_hit:g} + {b.z_short:g} + {b.z_max:g} + {b.z_rand:g} = {total:g} (the defaults: 0.8, 0.1, "
-            f"0.05, 0.05)", "sensor.beam.z_short", "sensor.beam.z_max", "sensor.beam.z_rand"
-        )
     if cfg.quality.min_beams > s.max_beams:
         raise _CrossCheckError(f"quality.min_beams: {cfg.quality.min_beams} is more than sensor.max_beams "
                                f"({s.max_beams}): no update would have beams enough to judge", "sensor.max_beams")
-    if any(v < 0 for v in cfg.filter.initial_std):
-        raise _CrossCheckError("filter.initial_std: standard deviations must be >= 0")
-    if any(not v > 0 for v in cfg.filter.respread_std):
-        raise _CrossCheckError("filter.respread_std: standard deviations must be > 0")
-    if any(not v > 0 for v in cfg.filter.recovery_local_std):
-        raise _CrossCheckError("filter.recovery_local_std: standard deviations must be > 0")
-    f = cfg.filter
-    if f.recovery in (True, "augmented", "auto") and f.recovery_alpha_slow >= f.recovery_alpha_fast:
-        raise _CrossCheckError(
-            f"filter.recovery_alpha_slow: {f.recovery_alpha_slow} must be below filter.recovery_alpha_fast "
-            f"({f.recovery_alpha_fast})", "filter.recovery", "filter.recovery_alpha_fast"
-        )
+    _section_checks(cfg.filter)
+
+
+def _section_checks(sec: Any) -> None:
+    """The checks across the keys of one section (``_cross_checks`` runs them for a whole Config, ``replace`` for
+    the section it changes: the beam weights of ``replace(cfg.sensor.beam, z_hit=0.5)`` went unchecked, and the
+    model scored with a mixture of total mass 0.7)."""
+    if isinstance(sec, TopicsConfig):
+        if not sec.cloud_z[0] <= sec.cloud_z[1]:
+            raise _CrossCheckError(f"topics.cloud_z: expected [min, max], got {list(sec.cloud_z)}")
+        if sec.scan == "" or sec.odom == "":
+            raise _CrossCheckError("topics.scan: empty topic name", "topics.odom")
+    elif isinstance(sec, SensorConfig):
+        if sec.range_min >= sec.range_max:
+            raise _CrossCheckError(f"sensor.range_min: {sec.range_min} must be below sensor.range_max "
+                                   f"({sec.range_max})", "sensor.range_max")
+        _section_checks(sec.likelihood_field)
+        if sec.use and sec.model == "likelihood_field" and sec.likelihood_field.z_hit <= 0:  # every pose alike
+            raise _CrossCheckError("sensor.likelihood_field.z_hit: 0 makes every pose score alike (the scan would "
+                                   "correct nothing); for a run without the laser set sensor.use: false",
+                                   "sensor.model", "sensor.use")
+        _section_checks(sec.beam)
+    elif isinstance(sec, LikelihoodFieldConfig):
+        if sec.z_hit + sec.z_rand <= 0:
+            raise _CrossCheckError("sensor.likelihood_field.z_hit: z_hit + z_rand must be positive",
+                                   "sensor.likelihood_field.z_rand")
+    elif isinstance(sec, BeamConfig):
+        total = sec.z_hit + sec.z_short + sec.z_max + sec.z_rand
+        if abs(total - 1.0) > 1e-6:
+            raise _CrossCheckError(
+                f"sensor.beam.z_hit: the beam model's mixture weights z_hit + z_short + z_max + z_rand must sum to "
+                f"1, got {sec.z_hit:g} + {sec.z_short:g} + {sec.z_max:g} + {sec.z_rand:g} = {total:g} (the "
+                f"defaults: 0.8, 0.1, 0.05, 0.05)", "sensor.beam.z_short", "sensor.beam.z_max", "sensor.beam.z_rand"
+            )
+    elif isinstance(sec, LandmarkConfig):
+        if sec.z_det + sec.z_fp <= 0:
+            raise _CrossCheckError("landmarks.z_det: z_det + z_fp must be positive", "landmarks.z_fp")
+        if sec.use and sec.map is None:
+            raise _CrossCheckError("landmarks.map: landmarks.use is true but no landmark map is given",
+                                   "landmarks.use")
+    elif isinstance(sec, PlaneConfig):
+        if sec.z_det + sec.z_fp <= 0:
+            raise _CrossCheckError("planes.z_det: z_det + z_fp must be positive", "planes.z_fp")
+        if sec.use and sec.depth is None:
+            raise _CrossCheckError("planes.depth: planes.use is true but no depth folder is given", "planes.use")
+    elif isinstance(sec, FilterConfig):
+        if any(v < 0 for v in sec.initial_std):
+            raise _CrossCheckError("filter.initial_std: standard deviations must be >= 0")
+        if any(not v > 0 for v in sec.respread_std):
+            raise _CrossCheckError("filter.respread_std: standard deviations must be > 0")
+        if any(not v > 0 for v in sec.recovery_local_std):
+            raise _CrossCheckError("filter.recovery_local_std: standard deviations must be > 0")
+        if sec.recovery in (True, "augmented", "auto") and sec.recovery_alpha_slow >= sec.recovery_alpha_fast:
+            raise _CrossCheckError(
+                f"filter.recovery_alpha_slow: {sec.recovery_alpha_slow} must be below filter.recovery_alpha_fast "
+                f"({sec.recovery_alpha_fast})", "filter.recovery", "filter.recovery_alpha_fast"
+            )
 
 
 # ----------------------------------------------------------------------------- overrides and paths
@@ -925,13 +942,16 @@ def load_config(path: str | Path | None = None, overrides: list | tuple = ()) ->
 def replace(cfg: Any, **changes: Any) -> Any:
     """dataclasses.replace for callers that tweak a config or a section, validated as a config file's keys are
     (ConfigError naming the key): unchecked, ``alpha1=-1`` failed three steps later as "math domain error",
-    ``particles=0`` as a ZeroDivisionError. A whole ``Config`` gets the checks across keys too."""
+    ``particles=0`` as a ZeroDivisionError. A whole ``Config`` gets the checks across keys too, a section those
+    within it (``_section_checks``: the beam weights' sum, range_min below range_max, ...)."""
     new = dataclasses.replace(cfg, **changes)
     hints = typing.get_type_hints(Config)
     prefix = next((f"{name}." for name, tp in hints.items() if tp is type(cfg)), "")
     built = _build(type(new), to_dict(new), prefix)
     if isinstance(built, Config):
         _cross_checks(built)
+    else:
+        _section_checks(built)
     return built
 
 

@@ -106,6 +106,16 @@ class Control:
     # (motion.fill_spread)
     filled: bool = False
 
+    def velocities(self) -> tuple[float, float, float]:
+        """(v, w, dt) for a velocity model: as given, or, where v and w are both 0 (a log without tv / rv, a Control
+        made from the odometry pair alone, as the README's loop does), from the odometry pair
+        (``mcl.motion.velocities_from_odometry``: before, such a step moved no particle)."""
+        if self.v == 0.0 and self.w == 0.0:
+            from mcl.motion import velocities_from_odometry
+
+            return velocities_from_odometry(self.odom_prev, self.odom_now, self.dt)
+        return float(self.v), float(self.w), float(self.dt)
+
 
 SCALE_PIN = 0.8  # motion.scale_window: a correction that leaves this much of the spread along the travel pins nothing
 

@@ -19,6 +19,10 @@ for N particles at once, with the refinements of ROS AMCL's
       sigma_rot2^2  = alpha1 rot2^2 + alpha2 trans^2
   ``noise_form="std"`` (lecture slides):
       sigma_rot1  = alpha1 |rot1| + alpha2 trans, and so on.
+  With ``noise_step`` > 0 (``MotionConfig``'s default 0.3 m) a step longer
+  than noise_step has the translation-driven noise of a random walk of such
+  steps: trans^2 -> trans * min(trans, noise_step) above (``noise_trans``);
+  ``noise_step=0`` is the book's formulas exactly.
 
 Map-based motion model (seed section 5.5, ``sample_motion_model_with_map``):
 with an ``allowed`` mask (``allowed_mask``: free cells farther than the robot
@@ -120,8 +124,9 @@ def noise_trans(trans, cfg):
 def noise_sigmas(rot1: float, trans: float, rot2: float, cfg) -> tuple[float, float, float]:
     """Standard deviations (sigma_rot1, sigma_trans, sigma_rot2) of the noise on the deltas.
 
-    ``cfg`` needs alpha1..alpha4 and noise_form ("variance" or "std"); the
-    rotations enter as ``noise_rotations`` reads them (a step backwards read forwards).
+    ``cfg`` needs alpha1..alpha4, noise_form ("variance" or "std") and noise_step (0: the book's trans^2; a
+    MotionConfig's default 0.3 m: a longer step's trans^2 is trans * 0.3, ``noise_trans``); the rotations enter
+    as ``noise_rotations`` reads them (a step backwards read forwards).
     """
     a1, a2, a3, a4 = float(cfg.alpha1), float(cfg.alpha2), float(cfg.alpha3), float(cfg.alpha4)
     r1, r2 = noise_rotations(rot1, rot2)
@@ -725,8 +730,8 @@ def velocity_inverse(x_prev, x_new, dt: float):
 
 
 def _velocity_control(u):
-    if hasattr(u, "v"):
-        return float(u.v), float(u.w), float(u.dt)
+    if hasattr(u, "velocities"):  # a Control
+        return u.velocities()
     v, w, dt = u
     return float(v), float(w), float(dt)
 
@@ -863,8 +868,10 @@ class VelocityMotionModel:
 
     def sample_control(self, particles, control, rng, allowed=None, grid=None, fault=None, log_weight=None,
                        fallback=None):
-        """``sample`` for a :class:`mcl.filter.Control` (uses its v, w, dt; a filled step's with ``fill_spread``)."""
-        return self.sample(particles, control.v, control.w, control.dt, rng, allowed=allowed, grid=grid,
+        """``sample`` for a :class:`mcl.filter.Control` (its ``velocities()``: v, w, dt, or from its odometry pair
+        where v and w are 0; a filled step's with ``fill_spread``)."""
+        v, w, dt = control.velocities()
+        return self.sample(particles, v, w, dt, rng, allowed=allowed, grid=grid,
                            fault=fault, log_weight=log_weight, fallback=fallback, spread=_fill_spread(control, self.cfg))
 
     def sample(self, particles, v, w, dt, rng: np.random.Generator, allowed=None, grid=None, out=None,

@@ -260,6 +260,25 @@ def test_replace_validates_as_a_config_file_does():
     assert replace(cfg.motion, alpha1=0.2).alpha1 == 0.2 and replace(cfg, seed=5) == Config(seed=5)
 
 
+def test_replace_on_a_section_checks_across_its_keys():
+    # replace(cfg.sensor.beam, z_hit=0.5) was taken: the beam model then scored with a mixture of total mass 0.7;
+    # only replace on the whole Config checked the sum
+    from mcl.config import replace
+
+    cfg = load_config(None)
+    for section, kw, said in (
+            (cfg.sensor.beam, {"z_hit": 0.5}, "sensor.beam.z_hit: the beam model's mixture weights"),
+            (cfg.sensor, {"range_min": 90.0}, "sensor.range_min: 90.0 must be below sensor.range_max"),
+            (cfg.sensor.likelihood_field, {"z_hit": 0.0, "z_rand": 0.0}, "z_hit + z_rand must be positive"),
+            (cfg.filter, {"recovery": "augmented", "recovery_alpha_slow": 0.5, "recovery_alpha_fast": 0.1},
+             "filter.recovery_alpha_slow: 0.5 must be below"),
+            (cfg.landmarks, {"use": True}, "landmarks.map: landmarks.use is true")):
+        with pytest.raises(ConfigError, match=re.escape(said)):
+            replace(section, **kw)
+    beam = replace(cfg.sensor.beam, z_hit=0.7, z_short=0.2)  # a sum of 1 passes
+    assert replace(cfg.sensor, beam=beam).beam.z_short == 0.2
+
+
 def test_an_integer_with_leading_zeros_is_decimal_everywhere(tmp_path):
     # `--seed 010` ran seed 10, `--set seed=010` and a config's `seed: 010` seed 8 (YAML 1.1 octal), and `08` was
     # refused: one spelling, two trajectories. Now decimal in all three, as YAML 1.2 reads it.

@@ -445,3 +445,27 @@ def test_an_out_buffer_of_another_shape_is_refused_not_written_past():
     out = np.empty((3, 200))
     new, ok, _ = model.sample(p, u0, u1, np.random.default_rng(1), out=out)
     assert new is out and ok.all()
+
+
+def test_a_velocity_model_given_only_the_odometry_pair_moves_by_it():
+    """The README's Python loop makes ``Control(prev.odom, scan.odom, dt=...)`` (no v, w): with
+    ``motion.model=velocity`` that moved no particle at all (v = w = 0), and the run drifted 0.5 rad off without a
+    word. The velocities now come from the odometry pair as a log without tv / rv gives them (an arc of the pair's
+    length and turn). Noise-free model: the particle ends where the odometry did, 0.5 m ahead along 0.1 rad turning
+    0.2 rad, within 1 mm (an arc of length 0.5 m ends 0.8 mm short of its chord's 0.5 m) and its heading within
+    1e-9."""
+    from mcl.filter import Control
+    from mcl.motion import VelocityMotionModel, velocities_from_odometry
+
+    cfg = SimpleNamespace(model="velocity", noise_form="variance", noise="normal", max_tries=10, alpha1=0.0,
+                          alpha2=0.0, alpha3=0.0, alpha4=0.0, alpha5=0.0, alpha6=0.0)
+    end = np.array([0.5 * np.cos(0.1), 0.5 * np.sin(0.1), 0.2])
+    u = Control(np.zeros(3), end, dt=0.2)
+    assert u.velocities() == pytest.approx(velocities_from_odometry(np.zeros(3), end, 0.2))
+    new, ok, _ = VelocityMotionModel(cfg).sample_control(np.zeros((3, 4)), u, np.random.default_rng(0))
+    assert ok.all()
+    np.testing.assert_allclose(new[0], end[0], atol=1e-3)  # the arc's end vs the chord's: 0.5 * (1 - sinc) ~ 1e-4
+    np.testing.assert_allclose(new[1], end[1], atol=1e-3)
+    np.testing.assert_allclose(new[2], 0.2, atol=1e-9)
+    # given velocities are used as given
+    assert Control(np.zeros(3), end, dt=0.2, v=1.0, w=0.0).velocities() == (1.0, 0.0, 0.2)
