@@ -155,6 +155,7 @@ class Source:
     remaps: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     ns: str = ""
+    unresolved: set = field(default_factory=set)  # names the file gives a value mcl could not resolve ($(eval))
 
 
 def _flatten(d: dict, prefix: str = "") -> dict:
@@ -201,6 +202,13 @@ def _walk(node: Any, path: tuple = (), depth: int = 0):
         yield from _walk(v, (*path, str(k)), depth + 1)
 
 
+def _node_namespace(path: tuple) -> str:
+    """The namespace of a nav2 params file's node at ``path`` (``/robot1/amcl:`` or ``robot1: amcl:``: robot1), in
+    which its relative topics resolve as ROS 2 resolves them; "" at the root or under a wildcard (``/**/amcl``)."""
+    parts = [q for k in path for q in str(k).split("/") if q]
+    return "" if any("*" in q for q in parts) else "/".join(parts[:-1])
+
+
 def _is_amcl_name(path: tuple) -> bool:
     return bool(path) and path[-1].strip("/").split("/")[-1].endswith("amcl")
 
@@ -218,7 +226,8 @@ def _from_yaml(path: Path, doc: Any) -> Source:
                                key=lambda n: -_score(n[1]))
         if pick:
             p, params = pick[0]
-            src = Source(path, NAV2, _flatten(params), f"{'/'.join(p) + ': ' if p else ''}ros__parameters")
+            src = Source(path, NAV2, _flatten(params), f"{'/'.join(p) + ': ' if p else ''}ros__parameters",
+                         ns=_node_namespace(p))
             if len(named) > 1:
                 src.warnings.append(f"{len(named)} amcl nodes ({', '.join('/'.join(n[0]) for n in named)}): "
                                     f"the first ({'/'.join(p)}) is read")
@@ -234,10 +243,14 @@ def _from_yaml(path: Path, doc: Any) -> Source:
     named = [c for c in candidates if _is_amcl_name(c[0])]
     p, params = named[0] if named else max(candidates, key=lambda c: _score(c[1]))
     flavour, guessed = _flavour_of(params)
+    if guessed and p:  # under a node's name without ros__parameters: a rosparam file (nav2 never reads one so)
+        flavour = ROS1
     src = Source(path, flavour, _flatten(params), "/".join(p) if p else "the top level")
     if guessed:
-        src.warnings.append("every name here is both ROS 1 amcl's and nav2_amcl's: read as nav2_amcl's (its defaults "
-                            "fill a group's missing parameters)")
+        why = (f"under {'/'.join(p)}: without ros__parameters: (a rosparam file) read as ROS 1 amcl's" if p else
+               "read as nav2_amcl's")
+        src.warnings.append(f"every name here is both ROS 1 amcl's and nav2_amcl's: {why} (its defaults fill a "
+                            "group's missing parameters)")
     return src
 
 
@@ -275,6 +288,11 @@ def _from_launch(path: Path, text: str) -> Source:
 
     def subst(value: str, what: str, args: dict) -> str | None:
         """$(arg NAME) replaced from ``args``; None (and a warning) for any other substitution."""
+        if value.strip().startswith("$(eval "):  # the whole value is one Python expression (roslaunch's rule)
+            warnings.append(f"{what}: {value.strip()} cannot be resolved here (roslaunch's $(eval) is not "
+                            "evaluated): not used")
+            return None
+
         def one(m):
             if m.group(1) == "arg" and m.group(2).strip() in args:
                 return args[m.group(2).strip()]
@@ -365,6 +383,7 @@ def _from_launch(path: Path, text: str) -> Source:
         warnings.append(f"{len(nodes)} amcl nodes launched: the first ({node.get('name', 'amcl')}) is read")
     flavour = ROS1 if node.get("pkg") == "amcl" else NAV2
     params: dict = {}
+    unresolved: set = set()
 
     for el in node:
         if skipped(el, args):
@@ -377,6 +396,8 @@ def _from_launch(path: Path, text: str) -> Source:
             value = subst(el.get("value"), name, args)
             if value is not None:
                 params[name] = _roslaunch_value(value, el.get("type"))
+            else:
+                unresolved.add(name)
         elif el.tag == "rosparam" and el.get("command", "load") == "load":
             loaded = None
             if el.get("file"):
@@ -405,7 +426,7 @@ def _from_launch(path: Path, text: str) -> Source:
             if r is not None:
                 remaps[r[0]] = r[1]
     return Source(path, flavour, params, f"<node name=\"{node.get('name', 'amcl')}\">", remaps, warnings,
-                  ns.strip("/"))
+                  ns.strip("/"), unresolved)
 
 
 def _resolve(name: str, ns: str) -> str:
@@ -537,7 +558,9 @@ class _Converter:
 
     def said(self, key: str) -> str:
         """'name value' for a comment, '(AMCL's default)' when the file does not give it."""
-        extra = "" if self.given(key) else " (AMCL's default)"
+        extra = ("" if self.given(key) else
+                 " (AMCL's default: the file's value could not be resolved)" if self.name(key) in self.src.unresolved
+                 else " (AMCL's default)")
         return f"{self.name(key)} {_num(self.get(key))}{extra}"
 
     def read(self) -> None:
@@ -741,6 +764,7 @@ class _Converter:
             return
         if any(map(self.given, field_keys)):
             self.weights("sensor.likelihood_field", field_keys, ("z_hit", "z_rand"))
+            self.note_rand_range()
         if self.given("laser_likelihood_max_dist"):
             self.set("sensor.likelihood_field.likelihood_max_dist", self.get("laser_likelihood_max_dist"),
                      self.said("laser_likelihood_max_dist"), "laser_likelihood_max_dist")
@@ -768,6 +792,24 @@ class _Converter:
                       "mcl multiplies them, as the book and AMCL's likelihood_field_prob do: its weights are sharper "
                       "(sensor.exponent < 1 tempers them)")
 
+    def note_rand_range(self) -> None:
+        """AMCL's z_rand / range_max uses the laser's range (the scan's range_max, laser_max_range where that is
+        smaller), mcl's sensor.range_max: a note with the factor that makes them one (a stock nav2 file's 100 m
+        against a 12 m laser is 8.3 times lower a floor)."""
+        given = self.given("laser_max_range") and self.get("laser_max_range") > 0
+        if given:
+            here = f"{_num(self.get('laser_max_range'))} m, from {self.name('laser_max_range')}"
+            r = float(self.get("laser_max_range"))
+        else:
+            from mcl.config import SensorConfig
+
+            r = float(SensorConfig().range_max)
+            here = f"{_num(r)} m, mcl's default"
+        self.note(f"AMCL divides z_rand by the laser's range (the scan's range_max, or laser_max_range where "
+                  f"smaller); mcl by sensor.range_max ({here}): for a laser of R m mcl's floor is R/{_num(r)} of "
+                  f"AMCL's. To score as AMCL did, set sensor.range_max to the laser's range (a reading at it is no "
+                  f"return, as in AMCL), or z_rand to z_rand x {_num(r)}/R with z_hit scaled so they sum to 1")
+
     def weights(self, block: str, keys: tuple, mixture: tuple) -> None:
         """The mixture weights of ``block``, AMCL's unnormalised hit Gaussian made a density (x sqrt(2 pi) sigma)
         and the weights scaled to sum to 1: the same p(z) up to a factor common to every particle. Values mcl
@@ -784,8 +826,7 @@ class _Converter:
         for k in keys:
             if k in mixture:
                 how = ("" if not ok else ": AMCL's unnormalised hit Gaussian x sqrt(2 pi) sigma_hit, then the "
-                       "weights scaled to sum to 1 (the same weights where sensor.range_max is the scan's, over which AMCL "
-                       "spreads z_rand)" if k == "z_hit" else
+                       "weights scaled to sum to 1 (AMCL's p(z) where sensor.range_max is the laser's range: see the notes)" if k == "z_hit" else
                        ": scaled with z_hit (see there)")
                 self.set(f"{block}.{k}", float(f"{w[k]:.6g}") if ok else self.get(k), f"{self.said(k)}{how}", k)
             else:

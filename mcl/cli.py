@@ -24,6 +24,7 @@ from mcl.errors import DataError, MclError, MclWarning
 
 EXIT_ERROR = 2
 EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: what a shell reports for cat or grep whose reader left
 
 
 def _project_default_config() -> Path | None:
@@ -807,6 +808,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("mcl: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError as e:
+        if e.filename is None:  # stdout's reader left (`mcl log info L | head -1`): quiet, as cat and grep are
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error as Python exits
+            return EXIT_BROKEN_PIPE
+        print(f"mcl: error: {e.filename}: {e.strerror or e}", file=sys.stderr)
+        return EXIT_ERROR
     except OSError as e:  # a file mcl could not write (a full disk, a folder made read-only mid-run): one line
         where = f"{e.filename}: " if e.filename else ""
         print(f"mcl: error: {where}{e.strerror or e}", file=sys.stderr)

@@ -566,3 +566,50 @@ def test_a_namespaced_group_puts_the_nodes_topics_in_its_namespace(tmp_path):
     k = keys('<node pkg="amcl" type="amcl" name="amcl" ns="/r3"><param name="min_particles" value="300"/></node>')
     assert k["topics.scan"] == "/r3/scan" and k["topics.map"] == "/r3/map"
     assert "topics.scan" not in keys(node)  # the root namespace: mcl's own choice (/scan, else the only one)
+
+
+def test_a_rosparam_file_under_the_nodes_name_is_ros1_even_with_names_both_have(tmp_path):
+    # `amcl:` without ros__parameters: is a rosparam file (nav2 never reads one so); with names both flavours share it
+    # was read as nav2's, and nav2's defaults filled the group: kld_err 0.05 for ROS 1's 0.01, recovery_alpha_fast 0
+    # (recovery not mapped) for ROS 1's 0.1. A flat file stays nav2's (said in a warning), as before.
+    c = convert(_write(tmp_path, "ros1.yaml", "amcl:\n  min_particles: 100\n  max_particles: 5000\n"
+                                              "  recovery_alpha_slow: 0.001\n"))
+    assert c.keys["filter.kld_epsilon"] == 0.01
+    assert c.keys["filter.recovery"] == "augmented" and c.keys["filter.recovery_alpha_fast"] == 0.1
+    assert any("read as ROS 1 amcl's" in w for w in c.warnings)
+    flat = convert(_write(tmp_path, "flat.yaml", "min_particles: 100\nmax_particles: 5000\n"))
+    assert flat.keys["filter.kld_epsilon"] == 0.05 and any("read as nav2_amcl's" in w for w in flat.warnings)
+
+
+@pytest.mark.parametrize("head, scan", [("/robot1/amcl:\n", "/robot1/scan"), ("robot1:\n amcl:\n", "/robot1/scan"),
+                                        ("/fleet/r2/amcl:\n", "/fleet/r2/base_scan"), ("/**/amcl:\n", None)])
+def test_a_nav2_nodes_namespace_takes_its_relative_topics(tmp_path, head, scan):
+    # nav2 resolves a relative scan_topic in the node's namespace: /robot1/amcl read `scan` as /scan (the root)
+    indent = " " * head.count("\n")
+    topic = "base_scan" if "fleet" in head else "scan"
+    text = f"{head}{indent} ros__parameters:\n{indent}  scan_topic: {topic}\n{indent}  max_particles: 3000\n"
+    keys = convert(_write(tmp_path, "nav2.yaml", text)).keys
+    if scan is None:  # a wildcard's namespace is not known: the root's
+        assert keys["topics.scan"] == "/scan" and "topics.map" not in keys
+    else:
+        assert keys["topics.scan"] == scan and keys["topics.map"] == scan.rsplit("/", 1)[0] + "/map"
+
+
+def test_a_launch_files_eval_is_named_whole_and_its_default_said_so(tmp_path):
+    # `$(eval arg('particles') // 4)` was cut at its first ')' in the warning, and the output said min_particles
+    # 100 "(AMCL's default)" as if the file had not set it
+    c = convert(_write(tmp_path, "e.launch", '<launch><arg name="particles" default="1234"/>'
+                                             '<node pkg="amcl" type="amcl" name="amcl">'
+                                             '<param name="min_particles" value="$(eval arg(\'particles\') // 4)"/>'
+                                             '<param name="max_particles" value="$(arg particles)"/></node></launch>'))
+    assert any("$(eval arg('particles') // 4) cannot be resolved" in w for w in c.warnings), c.warnings
+    assert "min_particles 100 (AMCL's default: the file's value could not be resolved)" in c.text
+
+
+def test_the_random_floors_range_is_noted_with_its_factor(tmp_path):
+    # AMCL divides z_rand by the laser's range, mcl by sensor.range_max: a stock nav2 file (laser_max_range 100)
+    # against a 12 m laser has a floor 8.3 times lower in mcl; the note says so and how to match
+    c = convert(_write(tmp_path, "n.yaml", "amcl:\n  ros__parameters:\n    laser_max_range: 100.0\n"
+                                           "    z_hit: 0.5\n    z_rand: 0.5\n    sigma_hit: 0.2\n"))
+    assert "mcl by sensor.range_max (100 m, from laser_max_range): for a laser of R m mcl's floor is R/100" in \
+        " ".join(c.text.replace("# ", "").split())

@@ -102,3 +102,18 @@ def test_what_mcl_log_info_refuses_or_cannot_use(tmp_path, capsys):
     assert main(["log", "info", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"mcl: error: {bad}:2: FLASER: ") and err.count("\n") == 1, err
+
+
+def test_a_reader_that_leaves_early_ends_the_command_quietly():
+    # `mcl log info L | head -1` printed "mcl: error: Broken pipe" and exited 2 (when head left before the output
+    # was written). Now quiet, with cat's and grep's 141. The read end is closed before the command prints.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    p = subprocess.Popen([sys.executable, "-m", "mcl", "log", "info", str(DEMO / "log.clf")], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, cwd=Path(__file__).resolve().parents[1])
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141, err
+    assert err == ""
