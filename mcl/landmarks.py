@@ -7,7 +7,10 @@ A landmark map is a YAML file (``mcl simulate --landmarks K`` writes one)::
       - {id: 2, x: 10.05, y: 1.40, signature: 0.7}   # signature: optional number
 
 ``id`` is a unique integer >= 0 (the correspondence the detector reports),
-``x``, ``y`` metres in the map frame.
+``x``, ``y`` metres in the map frame. A ``signature`` is read and kept, not
+scored: an observation (a LANDMARK line, a bag's landmarks) carries id,
+range and bearing only, so Table 6.4's third factor prob(s - s_j, sigma_s^2)
+has no measured signature to compare and is left out (a factor 1).
 
 An observation ``z = <i, d, phi>`` is the landmark's id, its range (m) and its
 bearing (rad, counter-clockwise from the robot's heading), all from the robot

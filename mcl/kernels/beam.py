@@ -38,7 +38,9 @@ HIT, SHORT, MAX, RAND, SIGMA, LAMBDA = 0, 1, 2, 3, 4, 5
 
 @njit(cache=True, nogil=True)
 def beam_prob(z, zs, zmax, params):
-    """p(z | z*) of one beam: the four-component mixture above (a density plus the p_max atom at zmax)."""
+    """p(z | z*) of one beam: the four-component mixture above (a density plus the p_max atom at zmax). At z* = 0
+    (the laser inside an obstacle) p_short is a point mass at 0 and is left out: the mixture's mass there is
+    1 - z_short, a pose inside a wall scoring that much lower."""
     z_hit = params[0]
     z_short = params[1]
     z_max = params[2]
