@@ -24,7 +24,6 @@ the file and the YAML key; nothing else escapes :func:`load_map`.
 
 from __future__ import annotations
 
-import io
 import json
 import math
 import os
@@ -43,12 +42,12 @@ __all__ = ["OccupancyGrid", "load_map", "save_map"]
 
 _MODES = ("trinary", "scale", "raw")
 
-# Memory a localization needs per map cell, at least: the distance field, the likelihood table and the map-rejection
-# mask, measured at 17-18 bytes a cell on 100 M and 400 M cell maps (tracking, --rerun off; a global start and a
-# recording take 23-26). 2026-11-27, 100 M cells, the interpreter's 0.25 GB included: 18.6 tracking and 17.9 global
-# (23.5 and 22.9 while the depth table was built from a copy of the whole map). A map whose cells need more than the
-# machine has is refused before its image is decoded.
-BYTES_PER_CELL = 17
+# Memory a localization needs per map cell: the distance field, the likelihood table and the map-rejection mask
+# take 17-20 bytes a cell tracking; a global start, or a search after the track is lost (which any run with recovery
+# may start), adds the search's tables: 28-30 (2026-12-07, 100 M and 208 M cells with a recording: 19.5 / 17.4
+# tracking, 29.8 / 28.2 global; a map checked at 17 passed at 1.7 times what the machine had). A map whose cells
+# need more than the machine has is refused before its image is decoded.
+BYTES_PER_CELL = 30
 
 
 def available_memory() -> int | None:
@@ -70,7 +69,8 @@ def _check_memory(label: str, width: int, height: int) -> None:
             return f"{b / 1e9:.1f} GB" if b >= 1e9 else f"{b / 1e6:.0f} MB"
 
         raise DataError(f"{label}: {width} x {height} cells need about {size(need)} to localize in "
-                        f"({BYTES_PER_CELL} bytes a cell: distance field, likelihood table, rejection mask); "
+                        f"({BYTES_PER_CELL} bytes a cell: distance field, likelihood tables, rejection mask, a "
+                        "search's tables); "
                         f"{size(have)} of memory is available: crop the map to where the robot drives, or "
                         "coarsen its resolution")
 
@@ -429,19 +429,25 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, int, np.ndarray
     from PIL import Image, UnidentifiedImageError
 
     label = f"{where}: image: {_printable(str(img_path))}"
-    try:
-        with open(img_path, "rb") as f:
-            data = f.read()
+    f = None
+    try:  # opened, not read: a map too big for the memory is refused from its header (reading a 2.5 GB image
+        # first took 13 s and 2.6 GB to say so)
+        f = open(img_path, "rb")
+        head = f.read(1 << 16)  # a PGM's header, for its maxval
+        f.seek(0)
     except (OSError, ValueError) as e:
+        if f is not None:
+            f.close()
         reason = getattr(e, "strerror", None) or type(e).__name__
         raise DataError(f"{label}: cannot read image: {reason}") from None
-    if not data:
+    if not head:
+        f.close()
         raise DataError(f"{label}: empty file")
     # Pillow's decompression-bomb guard (a warning above 89 M pixels, an error above 179 M) is for images from the
     # web; a map is the user's own file, and a 500 m building at 5 cm has 100 M cells.
     bomb_limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
     try:
-        with Image.open(io.BytesIO(data)) as im:
+        with f, Image.open(f) as im:
             _check_memory(label, *im.size)  # the header's size, before the pixels are decoded
             im.load()
             fmt, mode = im.format, im.mode
@@ -464,7 +470,7 @@ def _read_image(img_path: Path, where: str) -> tuple[np.ndarray, int, np.ndarray
     if arr.ndim == 2:
         n = 1
         # Pillow scales a PGM by its maxval, rounded: to 0..255 (maxval <= 255) or 0..65535 (mode I)
-        maxval = _pgm_maxval(data) if fmt == "PPM" else None
+        maxval = _pgm_maxval(head) if fmt == "PPM" else None
         if mode == "L":
             colour = arr
             if maxval is not None and maxval < 255:  # SDL_image (ROS 1): v * 255 // maxval, truncated

@@ -622,9 +622,33 @@ def test_a_run_keeps_the_huge_page_advice_off_in_its_loop_too_and_gives_it_back(
     assert s["updates"] > 5 and seen == [False] * 5
 
 
+def test_a_map_too_big_for_the_memory_is_refused_without_reading_its_image(tmp_path, monkeypatch):
+    # The image was read whole before its header was looked at: a 2.5 GB PGM took 13 s and 2.6 GB of memory to be
+    # refused. A 200 MB sparse file (its header says 14142 x 14142): refused with under 1 MB allocated.
+    import tracemalloc
+
+    import mcl.maps as maps
+
+    img = tmp_path / "big.pgm"
+    with open(img, "wb") as f:
+        f.write(b"P5\n14142 14142\n255\n")
+        f.truncate(200_000_000)
+    (tmp_path / "big.yaml").write_text("image: big.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n"
+                                       "occupied_thresh: 0.65\nfree_thresh: 0.196\nnegate: 0\n")
+    monkeypatch.setattr(maps, "available_memory", lambda: 1_000_000_000)
+    tracemalloc.start()
+    try:
+        with pytest.raises(DataError, match=r"14142 x 14142 cells need about 6\.0 GB"):
+            load_map(tmp_path / "big.yaml")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000, peak
+
+
 def test_a_map_too_big_for_the_memory_is_one_line_before_its_pixels_are_decoded(tmp_path, monkeypatch, capsys):
-    # BYTES_PER_CELL (17) per cell against the memory available: 1000 x 600 cells need 10.2 MB. With 8 MB
-    # available the map is refused, naming the file, the cells and what to do; with 12 MB it loads.
+    # BYTES_PER_CELL (30) per cell against the memory available: 1000 x 600 cells need 18 MB. With 8 MB
+    # available the map is refused, naming the file, the cells and what to do; with 20 MB it loads.
     import mcl.maps as maps
     from mcl.cli import main
 
@@ -635,14 +659,14 @@ def test_a_map_too_big_for_the_memory_is_one_line_before_its_pixels_are_decoded(
     decoded = []
     load = ImageFile.ImageFile.load
     monkeypatch.setattr(ImageFile.ImageFile, "load", lambda im: decoded.append(1) or load(im))
-    with pytest.raises(DataError, match=r"m\.yaml: image: .*m\.png: 1000 x 600 cells need about 10 MB to localize "
-                                        r"in \(17 bytes a cell.*\); 8 MB of memory is available: crop the map"):
+    with pytest.raises(DataError, match=r"m\.yaml: image: .*m\.png: 1000 x 600 cells need about 18 MB to localize "
+                                        r"in \(30 bytes a cell.*\); 8 MB of memory is available: crop the map"):
         load_map(y)
     assert not decoded  # refused from the header, before the pixels
     assert main(["run", "--map", str(y), "--log", str(tmp_path / "none.clf"), "--rerun", "off"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "1000 x 600 cells need about 10 MB" in err[0], err
-    monkeypatch.setattr(maps, "available_memory", lambda: 12_000_000)
+    assert len(err) == 1 and "1000 x 600 cells need about 18 MB" in err[0], err
+    monkeypatch.setattr(maps, "available_memory", lambda: 20_000_000)
     assert load_map(y).occupancy.shape == (600, 1000) and decoded
     monkeypatch.setattr(maps, "available_memory", lambda: None)  # not known (not Linux): no check
     assert load_map(y).occupancy.shape == (600, 1000)
