@@ -1119,6 +1119,8 @@ def _run(
             log_scan=cfg.rerun.scan,
         )
         viz.log_map(grid)
+        if viz.frame_note():  # a map far from (0, 0): the recording's own frame
+            echo(viz.frame_note())
         if cfg.sensor.use:
             viz.log_likelihood_field(grid, cfg.sensor)
         if landmark_map is not None:

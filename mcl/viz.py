@@ -367,6 +367,24 @@ def scale_colors(u: np.ndarray, faded: bool = False) -> np.ndarray:
     return np.rint(rgb).astype(np.uint8)
 
 
+# m: a map reaching farther than this from (0, 0) is recorded in a frame of its own (``recording_offset``): Rerun
+# stores positions as float32, whose step is 1 mm at 8 km, 0.5 m at a UTM northing (5.4e6 m), where a particle cloud
+# collapsed onto a line
+LOCAL_FRAME_FROM = 10_000.0
+
+
+def recording_offset(grid: Any) -> np.ndarray:
+    """(2,) metres subtracted from every position the recording holds: (0, 0) for a map within
+    ``LOCAL_FRAME_FROM`` of the origin, else its origin rounded to the kilometre (positions then stay within a few
+    km of 0, their float32 step under a millimetre)."""
+    x0, y0 = (float(v) for v in grid.origin[:2])
+    res = float(grid.resolution)
+    far = max(abs(x0), abs(y0), abs(x0 + grid.width * res), abs(y0 + grid.height * res))
+    if not far > LOCAL_FRAME_FROM:
+        return np.zeros(2)
+    return np.round(np.array([x0, y0]) / 1000.0) * 1000.0
+
+
 def _xy32(points: np.ndarray) -> np.ndarray:
     """(K, 2) float32 points (a new array) of (2+, K) float64 ones: the positions of a Points2D."""
     return np.ascontiguousarray(points[:2].T, dtype=np.float32)
@@ -472,13 +490,14 @@ def _field_bands(grid: Any, sensor_cfg: Any, k: int, cells: int = 1 << 22):
 
 
 def _log_grid_image(rec: Any, path: str, grid: Any, img: np.ndarray, mode: str, draw_order: float,
-                    k: int = 1) -> None:
+                    k: int = 1, offset: np.ndarray | None = None) -> None:
     """Static image ``img`` (row 0 the top, one pixel per ``k`` x ``k`` grid cells; ``mode`` L or RGBA) laid over
     the grid at ``path``, its bottom-left corner on the grid's origin: PNG-encoded when pillow is there, raw
     otherwise."""
     h = img.shape[0]
     res = float(grid.resolution) * k
-    x0, y0 = (float(v) for v in grid.origin[:2])
+    o = np.zeros(2) if offset is None else offset  # the recording's frame (recording_offset)
+    x0, y0 = (float(v) - float(d) for v, d in zip(grid.origin[:2], o))
     # pixel (u, v) -> world (x0 + u res, y0 + h res - v res): with the y flip on `world`
     # the image is drawn unmirrored with its top row at the top.
     rec.log(path, rr.Transform3D(translation=[x0, y0 + h * res, 0.0], scale=[res, -res, 1.0]), static=True)
@@ -569,6 +588,7 @@ class RerunLogger:
         self._time_kind: str | None = None
         self._stat_names: list[str] = []
         self._bounds = None  # the world view's frame, from the map (log_map)
+        self.offset = np.zeros(2)  # m: subtracted from every position recorded (recording_offset, from log_map)
         self._warm: set[str] = set()
         self._hist_width: float | None = None  # timings whose warm-up (first real run) is over
         self._blueprint_key: tuple[str, ...] | None = None
@@ -686,8 +706,29 @@ class RerunLogger:
         img[free] = _FREE
         img[occupied] = _OCCUPIED
         img = np.ascontiguousarray(img[::-1])  # grid row 0 is the bottom; image row 0 is the top
-        _log_grid_image(rec, "world/map", grid, img, "L", _DRAW_ORDER["map"], k)
-        self._bounds = known_bounds(grid)  # the world view's frame (build_blueprint)
+        self.offset = recording_offset(grid)
+        if self.offset.any():
+            rec.log("about", rr.TextDocument(ABOUT + self.frame_note(), media_type=rr.MediaType.MARKDOWN),
+                    static=True)
+        _log_grid_image(rec, "world/map", grid, img, "L", _DRAW_ORDER["map"], k, self.offset)
+        b = known_bounds(grid)  # the world view's frame (build_blueprint)
+        ox, oy = (float(v) for v in self.offset)
+        self._bounds = None if b is None else ((b[0][0] - ox, b[0][1] - ox), (b[1][0] - oy, b[1][1] - oy))
+
+    def frame_note(self) -> str:
+        """What the recording's positions are relative to, when not the map frame ("" when they are)."""
+        if not self.offset.any():
+            return ""
+        ox, oy = (float(v) for v in self.offset)
+        return (f"recording: positions are relative to ({ox:.0f}, {oy:.0f}) m in the map frame (Rerun keeps them "
+                "as float32, which would round them to centimetres or more this far out); the trajectory and "
+                "summary keep the map frame")
+
+    def local(self, a: Any) -> np.ndarray:
+        """``a`` (an x, y[, theta] pose or a (2|3, N) array) in the recording's frame: x, y less ``offset``."""
+        b = np.array(a, dtype=np.float64)
+        b[:2] -= self.offset.reshape((2,) + (1,) * (b.ndim - 1))
+        return b
 
     def log_likelihood_field(self, grid: Any, sensor_cfg: Any) -> None:
         """Static image of the likelihood field (Prob. Rob. Table 6.3): p(endpoint | map) of an endpoint in each
@@ -718,14 +759,14 @@ class RerunLogger:
         bands = [table[np.rint(np.minimum(d[::-1], top_mm / 1000.0) * 1000.0).astype(np.int32)]  # image row 0: top
                  for d in _field_bands(grid, sensor_cfg, k)]  # a block shows its most likely cell
         img = np.concatenate(bands[::-1]) if len(bands) > 1 else bands[0]
-        _log_grid_image(rec, "world/likelihood_field", grid, img, "RGBA", _DRAW_ORDER["map"] + 1.0, k)
+        _log_grid_image(rec, "world/likelihood_field", grid, img, "RGBA", _DRAW_ORDER["map"] + 1.0, k, self.offset)
 
     def log_truth_path(self, poses: np.ndarray, t: np.ndarray | None = None) -> None:
         """Static full true path (3, M), at times ``t`` (M,) if given; per-step truth trails are then not logged."""
         rec = self._live()
         if rec is None:
             return
-        p = np.asarray(poses, dtype=np.float64)
+        p = self.local(poses)
         # broken where the robot jumps (a kidnap): one line across the map through its walls read as a path. A step
         # over 10 median steps (and 1 m); with times, only when it is as fast too: a scan gap of 2 s drove 1.1 m at
         # the robot's own speed, and the path was cut there
@@ -790,6 +831,10 @@ class RerunLogger:
         rec.set_time("step", sequence=int(step))
         self._step_now = int(step)
         self._set_time(rec, float(t))
+        estimate = self.local(estimate)  # the recording's frame (recording_offset); the particles' in _log_particles
+        scan_world, skipped_world, expected_world, odom_pose, truth_pose = (
+            None if a is None else self.local(a) for a in (scan_world, skipped_world, expected_world, odom_pose,
+                                                          truth_pose))
 
         if self.particles_max > 0 and call % self.particles_every == 0:
             self._log_particles(rec, particles, weights)
@@ -934,8 +979,8 @@ class RerunLogger:
         p = np.asarray(particles)
         idx = subsample_indices(p.shape[1], self.particles_max)
         xy = np.empty((idx.size, 2), dtype=np.float32)
-        xy[:, 0] = p[0, idx]
-        xy[:, 1] = p[1, idx]
+        xy[:, 0] = p[0, idx] - self.offset[0]
+        xy[:, 1] = p[1, idx] - self.offset[1]
         w = np.asarray(weights, dtype=np.float64)[idx]
         # Size and fading by weight too: among thousands of points of similar colour the heavy ones still stand out.
         # Three sizes (1, 2, 3.5 UI points: below 1.5 decades under the heaviest, within it, within 0.3 decades):
@@ -1190,7 +1235,7 @@ def log_landmark_map(logger: RerunLogger, landmark_map: Any) -> None:
     rec = logger._live()
     if rec is None:
         return
-    xy = np.ascontiguousarray(np.asarray(landmark_map.xy, dtype=np.float64).T, dtype=np.float32)
+    xy = np.ascontiguousarray(logger.local(landmark_map.xy).T, dtype=np.float32)
     rec.log(
         "world/landmarks",
         rr.Points2D(
@@ -1225,7 +1270,7 @@ def log_landmark_observations(logger: RerunLogger, estimate: np.ndarray, marks: 
     if marks is None or len(marks.ids) == 0:
         rec.log("world/landmarks/observed", rr.LineStrips2D(np.zeros((0, 2, 2), dtype=np.float32)))
         return
-    seg = landmark_rays(estimate, marks.ranges, marks.bearings).astype(np.float32)
+    seg = landmark_rays(logger.local(estimate), marks.ranges, marks.bearings).astype(np.float32)
     rec.log(
         "world/landmarks/observed",
         rr.LineStrips2D(
@@ -1246,7 +1291,8 @@ def log_line_features(logger: RerunLogger, segments: np.ndarray) -> None:
         return
     rec.log(
         "world/lines",
-        rr.LineStrips2D(np.ascontiguousarray(segments, dtype=np.float32).reshape(-1, 2, 2), colors=[[220, 40, 200]],
+        rr.LineStrips2D((np.asarray(segments, dtype=np.float64).reshape(-1, 2, 2) - logger.offset).astype(np.float32),
+                        colors=[[220, 40, 200]],
                         radii=rr.Radius.ui_points(2.0), draw_order=_DRAW_ORDER["scan"]),
     )
 
@@ -1330,6 +1376,13 @@ _PLANE_COLORS = np.array([[230, 25, 75], [60, 180, 75], [255, 225, 25], [0, 130,
                           [145, 30, 180], [70, 240, 240], [240, 50, 230]], dtype=np.uint8)
 
 
+def _less(points: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """float32 (M, 2 or 3) points with their x, y less ``offset`` (the recording's frame)."""
+    p = np.array(points, dtype=np.float64)
+    p[:, :2] -= offset
+    return p.astype(np.float32)
+
+
 def log_planes(logger: RerunLogger, estimate: np.ndarray, sensor: Any, planes: Any, max_points: int = 5000) -> None:
     """This step's depth cloud, extracted planes (patches) and their matches (``sensor``: a
     mcl.planes.PlaneSensor whose ``last_cloud`` the planes came from). Call after ``log_step``."""
@@ -1344,11 +1397,11 @@ def log_planes(logger: RerunLogger, estimate: np.ndarray, sensor: Any, planes: A
         idx = subsample_indices(cloud.points.shape[0], max_points)
         lab = planes.labels[idx]
         colors = np.where(lab[:, None] >= 0, _PLANE_COLORS[np.maximum(lab, 0) % len(_PLANE_COLORS)], 150)
-        rec.log("depth/cloud", rr.Points3D(level_to_world(estimate, cam, cloud.points[idx]).astype(np.float32),
+        rec.log("depth/cloud", rr.Points3D(_less(level_to_world(estimate, cam, cloud.points[idx]), logger.offset),
                                            colors=colors.astype(np.uint8), radii=0.01))
     k = len(planes)
     if k:
-        verts = level_to_world(estimate, cam, planes.corners.reshape(-1, 3)).astype(np.float32)
+        verts = _less(level_to_world(estimate, cam, planes.corners.reshape(-1, 3)), logger.offset)
         tri = np.array([[4 * j, 4 * j + 1, 4 * j + 2] for j in range(k)] + [[4 * j, 4 * j + 2, 4 * j + 3]
                                                                            for j in range(k)], dtype=np.uint32)
         vcol = np.repeat(_PLANE_COLORS[np.arange(k) % len(_PLANE_COLORS)], 4, axis=0)
@@ -1358,11 +1411,11 @@ def log_planes(logger: RerunLogger, estimate: np.ndarray, sensor: Any, planes: A
     model = sensor.model
     walls = planes.vertical(float(sensor.cfg.vertical_tol))
     seg_obs = [level_to_world(estimate, cam, planes.corners[j, :2])[:, :2] for j in walls]
-    rec.log("world/planes/observed", rr.LineStrips2D([s.astype(np.float32) for s in seg_obs],
+    rec.log("world/planes/observed", rr.LineStrips2D([_less(s, logger.offset) for s in seg_obs],
                                                      colors=[[0, 200, 255]], radii=rr.Radius.ui_points(3.0),
                                                      draw_order=_DRAW_ORDER["scan"] + 1.0))
     match = associate(model, estimate, model.prepare(planes))
     faces = model.map.faces[match[match >= 0]]
-    rec.log("world/planes/matched", rr.LineStrips2D([f[3:7].reshape(2, 2).astype(np.float32) for f in faces],
+    rec.log("world/planes/matched", rr.LineStrips2D([_less(f[3:7].reshape(2, 2), logger.offset) for f in faces],
                                                     colors=[[255, 255, 255]], radii=rr.Radius.ui_points(1.5),
                                                     draw_order=_DRAW_ORDER["scan"] + 0.5))

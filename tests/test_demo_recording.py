@@ -193,3 +193,40 @@ def test_timings_warm_up_apart_when_the_kernels_are_already_loaded(recording, tm
     steps, _ = _rows(chunks, "/stats/time_ms/predict", "Scalars:scalars")
     w_steps, _ = _rows(chunks, "/warmup/time_ms/predict", "Scalars:scalars")
     assert w_steps == [1] and sorted(steps) == list(range(2, s["updates"]))  # nothing to predict at step 0
+
+
+def test_a_map_far_from_the_origin_is_recorded_in_a_frame_of_its_own(tmp_path):
+    # A map in UTM-like coordinates (origin 500 km east, 5,400 km north): Rerun keeps positions as float32, whose
+    # step there is 0.5 m, and every particle of a step was recorded on one y. The recording now holds positions
+    # less the map's origin rounded to the km, and says so; the trajectory keeps the map frame. Tolerance 1 mm:
+    # float32's step at the few hundred metres left is under 0.1 mm.
+    import shutil
+
+    from mcl.trajectory import read_tum
+    from mcl.viz import recording_offset
+
+    far = np.array([500_000.0, 5_400_000.0])
+    shutil.copy(DEMO / "map.pgm", tmp_path / "map.pgm")
+    (tmp_path / "map.yaml").write_text((DEMO / "map.yaml").read_text().replace(
+        "origin: [-1.0, -1.0, 0.0]", f"origin: [{far[0] - 1.0}, {far[1] - 1.0}, 0.0]"))
+    _, truth = read_tum(DEMO / "truth.tum")
+    start = truth[:, 0] + np.array([*far, 0.0])
+    log = _head(DEMO / "log.clf", tmp_path / "head.clf", 20)
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"log={log}", f"map={tmp_path / 'map.yaml'}", f"filter.initial_pose=[{start[0]}, {start[1]}, {start[2]}]",
+        "filter.particles=2000", "filter.kld=false", "rerun.particles_max=2000"])
+    said: list = []
+    run(cfg, tmp_path / "out", progress=False, echo=lambda *a: said.append(" ".join(map(str, a))))
+    offset = recording_offset(load_map(tmp_path / "map.yaml"))
+    assert offset.tolist() == [500_000.0, 5_400_000.0]
+    assert any("positions are relative to (500000, 5400000) m" in s for s in said), said
+    t, est = read_tum(tmp_path / "out" / "trajectory.tum")
+    chunks = list(RrdReader(tmp_path / "out" / "recording.rrd").stream().to_chunks())
+    steps, pos = _rows(chunks, "/world/estimate", "Points2D:positions")
+    rec = {k: np.asarray(v[0], dtype=np.float64) for k, v in zip(steps, pos)}
+    assert len(rec) >= est.shape[1] - 1  # an update a scan (the first starts the filter)
+    for k, xy in rec.items():  # each recorded estimate is one of the trajectory's poses, to 1 mm
+        assert np.hypot(*(xy + offset)[:, None] - est[:2]).min() < 1e-3, (k, xy)
+    _, clouds = _rows(chunks, "/world/particles", "Points2D:positions")
+    ys = np.array([p[1] for p in clouds[-1]])
+    assert np.unique(ys).size > 100  # a cloud (581 distinct y after resampling), not a line of one y
