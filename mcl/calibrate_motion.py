@@ -30,7 +30,9 @@ eps_rot1 + eps_rot2: variance sigma_rot1^2 + sigma_rot2^2, with rot1 = 0 and
 rot2 = the whole turn as below min_trans) and the translation (folded at 0:
 with the direction free, so is the step's sign), and the split is uniform on
 the circle. Pairs below min_trans (either step) take the
-turn-only density alone. p_turn, the share of pairs whose split is not
+turn-only density alone (its noise from the reference's rot1 and rot2 where
+the reference moved min_trans or more and its split is observed, a share
+1 - p_turn; from (0, the turn) for the rest). p_turn, the share of pairs whose split is not
 observed, is fitted with the alphas (at most 0.5); fr101, belgioioso and
 intel_lab give 0.22-0.30. The optimiser is Nelder-Mead, then L-BFGS-B, on log-alphas (so they
 stay positive) with bounds [1e-9, 100].
@@ -233,17 +235,29 @@ def pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_form=
 
     r1, tr, r2 = odometry_deltas_array(odom_prev, odom_now, mt)
     h1, ht, h2 = odometry_deltas_array(x_prev, x_now, mt)
+    s1, st, s2 = noise_sigmas_array(h1, ht, h2, cfg)
     # turn only: rot1 = 0, rot2 = the whole turn (the filter's rule below min_trans), noise eps_rot1 + eps_rot2;
     # the step's direction is free, so its sign is too: the translation's density is folded at 0
     turn = _wrap_np(h1 + h2)
     t1, tt, t2 = noise_sigmas_array(np.zeros_like(turn), ht, turn, cfg)
-    ll_turn = log_f(_wrap_np(r1 + r2 - turn), np.hypot(t1, t2)) + np.logaddexp(log_f(tr - ht, tt), log_f(tr + ht, tt))
-    s1, st, s2 = noise_sigmas_array(h1, ht, h2, cfg)
+
+    def turn_only(sig_turn, sig_trans):
+        return (log_f(_wrap_np(r1 + r2 - turn), sig_turn)
+                + np.logaddexp(log_f(tr - ht, sig_trans), log_f(tr + ht, sig_trans)))
+
+    ll_turn = turn_only(np.hypot(t1, t2), tt)
     d1, dtr, d2 = odometry_residuals(r1, tr, r2, h1, ht, h2)
     ll = log_f(d1, s1) + log_f(dtr, st) + log_f(d2, s2)
+    # an odometry step under min_trans has no direction to compare: the turn and the step alone, their noise from
+    # the hypothesis's split where its step shows one (a pose that moved 15 cm turning 0.35 then -0.33 rad, its
+    # odometry reading 6 mm: turn noise sigma 0.1, not the 0.02 of (0, the net turn), which put alpha3 at 0.074
+    # for 0.05 on the model's own draws), of (0, the turn) for the share p_turn whose split is not observed
+    ll_short = turn_only(np.hypot(s1, s2), st)
     if p_turn > 0:  # the split uniform on the circle: 1 / 2 pi
         ll = np.logaddexp(math.log1p(-p_turn) + ll, math.log(p_turn / (2 * math.pi)) + ll_turn)
-    return np.where((tr < mt) | (ht < mt), ll_turn, ll)
+        ll_short = np.logaddexp(math.log1p(-p_turn) + ll_short, math.log(p_turn) + ll_turn)
+    # a hypothesis step under min_trans has rot1 = 0 (odometry_deltas_array): ll_short is ll_turn there
+    return np.where(ht < mt, ll_turn, np.where(tr < mt, ll_short, ll))
 
 
 def pair_log_likelihood(alphas, *pairs, **kw) -> float:
@@ -269,7 +283,11 @@ def fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="varia
     odometry reset or slip, not noise, and the fit is made again without such pairs when they are at most
     ``OUTLIER_SHARE`` of them (said in a warning naming the worst pair's time; ``left_out`` in the result). One
     kidnap pair in the demo's log made alpha4 0.125 instead of 0.0073; one odometry reset in a generated drive made
-    alpha3 21 and alpha1 a sixth of its value, and the calibrated config tracked worse than the default."""
+    alpha3 21 and alpha1 a sixth of its value, and the calibrated config tracked worse than the default.
+
+    ``noise_step`` 0 (this function's default) fits the book's Table 5.5/5.6 noise; alphas for a config pass its
+    ``motion.noise_step`` (``MotionConfig``'s default is 0.3 m, as ``mcl calibrate motion`` does), else steps over
+    0.3 m were fitted with another noise than the filter then samples."""
     op, on, xp, xn = (np.asarray(a, dtype=np.float64) for a in (odom_prev, odom_now, x_prev, x_now))
     kw = dict(noise_form=noise_form, noise=noise, x0=x0, min_trans=min_trans, p_turn=p_turn, noise_step=noise_step)
     if not trim:
