@@ -98,6 +98,9 @@ def test_run_writes_every_output_and_a_recording_with_one_row_per_update(tmp_pat
     assert summary["particles_min"] <= summary["particles_mean"] <= 500
     for stage in ("predict", "correct", "resample", "estimate", "viz"):
         assert summary["wall_time_s"][stage] >= 0
+    # the time between the data's load and the first update (the filter's and the recording's tables) has a field of
+    # its own: "load" + "loop" left 39 of 50 s out on a 208 M-cell map
+    assert summary["wall_time_s"]["setup"] > 0
     # what the arithmetic ran on: another machine's numpy SIMD paths can give another trajectory for the same seed
     assert summary["platform"]["numpy"] == np.__version__ and isinstance(summary["platform"]["numpy_simd"], list)
     # The resolved config repeats the run: same trajectory, byte for byte.
