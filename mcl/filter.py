@@ -149,6 +149,9 @@ class StepInfo:
     skipped_endpoints: np.ndarray | None = None  # (2, skipped_beams) their robot-frame endpoints (None: none skipped)
     events: tuple[str, ...] = ()  # degenerate-input events of this update (kinds of ParticleFilter.events)
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
+    # the set as this update weighted it (particles, weights), kept when this update's resampling replaced it (a
+    # re-seed, a protected re-seed's resample, a fixed-N resample): what the recording draws
+    weighted: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def quality(self) -> float:
@@ -1185,6 +1188,7 @@ class ParticleFilter:
         new particles come from ``recovery_sampler`` instead of the weighted set.
         """
         fc = self.cfg.filter
+        info.weighted = (self.particles, self.weights)  # (the arrays are replaced, not written, by what follows)
         challenged = self.challenge is not None and self.challenge.due
         reseed_due = self.recovery is not None and (getattr(self.recovery, "reseed_due", False) or challenged)
         if self.protected is not None:

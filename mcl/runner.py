@@ -933,11 +933,14 @@ class _UpdateRecording:
             # the scan the map predicts at the estimate (the beam model's z*), next to the measured one
             expected_world = viz.expected_scan(self.grid, mean, laser_pose, scan.angles,
                                                scan.max_range or cfg.sensor.range_max)
+        # the set as this update weighted it: a re-seed resamples at once, and its prior (the kept track's heavy
+        # particles among equal fresh ones) was drawn where the update's posterior belonged
+        particles, weights = info.weighted if info.weighted is not None else (pf.particles, pf.weights)
         viz.log_step(
             step,
             scan.t,
-            particles=pf.particles,
-            weights=pf.weights,
+            particles=particles,
+            weights=weights,
             estimate=mean,
             cov=cov,
             scan_world=scan_world,

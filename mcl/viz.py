@@ -838,6 +838,7 @@ class RerunLogger:
 
         if self.particles_max > 0 and call % self.particles_every == 0:
             self._log_particles(rec, particles, weights)
+        self._log_histogram(weights)  # every update, all N: 24 bars (a thinned or hidden cloud thinned it too)
         self._log_estimate(rec, estimate, cov)
         if self.log_scan and (scan_world is not None or self._scan_shown):
             # a step without returns (all beyond range, an update from landmarks alone) clears the last scan: it
@@ -858,6 +859,9 @@ class RerunLogger:
             self._prev_truth = self._log_pose(
                 rec, "world/truth", truth_pose, self._prev_truth, [40, 170, 40], trail=not self._truth_path_logged
             )
+        elif self._prev_truth is not None:  # a reference gap not bridged: the last true pose is not this step's
+            rec.log("world/truth", rr.Points2D(np.zeros((0, 2), dtype=np.float32)))  # (rows of this step's time)
+            self._prev_truth = None
         if odom_pose is not None:
             self._prev_odom = self._log_pose(rec, "world/odometry", odom_pose, self._prev_odom, [240, 150, 30])
         if stats:
@@ -991,6 +995,8 @@ class RerunLogger:
         radii = np.empty(idx.size, dtype=np.float32)
         cloud_style(_log_relative(w), _WEIGHT_DECADES, _VIRIDIS, float(_FREE), True, _RADII, _RADII_AT, colors, radii)
         self._buffer_rows("world/particles", "Points2D", dict(positions=xy, colors=colors, radii=radii))
+
+    def _log_histogram(self, weights: np.ndarray) -> None:
         counts, centres, width = weight_histogram(weights)
         if width != self._hist_width:  # the bins only when they change (the viewer takes the latest): ~2 ms saved
             self._hist_width = width
@@ -1339,6 +1345,8 @@ def log_motion_samples(path: str | os.PathLike, pose: np.ndarray, panels: list) 
     rec.save(str(partial))
     allp = np.concatenate([c for _, clouds in panels for c in clouds], axis=1)
     span = float(max(np.ptp(allp[0]), np.ptp(allp[1]), 1e-3)) * 1.3
+    # y up, as in a run's recording (a 2D view draws y down: a left turn showed as a right turn)
+    rec.log("motion", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
     for k, (label, clouds) in enumerate(panels):
         dx = k * span
         rec.log(f"motion/{k}", rr.TextDocument(label), static=True)

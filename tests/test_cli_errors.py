@@ -485,3 +485,22 @@ def test_a_map_read_into_nothing_a_laser_can_match_is_refused_or_warned_of(world
         assert len(said) == int(warned), said
         if warned:
             assert said[0].startswith(f"mcl: warning: {inverted}: ") and "walls read as free? (negate" in said[0]
+
+
+def test_explore_recording_draws_y_up_as_a_runs_recording_does(tmp_path):
+    # A 2D view draws y down: without the y flip a run's recording has on `world`, a left turn's samples showed
+    # below the start arrow, as a right turn. The samples of a turn to the left lie at y > 0 and the flip is there.
+    from rerun.chunk import RrdReader
+
+    from mcl.cli import main
+
+    out = tmp_path / "v.rrd"
+    assert main(["explore", "motion", "--velocity", "1", "0.5", "1", "--steps", "3", "--samples", "200",
+                 "--out", str(out)]) == 0
+    chunks = list(RrdReader(out).stream().to_chunks())
+    flips = [c.to_record_batch().column("Transform3D:scale").to_pylist() for c in chunks
+             if str(c.entity_path) == "/motion" and "Transform3D:scale" in c.to_record_batch().schema.names]
+    assert flips == [[[[1.0, -1.0, 1.0]]]], flips  # one static row of one scale
+    ys = [p[1] for c in chunks if str(c.entity_path) == "/motion/0/samples"
+          for row in c.to_record_batch().column("Points2D:positions").to_pylist() for p in row]
+    assert np.mean(ys) > 0.1  # a left turn's samples, in the map frame's y up

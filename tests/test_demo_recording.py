@@ -230,3 +230,61 @@ def test_a_map_far_from_the_origin_is_recorded_in_a_frame_of_its_own(tmp_path):
     _, clouds = _rows(chunks, "/world/particles", "Points2D:positions")
     ys = np.array([p[1] for p in clouds[-1]])
     assert np.unique(ys).size > 100  # a cloud (581 distinct y after resampling), not a line of one y
+
+
+def test_a_reseeds_update_is_drawn_with_its_posterior_not_the_reseeds_prior(tmp_path):
+    # The demo from 45 to 58 s, tracking from the reference at 45 s: the kidnap at 50 s is a re-seed a few updates
+    # later. A re-seed resamples at once, and the recording drew its prior (the kept track's heavy particles among
+    # equal fresh ones: the histogram counted 100,000 where the update weighted 5,000, its heavy points the wrong
+    # track's). Now every step's histogram counts the particles that update weighted (stats/particles).
+    from mcl.trajectory import read_tum
+
+    lines = [ln for ln in (DEMO / "log.clf").read_text().splitlines(keepends=True)
+             if not ln.startswith(("FLASER", "ODOM")) or 45.0 <= float(ln.split()[-1]) <= 58.0]
+    (tmp_path / "cut.clf").write_text("".join(lines))
+    t, truth = read_tum(DEMO / "truth.tum")
+    x = truth[:, np.searchsorted(t, 45.0)]
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"log={tmp_path / 'cut.clf'}", f"filter.initial_pose=[{x[0]}, {x[1]}, {x[2]}]", "filter.particles=3000",
+        "rerun.particles_max=500"])
+    s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
+    assert s["reseeds"] >= 1
+    chunks = list(RrdReader(tmp_path / "out" / "recording.rrd").stream().to_chunks())
+    steps, values = _rows(chunks, "/weights/histogram", "BarChart:values")
+    counts = {k: float(np.sum(v[0]["buffer"])) for k, v in zip(steps, values)}
+    p_steps, p_vals = _rows(chunks, "/stats/particles", "Scalars:scalars")
+    n = {k: v[0] for k, v in zip(p_steps, p_vals)}
+    assert sorted(counts) == sorted(n) == list(range(s["updates"]))
+    assert {k: c for k, c in counts.items() if c != n[k]} == {}
+
+
+def test_the_histogram_without_a_cloud_and_the_truth_cleared_across_a_gap(tmp_path):
+    # rerun.particles_max 0 dropped the weight histogram too (its panel stayed empty), and a thinned cloud thinned
+    # it; a reference gap that is not bridged left the last true pose on screen for a second, 1 m from the robot,
+    # while the error panel was blank. The demo's first 40 scans, its reference cut from 3 to 5 s.
+    from mcl.trajectory import read_tum, write_tum
+
+    t, truth = read_tum(DEMO / "truth.tum")
+    keep = (t < 3.0) | (t > 5.0)
+    write_tum(tmp_path / "gap.tum", t[keep], truth[:, keep])
+    log = _head(DEMO / "log.clf", tmp_path / "head.clf", SCANS)
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"log={log}", f"truth={tmp_path / 'gap.tum'}", "filter.particles=3000", "rerun.particles_max=0",
+        "filter.global_density=0"])
+    s = run(cfg, tmp_path / "out", progress=False, echo=lambda *_: None)
+    chunks = list(RrdReader(tmp_path / "out" / "recording.rrd").stream().to_chunks())
+    steps, _ = _rows(chunks, "/weights/histogram", "BarChart:values")
+    assert sorted(steps) == list(range(s["updates"]))
+    assert not any(str(c.entity_path) == "/world/particles" and not c.is_static for c in chunks)
+    # the truth's rows: a point at each step with a reference, none (cleared once) inside the gap
+    rows = {}
+    for c in chunks:
+        if str(c.entity_path) == "/world/truth" and not c.is_static:
+            b = c.to_record_batch()
+            if "Points2D:positions" in b.schema.names:
+                for k, tt, p in zip(b.column("step").cast(pa.int64()).to_pylist(), b.column("time").to_pylist(),
+                                    b.column("Points2D:positions").to_pylist()):
+                    rows[k] = (tt.total_seconds(), len(p))
+    cleared = [k for k, (_, n) in rows.items() if n == 0]
+    assert len(cleared) == 1 and 3.0 <= rows[cleared[0]][0] <= 5.0, rows
+    assert all(n == 1 for k, (tt, n) in rows.items() if not 3.0 <= tt <= 5.0)
