@@ -388,6 +388,11 @@ class EvalConfig:
     """How `mcl eval` and a run with truth score a trajectory."""
 
     converged_within: float = field(default=0.3, metadata=_rng(0.0, lo_open=True))  # m, for convergence time
+    # s: at the first update at or after this time the filter is kidnapped: its particles replaced by a cloud around
+    # a free pose at least kidnap_m from the truth there (a recovery test on a real log; mcl eval's kidnapped mode
+    # sets it, so a run folder's config.yaml repeats the run); null: not
+    kidnap_at: float | None = field(default=None, metadata=_rng(0.0))
+    kidnap_m: float = field(default=5.0, metadata=_rng(0.0, lo_open=True))  # m
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -987,9 +987,10 @@ def _run(
     line's --initial-pose or --global, a --set of filter.initial_pose or filter.global_localization, a suite's run)
     or the config tracks from its own ``filter.initial_pose`` (``global_localization: false``); then the config's.
 
-    ``kidnap_filter_at=(t, d)``: at the first update at or after time t, the particles are replaced by a cloud
-    (filter.initial_std) around a free pose at least d metres from the truth there (from the estimate without
-    truth), drawn with the filter's generator: a kidnapping test on a real log (``mcl eval --suite``).
+    ``kidnap_filter_at=(t, d)`` (default: the config's ``eval.kidnap_at``, ``eval.kidnap_m``): at the first update
+    at or after time t, the particles are replaced by a cloud (filter.initial_std) around a free pose at least d
+    metres from the truth there (from the estimate without truth): a kidnapping test on a real log (``mcl eval
+    --suite``).
     ``summary["kidnap"]`` says when, where to and how far.
 
     ``on_update(t, pf, info, ref)``, if given, is called after every filter update (not for gated scans) with the
@@ -1167,6 +1168,8 @@ def _run(
     quality_out = LineWriter(out_dir / "quality.csv", header=QUALITY_HEADER)
     quality_rows: list[tuple] = []  # (match, contradiction, lost) of each filter update, for the summary
     last_mean, last_lost, last_spread = None, False, math.nan
+    if kidnap_filter_at is None and cfg.eval.kidnap_at is not None:
+        kidnap_filter_at = (float(cfg.eval.kidnap_at), float(cfg.eval.kidnap_m))
     kidnap = None  # kidnap_filter_at: what was done
     bar = tqdm(total=len(updates), unit="scan", disable=(None if progress is None else not progress), leave=False, dynamic_ncols=True)
     loop0 = time.perf_counter()

@@ -12,7 +12,7 @@ and the modes to run each in:
   undo the convergence); *lost* unless it converged within ``WITHIN_S``; RMSE and max from the convergence on;
 - ``kidnapped``: tracking, then the robot (a synthetic world made again with ``kidnap_at`` = half its
   duration) or the filter (a real log: the particles moved at mid-truth to a cloud around a free pose
-  >= ``KIDNAP_M`` away, the runner's ``kidnap_filter_at``) is kidnapped; scored by the recovery time, from
+  >= ``KIDNAP_M`` away: the run's ``eval.kidnap_at``, ``eval.kidnap_m``) is kidnapped; scored by the recovery time, from
   the kidnap until the error falls below ``SETTLE_M`` and stays within the same bound; *lost* unless it
   recovered within ``WITHIN_S`` (or the maximum error before the kidnap exceeds ``lost_m``); RMSE and max
   over the poses before the kidnap and after the recovery. A reference time between the filter's last pose
@@ -555,7 +555,8 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int | rang
                 truth = d.truth if d.truth is not None else _bag_truth(suite, d, cache)
                 data = {"map": d.map, "log": d.log, "truth": truth}
                 if d.bag is not None:
-                    data["bag"] = d.bag
+                    # the mode's start, not the bag's /initialpose (also for `mcl run` of the run's config.yaml)
+                    data.update({"bag": d.bag, "topics.initial_pose": None})
                 pose = d.initial_pose or _truth_start(truth)
             for clabel, cpath, extra in configs:
                 overrides = [f"{k}={'null' if v is None else v}" for k, v in data.items()]
@@ -612,6 +613,8 @@ def _finish_plan(jobs: list[Job]) -> None:
                 j.cfg = dataclasses.replace(j.cfg, filter=f)
             if j.mode == "kidnapped":
                 j.kidnap_t = float(sim["kidnap"]["t"])
+        if j.kidnap_filter:
+            j.cfg = _filter_kidnapped(j.cfg)
         text = dump_config(j.cfg) + f"\nmode: {j.mode}\nlost_m: {j.lost_m}\nkidnap: {j.kidnap_t} {j.kidnap_filter}\n"
         text += _data_stamp(j.cfg, stamps)
         j.fingerprint = hashlib.sha1(text.encode()).hexdigest()
@@ -745,8 +748,8 @@ def run_job(job: Job) -> dict:
     try:
         with warnings.catch_warnings(record=True) as caught:  # the log's warnings go into the row
             warnings.simplefilter("always")
-            summary = run(job.cfg, out, progress=False, echo=echo, initial_pose_override=True,  # the mode's start
-                          kidnap_filter_at=(_mid_truth(job.cfg.truth), KIDNAP_M) if job.kidnap_filter else None)
+            cfg = _filter_kidnapped(job.cfg) if job.kidnap_filter and job.cfg.eval.kidnap_at is None else job.cfg
+            summary = run(cfg, out, progress=False, echo=echo, initial_pose_override=True)  # the mode's start
     except KeyboardInterrupt:
         return {**row, "interrupted": True}
     except MclError as e:
@@ -765,6 +768,10 @@ def run_job(job: Job) -> dict:
     except MclError as e:  # a truth that does not overlap the log: this run's error, the others go on
         return {**row, "error": f"truth {job.cfg.truth}: {e}"}
     kidnap_t = job.kidnap_t if job.kidnap_t is not None else summary.get("kidnap", {}).get("t")
+    if job.mode == "kidnapped" and kidnap_t is None:  # (a TypeError in the scoring, which stopped the evaluation)
+        return {**row, "error": f"{job.cfg.log or job.cfg.bag}: no update at or after the kidnap time "
+                                f"{cfg.eval.kidnap_at or 0.0:.1f} s (the middle of the reference {job.cfg.truth}): the log "
+                                "ends before it"}
     atomic_write_text(out / "errors.csv", "t,error_m\n" + "".join(f"{a:.6f},{b:.6f}\n" for a, b in zip(tq, e_pos)))
     before = te[te < kidnap_t] if kidnap_t is not None else te[:0]
     s = score(job.mode, tq, e_pos, lost_m=job.lost_m, kidnap_t=kidnap_t,
@@ -787,6 +794,16 @@ def run_job(job: Job) -> dict:
             raise KeyboardInterrupt
         signal.raise_signal(signal.SIGINT)
     return row
+
+
+def _filter_kidnapped(cfg):
+    """``cfg`` with a real log's kidnap (mid-truth, ``KIDNAP_M``) as its own keys, ``eval.kidnap_at`` and
+    ``eval.kidnap_m``: the run folder's config.yaml repeats the run (given to the runner from outside, a
+    ``mcl run`` of it ran a plain tracking run)."""
+    import dataclasses
+
+    ev = dataclasses.replace(cfg.eval, kidnap_at=_mid_truth(cfg.truth), kidnap_m=KIDNAP_M)
+    return dataclasses.replace(cfg, eval=ev)
 
 
 def _mid_truth(truth: str) -> float:
@@ -1314,7 +1331,8 @@ def _evaluate_suite(suite_path, *, config, sets, seeds, jobs, out, cache, modes,
     return 2 if errors else 0
 
 
-PER_RUN_KEYS = ("map", "log", "bag", "truth", "seed", "filter.initial_pose", "filter.global_localization")
+PER_RUN_KEYS = ("map", "log", "bag", "truth", "seed", "filter.initial_pose", "filter.global_localization",
+                "eval.kidnap_at")
 
 
 def check_sets(sets) -> None:
@@ -1325,7 +1343,8 @@ def check_sets(sets) -> None:
         key = str(text).split("=", 1)[0].strip()
         if key in PER_RUN_KEYS or key.split(".")[0] == "rerun":
             how = {"seed": "give --seeds", "filter.initial_pose": "each mode starts its own way",
-                   "filter.global_localization": "each mode starts its own way"}.get(
+                   "filter.global_localization": "each mode starts its own way",
+                   "eval.kidnap_at": "the kidnapped mode kidnaps a real log's filter mid-way"}.get(
                 key, "runs record nothing" if key.startswith("rerun") else "each dataset names its own")
             raise ConfigError(f"--set {key}: the suite sets it for each run ({how})")
 

@@ -1176,3 +1176,37 @@ def test_two_evaluations_into_one_out_folder_are_refused_while_one_runs(tmp_path
     assert err == [f"mcl: error: --out {out}: another mcl eval is writing in this folder now: wait for it to end, or "
                    "choose another --out"]
     assert list(out.iterdir()) == []
+
+
+def test_a_real_logs_kidnapped_run_folder_repeats_from_its_config(tmp_path):
+    # A real log's kidnap was handed to the runner from outside its config: `mcl run runs/.../config.yaml` (the
+    # README: "repeats the run exactly") ran a plain tracking run from the kidnap on. The kidnap is now the run's
+    # own eval.kidnap_at / eval.kidnap_m. The demo as a "real" dataset (map, log and truth files), its first 30 s.
+    from mcl.cli import main
+    from mcl.suite import evaluate_suite
+
+    demo = Path(__file__).resolve().parents[1] / "data" / "demo"
+    log = tmp_path / "demo30.clf"
+    log.write_text("".join(ln for ln in (demo / "log.clf").read_text().splitlines(keepends=True)
+                           if not ln.startswith(("FLASER", "ODOM")) or float(ln.split()[-1]) <= 30.0))
+    t, p = read_tum(demo / "truth.tum")
+    write_tum(tmp_path / "truth30.tum", t[t <= 30.0], p[:, t <= 30.0])
+
+    def suite(truth) -> Path:
+        (tmp_path / "s.yaml").write_text(f"name: s\nmodes: [kidnapped]\ndatasets:\n  - name: demo\n"
+                                         f"    map: {demo / 'map.yaml'}\n    log: {log}\n    truth: {truth}\n")
+        return tmp_path / "s.yaml"
+
+    # a reference longer than the log: its middle (35 s) is past the log's end; a TypeError stopped the evaluation
+    said: list = []
+    assert evaluate_suite(suite(demo / "truth.tum"), out=tmp_path / "long", baseline=False, echo=lambda *_: None,
+                          warn=said.append) == 2
+    assert any("no update at or after the kidnap time 35.0 s" in m and "the log ends before it" in m for m in said)
+    assert evaluate_suite(suite(tmp_path / "truth30.tum"), out=tmp_path / "ev", baseline=False,
+                          echo=lambda *_: None) == 0
+    run_dir = tmp_path / "ev" / "runs" / "demo" / "kidnapped" / "default" / "seed1"
+    kid = json.loads((run_dir / "summary.json").read_text())["kidnap"]
+    assert kid["distance_m"] >= 5.0 and kid["t"] == pytest.approx(15.0, abs=0.2)  # mid-truth
+    assert main(["run", str(run_dir / "config.yaml"), "--out", str(tmp_path / "again"), "--rerun", "off",
+                 "--no-progress"]) == 0
+    assert (tmp_path / "again" / "trajectory.tum").read_bytes() == (run_dir / "trajectory.tum").read_bytes()
