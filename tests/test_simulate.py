@@ -1021,3 +1021,16 @@ def test_landmarks_left_out_of_a_bag_are_said(tmp_path, capsys):
     assert main(["convert", str(tmp_path / "c" / "log.clf"), str(tmp_path / "c.mcap")]) == 0
     err = capsys.readouterr().err
     assert "LANDMARK lines not written: a bag has no message for them" in err
+
+
+def test_ground_hits_beside_a_holonomic_drive_draw_numbers_of_their_own(tmp_path):
+    # The ground hits and the holonomic offsets both drew from child stream 8 (the unmapped furniture and the depth
+    # frames both from 6): with both on, the windows' times were made of the offsets' numbers. With the holonomic
+    # drive on, the hits now draw from a stream of their own; alone, each is the world it was.
+    import yaml
+
+    def windows(name, **kw):
+        simulate(tmp_path / name, seed=4, duration=40.0, ground_hits=2, **kw)
+        return yaml.safe_load((tmp_path / name / "sim.yaml").read_text())["ground_hits"]
+
+    assert windows("hol", holonomic=0.3) != windows("plain")  # before: the same windows, from the same numbers
