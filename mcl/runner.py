@@ -338,6 +338,49 @@ def _choose_scans(log, laser: str):
     return log.laser_stream(laser)
 
 
+STILL_ODOMETRY = 1e-6  # m or rad: odometry poses that never move farther than this from the first are no odometry
+
+
+def _still_odometry(log, scans, sensor_cfg, echo, progress) -> list:
+    """``scans`` of a CARMEN log whose scans' odometry poses never move (a laser-only log, written with zeros; or
+    its FLASER lines' pose fields left empty): paired with the ODOM lines where those move, else with laser
+    odometry (``mcl.laser_odometry``, as a bag without odometry is), with a note. Such a log ran every scan gated
+    at the start pose: 12-28 m off without a word."""
+    poses = [s.odom for s in scans]
+    if len(scans) < 10 or any(p is None for p in poses):
+        return scans
+    poses = np.asarray(poses, dtype=np.float64)
+    if np.abs(poses - poses[0]).max() > STILL_ODOMETRY:
+        return scans
+    from mcl.datasets.rosbag import odometry_at
+
+    odo = np.asarray(log.odometry, dtype=np.float64).reshape(-1, 6)
+    odo = odo[np.argsort(odo[:, 0], kind="stable")]
+    if odo.shape[0] >= 2 and np.abs(odo[:, 1:4] - odo[0, 1:4]).max() > STILL_ODOMETRY:
+        echo(f"{log.path}: the scans' odometry poses never move; the ODOM lines do: each scan paired with the ODOM "
+             "pose at its stamp")
+        return [dataclasses.replace(s, odom=odometry_at(odo, s.t)[0]) for s in scans]
+    from tqdm import tqdm
+
+    from mcl.laser_odometry import laser_odometry
+
+    first = scans[0].kind
+    mount = (np.asarray(sensor_cfg.laser_pose) if sensor_cfg.laser_pose is not None
+             else scans[0].laser_offset if scans[0].laser_offset is not None else np.zeros(3))
+    one = [s for s in scans if s.kind == first]
+    with tqdm(one, unit="scan", desc="laser odometry", leave=False, dynamic_ncols=True,
+              disable=(None if progress is None else not progress)) as bar:
+        rows, failed = laser_odometry(bar, mount)
+    rows = rows[np.argsort(rows[:, 0], kind="stable")]
+    log.odometry = rows  # the odometry the checks read too
+    log.wheel_odometry = False
+    echo(f"{log.path}: no odometry (every scan's pose and ODOM line is the same): replayed on laser odometry, "
+         f"the {first} scans matched one to the next"
+         + (f" ({failed} of {len(one)} matched no earlier one: their motion is the last step's, or none)"
+            if failed > 0.05 * len(one) else ""))
+    return [dataclasses.replace(s, odom=odometry_at(rows, s.t)[0]) for s in scans]
+
+
 def _landmark_records(log, cfg: Config) -> list:
     """The log's LANDMARK records when ``landmarks.use`` is on (DataError if it has none), else []."""
     if not cfg.landmarks.use:
@@ -450,6 +493,7 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         grid = load_map(cfg.map)
         log = read_carmen(cfg.log)
         scans = _choose_scans(log, cfg.laser) if cfg.sensor.use else []
+        scans = _still_odometry(log, scans, cfg.sensor, echo, progress)
         marks = _landmark_records(log, cfg)
     for w in log.warnings:
         echo(f"mcl: warning: {w}")
@@ -634,8 +678,11 @@ def _check_truth_motion(log, truth, name: str, echo) -> None:
     odometry, _ = _odometry_rows(log, log.scans if isinstance(getattr(log, "scans", None), list) else [])
     bad, n = motion_disagreement(odometry[:, 0], odometry[:, 1:4].T, truth.t, truth.poses)
     if n >= 10 and bad > n / 3:  # a run's own reference: at most 1 in 11 (the measurement in motion_disagreement)
-        echo(f"mcl: warning: {name}: the reference does not move as the odometry does in {bad} of {n} stretches of "
-             "5 s (a trajectory of another run?): the run is scored against it all the same")
+        source = "laser odometry" if not getattr(log, "wheel_odometry", True) else "odometry"
+        echo(f"mcl: warning: {name}: the reference does not move as the {source} does in {bad} of {n} stretches of "
+             f"5 s (a trajectory of another run, or the {source} at fault: "
+             + ("its matches" if source != "odometry" else "other units or scale, headings in degrees")
+             + "): the run is scored against it all the same")
 
 
 def _estimate_bag(cfg: Config, out_dir: Path, log):

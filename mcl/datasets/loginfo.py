@@ -86,8 +86,10 @@ def check_lines(u: dict) -> list[str]:
         kept = d["wins"].get("recorded", 0)
         yaw = (f"; the laser's yaw {d['yaw_deg']:+.1f} +- {d['yaw_se_deg']:.1f} degrees from its mounting (sensor."
                "mount_yaw fits 2 or more)" if d.get("yaw_deg") is not None else "")
-        lines.append("  odometry check: " + (f"{d['laser']}: " if len(each) > 1 else "") + (
-            d.get("text") or f"the scans fit the odometry as recorded ({kept} of {d['pairs']} pairs of scans){yaw}"))
+        fit = (f"the scans fit the odometry as recorded ({kept} of {d['pairs']} pairs of scans){yaw}" if d["pairs"]
+               else "no pair of scans to check: the odometry never moved far enough (odometry that never moves at "
+                    "all, a run replays on laser odometry)")  # not "0 of 0 pairs fit"
+        lines.append("  odometry check: " + (f"{d['laser']}: " if len(each) > 1 else "") + (d.get("text") or fit))
     c = u.get("time_offset_check")
     each = [c, *c.get("other_lasers", [])] if c is not None else []
     for d in each:
