@@ -403,3 +403,38 @@ def check_each_laser(scans, mount_of, *, first_only: bool = False, step: float =
         if out.wins.get(lead, 0) >= MIN_WINS and out.wins[lead] >= 2 * recorded:
             out.verdict = lead
     return {kind: v[0] for kind, v in state.items()}
+
+
+# The odometry's units, from its rows alone (no scans): a ground robot's median speed between odometry poses is under
+# 6 m/s (the eight shared logs and the demo: 0.18-5.2 m/s), and under 1 % of its turning steps turn over 1 rad
+# (0-0.6 %, scans up to 2 s apart); in centimetres or millimetres its median speed is 36-470 m/s, and with its
+# headings in degrees 60-64 % of its turning steps wrap to over 1 rad (2026-12-07, the demo and aces degraded so).
+UNITS_SPEED = 25.0  # m/s (90 km/h: a car's odometry is metres still): a median speed above this is another unit
+UNITS_TURN = 1.0  # rad ...
+UNITS_TURN_SHARE = 0.2  # ... a share of turning steps over UNITS_TURN above this is headings in degrees
+
+
+def odometry_units(rows: np.ndarray) -> list[str]:
+    """What the odometry's rows (t, x, y, theta, ...; time-sorted) say of its units: [] when metres and radians fit,
+    else one phrase each for a length unit (centimetres or millimetres: the median speed) and for headings in
+    degrees. A log in either was lost by hundreds of metres, or blamed on a slipping wheel, an omnidirectional
+    base or the reference."""
+    rows = np.asarray(rows, dtype=np.float64)
+    if rows.shape[0] < 10:
+        return []
+    dt = np.diff(rows[:, 0])
+    step = np.hypot(np.diff(rows[:, 1]), np.diff(rows[:, 2]))
+    turn = np.abs(np.angle(np.exp(1j * np.diff(rows[:, 3]))))
+    out = []
+    moving = (dt > 1e-3) & (step > 1e-4)
+    if moving.sum() >= 10:
+        speed = float(np.median(step[moving] / dt[moving]))
+        if speed > UNITS_SPEED:
+            out.append(f"the odometry moves at a median {speed:.0f} m/s ({3.6 * speed:.0f} km/h) between its poses: "
+                       f"its positions in other units than metres? (centimetres: {speed / 100:.2g} m/s, "
+                       f"millimetres: {speed / 1000:.2g})")
+    turning = turn > 1e-3
+    if turning.sum() >= 10 and (turn[turning] > UNITS_TURN).mean() > UNITS_TURN_SHARE:
+        out.append(f"{(turn[turning] > UNITS_TURN).mean():.0%} of the odometry's turning steps turn over "
+                   f"{UNITS_TURN:g} rad: its headings in degrees?")
+    return out

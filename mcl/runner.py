@@ -501,6 +501,11 @@ def _open_source(cfg: Config, echo, progress: bool | None = False):
         echo(note)
     if cfg.sensor.use:
         _check_map(grid, echo)
+    if getattr(log, "wheel_odometry", True):
+        from mcl.odomcheck import odometry_units
+
+        for said in odometry_units(_odometry_rows(log, scans if isinstance(scans, list) else [])[0]):
+            echo(f"mcl: warning: {log.path}: {said}: mend the log (the filter will be lost)")
     scans = _retime(scans, log, cfg.sensor.time_offset, echo)
     if cfg.sensor.use and cfg.sensor.upside_down and len(scans):
         from mcl.datasets import mirrored_scan

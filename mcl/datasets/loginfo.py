@@ -44,9 +44,16 @@ def scan_checks(scans, odometry, sensor, wheel_odometry: bool = True) -> dict:
                  else np.array([s.odom for s in scans if s.odom is not None], dtype=np.float64).reshape(-1, 3))
         share, travel = sideways_share(poses)
         sideways = {"share": round(share, 4), "travel_m": round(travel, 1), "omni": share >= SIDEWAYS_OMNI}
+    units = []
+    if wheel_odometry:
+        from mcl.odomcheck import odometry_units
+
+        rows = (np.asarray(odometry, dtype=np.float64).reshape(-1, 6) if odometry is not None else
+                np.array([(s.t, *s.odom) for s in scans if s.odom is not None], dtype=np.float64).reshape(-1, 4))
+        units = odometry_units(rows[np.argsort(rows[:, 0], kind="stable")])
     hits = [h for h in (self_hits_of(c) for c in beam_constancies(scans, float(sensor.range_min),
                                                                    float(sensor.range_max))) if h is not None]
-    out = {"self_hits": hits_summary(hits), "odometry_sideways": sideways}
+    out = {"self_hits": hits_summary(hits), "odometry_sideways": sideways, "odometry_units": units}
     for h, d in zip(hits, [out["self_hits"], *(out["self_hits"] or {}).get("other_lasers", [])]):
         d["text"] = h.describe()
     if wheel_odometry:  # laser odometry comes from the scans: nothing to check
@@ -80,6 +87,8 @@ def check_lines(u: dict) -> list[str]:
         lines.append(f"  sideways:     {w['share']:.1%} of the odometry's {w['travel_m']:g} m goes across the robot's "
                      "heading: " + ("an omnidirectional base (a run takes motion.model omni: motion.sideways)"
                                     if w["omni"] else "a differential drive's (motion.model odometry)"))
+    for said in u.get("odometry_units") or ():
+        lines.append(f"  units:        {said}")
     c = u.get("odometry_check")
     each = [c, *c.get("other_lasers", [])] if c is not None else []
     for d in each:
