@@ -352,21 +352,11 @@ def cmd_eval(args) -> int:
 
 
 def _warn_times(name, t, poses) -> None:
-    """A warning line for a trajectory whose times go back (scored sorted) or repeat with another position (which
-    of the two is scored is not defined): a file joined from two runs, or a writer's bug."""
-    import numpy as np
+    """A warning line for a trajectory whose times go back or repeat (``mcl.evaluate.time_warnings``)."""
+    from mcl.evaluate import time_warnings
 
-    back = int(np.count_nonzero(np.diff(t) < 0))
-    order = np.argsort(t, kind="stable")
-    ts, ps = t[order], poses[:2, order]
-    same = np.flatnonzero(np.diff(ts) == 0)
-    clash = same[np.hypot(*(ps[:, same + 1] - ps[:, same])) > 1e-6]
-    if back:
-        print(f"mcl: warning: {name}: the time goes back {back} time(s): the poses are scored in time order",
-              file=sys.stderr)
-    if clash.size:
-        print(f"mcl: warning: {name}: {clash.size} time(s) given twice with other positions (the first at "
-              f"t = {ts[clash[0]]:.6f} s): which is scored is not defined", file=sys.stderr)
+    for said in time_warnings(name, t, poses):
+        print(f"mcl: warning: {said}", file=sys.stderr)
 
 
 def _command(sub, name: str, module, help: str, description: str, epilog: str | None = None) -> None:

@@ -272,6 +272,9 @@ class Truth:
     def __init__(self, t: np.ndarray, poses: np.ndarray):
         order = np.argsort(t, kind="stable")
         self.t, self.poses = t[order], poses[:, order]
+        # as given, for the evaluation: a clock that steps back pairs its stretches by their order
+        # (mcl.evaluate), and stamps given twice are said; sorted, the run scored such a log unlike mcl eval
+        self.t_given, self.poses_given = t, poses
         self.spacing = float(np.median(np.diff(self.t))) if self.t.size > 1 else 0.0
 
     def at(self, t: float) -> np.ndarray | None:
@@ -1441,9 +1444,17 @@ def _run(
     if kidnap is not None:
         summary["kidnap"] = kidnap
     if truth is not None and traj_t:
+        from mcl.evaluate import time_warnings
+
+        # a log whose scans repeat a stamp has two poses at it, each paired by time with the reference's: said, as
+        # mcl eval says it (the run scored such a log 0.62 m where each pose was 0.08 m off, without a word)
+        for said in time_warnings(out_dir / "trajectory.tum", np.array(traj_t), np.array(traj_p).T):
+            if "given twice" in said:
+                echo(f"mcl: warning: {said}")
         try:
             summary["eval"] = evaluate(
-                np.array(traj_t), np.array(traj_p).T, truth.t, truth.poses, converged_within=cfg.eval.converged_within
+                np.array(traj_t), np.array(traj_p).T, truth.t_given, truth.poses_given,
+                converged_within=cfg.eval.converged_within
             )
         except DataError as e:
             summary["eval"] = {"error": str(e)}
