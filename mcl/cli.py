@@ -355,7 +355,7 @@ def _warn_times(name, t, poses) -> None:
     """A warning line for a trajectory whose times go back or repeat (``mcl.evaluate.time_warnings``)."""
     from mcl.evaluate import time_warnings
 
-    for said in time_warnings(name, t, poses):
+    for _, said in time_warnings(name, t, poses):
         print(f"mcl: warning: {said}", file=sys.stderr)
 
 
@@ -791,7 +791,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     try:
         with _clean_warnings():
-            return int(args.func(args) or 0)
+            status = int(args.func(args) or 0)
+            sys.stdout.flush()  # here, not at exit: a reader that left is then the BrokenPipeError below
+            return status
     except MclError as e:
         print(f"mcl: error: {e}", file=sys.stderr)
         return EXIT_ERROR

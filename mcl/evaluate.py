@@ -158,10 +158,10 @@ def format_eval(r: dict) -> str:
     )
 
 
-def time_warnings(name, t, poses) -> list[str]:
+def time_warnings(name, t, poses) -> list[tuple[str, str]]:
     """What to say of a trajectory whose times go back (scored in time order) or repeat with another position (which
     of the two is scored is not defined): a file joined from two runs, a writer's bug, a log whose scans repeat a
-    stamp."""
+    stamp. (kind, text) pairs, kind "back" or "twice"."""
     t = np.asarray(t, dtype=np.float64)
     poses = np.asarray(poses, dtype=np.float64)
     out = []
@@ -171,8 +171,8 @@ def time_warnings(name, t, poses) -> list[str]:
     same = np.flatnonzero(np.diff(ts) == 0)
     clash = same[np.hypot(*(ps[:, same + 1] - ps[:, same])) > 1e-6]
     if back:
-        out.append(f"{name}: the time goes back {back} time(s): the poses are scored in time order")
+        out.append(("back", f"{name}: the time goes back {back} time(s): the poses are scored in time order"))
     if clash.size:
-        out.append(f"{name}: {clash.size} time(s) given twice with other positions (the first at "
-                   f"t = {ts[clash[0]]:.6f} s): which is scored is not defined")
+        out.append(("twice", f"{name}: {clash.size} time(s) given twice with other positions (the first at "
+                             f"t = {ts[clash[0]]:.6f} s): which is scored is not defined"))
     return out

@@ -342,6 +342,7 @@ def _choose_scans(log, laser: str):
 
 
 STILL_ODOMETRY = 1e-6  # m or rad: odometry poses that never move farther than this from the first are no odometry
+STILL_MATCHED = 0.1  # m or rad: ... unless the scans matched one to the next never move farther either (a robot parked)
 
 
 def _still_odometry(log, scans, sensor_cfg, echo, progress) -> list:
@@ -375,6 +376,8 @@ def _still_odometry(log, scans, sensor_cfg, echo, progress) -> list:
               disable=(None if progress is None else not progress)) as bar:
         rows, failed = laser_odometry(bar, mount)
     rows = rows[np.argsort(rows[:, 0], kind="stable")]
+    if np.abs(rows[:, 1:4] - rows[0, 1:4]).max() < STILL_MATCHED:  # the scans stood still too: a parked robot
+        return scans
     log.odometry = rows  # the odometry the checks read too
     log.wheel_odometry = False
     echo(f"{log.path}: no odometry (every scan's pose and ODOM line is the same): replayed on laser odometry, "
@@ -1448,8 +1451,8 @@ def _run(
 
         # a log whose scans repeat a stamp has two poses at it, each paired by time with the reference's: said, as
         # mcl eval says it (the run scored such a log 0.62 m where each pose was 0.08 m off, without a word)
-        for said in time_warnings(out_dir / "trajectory.tum", np.array(traj_t), np.array(traj_p).T):
-            if "given twice" in said:
+        for kind, said in time_warnings(out_dir / "trajectory.tum", np.array(traj_t), np.array(traj_p).T):
+            if kind == "twice":  # (a log whose clock steps back is said when it is read)
                 echo(f"mcl: warning: {said}")
         try:
             summary["eval"] = evaluate(

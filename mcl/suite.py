@@ -558,6 +558,9 @@ def plan(suite: Suite, *, config: str | None, sets: list[str], seeds: int | rang
                     # the mode's start, not the bag's /initialpose (also for `mcl run` of the run's config.yaml)
                     data.update({"bag": d.bag, "topics.initial_pose": None})
                 pose = d.initial_pose or _truth_start(truth)
+            # a real log's kidnap is set per run (_finish_plan), never taken from a config: one that carried it (a run
+            # folder's config.yaml) kidnapped every mode
+            data["eval.kidnap_at"] = None
             for clabel, cpath, extra in configs:
                 overrides = [f"{k}={'null' if v is None else v}" for k, v in data.items()]
                 if d.laser is not None:
@@ -602,6 +605,7 @@ def _finish_plan(jobs: list[Job]) -> None:
     from mcl.config import dump_config
 
     stamps: dict = {}
+    mids: dict = {}  # mid-truth by path: read once
     for j in jobs:
         if j.world is not None:
             sim = yaml.safe_load(Path(j.world[0], "sim.yaml").read_text())
@@ -614,7 +618,10 @@ def _finish_plan(jobs: list[Job]) -> None:
             if j.mode == "kidnapped":
                 j.kidnap_t = float(sim["kidnap"]["t"])
         if j.kidnap_filter:
-            j.cfg = _filter_kidnapped(j.cfg)
+            try:
+                j.cfg = _filter_kidnapped(j.cfg, mids)
+            except MclError:  # an unreadable truth: the run's row says so (run_job tries again)
+                pass
         text = dump_config(j.cfg) + f"\nmode: {j.mode}\nlost_m: {j.lost_m}\nkidnap: {j.kidnap_t} {j.kidnap_filter}\n"
         text += _data_stamp(j.cfg, stamps)
         j.fingerprint = hashlib.sha1(text.encode()).hexdigest()
@@ -748,6 +755,7 @@ def run_job(job: Job) -> dict:
     try:
         with warnings.catch_warnings(record=True) as caught:  # the log's warnings go into the row
             warnings.simplefilter("always")
+            # (a Job made without plan(), or whose truth _finish_plan could not read: its error is this row's)
             cfg = _filter_kidnapped(job.cfg) if job.kidnap_filter and job.cfg.eval.kidnap_at is None else job.cfg
             summary = run(cfg, out, progress=False, echo=echo, initial_pose_override=True)  # the mode's start
     except KeyboardInterrupt:
@@ -796,13 +804,16 @@ def run_job(job: Job) -> dict:
     return row
 
 
-def _filter_kidnapped(cfg):
+def _filter_kidnapped(cfg, mids: dict | None = None):
     """``cfg`` with a real log's kidnap (mid-truth, ``KIDNAP_M``) as its own keys, ``eval.kidnap_at`` and
     ``eval.kidnap_m``: the run folder's config.yaml repeats the run (given to the runner from outside, a
-    ``mcl run`` of it ran a plain tracking run)."""
+    ``mcl run`` of it ran a plain tracking run). ``mids``: the mid-truths read so far, by path."""
     import dataclasses
 
-    ev = dataclasses.replace(cfg.eval, kidnap_at=_mid_truth(cfg.truth), kidnap_m=KIDNAP_M)
+    mids = {} if mids is None else mids
+    if cfg.truth not in mids:
+        mids[cfg.truth] = _mid_truth(cfg.truth)
+    ev = dataclasses.replace(cfg.eval, kidnap_at=mids[cfg.truth], kidnap_m=KIDNAP_M)
     return dataclasses.replace(cfg, eval=ev)
 
 
@@ -1332,7 +1343,7 @@ def _evaluate_suite(suite_path, *, config, sets, seeds, jobs, out, cache, modes,
 
 
 PER_RUN_KEYS = ("map", "log", "bag", "truth", "seed", "filter.initial_pose", "filter.global_localization",
-                "eval.kidnap_at")
+                "eval.kidnap_at", "eval.kidnap_m")
 
 
 def check_sets(sets) -> None:
@@ -1344,7 +1355,8 @@ def check_sets(sets) -> None:
         if key in PER_RUN_KEYS or key.split(".")[0] == "rerun":
             how = {"seed": "give --seeds", "filter.initial_pose": "each mode starts its own way",
                    "filter.global_localization": "each mode starts its own way",
-                   "eval.kidnap_at": "the kidnapped mode kidnaps a real log's filter mid-way"}.get(
+                   "eval.kidnap_at": "the kidnapped mode kidnaps a real log's filter mid-way",
+                   "eval.kidnap_m": f"the kidnapped mode kidnaps a real log's filter {KIDNAP_M:g} m away"}.get(
                 key, "runs record nothing" if key.startswith("rerun") else "each dataset names its own")
             raise ConfigError(f"--set {key}: the suite sets it for each run ({how})")
 

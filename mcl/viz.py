@@ -332,7 +332,7 @@ def weight_histogram(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, float
     finite = rel[np.isfinite(rel)]  # none without a positive heaviest weight (it is 0 here when there is one)
     span = _HIST_DECADES
     if finite.size:
-        # a power-of-two multiple of _HIST_DECADES: the bins change only now and then (see _log_particles)
+        # a power-of-two multiple of _HIST_DECADES: the bins change only now and then (see _log_histogram)
         span = _HIST_DECADES * 2.0 ** max(0.0, math.ceil(math.log2(max(-float(finite.min()), 1e-9) / _HIST_DECADES)))
     edges = np.linspace(-span, 0.0, _HIST_BINS + 1)
     centres = 0.5 * (edges[:-1] + edges[1:])
@@ -816,7 +816,7 @@ class RerunLogger:
         scan; a step without any clears the previous step's (only once skipping has shown something, to keep
         recordings small).
         ``expected_world`` (2, E): where the beams would end if the estimate were right (see ``expected_scan``).
-        The histogram of the weights (all N) is logged with the particles.
+        The histogram of the weights (all N) is logged at every update, the cloud every ``particles_every``-th.
         """
         rec = self._live()
         if rec is None:

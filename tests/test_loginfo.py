@@ -111,8 +111,11 @@ def test_a_reader_that_leaves_early_ends_the_command_quietly():
     import sys
     from pathlib import Path
 
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # stdout buffered, as a user's is
     p = subprocess.Popen([sys.executable, "-m", "mcl", "log", "info", str(DEMO / "log.clf")], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, cwd=Path(__file__).resolve().parents[1])
+                         stderr=subprocess.PIPE, cwd=Path(__file__).resolve().parents[1], env=env)
     p.stdout.close()
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141, err

@@ -708,3 +708,29 @@ def test_a_slip_matched_farther_than_any_robot_drives_is_not_taken(tmp_path):
     s = run(cfg, tmp_path / "run", progress=False, echo=lambda msg: None)
     assert not [w for w in s["odometry_stalls"] if 21.0 < w["t0"] < 23.0]
     assert s["eval"]["ate_max"] < 1.0, s["eval"]
+
+
+def test_a_robot_parked_for_the_whole_log_keeps_its_odometry(tmp_path):
+    # Odometry that never moves because the robot never did (one place, its scans alike) is not "no odometry": no
+    # note, and the run is not replayed on laser odometry. The demo's first scan 30 times, 0.2 s apart, odometry 0.
+    from mcl.runner import run
+    from mcl.trajectory import read_tum
+
+    demo = PROJECT_ROOT / "data" / "demo"
+    lines = (demo / "log.clf").read_text().splitlines(keepends=True)
+    head = [ln for ln in lines if not ln.startswith(("FLASER", "ODOM"))]
+    p = next(ln for ln in lines if ln.startswith("FLASER")).split()
+    n = int(p[1])
+    p[2 + n:8 + n] = ["0.000000"] * 6
+    scans = []
+    for k in range(30):
+        p[-3] = p[-1] = f"{0.2 * k:.6f}"
+        scans.append(" ".join(p) + "\n")
+    (tmp_path / "log.clf").write_text("".join(head + scans))
+    _, truth = read_tum(demo / "truth.tum")
+    said: list = []
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"log={tmp_path / 'log.clf'}", f"map={demo / 'map.yaml'}", "rerun.mode=off",
+        f"filter.initial_pose={truth[:, 0].tolist()}"])
+    run(cfg, tmp_path / "out", progress=False, echo=said.append)
+    assert not any("laser odometry" in m or "ODOM lines do" in m for m in said), said

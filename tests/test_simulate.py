@@ -1034,3 +1034,30 @@ def test_ground_hits_beside_a_holonomic_drive_draw_numbers_of_their_own(tmp_path
         return yaml.safe_load((tmp_path / name / "sim.yaml").read_text())["ground_hits"]
 
     assert windows("hol", holonomic=0.3) != windows("plain")  # before: the same windows, from the same numbers
+
+
+def test_depth_frames_beside_unmapped_furniture_draw_numbers_of_their_own(tmp_path, monkeypatch):
+    # The depth frames' noise and the unmapped furniture both drew from child stream 6: with both on, the same
+    # numbers. The streams each is handed, compared by their first draws: distinct with both on; the depth frames'
+    # alone is the stream it was (child 6).
+    import mcl.depthsim
+    import mcl.simulate as sim
+
+    first: dict = {}
+    furniture, depth = sim._unmapped_furniture, mcl.depthsim.write_depth_folder
+
+    def furniture_spy(world, xy, n, radius, rng):
+        first["furniture"] = rng.bit_generator.state["state"]["state"]
+        return furniture(world, xy, n, radius, rng)
+
+    def depth_spy(out, world, poses, times, rng, *a, **kw):
+        first["depth"] = rng.bit_generator.state["state"]["state"]
+        return depth(out, world, poses, times, rng, *a, **kw)
+
+    monkeypatch.setattr(sim, "_unmapped_furniture", furniture_spy)
+    monkeypatch.setattr(mcl.depthsim, "write_depth_folder", depth_spy)
+    simulate(tmp_path / "both", seed=3, duration=6.0, depth=True, unmapped_furniture=2)
+    assert first["furniture"] != first["depth"]
+    simulate(tmp_path / "alone", seed=3, duration=6.0, depth=True)
+    child6 = np.random.default_rng(np.random.SeedSequence(3).spawn(7)[6]).bit_generator.state["state"]["state"]
+    assert first["depth"] == child6

@@ -1210,3 +1210,20 @@ def test_a_real_logs_kidnapped_run_folder_repeats_from_its_config(tmp_path):
     assert main(["run", str(run_dir / "config.yaml"), "--out", str(tmp_path / "again"), "--rerun", "off",
                  "--no-progress"]) == 0
     assert (tmp_path / "again" / "trajectory.tum").read_bytes() == (run_dir / "trajectory.tum").read_bytes()
+
+
+def test_a_config_carrying_a_kidnap_time_does_not_kidnap_other_modes(tmp_path):
+    # eval.kidnap_at in a --config (a run folder's config.yaml reused) kidnapped the tracking and global runs too;
+    # the plan sets it per run: only a real log's kidnapped mode has it
+    from mcl.suite import _finish_plan, load_suite, plan
+
+    demo = Path(__file__).resolve().parents[1] / "data" / "demo"
+    (tmp_path / "c.yaml").write_text("eval:\n  kidnap_at: 10.0\n")
+    (tmp_path / "s.yaml").write_text(f"name: s\nmodes: [tracking, global, kidnapped]\ndatasets:\n  - name: demo\n"
+                                     f"    map: {demo / 'map.yaml'}\n    log: {demo / 'log.clf'}\n"
+                                     f"    truth: {demo / 'truth.tum'}\n")
+    jobs = plan(load_suite(tmp_path / "s.yaml"), config=tmp_path / "c.yaml", sets=[], seeds=1, out=tmp_path / "o",
+                cache=tmp_path / "w", baseline=False)
+    _finish_plan(jobs)
+    at = {j.mode: j.cfg.eval.kidnap_at for j in jobs}
+    assert at["tracking"] is None and at["global"] is None and at["kidnapped"] == pytest.approx(35.0, abs=0.2)
