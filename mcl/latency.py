@@ -126,11 +126,13 @@ def advice(check: TimeOffsetCheck, current: float = 0.0, fitted: bool = False) -
     odometry at the time found (``sensor.stamp_offset: fit``)."""
     late = check.offset < 0
     head = (f"the scans seem stamped about {abs(check.offset):.2f} s {'late' if late else 'early'} (a laser driver's "
-            "time_offset or buffering, two clocks)")
+            f"time_offset or buffering, two clocks), or the odometry as much {'early' if late else 'late'} (the data "
+            "cannot tell which)")
     total = f"sensor.time_offset={round(current + check.offset, 2) + 0.0:g}"
     if fitted:
-        return (f"{head}: each scan paired with the odometry of when it was taken for this run (sensor.stamp_offset: "
-                f"keep leaves the stamps as they are); to do so for good, --set {total}")
+        return (f"{head}: each scan paired with the odometry of when it was taken for this run, the trajectory "
+                f"stamped so (sensor.stamp_offset: keep leaves the stamps as they are, right where the odometry is the "
+                f"one off); to do so for good, --set {total}")
     return (f"{head}, and the filter's heading will lag in every turn; if so, --set {total} pairs each scan with the "
             "odometry of when it was taken")
 

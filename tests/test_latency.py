@@ -119,8 +119,12 @@ def test_time_offset_pairs_each_scan_with_the_odometry_of_its_true_time(late_dri
     s3, (t3, _) = _run(world, tmp_path / "fit", said_fit, f"log={late}")
     warned = [m for m in said_fit if "seem stamped about" in m]
     assert len(warned) == 1 and warned[0].endswith(
-        "each scan paired with the odometry of when it was taken for this run (sensor.stamp_offset: keep leaves the "
-        f"stamps as they are); to do so for good, --set sensor.time_offset={suggested:g}"), said_fit
+        "each scan paired with the odometry of when it was taken for this run, the trajectory stamped so "
+        "(sensor.stamp_offset: keep leaves the stamps as they are, right where the odometry is the one off); to do so "
+        f"for good, --set sensor.time_offset={suggested:g}"), said_fit
+    # the other reading of the same data is named: odometry stamped early by as much (an audit's log was restamped
+    # the wrong way without a word)
+    assert "or the odometry as much early (the data cannot tell which)" in warned[0]
     assert s3["stamp_offset_fitted_s"] == pytest.approx(suggested, abs=0.005) and "stamp_offset_fitted_s" not in s2
     assert s3["eval"]["heading_rmse"] < 2.0 * s0["eval"]["heading_rmse"], (s0["eval"], s3["eval"])
     assert s3["eval"]["ate_rmse"] < 1.2 * s0["eval"]["ate_rmse"], (s0["eval"], s3["eval"])
