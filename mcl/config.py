@@ -733,12 +733,18 @@ def _section_checks(sec: Any) -> None:
     elif isinstance(sec, LandmarkConfig):
         if sec.z_det + sec.z_fp <= 0:
             raise _CrossCheckError("landmarks.z_det: z_det + z_fp must be positive", "landmarks.z_fp")
+        if sec.use and sec.z_det <= 0:  # as sensor.likelihood_field.z_hit 0: every pose alike
+            raise _CrossCheckError("landmarks.z_det: 0 makes every pose score alike (the landmarks would correct "
+                                   "nothing); for a run without them set landmarks.use: false", "landmarks.use")
         if sec.use and sec.map is None:
             raise _CrossCheckError("landmarks.map: landmarks.use is true but no landmark map is given",
                                    "landmarks.use")
     elif isinstance(sec, PlaneConfig):
         if sec.z_det + sec.z_fp <= 0:
             raise _CrossCheckError("planes.z_det: z_det + z_fp must be positive", "planes.z_fp")
+        if sec.use and sec.z_det <= 0:
+            raise _CrossCheckError("planes.z_det: 0 makes every pose score alike (the planes would correct "
+                                   "nothing); for a run without them set planes.use: false", "planes.use")
         if sec.use and sec.depth is None:
             raise _CrossCheckError("planes.depth: planes.use is true but no depth folder is given", "planes.use")
     elif isinstance(sec, FilterConfig):

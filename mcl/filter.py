@@ -397,6 +397,10 @@ class ParticleFilter:
             # a fresh draw of all n keeps pose k on observation k mod J (the even share)
             q = sample_poses_from_landmark(marks, lm.map, n, rng, self.cfg.landmarks)
             p[:, bad] = q[:, bad]
+        bad = np.flatnonzero(~self._allowed_at(p) | ~self._free_at(p))
+        if bad.size:  # never allowed (a landmark mistyped off the map, a huge sigma_range): uniform over free space,
+            # not kept where they fell (a global start's estimate began 700 m off a 20 m map)
+            p[:, bad] = self.sample_uniform(bad.size, rng, observation)
         return np.ascontiguousarray(p)
 
     def init_from_landmarks(self, marks) -> bool:

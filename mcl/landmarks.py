@@ -84,7 +84,15 @@ class LandmarkMap:
         return np.where(found, order[pos], -1).astype(np.int64)
 
 
+_ID_MAX = 2 ** 63 - 1  # ids are int64
+
+
 def _num(v, where: str, *, integer: bool = False):
+    if isinstance(v, str) and not integer:  # YAML 1.1 reads 1e6 (no dot) as a string; a config file's reader takes it
+        try:
+            v = float(v)
+        except ValueError:
+            pass
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise DataError(f"{where}: expected {'an integer' if integer else 'a number'}, got {v!r}"[:200])
     if integer:
@@ -93,6 +101,8 @@ def _num(v, where: str, *, integer: bool = False):
         v = int(v)
         if v < 0:
             raise DataError(f"{where}: expected an integer >= 0, got {v}")
+        if v > _ID_MAX:  # (an OverflowError traceback)
+            raise DataError(f"{where}: expected an integer up to {_ID_MAX} (int64), got {v}"[:200])
         return v
     return finite_number(v, where, DataError)
 

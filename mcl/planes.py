@@ -93,6 +93,9 @@ def rotation_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
 _BODY_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
+FOV_MAX = math.radians(170.0)  # rad: a pinhole camera's widest field of view taken
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class DepthCamera:
     """A pinhole depth camera and its mounting pose on the robot (Kinect v1 defaults)."""
@@ -155,7 +158,21 @@ class DepthCamera:
                 kw[k] = v
             else:
                 kw[k] = finite_number(v, f"{where}: {k}", DataError)
-        return cls(**kw)
+        cam = cls(**kw)
+        # values that made a run predict only (no plane in any frame) or a traceback, without a word
+        for k in ("fov_x", "fov_y"):  # a pinhole's: near pi, tan(fov / 2) puts every pixel at infinity
+            if not 0.0 < getattr(cam, k) <= FOV_MAX:
+                raise DataError(f"{where}: {k}: expected an angle in (0, {FOV_MAX:.3f}] rad (170 degrees), got "
+                                f"{getattr(cam, k)!r}")
+        if not 0.0 <= cam.z_min < cam.z_max:
+            raise DataError(f"{where}: z_min: expected 0 <= z_min < z_max, got {cam.z_min!r} and {cam.z_max!r}")
+        for k in ("sigma_a", "sigma_b", "quantization"):
+            if getattr(cam, k) < 0.0 or (k == "quantization" and cam.quantization == 0.0):
+                raise DataError(f"{where}: {k}: expected a number {'> 0' if k == 'quantization' else '>= 0'}, got "
+                                f"{getattr(cam, k)!r}")
+        if not 0.0 <= cam.p_dropout <= 1.0:
+            raise DataError(f"{where}: p_dropout: expected a probability in [0, 1], got {cam.p_dropout!r}")
+        return cam
 
 
 # ----------------------------------------------------------------------------- clouds
@@ -561,13 +578,20 @@ def write_depth_frame(folder: Path, t: float, depth_m: np.ndarray, quantization:
     return path
 
 
-def read_depth_frame(path: str | os.PathLike) -> np.ndarray:
-    """A depth frame as float64 metres (0: no reading); DataError naming the file when unreadable."""
+def read_depth_frame(path: str | os.PathLike, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """A depth frame as float64 metres (0: no reading); DataError naming the file when unreadable (a cut or
+    corrupt .npz was a zipfile or EOF traceback), or when not an image of ``shape`` (height, width: the camera's)."""
+    import zipfile
+
     try:
         with np.load(path) as z:
-            return z["depth"].astype(np.float64) * float(z["scale"])
-    except (OSError, KeyError, ValueError) as e:
+            depth = z["depth"].astype(np.float64) * float(z["scale"])
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as e:
         raise DataError(f"{path}: not a depth frame ({type(e).__name__})") from None
+    if depth.ndim != 2 or (shape is not None and depth.shape != tuple(shape)):
+        want = f"{shape[0]} x {shape[1]} (camera.yaml's height x width)" if shape is not None else "2-D"
+        raise DataError(f"{path}: a depth frame of shape {' x '.join(map(str, depth.shape))}, expected {want}")
+    return depth
 
 
 def load_depth_folder(folder: str | os.PathLike) -> tuple[DepthCamera, list[DepthFrame]]:
@@ -648,7 +672,8 @@ class PlaneSensor:
         import time
 
         t0 = time.perf_counter()
-        cloud = cloud_from_depth(read_depth_frame(frame.path), self.camera, int(self.cfg.stride))
+        cloud = cloud_from_depth(read_depth_frame(frame.path, (self.camera.height, self.camera.width)), self.camera,
+                                 int(self.cfg.stride))
         planes = extract_planes(cloud, self.cfg, self.rng, rho_max=self.camera.z_max)
         self.seconds += time.perf_counter() - t0
         self.last_cloud = cloud

@@ -397,3 +397,49 @@ def test_a_landmark_only_global_run_is_not_called_lost_for_want_of_scans(tmp_pat
     assert s["text"].startswith(f"Localized {s['updates']} updates (global,"), s["text"]  # was "of 0 scans"
     # every predicted particle takes one try or more; the first update predicts nothing (it said 0.99 tries)
     assert s["mean_tries"] >= 1.0 and s["mean_tries"] < 1.5, s["mean_tries"]
+
+
+def test_a_landmark_map_of_other_ids_or_off_the_map_is_said_and_the_start_stays_on_the_map(sim, tmp_path):
+    # An audit's landmark maps: every id +100 ran as odometry alone (5.2 m off) without a word; one landmark mistyped
+    # at (500, 500) drew the global start's particles there and the estimate began 700 m off a 20 m map. Now both
+    # are warned of, and a landmark seed's poses the map never allows are drawn uniform over free space instead.
+    import yaml
+
+    from mcl.runner import run
+
+    lm = yaml.safe_load((sim / "landmarks.yaml").read_text())
+
+    def go(name, items):
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({"landmarks": items}))
+        said: list = []
+        cfg = load_config(None, [f"map={sim / 'map.yaml'}", f"log={sim / 'log.clf'}", f"truth={sim / 'truth.tum'}",
+                                 "landmarks.use=true", f"landmarks.map={tmp_path / f'{name}.yaml'}", "sensor.use=false",
+                                 "rerun.mode=off", "filter.particles=2000"])
+        s = run(cfg, tmp_path / name, progress=False, echo=said.append)
+        return s, said
+
+    _, said = go("other", [{**d, "id": d["id"] + 100} for d in lm["landmarks"]])
+    assert sum("the landmarks correct nothing" in m for m in said) == 1, said
+    moved = [dict(d) for d in lm["landmarks"]]
+    moved[6].update(x=500.0, y=500.0)
+    s, said = go("moved", moved)
+    assert sum("landmark(s) off the map (id" in m for m in said) == 1, said
+    from mcl.trajectory import read_tum
+
+    _, p = read_tum(tmp_path / "moved" / "trajectory.tum")
+    assert np.abs(p[:2]).max() < 100.0  # on (or by) a map of about 20 m, never 500 m off
+    with pytest.raises(ConfigError, match=r"landmarks.z_det: 0 makes every pose score alike"):
+        load_config(None, ["landmarks.use=true", "landmarks.map=x.yaml", "landmarks.z_det=0"])
+
+
+def test_landmark_files_take_large_ids_and_exponents_as_one_line_or_numbers(tmp_path):
+    (tmp_path / "big.yaml").write_text("landmarks:\n  - {id: 99999999999999999999999, x: 1, y: 2}\n")
+    with pytest.raises(DataError, match=r"big\.yaml: landmarks\[0\]\.id: expected an integer up to"):
+        load_landmarks(tmp_path / "big.yaml")
+    (tmp_path / "exp.yaml").write_text("landmarks:\n  - {id: 3, x: 1e2, y: -2e1}\n")  # YAML 1.1 strings
+    assert load_landmarks(tmp_path / "exp.yaml").xy[:, 0].tolist() == [100.0, -20.0]
+    log = tmp_path / "l.clf"
+    log.write_text("ODOM 0 0 0 0 0 0 0 h 0\nLANDMARK 1 99999999999999999999 1.0 0.1 1.0 h 1.0\n"
+                   "ODOM 0 0 0 0 0 0 2 h 2\n")
+    with pytest.raises(DataError, match=r"l\.clf:2: LANDMARK: landmark id 99999999999999999999 is too large"):
+        read_carmen(log)

@@ -3,6 +3,7 @@ transform on planted planes and its stopping rule, the plane map and measurement
 section, the simulator's depth camera, and a planes-only run."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -356,3 +357,36 @@ def test_points_on_one_line_give_no_plane():
     depth_fit(cl.depth, cl.rays, idx, idx.size, cl.noise, np.array([1.0, 0.0, 0.0, 2.0]), 0, info)
     assert _invert_info(info, np.array([1.0, 0.0, 0.0])) is None
     assert len(extract_planes(cl, cfg(min_inliers=10, min_points=10), np.random.default_rng(0))) == 0
+
+
+def test_a_camera_files_bad_values_and_a_corrupt_or_misshapen_frame_are_one_line(depth_sim, tmp_path):
+    # An audit's camera.yaml values ran without a word (z_min over z_max, fov_x pi: no plane in any frame, the run
+    # odometry alone) or as tracebacks (fov_x 0, width and height not the frames'); a cut .npz was a zipfile
+    # traceback. Each is now one line naming the file and the key or the frame.
+    import shutil
+
+    import yaml
+
+    from mcl.planes import CAMERA_FILE, load_depth_folder, read_depth_frame
+
+    src = depth_sim / "depth" / "depth"
+    cam = yaml.safe_load((src / CAMERA_FILE).read_text())
+    for key, value, said in (("z_min", 5.0, "z_min: expected 0 <= z_min < z_max"),
+                             ("fov_x", 3.14159265358979, "fov_x: expected an angle in (0, 2.967] rad"),
+                             ("fov_x", 0.0, "fov_x: expected an angle in (0, 2.967] rad"),
+                             ("p_dropout", 2.0, "p_dropout: expected a probability")):
+        bad = tmp_path / f"{key}-{value}"
+        shutil.copytree(src, bad)
+        (bad / CAMERA_FILE).write_text(yaml.safe_dump({**cam, key: value}))
+        with pytest.raises(DataError, match=re.escape(said)):
+            load_depth_folder(bad)
+    frame = sorted(src.glob("*.npz"))[0]
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(frame.read_bytes()[: frame.stat().st_size // 2])
+    with pytest.raises(DataError, match=r"cut\.npz: not a depth frame \(BadZipFile\)"):
+        read_depth_frame(cut)
+    (tmp_path / "empty.npz").write_bytes(b"")
+    with pytest.raises(DataError, match=r"empty\.npz: not a depth frame"):
+        read_depth_frame(tmp_path / "empty.npz")
+    with pytest.raises(DataError, match=r"a depth frame of shape 120 x 160, expected 240 x 320"):
+        read_depth_frame(frame, (240, 320))

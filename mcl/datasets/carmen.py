@@ -228,6 +228,8 @@ def _count(s: str, what: str, kind: str) -> int:
         raise _Bad(f"{kind}: {what} is not an integer: {s[:30]!r}") from None
     if n < 0:
         raise _Bad(f"{kind}: negative {what} {n}")
+    if n > 2 ** 63 - 1:  # (an OverflowError traceback as an int64 landmark id)
+        raise _Bad(f"{kind}: {what} {s[:30]} is too large")
     return n
 
 
