@@ -367,14 +367,13 @@ def _still_odometry(log, scans, sensor_cfg, echo, progress) -> list:
     from tqdm import tqdm
 
     from mcl.laser_odometry import laser_odometry
+    from mcl.odomcheck import run_mount
 
     first = scans[0].kind
-    mount = (np.asarray(sensor_cfg.laser_pose) if sensor_cfg.laser_pose is not None
-             else scans[0].laser_offset if scans[0].laser_offset is not None else np.zeros(3))
     one = [s for s in scans if s.kind == first]
     with tqdm(one, unit="scan", desc="laser odometry", leave=False, dynamic_ncols=True,
               disable=(None if progress is None else not progress)) as bar:
-        rows, failed = laser_odometry(bar, mount)
+        rows, failed = laser_odometry(bar, run_mount(scans[0], sensor_cfg.laser_pose))
     rows = rows[np.argsort(rows[:, 0], kind="stable")]
     if np.abs(rows[:, 1:4] - rows[0, 1:4]).max() < STILL_MATCHED:  # the scans stood still too: a parked robot
         return scans
@@ -399,14 +398,12 @@ def _check_landmark_ids(landmark_map, marks, grid, echo) -> None:
                  f"observations name an id the map lacks (e.g. {int(ids[missing][0])}; the map's ids "
                  f"{int(landmark_map.ids.min())}..{int(landmark_map.ids.max())}): "
                  + ("the landmarks correct nothing" if missing.all() else "those correct nothing"))
-    res = float(grid.resolution)
-    x0, y0 = (float(v) for v in grid.origin[:2])
     xy = landmark_map.xy
-    off = ((xy[0] < x0) | (xy[0] > x0 + grid.width * res) | (xy[1] < y0) | (xy[1] > y0 + grid.height * res))
+    off = ~grid.contains(*grid.world_to_cell(xy[0], xy[1]))
     if off.any():
         k = int(np.flatnonzero(off)[0])
-        echo(f"mcl: warning: {landmark_map.path}: {int(off.sum())} landmark(s) off the map (id {int(landmark_map.ids[k])} "
-             f"at ({xy[0, k]:g}, {xy[1, k]:g})): a coordinate mistyped?")
+        echo(f"mcl: warning: {landmark_map.path}: {int(off.sum())} landmark(s) off the map (id "
+             f"{int(landmark_map.ids[k])} at ({xy[0, k]:g}, {xy[1, k]:g})): a coordinate mistyped?")
 
 
 def _landmark_records(log, cfg: Config) -> list:

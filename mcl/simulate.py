@@ -955,10 +955,9 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
                             rng_obst, exact, furniture, cast_from=at_laser[scan_ticks] if mounted else None)
     hit_windows = []
     if ground_hits:
-        # A ninth child stream (the others are unchanged), the holonomic offsets' too: with both on, a twelfth (the
-        # two drew the same numbers; each alone is the world it was)
-        rng_ground = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(12 if holonomic else 9)[
-            11 if holonomic else 8])
+        # The ninth child stream (a child depends on its index alone: the others are unchanged), the holonomic
+        # offsets' too: with both on, the twelfth (the two drew the same numbers; each alone is the world it was)
+        rng_ground = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(12)[11 if holonomic else 8])
         hit_windows = _ground_hits(rng_ground, t[scan_ticks], angles, int(ground_hits), float(duration), exact)
     for a0, a1, reach in body:  # the robot itself, nearer than anything else along those beams
         sector = (angles >= a0) & (angles <= a1)
@@ -1058,10 +1057,8 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
         from mcl.depthsim import write_depth_folder
         from mcl.planes import DepthCamera
 
-        # A seventh child stream (the others are unchanged), the unmapped furniture's too: with both on, a
-        # thirteenth (the two drew the same numbers; each alone is the world it was)
-        rng_depth = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(13 if unmapped_furniture else 7)[
-            12 if unmapped_furniture else 6])
+        # The seventh child stream, the unmapped furniture's too: with both on, the thirteenth (as above)
+        rng_depth = np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(13)[12 if unmapped_furniture else 6])
         cam = depth_camera if depth_camera is not None else DepthCamera()
         ticks = scan_ticks[:: int(depth_every)]
         n_depth = write_depth_folder(out, world, truth[ticks], t[ticks], rng_depth, cam)

@@ -726,6 +726,8 @@ class RerunLogger:
 
     def local(self, a: Any) -> np.ndarray:
         """``a`` (an x, y[, theta] pose or a (2|3, N) array) in the recording's frame: x, y less ``offset``."""
+        if not self.offset.any():  # (every map within 10 km of the origin: no copy)
+            return np.asarray(a, dtype=np.float64)
         b = np.array(a, dtype=np.float64)
         b[:2] -= self.offset.reshape((2,) + (1,) * (b.ndim - 1))
         return b
@@ -1297,8 +1299,7 @@ def log_line_features(logger: RerunLogger, segments: np.ndarray) -> None:
         return
     rec.log(
         "world/lines",
-        rr.LineStrips2D((np.asarray(segments, dtype=np.float64).reshape(-1, 2, 2) - logger.offset).astype(np.float32),
-                        colors=[[220, 40, 200]],
+        rr.LineStrips2D(_less(np.reshape(segments, (-1, 2)), logger.offset).reshape(-1, 2, 2), colors=[[220, 40, 200]],
                         radii=rr.Radius.ui_points(2.0), draw_order=_DRAW_ORDER["scan"]),
     )
 
