@@ -210,7 +210,9 @@ def cmd_run(args) -> int:
     if args.threads is not None:
         set_threads(args.threads)
     out = Path(args.out) if args.out else default_out_dir()
-    check_out_dir(out)  # before the data loads: a folder mcl may write in, holding nothing but a run's outputs
+    # before the data loads: a folder mcl may write in, holding nothing but a run's outputs, and none of its inputs
+    check_out_dir(out, inputs={"config": config_path, "map": cfg.map, "log": cfg.log, "bag": cfg.bag,
+                               "truth": cfg.truth, "landmark map": cfg.landmarks.map, "plane map": cfg.planes.map})
     if args.write_bag and cfg.bag is None:
         raise MclError("--write-bag needs a bag input (--bag)")
     start_given = start_given or any(item.split("=", 1)[0].strip() in _START_KEYS for item in args.set)
@@ -328,8 +330,8 @@ def cmd_eval(args) -> int:
                        "scored as they are)")
     if args.converged_within is None:
         args.converged_within = 0.3
-    if not args.converged_within > 0:
-        raise MclError(f"--converged-within: must be positive, got {args.converged_within}")
+    if not (args.converged_within > 0 and math.isfinite(args.converged_within)):  # (inf: converged at once)
+        raise MclError(f"--converged-within: must be a positive number of metres, got {args.converged_within}")
     t_est, p_est = read_tum(args.estimate)
     t_ref, p_ref = read_tum(args.reference)
     paired = steps_back_paired(t_est, t_ref)
@@ -735,6 +737,70 @@ def cmd_config_from_amcl(args) -> int:
     return 0
 
 
+# options and positionals that name a file or folder: `~` expanded (bash leaves it alone after `--out=`), an empty
+# value refused (`--log ''` read the current folder as the log)
+_PATH_OPTIONS = {"--config", "--map", "--log", "--bag", "--truth", "--out", "-o", "--suite", "--cache", "--space",
+                 "--study"}
+_PATH_POSITIONALS = {"config", "estimate", "reference", "outdir", "suite", "bag", "log", "src", "out", "path",
+                     "params"}
+
+
+def _path_arg(value: str) -> str:
+    if not value.strip():
+        raise argparse.ArgumentTypeError("an empty path")
+    if any(c in value for c in "\n\r\0"):
+        raise argparse.ArgumentTypeError(f"not a usable path: {value!r}")
+    return os.path.expanduser(value)
+
+
+def _leaf_parsers(parser: argparse.ArgumentParser):
+    """Every parser of a command that runs (``mcl run``, ``mcl calibrate sensor``), with its subparsers' parents."""
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        yield parser
+    for a in subs:
+        for child in dict.fromkeys(a.choices.values()):
+            yield from _leaf_parsers(child)
+
+
+def _finish(parser: argparse.ArgumentParser) -> None:
+    """What every command's parser shares: path arguments through ``_path_arg``, descriptions wrapped at 100
+    characters (RawDescriptionHelpFormatter keeps them as written: `mcl convert --help` had an 867-character line),
+    and the parser itself in the parsed arguments (``main`` names an unknown option in its usage)."""
+    import textwrap
+
+    def walk(p):
+        if p.description and isinstance(p.formatter_class, type) and issubclass(
+                p.formatter_class, argparse.RawDescriptionHelpFormatter):
+            p.description = "\n".join(textwrap.fill(line, 100, break_on_hyphens=False) if len(line) > 100 else line
+                                      for line in p.description.split("\n"))
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for child in dict.fromkeys(a.choices.values()):
+                    walk(child)
+            elif a.type is None and a.nargs != 0 and (
+                    set(a.option_strings) & _PATH_OPTIONS or (not a.option_strings and a.dest in _PATH_POSITIONALS)):
+                a.type = _path_arg
+
+    walk(parser)
+    for leaf in _leaf_parsers(parser):
+        leaf.set_defaults(_parser=leaf)
+
+
+def _unknown(args, extra: list[str]) -> None:
+    """An option no command knows: the command's own usage, and the option it was probably meant to be (argparse
+    3.11 printed `mcl`'s top-level usage, with no suggestion)."""
+    import difflib
+
+    leaf = getattr(args, "_parser", None)
+    if leaf is None:
+        return
+    options = [o for a in leaf._actions for o in a.option_strings]
+    hints = [h for x in extra if x.startswith("--")
+             for h in difflib.get_close_matches(x.split("=", 1)[0], options, n=1)]
+    leaf.error(f"unrecognized arguments: {' '.join(extra)}" + (f" (did you mean {', '.join(hints)}?)" if hints else ""))
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mcl",
@@ -754,6 +820,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_log(sub)
     _add_convert(sub)
     _add_config(sub)
+    _finish(parser)
     return parser
 
 
@@ -779,13 +846,20 @@ def _clean_warnings():
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    if "_ARGCOMPLETE" in os.environ:  # the shell asks for completions (pip install 'mcl[completion]')
-        with contextlib.suppress(ImportError):
-            import argcomplete
+    try:  # Ctrl-C while the parser is built (its imports take a moment): the one line below, not a traceback
+        parser = build_parser()
+        if "_ARGCOMPLETE" in os.environ:  # the shell asks for completions (pip install 'mcl[completion]')
+            with contextlib.suppress(ImportError):
+                import argcomplete
 
-            argcomplete.autocomplete(parser, exit_method=sys.exit)
-    args = parser.parse_args(argv)
+                argcomplete.autocomplete(parser, exit_method=sys.exit)
+        args, extra = parser.parse_known_args(argv)
+        if extra:
+            _unknown(args, extra)
+            parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    except KeyboardInterrupt:
+        print("mcl: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if args.command is None:
         parser.print_help()
         return 0
@@ -809,6 +883,9 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:  # a file mcl could not write (a full disk, a folder made read-only mid-run): one line
         where = f"{e.filename}: " if e.filename else ""
         print(f"mcl: error: {where}{e.strerror or e}", file=sys.stderr)
+        return EXIT_ERROR
+    except MemoryError:  # options that pass their checks but need more memory than there is
+        print(f"mcl: error: out of memory in mcl {args.command} (smaller inputs or options)", file=sys.stderr)
         return EXIT_ERROR
 
 

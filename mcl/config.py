@@ -17,8 +17,9 @@ from __future__ import annotations
 import copy
 import dataclasses
 import importlib.resources
-import math
 import difflib
+import math
+import re
 import types
 import typing
 from dataclasses import dataclass, field
@@ -28,7 +29,7 @@ from typing import Any, Literal
 import yaml
 
 from mcl.errors import ConfigError
-from mcl.yamlfile import finite_number, load_text, read_yaml
+from mcl.yamlfile import finite_number, load_text, read_yaml, short_repr
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
@@ -578,6 +579,19 @@ def _type_name(tp: Any) -> str:
     return {float: "a number", int: "an integer", bool: "true or false", str: "a string"}.get(tp, str(tp))
 
 
+# An integer in exponent notation ("5e3", "1E4"): what a float key takes (mcl.yamlfile.finite_number), an integer
+# key too when it is whole
+_EXPONENT_INT = re.compile(r"[-+]?[0-9]+(?:\.[0-9]*)?[eE]\+?[0-9]+")
+
+
+def _shown(value: Any) -> str:
+    """A config value as an error message shows it: as YAML spells true, false and null, else a repr cut to one
+    short line (a 100,000-number list was a 500 kB error line)."""
+    if value is None or isinstance(value, bool):
+        return yaml.safe_dump(value).split("\n", 1)[0]
+    return short_repr(value, 60)
+
+
 def _coerce(value: Any, tp: Any, key: str) -> Any:
     """Check `value` against the annotation `tp`; return it converted (ints to floats, lists to tuples)."""
     origin = typing.get_origin(tp)
@@ -585,14 +599,15 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
         args = typing.get_args(tp)
         if value is None and type(None) in args:
             return None
-        for a in args:
-            if a is type(None):
-                continue
+        others = [a for a in args if a is not type(None)]
+        if len(others) == 1 and value is not None:  # "X or null" given something else: the error of X itself
+            return _coerce(value, others[0], key)  # (filter.initial_pose[0]: expected a finite number, got 'nan')
+        for a in others:
             try:
                 return _coerce(value, a, key)
             except ConfigError:
                 pass
-        raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
+        raise ConfigError(f"{key}: expected {_type_name(tp)}, got {_shown(value)}")
     if origin is Literal:
         choices = typing.get_args(tp)
         if isinstance(value, bool):
@@ -603,28 +618,30 @@ def _coerce(value: Any, tp: Any, key: str) -> Any:
         if value not in choices:
             hint = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
             extra = f" (did you mean {hint[0]}?)" if hint else ""
-            raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}{extra}")
+            raise ConfigError(f"{key}: expected {_type_name(tp)}, got {_shown(value)}{extra}")
         return value
     if origin is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, (list, tuple)) or len(value) != len(args):
-            raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
+            raise ConfigError(f"{key}: expected {_type_name(tp)}, got {_shown(value)}")
         return tuple(_coerce(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{key}: expected true or false, got {value!r}")
+            raise ConfigError(f"{key}: expected true or false, got {_shown(value)}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, str) and _EXPONENT_INT.fullmatch(value.strip()):  # 5e3: a string to YAML 1.1
+                value = float(value)
             if isinstance(value, float) and value.is_integer():
                 return int(value)
-            raise ConfigError(f"{key}: expected an integer, got {value!r}")
+            raise ConfigError(f"{key}: expected an integer, got {_shown(value)}")
         return value
     if tp is float:
         return finite_number(value, key, ConfigError)
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{key}: expected a string, got {value!r}")
+            raise ConfigError(f"{key}: expected a string, got {_shown(value)}")
         return value
     raise ConfigError(f"{key}: unsupported type {tp}")  # pragma: no cover - a bug in the dataclasses
 
@@ -644,7 +661,7 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a mapping, got {data!r}")
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a mapping, got {_shown(data)}")
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     kwargs = {}
@@ -653,8 +670,8 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
         if k not in fields:
             if cls is SensorConfig and k in MOVED_SENSOR_KEYS:
                 raise ConfigError(f"{key}: moved to {MOVED_SENSOR_KEYS[k]}")
-            hint = difflib.get_close_matches(str(k), list(fields), n=1)
-            extra = f" (did you mean {hint[0]}?)" if hint else ""
+            hint = [] if "." in str(k) else difflib.get_close_matches(str(k), list(fields), n=1)
+            extra = f" (did you mean {hint[0]}?)" if hint else _elsewhere(str(k), prefix)
             raise ConfigError(f"{key}: unknown key{extra}")
         tp = hints[k]
         if dataclasses.is_dataclass(tp):
@@ -663,6 +680,37 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
             kwargs[k] = _coerce(v, tp, key)
             _check_range(kwargs[k], fields[k].metadata, key)
     return cls(**kwargs)
+
+
+def _keys_of(cls: type, prefix: str = "") -> list[str]:
+    """Every dotted key of the dataclass ``cls`` (sections' keys included)."""
+    keys = []
+    for name, tp in typing.get_type_hints(cls).items():
+        keys.append(prefix + name)
+        if dataclasses.is_dataclass(tp):
+            keys += _keys_of(tp, f"{prefix}{name}.")
+    return keys
+
+
+def _elsewhere(k: str, prefix: str) -> str:
+    """The hint for a key unknown where it stands but known elsewhere: a dotted key copied from --set into a file
+    (``filter.particles: 100``), or a key in the wrong section (``particles`` at the top, ``filter.alpha1``)."""
+    keys = _keys_of(Config)
+    if f"{prefix}{k}" in keys:  # "filter.particles" written as one key under the top level
+        parts = k.split(".")
+        return (f" (dotted keys are --set's; in a file, nest it: {parts[0]}:, then "
+                + ", then ".join(f"{p}: indented under it" for p in parts[1:]) + ")")
+    homes = [key for key in keys if key.rsplit(".", 1)[-1] == k and not dataclasses.is_dataclass(_key_type(key))]
+    if homes:
+        return f" (it belongs in {' or '.join(homes[:3])})"
+    return ""
+
+
+def _key_type(dotted: str) -> Any:
+    tp: Any = Config
+    for part in dotted.split("."):
+        tp = typing.get_type_hints(tp)[part]
+    return tp
 
 
 class _CrossCheckError(ConfigError):
@@ -770,6 +818,10 @@ def _printable(k: Any) -> str:
     return s if s.isprintable() else repr(s)[1:-1]
 
 
+def _cut(text: str, limit: int = 80) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def parse_override(text: str) -> tuple[list[str], Any]:
     """``section.key=value`` -> (["section", "key"], parsed YAML value)."""
     if "=" not in text:
@@ -827,6 +879,8 @@ def _over_defaults(loaded: dict, path: Path) -> dict:
 
     def merge(into: dict, over: dict) -> dict:
         for k, v in over.items():
+            if v is None and isinstance(into.get(k), dict):  # `filter:` with every key commented out: no change
+                continue  # (it was the code's plain values: 5,000 particles, no KLD, no recovery, with no word)
             into[k] = merge(into[k], v) if isinstance(v, dict) and isinstance(into.get(k), dict) else v
         return into
 
@@ -842,6 +896,14 @@ def _apply(data: dict, path: list[str], value: Any) -> None:
         if not isinstance(nxt, dict):
             raise ConfigError(f"{_printable('.'.join(path[: i + 1]))}: is not a section")
         node = nxt
+    if isinstance(node.get(path[-1]), dict) and (value is None or isinstance(value, dict)):
+        # a section given whole (`--set filter={}`, `--set filter=null`): its keys over the section's, none dropped
+        if value is None:
+            raise ConfigError(f"{_printable('.'.join(path))}: is a section: set its keys ({_printable(path[-1])}.KEY="
+                              "VALUE)")
+        for k, v in value.items():
+            _apply(node, [path[-1], str(k)], v)
+        return
     node[path[-1]] = value
 
 
@@ -906,7 +968,7 @@ def load_config(path: str | Path | None = None, overrides: list | tuple = ()) ->
         return f"{_at_line(path, keys[0] if keys else '')}: " if path is not None else ""
 
     for item in overrides:
-        given, text = item if isinstance(item, tuple) else (f"--set {_printable(item)}", item)
+        given, text = item if isinstance(item, tuple) else (f"--set {_cut(_printable(item))}", item)
         keys, value = parse_override(text)
         try:
             _apply(data, keys, value)

@@ -520,8 +520,12 @@ def load_map(path: str | os.PathLike) -> OccupancyGrid:
     if not isinstance(doc, dict):
         raise DataError(f"{where}: expected a YAML mapping with keys image, resolution, origin, ...")
     for key in ("image", "resolution", "origin", "occupied_thresh", "free_thresh"):
-        if key not in doc:
-            raise DataError(f"{where}: {key}: missing key")
+        if key not in doc:  # a misspelled key named: "resolution: missing key" beside a `resolutoin:` said nothing
+            import difflib
+
+            typo = difflib.get_close_matches(key, [str(k) for k in doc], n=1)
+            raise DataError(f"{where}: {key}: missing key" + (f" (is {short_repr(typo[0])[1:-1]}: meant?)"
+                                                              if typo else ""))
 
     image = doc["image"]
     if not isinstance(image, str) or not image.strip():

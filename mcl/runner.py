@@ -96,18 +96,27 @@ def summary_json(summary: dict) -> str:
     return json.dumps(_json_ready(summary), indent=2, allow_nan=False)
 
 
-def check_out_dir(out: Path, flag: str = "--out") -> None:
+def check_out_dir(out: Path, flag: str = "--out", inputs: dict | None = None) -> None:
     """Before any work: ``out`` must be a folder mcl can create and write in, empty or holding a run's outputs
     alone (a run again into the same folder replaces them). ConfigError naming ``flag`` otherwise: a file there,
-    a folder holding other files (a user's trajectory.tum is not overwritten), no permission."""
+    a folder holding other files (a user's trajectory.tum is not overwritten), no permission, or an input of the
+    run (``inputs``: what it is -> its path) where the run writes an output (a config edited in place, `--truth
+    r0/trajectory.tum --out r0`: both were written over)."""
     from mcl.trajectory import check_folder_holds, check_writable_folder
 
     out = Path(out)
     check_writable_folder(out, f"{flag} {out}")
+    outputs = {(out / n).resolve() for n in RUN_OUTPUTS}
+    for what, path in (inputs or {}).items():
+        if path is not None and Path(path).resolve() in outputs:
+            raise ConfigError(f"{flag} {out}: the run would write over its own {what}, {path}; choose another "
+                              "folder")
     # a run's outputs are files: a folder named recording.rrd was a traceback after the earlier outputs were gone
-    names = check_folder_holds(out, flag, lambda n: (n.removesuffix(".partial") in RUN_OUTPUTS
-                                                     or n == PARTIAL_RECORDING or _atomic_leftover(n))
-                               and (out / n).is_file(), "a run's outputs")
+    names = check_folder_holds(out, flag, lambda n: ((n.removesuffix(".partial") in RUN_OUTPUTS
+                                                      or n == PARTIAL_RECORDING or _atomic_leftover(n))
+                                                     and (out / n).is_file()) or (n == PREVIOUS and (out / n).is_dir()),
+                               "a run's outputs")
+    names = [n for n in names if n != PREVIOUS]
     if names and "config.yaml" not in names:  # a trajectory.tum of the user's own, say
         raise ConfigError(f"{flag} {out}: the folder holds {', '.join(names)} but no config.yaml: not an "
                           "mcl run's folder; choose a new or empty folder")
@@ -161,6 +170,56 @@ def folder_lock(folder: Path, busy: str):
     finally:
         if fd is not None:
             os.close(fd)
+
+
+PREVIOUS = ".mcl-previous"  # a folder's earlier finished run, set aside while a new run replaces it
+
+
+def _finished(out_dir: Path) -> bool:
+    """Whether ``out_dir`` holds a run that went to its end (a summary.json neither interrupted nor failed)."""
+    try:
+        summary = json.loads((out_dir / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(summary, dict) and summary.get("interrupted") is False and "error" not in summary
+
+
+def _run_files(out_dir: Path) -> list[Path]:
+    """The files of a run's outputs in ``out_dir``: finished, partial, and atomic writes' leftovers."""
+    names = [*RUN_OUTPUTS, *(f"{n}.partial" for n in RUN_OUTPUTS), PARTIAL_RECORDING]
+    files = [out_dir / n for n in names if (out_dir / n).is_file()]
+    return files + [p for p in out_dir.iterdir() if _atomic_leftover(p.name) and p.is_file()]
+
+
+def _set_aside(out_dir: Path) -> Path | None:
+    """A run into a folder that holds an earlier run: a finished one is moved into ``PREVIOUS`` (``_put_back``
+    restores it if this run does not finish: an interrupted rerun had lost a complete run), anything else goes.
+    A ``PREVIOUS`` left by a run that was killed is put back first. Returns ``PREVIOUS`` when it holds a run."""
+    import shutil
+
+    stash = out_dir / PREVIOUS
+    if stash.is_dir():  # a run killed mid-way (SIGKILL, a power cut) left the finished run aside
+        if not _finished(out_dir):
+            _put_back(out_dir, stash)
+        else:
+            shutil.rmtree(stash)
+    if not _finished(out_dir):
+        _clear_run_outputs(out_dir)
+        return None
+    stash.mkdir()
+    for p in _run_files(out_dir):
+        os.replace(p, stash / p.name)
+    return stash
+
+
+def _put_back(out_dir: Path, stash: Path) -> None:
+    """The earlier run in ``stash`` back in ``out_dir``, in place of whatever this run wrote."""
+    import shutil
+
+    _clear_run_outputs(out_dir)
+    for p in stash.iterdir():
+        os.replace(p, out_dir / p.name)
+    shutil.rmtree(stash)
 
 
 def _clear_run_outputs(out_dir: Path) -> None:
@@ -1169,7 +1228,7 @@ def _run(
             out_dir = _fresh_dir(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         signals.lock_fd = _lock_out_dir(out_dir)  # released as run() returns
-        _clear_run_outputs(out_dir)
+        previous = _set_aside(out_dir)
         atomic_write_text(out_dir / "config.yaml", dump_config(cfg))
     except OSError as e:
         raise DataError(f"{out_dir}: cannot write the run's outputs there: {e.strerror or e}") from None
@@ -1486,13 +1545,27 @@ def _run(
     except OSError:
         if failure is None:
             raise
+    kept = None  # the folder's earlier finished run, put back because this one did not finish
+    if previous is not None:
+        try:
+            if failure is None and not interrupted:
+                import shutil
+
+                shutil.rmtree(previous)
+            else:
+                _put_back(out_dir, previous)
+                kept = f"the earlier finished run in {out_dir} is kept (this run's outputs were discarded)"
+                summary["outputs"] = {k: None for k in summary["outputs"]}
+        except OSError as e:
+            failure = failure if failure is not None else e
     if failure is not None:  # one error line from the caller; the folder holds the poses up to it, and says so
         if isinstance(failure, OSError):  # an output mcl could not write: named, with what is kept
-            raise DataError(f"{_failure_text(failure, out_dir)} (stopped after {counts['updates']} updates; the poses "
-                            f"written so far are in {out_dir})") from None
+            raise DataError(f"{_failure_text(failure, out_dir)} (stopped after {counts['updates']} updates; "
+                            f"{kept or f'the poses written so far are in {out_dir}'})") from None
         if isinstance(failure, MclError):
-            raise type(failure)(f"{failure} (stopped after {counts['updates']} updates; the poses so far and a "
-                                f"summary.json that says so are in {out_dir})") from None
+            raise type(failure)(f"{failure} (stopped after {counts['updates']} updates; "
+                                f"{kept or f'the poses so far and a summary.json that says so are in {out_dir}'})"
+                                ) from None
         raise failure
 
     # The one-paragraph summary.
@@ -1513,7 +1586,7 @@ def _run(
         text += " " + format_eval(summary["eval"]) + "."
     elif "eval" in summary and "error" in summary["eval"]:
         text += f" Not scored: {summary['eval']['error']}."
-    text += f" Outputs in {out_dir}."
+    text += f" Outputs in {out_dir}." if kept is None else f" As it was interrupted, {kept}."
     if summary["outputs"]["recording"]:
         import shutil
 

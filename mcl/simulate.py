@@ -49,8 +49,6 @@ from pathlib import Path
 import numpy as np
 
 from mcl.errors import ConfigError
-from mcl.motion import noise_rotations
-
 __all__ = ["simulate", "make_world", "World", "add_arguments", "run_from_args", "simulator_stamp"]
 
 from mcl.worlds import (  # noqa: F401  (RESOLUTION, make_world, World: importable from here as before)
@@ -469,6 +467,8 @@ def _odometry(truth, pre, rng, alphas, scale, yaw_drift, min_trans=1e-6, odom_ra
     the spot exactly (trans 0); a replayed SLAM path (scripts/radish_dataset.py) jitters by millimetres in any
     direction, and the direction of such a step, taken for rot1, would give it a rotation's noise it never made
     (it passes ``mcl.motion.ROT1_MIN_TRANS``, 1 cm: the filter's and AMCL's rule)."""
+    from mcl.motion import noise_rotations  # here: numba, which the parser of `mcl --help` need not import
+
     a1, a2, a3, a4 = alphas
 
     def step(z, x0, y0, t0, x1, y1, t1, trans, odom):

@@ -58,7 +58,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcl.errors import ConfigError, MclError
-from mcl.evaluate import settle_time
 
 MODES = ("tracking", "global", "kidnapped")
 SETTLE_M = 0.5  # m: converged / recovered once the error falls below this and stays
@@ -684,6 +683,8 @@ def score(mode: str, t, e, *, lost_m: float, kidnap_t: float | None = None, kidn
     """A run's figures from its position errors e (m) at times t (see the module doc). ``kidnap_from``: the time of
     the filter's last pose before ``kidnap_t``; the errors after it and before the kidnap are left out."""
     import numpy as np
+
+    from mcl.evaluate import settle_time  # here: numba (mcl.estimate), which the parser of `mcl --help` need not import
 
     t, e = np.asarray(t, dtype=float), np.asarray(e, dtype=float)
     if mode == "kidnapped" and kidnap_from is not None:

@@ -54,12 +54,26 @@ _LEADING_ZEROS = re.compile(r"^[-+]?0[0-9_]+$")
 
 def _construct_int(loader, node):
     text = loader.construct_scalar(node)
-    if _LEADING_ZEROS.match(text):
-        return int(text.replace("_", ""), 10)
-    return yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
+    if ":" in text:  # YAML 1.1's base 60 (`1:30` was 90): a string, as YAML 1.2 and every user read it
+        return text
+    try:
+        if _LEADING_ZEROS.match(text):
+            return int(text.replace("_", ""), 10)
+        return yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
+    except ValueError:  # beyond Python's 4,300 digits: a traceback before
+        raise yaml.constructor.ConstructorError(None, None, f"an integer of {len(text)} digits",
+                                                node.start_mark) from None
+
+
+def _construct_float(loader, node):
+    text = loader.construct_scalar(node)
+    if ":" in text:  # base 60 (`1:30.5`): a string, as for integers
+        return text
+    return yaml.constructor.SafeConstructor.construct_yaml_float(loader, node)
 
 
 _Loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+_Loader.add_constructor("tag:yaml.org,2002:float", _construct_float)
 _Loader.add_implicit_resolver("tag:yaml.org,2002:int", _LEADING_ZEROS, list("-+0"))
 
 

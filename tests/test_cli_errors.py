@@ -504,3 +504,78 @@ def test_explore_recording_draws_y_up_as_a_runs_recording_does(tmp_path):
     ys = [p[1] for c in chunks if str(c.entity_path) == "/motion/0/samples"
           for row in c.to_record_batch().column("Points2D:positions").to_pylist() for p in row]
     assert np.mean(ys) > 0.1  # a left turn's samples, in the map frame's y up
+
+
+def test_an_unknown_option_is_named_in_its_commands_usage_with_a_suggestion(capsys):
+    # argparse 3.11 printed `mcl`'s top-level usage and no suggestion; `--partciles 5` took 5 as the config
+    for argv, said in ((["run", "--partciles", "5"], "mcl run: error: unrecognized arguments: --partciles (did you "
+                                                     "mean --particles?)"),
+                       (["eval", "--jsn"], "mcl eval: error: unrecognized arguments: --jsn (did you mean --json?)"),
+                       (["calibrate", "sensor", "--mapp", "x"], "mcl calibrate sensor: error: unrecognized arguments: "
+                                                                "--mapp x (did you mean --map?)")):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and err.splitlines()[-1] == said, err
+        assert err.startswith(f"usage: mcl {argv[0]}")  # the command's usage, not mcl's
+
+
+@pytest.mark.parametrize("argv", [["run", "--log", ""], ["run", "--out", " "], ["eval", "", "x.tum"],
+                                  ["simulate", ""], ["config", "show", ""]])
+def test_an_empty_path_is_refused_by_its_option(capsys, argv):
+    # `--log ''` read the current folder as the log ("cannot read: Is a directory"); `--out ''` was no --out
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2 and capsys.readouterr().err.splitlines()[-1].endswith(": an empty path")
+
+
+def test_a_tilde_in_an_options_path_is_the_home_folder(world, tmp_path, capsys, monkeypatch):
+    # bash leaves `~` alone after `--map=`: it was looked for as ./~/..., and `--out=~/x` made a folder named ~
+    home = tmp_path / "home"
+    (home / "w").mkdir(parents=True)
+    for name in ("map.yaml", "map.pgm", "log.clf"):
+        (home / "w" / name).write_bytes((world / name).read_bytes())
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "--map=~/w/map.yaml", "--log=~/w/log.clf", "--out=~/out", "--particles", "300",
+                 "--rerun", "off", "--no-progress"]) == 0
+    assert (home / "out" / "trajectory.tum").is_file() and not (tmp_path / "~").exists()
+
+
+def test_eval_refuses_an_infinite_convergence_bound(tmp_path, capsys):
+    t = np.arange(5.0)
+    write_tum(tmp_path / "a.tum", t, np.zeros((3, 5)))
+    assert main(["eval", str(tmp_path / "a.tum"), str(tmp_path / "a.tum"), "--converged-within", "inf"]) == 2
+    assert _one_error(capsys) == "mcl: error: --converged-within: must be a positive number of metres, got inf"
+
+
+def test_every_commands_help_fits_in_100_columns(capsys):
+    from mcl.cli import _leaf_parsers, build_parser
+
+    widest = {}
+    for leaf in _leaf_parsers(build_parser()):
+        text = leaf.format_help()
+        # the examples of an epilog are kept as written; the description and the options are wrapped
+        body = text.split("\nexamples:", 1)[0]
+        widest[leaf.prog] = max(len(line) for line in body.splitlines())
+    assert max(widest.values()) <= 100, {k: v for k, v in widest.items() if v > 100}
+
+
+def test_ctrl_c_while_the_parser_is_built_is_one_line(capsys, monkeypatch):
+    import mcl.cli
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(mcl.cli, "build_parser", interrupted)
+    assert main(["run"]) == 130 and capsys.readouterr().err == "mcl: interrupted\n"
+
+
+def test_the_parser_imports_no_numba(tmp_path):
+    # `mcl --help` took 1.1 s: building the parser imported mcl.simulate, which imported numba with mcl.motion
+    import subprocess
+    import sys
+
+    code = "import sys; from mcl.cli import build_parser; build_parser(); print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -301,3 +301,74 @@ def test_a_config_files_bad_key_names_its_line(tmp_path):
     with pytest.raises(ConfigError) as e:
         load_config(p)
     assert str(e.value).startswith(f"{p}:5: sensor.likelihood_field.sigma_hit: -1.0 is out of range")
+
+
+def test_an_empty_section_keeps_default_yamls_values(tmp_path):
+    # `filter:` with every key commented out was read as the code's plain filter (5,000 fixed particles, no KLD,
+    # no recovery) while `filter: {}` kept default.yaml's: the two spellings now agree, and so does a whole section
+    # given by --set
+    from mcl.config import default_config
+
+    default = default_config()
+    for text in ("filter:\n", "filter: {}\n", "filter:\nmotion:\n"):
+        cfg = load_config(write(tmp_path, text))
+        assert cfg.filter == default.filter and cfg.motion == default.motion, text
+    cfg = load_config(write(tmp_path, ""), ["filter={particles: 300}"])
+    assert cfg.filter.particles == 300 and cfg.filter.kld == default.filter.kld and cfg.filter.recovery == "lost"
+    with pytest.raises(ConfigError, match=r"^--set filter=null: filter: is a section: set its keys"):
+        load_config(write(tmp_path, ""), ["filter=null"])
+
+
+@pytest.mark.parametrize("text,value", [("5e3", 5000), ("1E4", 10000), ("2.5e3", 2500), ("1.0e+4", 10000)])
+def test_an_integer_key_takes_exponent_notation_as_a_float_key_does(tmp_path, text, value):
+    assert load_config(write(tmp_path, f"filter:\n  particles: {text}\n")).filter.particles == value
+    assert load_config(None, [f"filter.particles={text}"]).filter.particles == value
+
+
+@pytest.mark.parametrize("text,msg", [
+    ("filter:\n  particles: 1e20\n", "c.yaml:2: filter.particles: 100000000000000000000 is out of range (must be <= 10000000)"),
+    ("filter:\n  particles: 2.5e1\n", None),  # 25: whole, accepted
+    ("filter:\n  particles: 2.55e1\n", "c.yaml:2: filter.particles: expected an integer, got 25.5"),
+    # YAML 1.1 read 1:30 as 90 (base 60)
+    ("filter:\n  particles: 1:30\n", "c.yaml:2: filter.particles: expected an integer, got '1:30'"),
+    ("motion:\n  alpha1: 1:30.5\n", "c.yaml:2: motion.alpha1: expected a number, got '1:30.5'"),
+    # beyond Python's 4,300 digits: a ValueError traceback
+    ("motion:\n  alpha1: " + "9" * 5000 + "\n", "c.yaml:2: invalid YAML: an integer of 5000 digits"),
+    ("filter:\n  particles: true\n", "c.yaml:2: filter.particles: expected an integer, got true"),
+    ("filter:\n  initial_pose: [.nan, 0, 0]\n", "c.yaml:2: filter.initial_pose[0]: expected a finite number, got nan"),
+    ("filter:\n  initial_pose: [nan, 0, 0]\n", "c.yaml:2: filter.initial_pose[0]: expected a number, got 'nan'"),
+])
+def test_numbers_a_user_writes_are_read_or_refused_in_one_line(tmp_path, text, msg):
+    p = write(tmp_path, text)
+    if msg is None:
+        load_config(p)
+        return
+    with pytest.raises(ConfigError) as e:
+        load_config(p)
+    assert str(e.value) == f"{tmp_path}/{msg}"
+
+
+def test_an_error_line_shows_a_long_value_cut_short(tmp_path):
+    # a 100,000-number list, a 200,000-character string: error lines of 500 kB
+    for text in ("filter:\n  initial_pose: [" + "1.5, " * 100000 + "1]\n", "filter:\n  resampling: " + "x" * 200000):
+        with pytest.raises(ConfigError) as e:
+            load_config(write(tmp_path, text))
+        assert len(str(e.value)) < 300, str(e.value)[:300]
+    with pytest.raises(ConfigError) as e:
+        load_config(None, ["seed=" + "9" * 5000])
+    assert len(str(e.value)) < 300 and str(e.value).startswith("--set seed=999")
+
+
+@pytest.mark.parametrize("text,hint", [
+    ("filter.particles: 100\n", "filter.particles: unknown key (dotted keys are --set's; in a file, nest it: filter:, "
+                                "then particles: indented under it)"),
+    ("sensor:\n  likelihood_field.sigma_hit: 0.1\n", "sensor.likelihood_field.sigma_hit: unknown key (dotted keys are "
+     "--set's; in a file, nest it: likelihood_field:, then sigma_hit: indented under it)"),
+    ("particles: 100\n", "particles: unknown key (it belongs in filter.particles)"),
+    ("filter:\n  alpha1: 0.1\n", "filter.alpha1: unknown key (it belongs in motion.alpha1)"),
+    ("filter:\n  particels: 1\n", "filter.particels: unknown key (did you mean particles?)"),
+])
+def test_a_key_in_the_wrong_place_says_where_it_belongs(tmp_path, text, hint):
+    with pytest.raises(ConfigError) as e:
+        load_config(write(tmp_path, text))
+    assert str(e.value).endswith(hint), str(e.value)

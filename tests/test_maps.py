@@ -815,3 +815,13 @@ def test_an_occupancy_that_is_no_ros_grid_is_refused_and_the_callers_array_is_co
     assert g.occupied.sum() == 30 and g.occupancy.dtype == np.int8
     occ[5, 5] = 100
     assert g.occupancy[5, 5] == 0  # a copy
+
+
+def test_a_misspelled_key_of_a_map_yaml_is_named(tmp_path):
+    # `resolutoin:` gave "resolution: missing key", with no word of the key beside it
+    (tmp_path / "m.pgm").write_bytes(b"P5\n2 2\n255\n" + bytes([254, 0, 254, 254]))
+    (tmp_path / "m.yaml").write_text("image: m.pgm\nresolutoin: 0.05\norigin: [0, 0, 0]\noccupied_thresh: 0.65\n"
+                                     "free_thresh: 0.196\n")
+    with pytest.raises(DataError) as e:
+        load_map(tmp_path / "m.yaml")
+    assert str(e.value) == f"{tmp_path / 'm.yaml'}: resolution: missing key (is resolutoin: meant?)"

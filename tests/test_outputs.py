@@ -176,6 +176,89 @@ def test_a_bad_input_found_mid_run_keeps_the_poses_and_the_summary_says_why(worl
     assert not list(out.glob("*.partial"))
 
 
+def _stop_at(monkeypatch, update: int, raised: BaseException) -> None:
+    from mcl.filter import ParticleFilter
+
+    step, calls = ParticleFilter.step, []
+
+    def stopping(self, *a, **k):
+        calls.append(1)
+        if len(calls) == update:
+            raise raised
+        return step(self, *a, **k)
+
+    monkeypatch.setattr(ParticleFilter, "step", stopping)
+
+
+def _files(out):
+    return {q.name: q.read_bytes() for q in out.iterdir() if q.is_file()}
+
+
+@pytest.mark.parametrize("stop", ["interrupt", "error"])
+def test_a_rerun_that_does_not_finish_keeps_the_earlier_finished_run(world, tmp_path, capsys, monkeypatch, stop):
+    # Ctrl-C (or a bad reading) in a second run into a folder holding a finished run: the finished run's outputs
+    # were deleted as the second began, leaving a few updates of a run nobody wanted
+    out = tmp_path / "again"
+    assert _run(world, out, "--rerun", "save") == 0
+    before = _files(out)
+    _stop_at(monkeypatch, 5, KeyboardInterrupt() if stop == "interrupt" else DataError("log.clf:9: a bad reading"))
+    capsys.readouterr()
+    assert _run(world, out, "--seed", "2") == (130 if stop == "interrupt" else 2)
+    err = capsys.readouterr().err
+    assert f"the earlier finished run in {out} is kept (this run's outputs were discarded)" in err
+    assert _files(out) == before and sorted(p.name for p in out.iterdir()) == sorted(before)
+    monkeypatch.undo()
+    assert _run(world, out, "--seed", "2") == 0  # and a rerun that finishes replaces it, leaving nothing aside
+    assert json.loads((out / "summary.json").read_text())["seed"] == 2
+    assert not (out / "recording.rrd").exists() and not (out / ".mcl-previous").exists()
+
+
+def test_a_rerun_over_an_unfinished_run_replaces_it(world, tmp_path, monkeypatch):
+    out = tmp_path / "again"
+    _stop_at(monkeypatch, 5, KeyboardInterrupt())
+    assert _run(world, out) == 130
+    monkeypatch.undo()
+    _stop_at(monkeypatch, 7, KeyboardInterrupt())
+    assert _run(world, out, "--seed", "2") == 130  # the interrupted run was nothing to keep: the new one stands
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["seed"] == 2 and summary["updates"] == 6 and summary["interrupted"]
+    assert not (out / ".mcl-previous").exists()
+
+
+def test_a_finished_run_set_aside_by_a_killed_rerun_comes_back(world, tmp_path, monkeypatch):
+    out = tmp_path / "again"
+    assert _run(world, out) == 0
+    before = _files(out)
+    # kill -9 mid-rerun: the finished run aside, a few poses of the new one in the folder
+    (out / ".mcl-previous").mkdir()
+    for name in before:
+        os.replace(out / name, out / ".mcl-previous" / name)
+    (out / "config.yaml").write_text("seed: 2\n")
+    (out / "trajectory.tum.partial").write_text("1.0 0 0 0 0 0 0 1\n")
+    _stop_at(monkeypatch, 3, KeyboardInterrupt())
+    assert _run(world, out, "--seed", "3") == 130
+    assert _files(out) == before and not (out / ".mcl-previous").exists()
+
+
+def test_an_input_where_the_run_writes_an_output_is_refused(world, tmp_path, capsys):
+    # `mcl run proj/config.yaml --out proj` wrote the resolved config over the user's commented one; a --truth
+    # inside the folder was replaced by the new estimate
+    out = tmp_path / "proj"
+    out.mkdir()
+    config = out / "config.yaml"
+    config.write_text(f"# mine\nmap: {world / 'map.yaml'}\nlog: {world / 'log.clf'}\n")
+    assert main(["run", str(config), "--out", str(out), "--rerun", "off", "--no-progress"]) == 2
+    assert _error_lines(capsys) == [f"mcl: error: --out {out}: the run would write over its own config, {config}; "
+                                    "choose another folder"]
+    assert config.read_text().startswith("# mine")
+    r0 = tmp_path / "r0"
+    assert _run(world, r0) == 0
+    truth = (r0 / "trajectory.tum").read_bytes()
+    assert _run(world, r0, "--truth", str(r0 / "trajectory.tum")) == 2
+    (line,) = _error_lines(capsys)
+    assert "the run would write over its own truth" in line and (r0 / "trajectory.tum").read_bytes() == truth
+
+
 def test_a_full_disk_mid_run_keeps_the_whole_lines_and_says_which_file(world, tmp_path):
     # A file size limit (a full disk, as `ulimit -f` makes it) hit by the trajectory: the error was "File too
     # large" naming no file, the trajectory stayed as .partial with a line cut in half, the other outputs were never
