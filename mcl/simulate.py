@@ -40,6 +40,7 @@ noise that no wheel odometry has.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import math
 import os
@@ -925,17 +926,21 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     # --- laser
     t = np.round(np.arange(n_ticks) / odom_rate, 6)
     stalls = _grey_windows(t, int(odom_stalls), float(duration), float(odom_stall_s)) if odom_stalls else []
+    _say_cut(stalls, float(odom_stall_s), "--odom-stall-s")
     if stalls:
         odom, tv, rv = _stalled(odom, tv, rv, t, stalls)
     resets = _grey_windows(t, int(odom_resets), float(duration), float(odom_reset_s)) if odom_resets else []
+    _say_cut(resets, float(odom_reset_s), "--odom-reset-s")
     if resets:
         odom, tv, rv = _reset(odom, tv, rv, t, resets)
     slips = _grey_windows(t, int(odom_slips), float(duration), float(odom_slip_s)) if odom_slips else []
+    _say_cut(slips, float(odom_slip_s), "--odom-slip-s")
     if slips:
         odom, tv, rv = _slipped(odom, tv, rv, t, slips)
     scan_ticks = np.arange(0, n_ticks, scan_every)
     angles = beam_angles(int(n_beams), fov)
     blocked = world.blocked
+    _check_memory(scan_ticks.size, angles.size)
     exact = np.empty((scan_ticks.size, angles.size))
     at_laser = _mounted(truth, mount) if mounted else truth  # where each scan is taken from (the robot's truth)
     cast_rays(np.ascontiguousarray(at_laser[scan_ticks].T), angles, blocked, world.origin[0], world.origin[1],
@@ -1006,6 +1011,20 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     map_res = round(map_res * map_scale, 12)  # the map's cells, as the mapper drew them
     map_origin = (round(world_origin[0] * map_scale, 12), round(world_origin[1] * map_scale, 12))
     grid = OccupancyGrid.from_occupancy(occupancy, map_res, map_origin)
+    if map_resolution is not None and map_rotation == 0.0 and map_scale == 1.0:
+        # coarse cells thicken walls by up to a cell: a doorway narrower than that closes, and the robot drives
+        # through a wall of the map (0.5 m cells: 8 of 301 reference poses in walls, a run lost twice), unsaid
+        ix, iy = grid.world_to_cell(truth[:, 0], truth[:, 1])
+        inside = grid.contains(ix, iy)
+        walled = int(np.count_nonzero(grid.occupied[iy[inside], ix[inside]]))
+        if walled:
+            import warnings
+
+            from mcl.errors import MclWarning
+
+            warnings.warn(f"--map-resolution {map_res:g}: {walled} of the drive's {len(truth)} poses (every "
+                          f"{1.0 / odom_rate:g} s) lie in the map's walls (cells this coarse close a doorway): a filter on this map cannot follow the "
+                          "drive there", MclWarning, stacklevel=2)
     save_map(grid, out / "map.yaml")
 
     host = "sim"
@@ -1014,6 +1033,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
              f"fov={fov:.6f} range_max={range_max:g}; poses in the odometry frame\n",
              f"PARAM robot_front_laser_max {range_max:g} {0.0:.6f} {host} {0.0:.6f}\n"]
     gaps = _grey_windows(t, int(scan_gaps), float(duration), float(scan_gap_s)) if scan_gaps else []
+    _say_cut(gaps, float(scan_gap_s), "--scan-gap-s")
     # the scans the log keeps: all but those inside a gap (the laser silent, the odometry going on)
     kept = np.ones(scan_ticks.size, dtype=bool)
     for a, b in gaps:
@@ -1226,6 +1246,19 @@ def _grey_windows(t: np.ndarray, n: int, duration: float, seconds: float = GREY_
     """``spread_windows`` over a run of ``duration`` s from 0 (``t`` its ticks): the unknown floor's stretches, the
     laser's gaps."""
     return spread_windows(n, seconds, 0.0, duration, float(t[-1]))
+
+
+def _say_cut(windows: list, seconds: float, option: str) -> None:
+    """A warning when ``spread_windows`` made the windows shorter than ``option`` asked (they may fill at most half
+    the time between their centres): `--scan-gaps 1 --scan-gap-s 60` in a 60 s drive made a 15 s gap, unsaid."""
+    if windows and max(b - a for a, b in windows) < seconds - 1e-6:
+        import warnings
+
+        from mcl.errors import MclWarning
+
+        made = max(b - a for a, b in windows)
+        warnings.warn(f"{option} {seconds:g}: each window is {made:.1f} s (at most half the time between their "
+                      "centres, and within the drive); sim.yaml lists them", MclWarning, stacklevel=3)
 
 
 def spread_windows(n: int, seconds: float, start: float, duration: float, end: float | None = None) -> list:
@@ -1454,25 +1487,30 @@ def _cast_with_unmapped(world: World, poses: np.ndarray, times: np.ndarray, angl
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``mcl simulate``."""
-    parser.add_argument("outdir", help="folder to write map.yaml, map.pgm, log.clf (or a bag), truth.tum, sim.yaml")
+    parser.add_argument("outdir", help="folder to write map.yaml, map.pgm, log.clf (or a bag), truth.tum, sim.yaml; "
+                        "an earlier world there is replaced once the new one is whole")
     parser.add_argument("--kind", choices=KINDS, default="office",
                         help="world layout: office (default; the demo's ~20x15 m building), rooms (identical rooms "
                         "off a corridor: ambiguous), corridor (60-150 m, featureless), hall (40-80 m open hall, "
                         "sparse pillars), clutter (office full of small furniture, people and furniture the map "
                         "lacks), large (150-200 m building)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (world, path, noise); default 0")
-    parser.add_argument("--duration", type=float, default=60.0, help="seconds of driving; default 60")
-    parser.add_argument("--range-max", type=float, default=12.0, help="laser maximum range in m; default 12")
+    parser.add_argument("--duration", type=float, default=60.0, help="seconds of driving, 1-3600; default 60")
+    parser.add_argument("--range-max", type=float, default=12.0,
+                        help="laser maximum range in m, 0.5-100; default 12 (hall: 20-30 m reaches its walls)")
     parser.add_argument("--beams", type=int, default=181,
-                        help="beams over the field of view; default 181 (FLASER at 180 degrees; other geometries "
-                        "write ROBOTLASER1)")
+                        help="beams over the field of view, 2-4096; default 181 (FLASER at 180 degrees; other "
+                        "geometries write ROBOTLASER1)")
     parser.add_argument("--fov", type=float, default=180.0, metavar="DEG",
                         help="laser field of view in degrees; default 180 (a short-range URG-like laser: "
                         "--range-max 5.6 --fov 240)")
     parser.add_argument("--speed", type=float, default=None, metavar="V",
-                        help="robot speed in m/s; default the kind's (office 0.5, corridor/hall 0.8, large 1.0)")
+                        help="the robot's cruise speed in m/s; default the kind's (office and rooms 0.5, clutter "
+                        "0.4, corridor and hall 0.8, large 1.0). The path follower's 0.5 m lookahead keeps the "
+                        "drive under about 0.8 m/s whatever the cruise speed")
     parser.add_argument("--kidnap-at", type=float, default=None, metavar="T",
-                        help="teleport the robot at time T s (odometry does not see it)")
+                        help="teleport the robot at time T s, before the drive's end (odometry does not see it); "
+                        "default none")
     parser.add_argument("--dynamic-obstacles", type=int, default=None, metavar="N",
                         help="N obstacles the map does not show (boxes near the path, walking people); default 0 "
                         "(clutter: 10)")
@@ -1577,7 +1615,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="share of beams returning nothing (written as the maximum range); default 0.01")
     noise.add_argument("--odom-alphas", default=None, metavar="A1,A2,A3,A4",
                        help="the odometry motion model's alpha1..alpha4, variance form (Table 5.6: the variance of "
-                       "rot1 is alpha1 rot1^2 + alpha2 trans^2, ...); default 0.05,0.05,0.05,0.02")
+                       "rot1 is alpha1 rot1^2 + alpha2 trans^2, ...); default 0.05,0.05,0.05,0.02. Drawn at every "
+                       "odometry step (10 Hz, or the scan rate when faster): a faster --scan-rate takes shorter steps, "
+                       "and the same drive's odometry is less noisy (at 40 Hz about half the error of 5 Hz)")
     noise.add_argument("--odom-scale", type=float, default=None, metavar="S",
                        help="every odometry translation times S (a wheel radius off), 0.5-1.5; default 1.01")
     noise.add_argument("--odom-yaw-drift", type=float, default=None, metavar="R",
@@ -1649,16 +1689,48 @@ WORLD_OUTPUTS = ("map.yaml", "map.pgm", "log.clf", "log.bag", "log.db3", "log.mc
                  "landmarks.yaml", "depth")
 
 
+def _check_memory(scans: int, beams: int) -> None:
+    """ConfigError before the ranges are cast when they cannot fit: the exact ranges, the noisy ones and their text
+    take about 3 x 8 bytes a reading (an hour at 100 Hz of 4,096 beams asked for 11 GB, a traceback)."""
+    from mcl.maps import available_memory
+
+    need, free = 24 * scans * beams, available_memory()
+    if free is not None and need > free:
+        def size(b: float) -> str:
+            return f"{b / 1e9:.1f} GB" if b >= 1e9 else f"{b / 1e6:.0f} MB"
+
+        raise ConfigError(f"simulate: {scans:,} scans of {beams:,} beams need about {size(need)}, and {size(free)} "
+                          "are free: a shorter --duration, a lower --scan-rate or fewer --beams")
+
+
+_MAKING = ".mcl-world."  # the prefix of the folder inside OUTDIR a world is made in, before it is moved in place
+
+
+def _is_world_record(path: Path) -> bool:
+    """Whether ``path`` is a sim.yaml mcl simulate wrote (its kind, seed and start pose), not a file of that name."""
+    from mcl.yamlfile import read_yaml
+
+    try:
+        doc = read_yaml(path, ConfigError)
+    except ConfigError:
+        return False
+    return isinstance(doc, dict) and doc.get("kind") in KINDS and {"seed", "duration", "start_pose"} <= set(doc)
+
+
 def _check_world_folder(out: Path) -> None:
-    """ConfigError unless ``out`` is new, empty, or an earlier world (its sim.yaml): a folder of other files would
-    get a world's files among its own (a map.yaml of the user's overwritten)."""
+    """ConfigError unless ``out`` is new, empty, or an earlier world (the sim.yaml mcl simulate writes): a folder of
+    other files would get a world's files among its own (a map.yaml of the user's overwritten; a sim.yaml of
+    another simulator's was taken for one of ours)."""
     if not out.is_dir():
         return
-    entries = sorted(p.name for p in out.iterdir())
-    if entries and "sim.yaml" not in entries:
+    entries = sorted(p.name for p in out.iterdir() if not p.name.startswith(_MAKING))
+    if entries and not (out / "sim.yaml").is_file():
         shown = ", ".join(entries[:3]) + (", ..." if len(entries) > 3 else "")
         raise ConfigError(f"OUTDIR {out}: holds files ({shown}) and no sim.yaml: not an earlier world; choose a "
                           "new or empty folder")
+    if entries and not _is_world_record(out / "sim.yaml"):
+        raise ConfigError(f"OUTDIR {out}: its sim.yaml is not one mcl simulate wrote (no kind, seed, duration and "
+                          "start_pose): not an earlier world; choose a new or empty folder")
 
 
 def _swap_world(tmp: Path, out: Path) -> None:
@@ -1666,20 +1738,25 @@ def _swap_world(tmp: Path, out: Path) -> None:
     bag, landmarks or depth frames of another run stayed beside the new map and log), others (a README) stay."""
     import shutil
 
-    out.mkdir(parents=True, exist_ok=True)
-    for name in WORLD_OUTPUTS:
-        old = out / name
+    def remove(old: Path) -> None:
         if old.is_dir() and not old.is_symlink():
             shutil.rmtree(old)
         elif old.exists() or old.is_symlink():
             old.unlink()
-    for p in sorted(tmp.iterdir()):
-        os.replace(p, out / p.name)
+
+    made = {p.name for p in tmp.iterdir()}
+    for name in sorted(made):  # each file over the earlier one's (``tmp`` is inside ``out``: one file system)
+        if (out / name).is_dir():
+            remove(out / name)
+        os.replace(tmp / name, out / name)
+    for name in WORLD_OUTPUTS:  # the earlier world's files this one has not
+        if name not in made:
+            remove(out / name)
     tmp.rmdir()
 
 
 def run_from_args(args: argparse.Namespace) -> int:
-    """Run ``mcl simulate`` from parsed arguments; prints a one-line summary. The world is made in a folder beside
+    """Run ``mcl simulate`` from parsed arguments; prints a one-line summary. The world is made in a folder inside
     OUTDIR and moved in when whole: an error or Ctrl-C leaves OUTDIR as it was."""
     import shutil
     import tempfile
@@ -1689,9 +1766,14 @@ def run_from_args(args: argparse.Namespace) -> int:
     out = Path(args.outdir)
     check_writable_folder(out, f"OUTDIR {args.outdir}")
     _check_world_folder(out)
-    parent = out.resolve().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out.name}."))
+    # the world is made inside OUTDIR, on its file system (beside it, a mount point's world could not be moved in,
+    # and a read-only parent refused a writable OUTDIR); folders made here go again if the world is not made
+    made = [p for p in (out.resolve(), *out.resolve().parents) if not p.exists()]
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in out.glob(f"{_MAKING}*"):  # of a run that was killed
+        shutil.rmtree(stale, ignore_errors=True)
+    tmp = Path(tempfile.mkdtemp(dir=out, prefix=_MAKING))
+    done = False
     try:
         try:
             s = _simulate_from_args(argparse.Namespace(**{**vars(args), "outdir": str(tmp)}))
@@ -1709,8 +1791,13 @@ def run_from_args(args: argparse.Namespace) -> int:
                       "carries them); landmarks.yaml is written, and --format clf keeps them in the log",
                       file=sys.stderr)
         _swap_world(tmp, out)
+        done = True
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            for p in made:  # deepest first: `mcl simulate new/a/w --duration -5` left new/a behind
+                with contextlib.suppress(OSError):
+                    p.rmdir()
     s["outdir"] = str(out)
     x, y, th = s["start_pose"]
     msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "

@@ -922,7 +922,7 @@ def test_a_world_made_again_replaces_the_earlier_whole_and_a_stopped_one_leaves_
     # Into an earlier world's folder, seed 0's bag, landmarks and depth frames stayed beside seed 3's map and log;
     # Ctrl-C mid-way left a half-swapped world; a user's own map.yaml was overwritten. Now the world is made beside
     # the folder and moved in whole: an earlier world's files all go (a README stays), a folder of other files is
-    # refused, and a stopped run leaves the folder as it was.
+    # refused, and a stopped run leaves the folder as it was (the world is made inside it since session 97).
     import mcl.simulate as sim
     from mcl.cli import main
 
@@ -953,6 +953,77 @@ def test_a_world_made_again_replaces_the_earlier_whole_and_a_stopped_one_leaves_
     assert main(["simulate", str(mine), "--duration", "4"]) == 2
     assert "holds files (map.yaml) and no sim.yaml: not an earlier world" in capsys.readouterr().err
     assert (mine / "map.yaml").read_text() == "my map\n"
+
+
+def test_a_world_is_made_on_outdirs_own_file_system_and_a_failed_one_leaves_no_folders(tmp_path, capsys,
+                                                                                      monkeypatch):
+    # Made in a folder beside OUTDIR, a world could not be moved onto a mount point (a volume, a USB stick:
+    # "Invalid cross-device link") after the earlier world was deleted, and a read-only parent refused a writable
+    # OUTDIR. It is made inside OUTDIR now. Bad options left OUTDIR's missing parents behind.
+    import os
+
+    import mcl.simulate as sim
+    from mcl.cli import main
+
+    w = tmp_path / "w"
+    assert main(["simulate", str(w), "--duration", "3"]) == 0
+    before = {p.name: p.read_bytes() for p in w.iterdir()}
+    real = os.replace
+
+    def one_device(src, dst):  # a move between folders is a move across devices unless both are inside w
+        if os.path.dirname(os.path.dirname(os.fspath(src))) != os.fspath(w) and os.path.dirname(os.fspath(src)) != \
+                os.fspath(w):
+            raise OSError(18, "Invalid cross-device link", os.fspath(src))
+        return real(src, dst)
+
+    monkeypatch.setattr(sim.os, "replace", one_device)
+    assert main(["simulate", str(w), "--duration", "3", "--seed", "4"]) == 0
+    monkeypatch.undo()
+    after = {p.name: p.read_bytes() for p in w.iterdir()}
+    assert sorted(after) == sorted(before) and after["log.clf"] != before["log.clf"]
+    capsys.readouterr()
+    assert main(["simulate", str(tmp_path / "new" / "a" / "w"), "--duration", "-5"]) == 2
+    assert "--duration" in capsys.readouterr().err and not (tmp_path / "new").exists()
+
+
+def test_a_sim_yaml_of_another_tool_is_not_taken_for_an_earlier_world(tmp_path, capsys):
+    from mcl.cli import main
+
+    mine = tmp_path / "myrobot"
+    mine.mkdir()
+    (mine / "sim.yaml").write_text("gazebo: {}\n")
+    (mine / "map.yaml").write_text("image: lab.pgm\n")
+    assert main(["simulate", str(mine), "--duration", "3"]) == 2
+    assert "its sim.yaml is not one mcl simulate wrote" in capsys.readouterr().err
+    assert (mine / "map.yaml").read_text() == "image: lab.pgm\n"
+
+
+def test_a_world_too_large_for_memory_is_one_line_before_any_work(tmp_path, capsys, monkeypatch):
+    import mcl.maps
+    from mcl.cli import main
+
+    # an hour at 100 Hz of 4,096 beams asked numpy for 11 GB: a traceback (a machine swapping first)
+    monkeypatch.setattr(mcl.maps, "available_memory", lambda: 5_000_000)  # 5 MB
+    assert main(["simulate", str(tmp_path / "w"), "--duration", "60", "--beams", "1000"]) == 2
+    assert capsys.readouterr().err == ("mcl: error: simulate: 301 scans of 1,000 beams need about 7 MB, and 5 MB are "
+                                       "free: a shorter --duration, a lower --scan-rate or fewer --beams\n")
+    assert not (tmp_path / "w").exists()
+
+
+def test_windows_cut_shorter_than_asked_and_a_map_that_walls_the_drive_are_warned_of(tmp_path, capsys):
+    from mcl.cli import main
+
+    assert main(["simulate", str(tmp_path / "a"), "--duration", "60", "--scan-gaps", "1", "--scan-gap-s", "60",
+                 "--odom-stalls", "2", "--odom-stall-s", "60"]) == 0
+    err = capsys.readouterr().err
+    assert "--scan-gap-s 60: each window is 15.0 s" in err and "--odom-stall-s 60: each window is 10.0 s" in err
+    assert main(["simulate", str(tmp_path / "b"), "--duration", "60", "--scan-gaps", "1"]) == 0
+    assert "warning" not in capsys.readouterr().err  # 5 s gaps fit: nothing said
+    assert main(["simulate", str(tmp_path / "c"), "--duration", "60", "--map-resolution", "0.5"]) == 0
+    assert "--map-resolution 0.5: 16 of the drive's 601 poses (every 0.1 s) lie in the map's walls" in \
+        capsys.readouterr().err
+    assert main(["simulate", str(tmp_path / "d"), "--duration", "60", "--map-resolution", "0.1"]) == 0
+    assert "warning" not in capsys.readouterr().err
 
 
 def _parsed(argv):
