@@ -227,7 +227,9 @@ def cmd_run(args) -> int:
         print("mcl: note: --initial-std is not used: the run starts globally (--initial-pose X Y THETA tracks from "
               "a pose)", file=sys.stderr)
     summary = run(cfg, out, progress=False if args.no_progress else None, initial_pose_override=start_given,
-                  write_bag=args.write_bag, compile_note=True, fresh=not args.out)
+                  write_bag=args.write_bag, compile_note=True, fresh=not args.out,
+                  start_given_as=(f"--initial-pose {' '.join(f'{v:g}' for v in args.initial_pose)}"
+                                  if args.initial_pose is not None else None))
     if args.json:
         print(summary_json(summary))
     if cfg.rerun.mode == "serve" and not summary["interrupted"] and not summary.get("late_signal"):

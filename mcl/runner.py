@@ -883,7 +883,8 @@ def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
     Keywords: ``progress``, ``initial_pose_override``, ``echo``, ``fresh`` (``out_dir`` is a default name: made new,
-    or the next free name), ``kidnap_filter_at``, ``write_bag``, ``compile_note``, ``on_update`` (see :func:`_run`). SIGINT and
+    or the next free name), ``kidnap_filter_at``, ``write_bag``, ``compile_note``, ``on_update``, ``start_given_as`` (how
+    the user gave the start pose, for its error line; see :func:`_run`). SIGINT and
     SIGTERM stop the run cleanly (see :class:`_Interrupts`): ``summary["interrupted"]`` is then true. A signal
     that came after the summary was made (the run is whole) sets ``summary["late_signal"]`` instead.
     """
@@ -1116,6 +1117,7 @@ def _run(
     write_bag: bool = False,
     compile_note: bool = False,
     on_update=None,
+    start_given_as: str | None = None,
 ) -> dict:
     """Localize `cfg.log` on `cfg.map`; write the outputs into `out_dir`; return the summary.
 
@@ -1168,7 +1170,8 @@ def _run(
     if from_bag:
         _check_start_pose(grid, bag_initial[0], f"{cfg.bag}: {cfg.topics.initial_pose}", echo)
     elif not fc.global_localization and fc.initial_pose is not None:
-        _check_start_pose(grid, fc.initial_pose, "filter.initial_pose", echo)
+        # named as the user gave it: `--initial-pose 1000 1000 0` was said to be filter.initial_pose's
+        _check_start_pose(grid, fc.initial_pose, start_given_as or "filter.initial_pose", echo)
     b = cfg.sensor.beam
     if cfg.sensor.use and cfg.sensor.model == "beam" and b.z_max == 0 and b.z_rand == 0:
         echo("mcl: warning: sensor.beam: z_max and z_rand are both 0: a reading the map does not explain (no return, "

@@ -190,8 +190,14 @@ def test_a_start_pose_off_the_map_is_one_line_and_nothing_written(tmp_path, caps
                  "--rerun", "off", "--no-progress", "--initial-pose", "1000", "12", "0"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0
-    assert "filter.initial_pose: (1000.000, 12.000) lies outside the map" in err and "map.yaml (x -1.00..21.00 m" in err
+    # named as typed (it said filter.initial_pose, a key the user never wrote)
+    assert "error: --initial-pose 1000 12 0: (1000.000, 12.000) lies outside the map" in err
+    assert "map.yaml (x -1.00..21.00 m" in err
     assert not out.exists()
+    assert main(["run", "--map", str(DEMO / "map.yaml"), "--log", str(DEMO / "log.clf"), "--out", str(out),
+                 "--rerun", "off", "--no-progress", "--set", "filter.initial_pose=[1000, 12, 0]",
+                 "--set", "filter.global_localization=false"]) == 2
+    assert "error: filter.initial_pose: (1000.000, 12.000) lies outside" in capsys.readouterr().err
 
 
 def test_a_start_pose_on_a_cell_that_is_not_free_is_a_warning():
