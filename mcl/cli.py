@@ -381,7 +381,7 @@ def _add_simulate(sub) -> None:
     from mcl import simulate
 
     _command(sub, "simulate", simulate,
-             help="make a synthetic world: map + noisy CARMEN log + exact truth",
+             help="make a synthetic world: map + noisy log (CARMEN or a ROS bag) + exact truth",
              description="Draw an indoor world, drive a robot through it, and write map.yaml/map.pgm, log.clf,\n"
              "truth.tum and sim.yaml into OUTDIR.",
              epilog="examples:\n"

@@ -568,8 +568,50 @@ def bench_kernels(args) -> None:
             print()
     finally:
         numba.set_num_threads(saved)
+    bench_amcl_style(grid, beams[60], 100_000, 3 if args.quick else 10)
     bench_beam(grid, mask, ranges, angles, max_range, laser_pose, rng, args.quick)
     bench_uniform(args.quick)
+
+
+@numba.njit(cache=True)
+def amcl_style_loop(particles, ranges, bearings, distance, x0, y0, res, z_hit, z_rand, sigma_hit, range_max, out):
+    """ROS AMCL's likelihood-field update as its C code writes it (amcl_laser.cpp, LikelihoodFieldModel): one
+    thread; for every particle and every beam a cos and a sin of the beam's heading and an exp, p += pz^3. The
+    yardstick for mcl's kernels, which rotate the scan's precomputed endpoints once per particle."""
+    h, w = distance.shape
+    for i in range(particles.shape[1]):
+        px, py, pth = particles[0, i], particles[1, i], particles[2, i]
+        p = 1.0
+        for j in range(ranges.size):
+            a = pth + bearings[j]
+            hx = px + ranges[j] * math.cos(a)
+            hy = py + ranges[j] * math.sin(a)
+            ix = int(math.floor((hx - x0) / res))
+            iy = int(math.floor((hy - y0) / res))
+            z = distance[iy, ix] if 0 <= ix < w and 0 <= iy < h else 2.0
+            pz = z_hit * math.exp(-(z * z) / (2.0 * sigma_hit * sigma_hit)) + z_rand / range_max
+            p += pz * pz * pz
+        out[i] = p
+
+
+def bench_amcl_style(grid, e60, n: int, reps: int) -> None:
+    """The ``likelihood`` row's 60-beam scan and 100,000 particles through ``amcl_style_loop`` (README: "ROS
+    AMCL's C code")."""
+    rng = np.random.default_rng(1)
+    mask = allowed_mask(grid, motion_cfg().robot_radius)
+    p = particles_near_centre(grid, mask, n, rng)
+    ranges, bearings = np.hypot(e60[0], e60[1]), np.arctan2(e60[1], e60[0])
+    distance = np.ascontiguousarray(np.minimum(grid.distance, 2.0))
+    out = np.empty(n)
+
+    def call():
+        amcl_style_loop(p, ranges, bearings, distance, grid.origin[0], grid.origin[1], grid.resolution, 0.95, 0.05,
+                        0.1, 12.0, out)
+
+    call()
+    ms, best = (v * 1e3 for v in timed(call, reps))
+    print(f"# AMCL-style per-beam loop (amcl_style_loop: one thread, cos, sin and exp per beam; the yardstick of the "
+          f"likelihood rows): {n} particles x {ranges.size} beams: {ms:.1f} ms/call (best {best:.1f})")
 
 
 def bench_uniform(quick: bool) -> None:
