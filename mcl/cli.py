@@ -106,6 +106,26 @@ def _add_run(sub) -> None:
 _START_KEYS = ("filter.initial_pose", "filter.global_localization")
 
 
+def _set_keys(items) -> list[str]:
+    """The dotted keys ``--set`` items give, a section given whole included (``filter={initial_pose: [...]}``
+    gives filter.initial_pose), in their order; a malformed item as it reads (its error comes from the config)."""
+    from mcl.config import parse_override
+    from mcl.errors import ConfigError
+
+    keys = []
+    for item in items:
+        try:
+            path, value = parse_override(item)
+        except ConfigError:
+            keys.append(item.split("=", 1)[0].strip())
+            continue
+        key = ".".join(path)
+        keys.append(key)
+        if isinstance(value, dict):
+            keys += [f"{key}.{k}" for k in value]
+    return keys
+
+
 def _data_replaced(config_path, set_items, *, log=None, map_=None, truth=None, start_given: bool = False) -> list[str]:
     """The overrides a new log or bag (an option, or ``--set log=`` / ``bag=``) makes: the config's reference
     trajectory belongs to the config's log, so it goes unless given too (scored against another log it is noise: a
@@ -113,7 +133,7 @@ def _data_replaced(config_path, set_items, *, log=None, map_=None, truth=None, s
     config's start pose goes too (unless given), as it lies in the config's map: intel_lab's start on the demo's map
     was an unknown cell (every weight zero, lost in 344 of 350 updates). A new log on the config's map keeps it (a
     shortened copy of the log, another recording from the same dock). ``mcl run``'s note says when it goes."""
-    set_keys = {item.split("=", 1)[0].strip() for item in set_items}
+    set_keys = set(_set_keys(set_items))
     if not (log or set_keys & {"log", "bag"}):
         return []
     out = [] if truth is not None or "truth" in set_keys else ["truth=null"]
@@ -204,9 +224,10 @@ def cmd_run(args) -> int:
     cfg = load_config(config_path, overrides + list(args.set))
     options = {o[1].split("=", 1)[0]: o[0] for o in overrides if isinstance(o, tuple)}
     for item in args.set:  # a --set is applied last: it wins over an option that sets the same key, and says so
-        key = item.split("=", 1)[0].strip()  # (once the config took it: a malformed --set is its error line alone)
-        if key in options:
-            print(f"mcl: warning: --set {item} overrides {options[key]}", file=sys.stderr)
+        # (once the config took it: a malformed --set is its error line alone; a section given whole, its keys)
+        for key in dict.fromkeys(_set_keys([item])):
+            if key in options:
+                print(f"mcl: warning: --set {item} overrides {options[key]}", file=sys.stderr)
     if args.threads is not None:
         set_threads(args.threads)
     out = Path(args.out) if args.out else default_out_dir()
@@ -215,7 +236,8 @@ def cmd_run(args) -> int:
                                "truth": cfg.truth, "landmark map": cfg.landmarks.map, "plane map": cfg.planes.map})
     if args.write_bag and cfg.bag is None:
         raise MclError("--write-bag needs a bag input (--bag)")
-    start_given = start_given or any(item.split("=", 1)[0].strip() in _START_KEYS for item in args.set)
+    start_set = any(k in _START_KEYS for k in _set_keys(args.set))
+    start_given = start_given or start_set
     if "filter.initial_pose=null" in replaced:
         print("mcl: note: the config's filter.initial_pose lies in its map, which this run replaces with its log: "
               "the run starts globally (--initial-pose X Y THETA tracks from a pose)", file=sys.stderr)
@@ -229,7 +251,7 @@ def cmd_run(args) -> int:
     summary = run(cfg, out, progress=False if args.no_progress else None, initial_pose_override=start_given,
                   write_bag=args.write_bag, compile_note=True, fresh=not args.out,
                   start_given_as=(f"--initial-pose {' '.join(f'{v:g}' for v in args.initial_pose)}"
-                                  if args.initial_pose is not None else None))
+                                  if args.initial_pose is not None and not start_set else None))
     if args.json:
         print(summary_json(summary))
     if cfg.rerun.mode == "serve" and not summary["interrupted"] and not summary.get("late_signal"):

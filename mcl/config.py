@@ -581,7 +581,7 @@ def _type_name(tp: Any) -> str:
 
 # An integer in exponent notation ("5e3", "1E4"): what a float key takes (mcl.yamlfile.finite_number), an integer
 # key too when it is whole
-_EXPONENT_INT = re.compile(r"[-+]?[0-9]+(?:\.[0-9]*)?[eE]\+?[0-9]+")
+_EXPONENT_INT = re.compile(r"[-+]?[0-9]+(?:\.[0-9]*)?[eE][-+]?[0-9]+")
 
 
 def _shown(value: Any) -> str:
@@ -670,8 +670,11 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
         if k not in fields:
             if cls is SensorConfig and k in MOVED_SENSOR_KEYS:
                 raise ConfigError(f"{key}: moved to {MOVED_SENSOR_KEYS[k]}")
-            hint = [] if "." in str(k) else difflib.get_close_matches(str(k), list(fields), n=1)
-            extra = f" (did you mean {hint[0]}?)" if hint else _elsewhere(str(k), prefix)
+            # a key's exact home elsewhere first (`filter.laser_pose` was "did you mean cluster_size?"), then a
+            # near miss here
+            extra = _elsewhere(str(k), prefix)
+            hint = [] if extra or "." in str(k) else difflib.get_close_matches(str(k), list(fields), n=1)
+            extra = extra or (f" (did you mean {hint[0]}?)" if hint else "")
             raise ConfigError(f"{key}: unknown key{extra}")
         tp = hints[k]
         if dataclasses.is_dataclass(tp):

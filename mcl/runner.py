@@ -98,7 +98,7 @@ def summary_json(summary: dict) -> str:
 
 def check_out_dir(out: Path, flag: str = "--out", inputs: dict | None = None) -> None:
     """Before any work: ``out`` must be a folder mcl can create and write in, empty or holding a run's outputs
-    alone (a run again into the same folder replaces them). ConfigError naming ``flag`` otherwise: a file there,
+    alone (and ``PREVIOUS``; a run again into the same folder replaces them, ``_set_aside``). ConfigError naming ``flag`` otherwise: a file there,
     a folder holding other files (a user's trajectory.tum is not overwritten), no permission, or an input of the
     run (``inputs``: what it is -> its path) where the run writes an output (a config edited in place, `--truth
     r0/trajectory.tum --out r0`: both were written over)."""
@@ -194,37 +194,48 @@ def _run_files(out_dir: Path) -> list[Path]:
 def _set_aside(out_dir: Path) -> Path | None:
     """A run into a folder that holds an earlier run: a finished one is moved into ``PREVIOUS`` (``_put_back``
     restores it if this run does not finish: an interrupted rerun had lost a complete run), anything else goes.
-    A ``PREVIOUS`` left by a run that was killed is put back first. Returns ``PREVIOUS`` when it holds a run."""
+    A ``PREVIOUS`` left by a run that was killed is put back first. Returns ``PREVIOUS`` when it holds a run.
+
+    Killed at any point, the folder stays one a run accepts and the earlier run is recovered: summary.json goes
+    aside first (the folder is then no finished run) and config.yaml last (it stays an mcl run's folder), and
+    ``_put_back`` brings summary.json back last."""
     import shutil
 
     stash = out_dir / PREVIOUS
     if stash.is_dir():  # a run killed mid-way (SIGKILL, a power cut) left the finished run aside
-        if not _finished(out_dir):
-            _put_back(out_dir, stash)
-        else:
+        if _finished(out_dir):  # killed as it deleted the stash of a run that finished
             shutil.rmtree(stash)
+        else:
+            _put_back(out_dir, stash)
     if not _finished(out_dir):
         _clear_run_outputs(out_dir)
         return None
     stash.mkdir()
-    for p in _run_files(out_dir):
+    for p in sorted(_run_files(out_dir), key=lambda p: (p.name != "summary.json", p.name == "config.yaml")):
         os.replace(p, stash / p.name)
     return stash
 
 
 def _put_back(out_dir: Path, stash: Path) -> None:
-    """The earlier run in ``stash`` back in ``out_dir``, in place of whatever this run wrote."""
-    import shutil
-
-    _clear_run_outputs(out_dir)
-    for p in stash.iterdir():
-        os.replace(p, out_dir / p.name)
-    shutil.rmtree(stash)
+    """The earlier run in ``stash`` back in ``out_dir``, in place of whatever this run wrote: this run's files the
+    earlier run had not go first, then the earlier run's files over this run's, summary.json last (killed part-way,
+    the folder is still no finished run, and the next run puts back the rest). A stash without config.yaml (the
+    last file set aside, the first put back) is a set-aside or put-back cut short: the folder's files are then the
+    earlier run's own, and stay."""
+    back = {p.name for p in stash.iterdir()}
+    if "config.yaml" in back:
+        for p in _run_files(out_dir):
+            if p.name not in back:
+                p.unlink()
+    for name in sorted(back, key=lambda n: (n != "config.yaml", n == "summary.json")):
+        os.replace(stash / name, out_dir / name)
+    stash.rmdir()
 
 
 def _clear_run_outputs(out_dir: Path) -> None:
-    """A run into a folder that holds an earlier run's outputs: those go first (a recording left from a run with
-    rerun.mode save beside the new run's trajectory would belong to another run)."""
+    """A run into a folder that holds an earlier unfinished run's outputs: those go first (a recording left from a
+    run with rerun.mode save beside the new run's trajectory would belong to another run; a finished run is set
+    aside instead, ``_set_aside``)."""
     for name in RUN_OUTPUTS:
         for p in (out_dir / name, out_dir / f"{name}.partial"):
             if p.is_file():
@@ -891,6 +902,16 @@ def run(cfg: Config, out_dir: Path, **kwargs) -> dict:
     with _Interrupts() as signals, small_pages():
         try:
             summary = _run(cfg, out_dir, signals, **kwargs)
+        except BaseException:
+            # an error _run does not catch (an output that cannot be opened, the recording's server): an earlier
+            # finished run set aside comes back (it stayed hidden in .mcl-previous)
+            stash = Path(out_dir) / PREVIOUS
+            if not kwargs.get("fresh") and stash.is_dir():
+                try:
+                    _put_back(Path(out_dir), stash)
+                except OSError:
+                    pass
+            raise
         finally:
             if getattr(signals, "lock_fd", None) is not None:
                 os.close(signals.lock_fd)

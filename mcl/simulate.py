@@ -1761,6 +1761,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     import shutil
     import tempfile
 
+    from mcl.runner import folder_lock
     from mcl.trajectory import check_writable_folder
 
     out = Path(args.outdir)
@@ -1770,9 +1771,34 @@ def run_from_args(args: argparse.Namespace) -> int:
     # and a read-only parent refused a writable OUTDIR); folders made here go again if the world is not made
     made = [p for p in (out.resolve(), *out.resolve().parents) if not p.exists()]
     out.mkdir(parents=True, exist_ok=True)
-    for stale in out.glob(f"{_MAKING}*"):  # of a run that was killed
-        shutil.rmtree(stale, ignore_errors=True)
-    tmp = Path(tempfile.mkdtemp(dir=out, prefix=_MAKING))
+    with contextlib.ExitStack() as held:
+        try:
+            # one simulate at a time in a folder: a second removed the first's working folder as stale
+            held.enter_context(folder_lock(out, f"OUTDIR {out}: another mcl simulate is writing a world there"))
+        except ConfigError:
+            for p in made:
+                with contextlib.suppress(OSError):
+                    p.rmdir()
+            raise
+        for stale in out.glob(f"{_MAKING}*"):  # of a run that was killed
+            shutil.rmtree(stale, ignore_errors=True)
+        tmp = Path(tempfile.mkdtemp(dir=out, prefix=_MAKING))
+        s = _make_in(args, tmp, out, made)
+    s["outdir"] = str(out)
+    x, y, th = s["start_pose"]
+    msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
+           f"start pose {x:.3f} {y:.3f} {th:.3f}")
+    if s["kidnap"]:
+        msg += f", kidnapped at {s['kidnap']['t']:.1f} s"
+    print(msg)
+    return 0
+
+
+def _make_in(args: argparse.Namespace, tmp: Path, out: Path, made: list) -> dict:
+    """The world of ``args`` made in ``tmp`` and swapped into ``out``; on any failure ``tmp`` goes, and the folders
+    ``made`` for OUTDIR too (deepest first: `mcl simulate new/a/w --duration -5` left new/a behind)."""
+    import shutil
+
     done = False
     try:
         try:
@@ -1795,14 +1821,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         if not done:
-            for p in made:  # deepest first: `mcl simulate new/a/w --duration -5` left new/a behind
+            for p in made:
                 with contextlib.suppress(OSError):
                     p.rmdir()
-    s["outdir"] = str(out)
-    x, y, th = s["start_pose"]
-    msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
-           f"start pose {x:.3f} {y:.3f} {th:.3f}")
-    if s["kidnap"]:
-        msg += f", kidnapped at {s['kidnap']['t']:.1f} s"
-    print(msg)
-    return 0
+    return s

@@ -58,11 +58,15 @@ def _construct_int(loader, node):
         return text
     try:
         if _LEADING_ZEROS.match(text):
-            return int(text.replace("_", ""), 10)
-        return yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
-    except ValueError:  # beyond Python's 4,300 digits: a traceback before
+            value = int(text.replace("_", ""), 10)
+        else:
+            value = yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
+    except ValueError:  # beyond Python's 4,300 decimal digits: a traceback before
+        value = None
+    if value is None or value.bit_length() > 14_000:  # (0x, 0b: read, but a traceback when printed in decimal)
         raise yaml.constructor.ConstructorError(None, None, f"an integer of {len(text)} digits",
                                                 node.start_mark) from None
+    return value
 
 
 def _construct_float(loader, node):

@@ -549,8 +549,10 @@ def test_eval_refuses_an_infinite_convergence_bound(tmp_path, capsys):
     assert _one_error(capsys) == "mcl: error: --converged-within: must be a positive number of metres, got inf"
 
 
-def test_every_commands_help_fits_in_100_columns(capsys):
+def test_every_commands_help_fits_in_100_columns(capsys, monkeypatch):
     from mcl.cli import _leaf_parsers, build_parser
+
+    monkeypatch.setenv("COLUMNS", "80")  # argparse fills the options to the terminal's width
 
     widest = {}
     for leaf in _leaf_parsers(build_parser()):
@@ -579,3 +581,29 @@ def test_the_parser_imports_no_numba(tmp_path):
     code = "import sys; from mcl.cli import build_parser; build_parser(); print('numba' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_start_pose_off_the_map_is_credited_to_the_set_that_gave_it(world, tmp_path, capsys):
+    # --initial-pose 1 2 0 with a --set of the pose: the error named the option, whose pose was fine
+    for item in ("filter.initial_pose=[1000, 12, 0]", "filter={initial_pose: [1000, 12, 0]}"):
+        assert main(["run", "--map", str(world / "map.yaml"), "--log", str(world / "log.clf"), "--initial-pose", "1",
+                     "2", "0", "--set", item, "--rerun", "off", "--no-progress", "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"mcl: warning: --set {item} overrides --initial-pose 1.0 2.0 0.0" in err  # a whole section too
+        assert "mcl: error: filter.initial_pose: (1000.000, 12.000) lies outside the map" in err
+
+
+def test_a_second_simulate_into_a_folder_one_is_writing_in_is_refused(tmp_path, capsys):
+    from mcl.runner import lock_folder
+
+    w = tmp_path / "w"
+    w.mkdir()
+    fd = lock_folder(w, "held")  # another mcl simulate at work there (it removed the first's working folder)
+    try:
+        assert main(["simulate", str(w), "--duration", "3"]) == 2
+        assert _one_error(capsys) == f"mcl: error: OUTDIR {w}: another mcl simulate is writing a world there"
+    finally:
+        import os
+
+        os.close(fd)
+    assert main(["simulate", str(w), "--duration", "3"]) == 0

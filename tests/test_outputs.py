@@ -240,6 +240,53 @@ def test_a_finished_run_set_aside_by_a_killed_rerun_comes_back(world, tmp_path, 
     assert _files(out) == before and not (out / ".mcl-previous").exists()
 
 
+def test_a_rerun_that_fails_before_its_loop_puts_the_earlier_run_back(world, tmp_path, capsys, monkeypatch):
+    # quality.csv that cannot be opened: the error left the loop's handling out, and the finished run stayed hidden
+    # in .mcl-previous
+    import mcl.trajectory
+
+    out = tmp_path / "again"
+    assert _run(world, out) == 0
+    before = _files(out)
+
+    def full(*_a, **_k):
+        raise OSError(28, "No space left on device", str(out / "quality.csv"))
+
+    monkeypatch.setattr(mcl.trajectory, "LineWriter", full)
+    assert _run(world, out, "--seed", "2") == 2
+    assert _files(out) == before and not (out / ".mcl-previous").exists()
+
+
+@pytest.mark.parametrize("moved", [["summary.json"], ["summary.json", "quality.csv", "trajectory.tum"]])
+def test_a_run_killed_while_it_set_the_earlier_run_aside_gets_it_back(world, tmp_path, monkeypatch, moved):
+    # killed part-way through the set-aside (summary.json goes first, config.yaml last): the folder is still one a
+    # run accepts (it held quality.csv and summary.json without config.yaml, refused), and the next run puts the
+    # earlier run back whole before it sets it aside again
+    out = tmp_path / "again"
+    assert _run(world, out) == 0
+    before = _files(out)
+    (out / ".mcl-previous").mkdir()
+    for name in moved:
+        os.replace(out / name, out / ".mcl-previous" / name)
+    _stop_at(monkeypatch, 3, KeyboardInterrupt())
+    assert _run(world, out, "--seed", "3") == 130
+    assert _files(out) == before and not (out / ".mcl-previous").exists()
+
+
+def test_a_run_killed_while_it_put_the_earlier_run_back_gets_the_rest(world, tmp_path, monkeypatch):
+    # killed part-way through the put-back (summary.json comes back last): the stash was deleted with the files
+    # still in it once summary.json was back; now summary.json is the last file moved, and the next run merges
+    out = tmp_path / "again"
+    assert _run(world, out) == 0
+    before = _files(out)
+    (out / ".mcl-previous").mkdir()
+    for name in ("summary.json", "trajectory.tum"):  # config.yaml and quality.csv already back
+        os.replace(out / name, out / ".mcl-previous" / name)
+    _stop_at(monkeypatch, 3, KeyboardInterrupt())
+    assert _run(world, out, "--seed", "3") == 130
+    assert _files(out) == before and not (out / ".mcl-previous").exists()
+
+
 def test_an_input_where_the_run_writes_an_output_is_refused(world, tmp_path, capsys):
     # `mcl run proj/config.yaml --out proj` wrote the resolved config over the user's commented one; a --truth
     # inside the folder was replaced by the new estimate
