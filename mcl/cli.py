@@ -811,14 +811,16 @@ def _finish(parser: argparse.ArgumentParser) -> None:
         leaf.set_defaults(_parser=leaf)
 
 
-def _unknown(args, extra: list[str]) -> None:
+def _unknown(args, extra: list[str], argv: list[str] | None) -> None:
     """An option no command knows: the command's own usage, and the option it was probably meant to be (argparse
     3.11 printed `mcl`'s top-level usage, with no suggestion)."""
     import difflib
 
     leaf = getattr(args, "_parser", None)
-    if leaf is None:
-        return
+    words = sys.argv[1:] if argv is None else list(argv)
+    command = getattr(args, "command", None)
+    if leaf is None or command not in words or words.index(extra[0]) < words.index(command):
+        return  # before the command (`mcl --bogus run`): mcl's own usage says it
     options = [o for a in leaf._actions for o in a.option_strings]
     hints = [h for x in extra if x.startswith("--")
              for h in difflib.get_close_matches(x.split("=", 1)[0], options, n=1)]
@@ -879,7 +881,7 @@ def main(argv: list[str] | None = None) -> int:
                 argcomplete.autocomplete(parser, exit_method=sys.exit)
         args, extra = parser.parse_known_args(argv)
         if extra:
-            _unknown(args, extra)
+            _unknown(args, extra, argv)
             parser.error(f"unrecognized arguments: {' '.join(extra)}")
     except KeyboardInterrupt:
         print("mcl: interrupted", file=sys.stderr)

@@ -518,6 +518,9 @@ def test_an_unknown_option_is_named_in_its_commands_usage_with_a_suggestion(caps
         err = capsys.readouterr().err
         assert e.value.code == 2 and err.splitlines()[-1] == said, err
         assert err.startswith(f"usage: mcl {argv[0]}")  # the command's usage, not mcl's
+    with pytest.raises(SystemExit):  # an unknown option before the command is mcl's own
+        main(["--bogus", "run"])
+    assert capsys.readouterr().err.splitlines()[-1] == "mcl: error: unrecognized arguments: --bogus"
 
 
 @pytest.mark.parametrize("argv", [["run", "--log", ""], ["run", "--out", " "], ["eval", "", "x.tum"],

@@ -998,7 +998,7 @@ def test_a_sim_yaml_of_another_tool_is_not_taken_for_an_earlier_world(tmp_path, 
     assert (mine / "map.yaml").read_text() == "image: lab.pgm\n"
 
 
-def test_a_world_too_large_for_memory_is_one_line_before_any_work(tmp_path, capsys, monkeypatch):
+def test_a_world_too_large_for_memory_is_one_line_before_its_ranges_are_cast(tmp_path, capsys, monkeypatch):
     import mcl.maps
     from mcl.cli import main
 
