@@ -821,7 +821,9 @@ def _printable(k: Any) -> str:
     return s if s.isprintable() else repr(s)[1:-1]
 
 
-def _cut(text: str, limit: int = 80) -> str:
+def _cut(text: str, limit: int = 240) -> str:
+    """A --set as an error line quotes it: whole up to ``limit`` characters (a path in it is the user's to see),
+    cut beyond (a 5,000-digit seed was a 5 kB line)."""
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
