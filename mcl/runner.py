@@ -236,15 +236,8 @@ def _clear_run_outputs(out_dir: Path) -> None:
     """A run into a folder that holds an earlier unfinished run's outputs: those go first (a recording left from a
     run with rerun.mode save beside the new run's trajectory would belong to another run; a finished run is set
     aside instead, ``_set_aside``)."""
-    for name in RUN_OUTPUTS:
-        for p in (out_dir / name, out_dir / f"{name}.partial"):
-            if p.is_file():
-                p.unlink()
-    for p in out_dir.iterdir():
-        if _atomic_leftover(p.name) and p.is_file():
-            p.unlink()
-    if (out_dir / PARTIAL_RECORDING).is_file():
-        (out_dir / PARTIAL_RECORDING).unlink()
+    for p in _run_files(out_dir):
+        p.unlink()
 
 
 # frames of mcl's own code have a file name starting with one of these

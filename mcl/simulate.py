@@ -1771,19 +1771,24 @@ def run_from_args(args: argparse.Namespace) -> int:
     # and a read-only parent refused a writable OUTDIR); folders made here go again if the world is not made
     made = [p for p in (out.resolve(), *out.resolve().parents) if not p.exists()]
     out.mkdir(parents=True, exist_ok=True)
-    with contextlib.ExitStack() as held:
-        try:
-            # one simulate at a time in a folder: a second removed the first's working folder as stale
-            held.enter_context(folder_lock(out, f"OUTDIR {out}: another mcl simulate is writing a world there"))
-        except ConfigError:
+    done = False
+    try:
+        # one simulate at a time in a folder: a second removed the first's working folder as stale
+        with folder_lock(out, f"OUTDIR {out}: another mcl simulate is writing a world there"):
+            for stale in out.glob(f"{_MAKING}*"):  # of a run that was killed
+                shutil.rmtree(stale, ignore_errors=True)
+            tmp = Path(tempfile.mkdtemp(dir=out, prefix=_MAKING))
+            try:
+                s = _make_in(args, tmp)
+                _swap_world(tmp, out)
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+        done = True
+    finally:
+        if not done:  # deepest first: `mcl simulate new/a/w --duration -5` left new/a behind
             for p in made:
                 with contextlib.suppress(OSError):
                     p.rmdir()
-            raise
-        for stale in out.glob(f"{_MAKING}*"):  # of a run that was killed
-            shutil.rmtree(stale, ignore_errors=True)
-        tmp = Path(tempfile.mkdtemp(dir=out, prefix=_MAKING))
-        s = _make_in(args, tmp, out, made)
     s["outdir"] = str(out)
     x, y, th = s["start_pose"]
     msg = (f"{s['outdir']}: {s['scans']} scans, {s['duration']:.1f} s, path {s['path_length']:.1f} m, "
@@ -1794,34 +1799,22 @@ def run_from_args(args: argparse.Namespace) -> int:
     return 0
 
 
-def _make_in(args: argparse.Namespace, tmp: Path, out: Path, made: list) -> dict:
-    """The world of ``args`` made in ``tmp`` and swapped into ``out``; on any failure ``tmp`` goes, and the folders
-    ``made`` for OUTDIR too (deepest first: `mcl simulate new/a/w --duration -5` left new/a behind)."""
-    import shutil
-
-    done = False
+def _make_in(args: argparse.Namespace, tmp: Path) -> dict:
+    """The world of ``args`` made in ``tmp`` (a bag too, with ``--format``); its summary. An error in a parameter
+    names the option as the command line spells it ("simulate: n_beams" -> "--beams")."""
     try:
-        try:
-            s = _simulate_from_args(argparse.Namespace(**{**vars(args), "outdir": str(tmp)}))
-        except ConfigError as e:  # a parameter named as the command line spells it: "simulate: n_beams" -> "--beams"
-            key, _, msg = str(e).removeprefix("simulate: ").partition(": ")
-            option = {"n_beams": "beams"}.get(key, key)
-            if not hasattr(args, option):
-                raise
-            raise ConfigError(f"--{option.replace('_', '-')}: {msg}") from None
-        fmt = getattr(args, "format", "clf")
-        if fmt != "clf":
-            write_log_as_bag(tmp, fmt, sweep=args.scan_sweep)
-            if getattr(args, "landmarks", 0):  # the bag holds no LANDMARK lines: said, not dropped in silence
-                print(f"mcl: note: --landmarks with --format {fmt}: the detections are not in the bag (no bag message "
-                      "carries them); landmarks.yaml is written, and --format clf keeps them in the log",
-                      file=sys.stderr)
-        _swap_world(tmp, out)
-        done = True
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if not done:
-            for p in made:
-                with contextlib.suppress(OSError):
-                    p.rmdir()
+        s = _simulate_from_args(argparse.Namespace(**{**vars(args), "outdir": str(tmp)}))
+    except ConfigError as e:
+        key, _, msg = str(e).removeprefix("simulate: ").partition(": ")
+        option = {"n_beams": "beams"}.get(key, key)
+        if not hasattr(args, option):
+            raise
+        raise ConfigError(f"--{option.replace('_', '-')}: {msg}") from None
+    fmt = getattr(args, "format", "clf")
+    if fmt != "clf":
+        write_log_as_bag(tmp, fmt, sweep=args.scan_sweep)
+        if getattr(args, "landmarks", 0):  # the bag holds no LANDMARK lines: said, not dropped in silence
+            print(f"mcl: note: --landmarks with --format {fmt}: the detections are not in the bag (no bag message "
+                  "carries them); landmarks.yaml is written, and --format clf keeps them in the log",
+                  file=sys.stderr)
     return s

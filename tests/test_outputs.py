@@ -257,30 +257,21 @@ def test_a_rerun_that_fails_before_its_loop_puts_the_earlier_run_back(world, tmp
     assert _files(out) == before and not (out / ".mcl-previous").exists()
 
 
-@pytest.mark.parametrize("moved", [["summary.json"], ["summary.json", "quality.csv", "trajectory.tum"]])
-def test_a_run_killed_while_it_set_the_earlier_run_aside_gets_it_back(world, tmp_path, monkeypatch, moved):
-    # killed part-way through the set-aside (summary.json goes first, config.yaml last): the folder is still one a
-    # run accepts (it held quality.csv and summary.json without config.yaml, refused), and the next run puts the
-    # earlier run back whole before it sets it aside again
+@pytest.mark.parametrize("moved", [
+    ["summary.json"],  # killed part-way through the set-aside (summary.json goes first, config.yaml last) ...
+    ["summary.json", "quality.csv", "trajectory.tum"],
+    ["summary.json", "trajectory.tum"],  # ... or through the put-back (config.yaml first, summary.json last)
+])
+def test_a_run_killed_while_it_set_the_earlier_run_aside_or_put_it_back_gets_it_back(world, tmp_path, monkeypatch,
+                                                                                    moved):
+    # the folder is still one a run accepts (it held quality.csv and summary.json without config.yaml, refused),
+    # and the next run puts the earlier run back whole before it sets it aside again (once summary.json was back,
+    # the stash was deleted with the files still in it)
     out = tmp_path / "again"
     assert _run(world, out) == 0
     before = _files(out)
     (out / ".mcl-previous").mkdir()
     for name in moved:
-        os.replace(out / name, out / ".mcl-previous" / name)
-    _stop_at(monkeypatch, 3, KeyboardInterrupt())
-    assert _run(world, out, "--seed", "3") == 130
-    assert _files(out) == before and not (out / ".mcl-previous").exists()
-
-
-def test_a_run_killed_while_it_put_the_earlier_run_back_gets_the_rest(world, tmp_path, monkeypatch):
-    # killed part-way through the put-back (summary.json comes back last): the stash was deleted with the files
-    # still in it once summary.json was back; now summary.json is the last file moved, and the next run merges
-    out = tmp_path / "again"
-    assert _run(world, out) == 0
-    before = _files(out)
-    (out / ".mcl-previous").mkdir()
-    for name in ("summary.json", "trajectory.tum"):  # config.yaml and quality.csv already back
         os.replace(out / name, out / ".mcl-previous" / name)
     _stop_at(monkeypatch, 3, KeyboardInterrupt())
     assert _run(world, out, "--seed", "3") == 130
