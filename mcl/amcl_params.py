@@ -33,8 +33,10 @@ first, so a value mcl refuses is an error naming the AMCL parameter it came from
 
 from __future__ import annotations
 
+import ast
 import difflib
 import math
+import operator
 import re
 import tempfile
 import textwrap
@@ -46,7 +48,7 @@ from typing import Any
 import yaml
 
 from mcl.errors import ConfigError, MclError
-from mcl.yamlfile import SAFE_LOADER, finite_number, read_yaml, short_repr
+from mcl.yamlfile import SAFE_LOADER, finite_number, short_repr
 
 WIDTH = 118  # the output's lines, comments wrapped
 ROS1 = "ROS 1 amcl"
@@ -121,17 +123,27 @@ PARAMS = (
     _Param("restore_defaults", "restore_defaults", None, bool),
     _Param("force_update_after_initialpose", "force_update_after_initialpose", None, bool),
     _Param("force_update_after_set_map", "force_update_after_set_map", None, bool),
+    _Param("std_warn_level_x", "std_warn_level_x", None, float),
+    _Param("std_warn_level_y", "std_warn_level_y", None, float),
+    _Param("std_warn_level_yaw", "std_warn_level_yaw", None, float),
+    _Param("initialize_at_saved_pose", None, "initialize_at_saved_pose", bool),
+    _Param("saved_pose_filepath", None, "saved_pose_filepath", str),
+    _Param("freespace_downsampling", None, "freespace_downsampling", int),
+    _Param("random_seed", None, "random_seed", int, None, -1),
 )
 UNUSED = {"transform_tolerance": "the map -> odom transform's post-dating", "save_pose_rate": "",
           "tf_broadcast": "", "first_map_only": "", "always_reset_initial_pose": "", "gui_publish_rate": "",
           "use_map_topic": "mcl reads a map file, else the bag's topics.map", "bag_scan_period": "",
           "restore_defaults": "", "force_update_after_initialpose": "", "force_update_after_set_map": "",
           "global_frame_id": "mcl's estimate is in the map's frame",
-          "initial_pose.z": ""}
+          "initial_pose.z": "", "std_warn_level_x": "mcl's quality signal says when the track is in doubt",
+          "std_warn_level_y": "", "std_warn_level_yaw": "", "initialize_at_saved_pose": "", "saved_pose_filepath": "",
+          "freespace_downsampling": "mcl draws global poses from every free cell"}
 # ROS 1 reads this misspelling too (amcl_node.cpp; navigation#790)
 ALIASES = {"beam_skip_error_threshold_": "beam_skip_error_threshold"}
 # parameters every ROS 2 node has, and rosparam's own
-GENERIC = ("use_sim_time", "qos_overrides", "introspection_mode", "bond_heartbeat_period", "start_type_description_service")
+GENERIC = ("use_sim_time", "qos_overrides", "introspection_mode", "bond_heartbeat_period", "start_type_description_service",
+           "allow_parameter_qos_overrides")
 
 _BY_NAME = {flavour: {getattr(p, attr): p for p in PARAMS if getattr(p, attr)} for flavour, attr in
             ((ROS1, "ros1"), (NAV2, "nav2"))}
@@ -330,6 +342,7 @@ def _from_launch(path: Path, text: str) -> Source:
     # groups too): an amcl node in a group whose condition is false is not launched. Only the conditions that can
     # matter are evaluated (another node's, or a group's without an amcl node, would only add warnings).
     nodes: list[tuple] = []  # (amcl node launched, the args, the remaps and the namespace in scope there)
+    scoped: list[tuple] = []  # (<param> or <rosparam> outside a node, the args and the namespace there)
     not_launched = 0
 
     def remap_of(el, args: dict, ns: str) -> tuple[str, str] | None:
@@ -353,6 +366,10 @@ def _from_launch(path: Path, text: str) -> Source:
                 r = None if skipped(el, args) else remap_of(el, args, ns)
                 if r is not None:
                     remaps[r[0]] = r[1]
+                continue
+            if el.tag in ("param", "rosparam"):  # the scope's own: read when they name the amcl node's parameters
+                if not skipped(el, args):
+                    scoped.append((el, dict(args), ns))
                 continue
             if el.tag not in ("arg", "group", "node"):
                 continue
@@ -385,42 +402,67 @@ def _from_launch(path: Path, text: str) -> Source:
     params: dict = {}
     unresolved: set = set()
 
+    def absolute(name: str, ns: str) -> str:
+        return "/" + "/".join(q for q in (*([] if name.startswith("/") else ns.split("/")), *name.split("/")) if q)
+
+    def rosparam(el, args: dict) -> dict | None:
+        """A <rosparam command="load"> (file= or its text; param= puts it under a name) as flat names."""
+        loaded = None
+        if el.get("file"):
+            file = subst(el.get("file"), "<rosparam file>", args)
+            if file is not None:
+                f = Path(file)
+                f = f if f.is_absolute() else path.parent / f
+                loaded = _load_rosparam(_read_text(f), str(f), warnings)
+        elif (el.text or "").strip():
+            body = el.text if el.get("subst_value") not in ("true", "True") else subst(el.text, "<rosparam>", args)
+            try:
+                loaded = _load_rosparam(body, "a <rosparam> block", warnings) if body is not None else None
+            except MclError as e:
+                warnings.append(f"{e}: not read")
+        if el.get("param") and loaded is not None:
+            loaded = {el.get("param"): loaded}
+        return _flatten(loaded) if isinstance(loaded, dict) else None
+
+    def param(el, args: dict, name: str) -> None:
+        if el.get("value") is None:
+            warnings.append(f"{name}: a <param> without value= (command=, textfile=) is not read")
+            return
+        value = subst(el.get("value"), name, args)
+        if value is not None:
+            params[name] = _roslaunch_value(value, el.get("type"))
+        else:
+            unresolved.add(name)
+
+    # roslaunch sets the parameters of the whole file before it starts a node: those outside the node that name its
+    # own (<param name="amcl/x">, <rosparam ns="amcl">) count as its own; those in the node come after them
+    private = absolute(node.get("name", "amcl"), ns)
+    for el, el_args, el_ns in scoped:
+        if el.tag == "param" and el.get("name"):
+            full = absolute(el.get("name"), el_ns)
+            if full.startswith(private + "/"):
+                param(el, el_args, full[len(private) + 1:])
+        elif el.tag == "rosparam" and el.get("command", "load") == "load":
+            where = absolute(el.get("ns") or "", el_ns)
+            if private == where or private.startswith(where + "/"):
+                inside = private[len(where):].strip("/")  # the node's path below the rosparam's namespace
+                flat = rosparam(el, el_args) or {}
+                prefix = inside.replace("/", ".") + "." if inside else ""
+                params.update({k[len(prefix):]: v for k, v in flat.items() if k.startswith(prefix)})
     for el in node:
         if skipped(el, args):
             continue
-        if el.tag == "param" and el.get("name"):
-            name = el.get("name").lstrip("~")
-            if el.get("value") is None:
-                warnings.append(f"{name}: a <param> without value= (command=, textfile=) is not read")
-                continue
-            value = subst(el.get("value"), name, args)
-            if value is not None:
-                params[name] = _roslaunch_value(value, el.get("type"))
-            else:
-                unresolved.add(name)
+        if el.tag == "param" and el.get("from") is not None and not el.get("name"):
+            warnings.append(f"<param from=\"{el.get('from')}\"> (a ROS 2 parameter file) is not read: give that "
+                            "file to mcl config from-amcl")
+        elif el.tag == "param" and el.get("name"):
+            param(el, args, el.get("name").lstrip("~"))
         elif el.tag == "rosparam" and el.get("command", "load") == "load":
-            loaded = None
-            if el.get("file"):
-                file = subst(el.get("file"), "<rosparam file>", args)
-                if file is not None:
-                    f = Path(file)
-                    f = f if f.is_absolute() else path.parent / f
-                    try:
-                        loaded = read_yaml(f, MclError)
-                    except MclError as e:
-                        if ": duplicate key " not in str(e):
-                            raise
-                        loaded = _read_last_wins(f, warnings, f"{f}:")
-            elif (el.text or "").strip():
-                body = el.text if el.get("subst_value") not in ("true", "True") else subst(el.text, "<rosparam>", args)
-                try:
-                    loaded = yaml.safe_load(body) if body is not None else None
-                except yaml.YAMLError:
-                    warnings.append("a <rosparam> block is not valid YAML: not read")
-            if el.get("param") and loaded is not None:
-                loaded = {el.get("param"): loaded}
-            if isinstance(loaded, dict):
-                params.update(_flatten(loaded))
+            if (el.get("ns") or "").strip("/~"):  # under the node's own namespace: ~ns/..., names AMCL never reads
+                warnings.append(f"<rosparam ns=\"{el.get('ns')}\"> in the node: its parameters are under "
+                                f"~{el.get('ns').strip('/~')}/, where AMCL does not read them: not read")
+                continue
+            params.update(rosparam(el, args) or {})
         elif el.tag == "remap":  # the node's own: over its scope's
             r = remap_of(el, args, ns)
             if r is not None:
@@ -438,10 +480,11 @@ def _resolve(name: str, ns: str) -> str:
     return "/" + "/".join(p for p in (*ns.strip("/").split("/"), name) if p)
 
 
-class _LastWins(SAFE_LOADER):
-    """SAFE_LOADER that keeps the last of a key given twice in one mapping, as rosparam (PyYAML) does, and records
-    it (line, key) in ``duplicates``: a shipped AMCL file may repeat a parameter (PAL's amcl.yaml repeats
-    laser_lambda_short), which mcl's own files refuse."""
+class _Rosparam(SAFE_LOADER):
+    """SAFE_LOADER as rosparam (PyYAML) reads a parameter file: the last of a key given twice in one mapping is
+    kept, and recorded (line, key) in ``duplicates`` (PAL's amcl.yaml repeats laser_lambda_short, which mcl's own
+    files refuse); rosparam's angle tags are read (ros_comm ``rosparam/__init__.py``): ``!degrees 30`` and
+    ``deg(30)`` are 30 degrees in radians, ``!radians pi/6`` and ``rad(pi/6)`` an expression of numbers and pi."""
 
     def __init__(self, stream):
         super().__init__(stream)
@@ -463,36 +506,89 @@ class _LastWins(SAFE_LOADER):
                     seen.add(key)
 
 
-def _read_last_wins(path: Path, warnings: list, where: str = "line ") -> Any:
-    loader = _LastWins(path.read_text(encoding="utf-8"))
+_ARITH = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv}
+
+
+def _radian_expression(text: str) -> float:
+    """rosparam's ``!radians`` value: numbers and ``pi`` under + - * / and brackets (rosparam evaluates it as
+    Python; nothing else is read here)."""
+
+    def value(n):
+        if isinstance(n, ast.Constant) and type(n.value) in (int, float):
+            return float(n.value)
+        if isinstance(n, ast.Name) and n.id == "pi" or (isinstance(n, ast.Attribute) and n.attr == "pi"
+                                                       and isinstance(n.value, ast.Name) and n.value.id == "math"):
+            return math.pi
+        if isinstance(n, ast.UnaryOp) and isinstance(n.op, (ast.UAdd, ast.USub)):
+            return value(n.operand) * (-1.0 if isinstance(n.op, ast.USub) else 1.0)
+        if isinstance(n, ast.BinOp) and type(n.op) in _ARITH:
+            return _ARITH[type(n.op)](value(n.left), value(n.right))
+        raise ValueError(text)
+
+    return value(ast.parse(text.strip(), mode="eval").body)
+
+
+def _angle(loader, node, degrees: bool) -> float:
+    text = str(loader.construct_scalar(node)).strip()
+    prefix = "deg(" if degrees else "rad("
+    expr = text[4:-1] if text.startswith(prefix) and text.endswith(")") else text
+    try:
+        v = math.radians(float(expr)) if degrees else _radian_expression(expr)
+    except (ValueError, SyntaxError, TypeError, ZeroDivisionError, OverflowError, RecursionError, MemoryError):
+        what = "a number of degrees" if degrees else "a radian expression (numbers and pi)"
+        raise yaml.constructor.ConstructorError(None, None, f"{short_repr(text)} is not {what}",
+                                                node.start_mark) from None
+    if not math.isfinite(v):
+        raise yaml.constructor.ConstructorError(None, None, f"{short_repr(text)} is not finite", node.start_mark)
+    return v
+
+
+_Rosparam.add_constructor("!degrees", lambda loader, node: _angle(loader, node, True))
+_Rosparam.add_constructor("!radians", lambda loader, node: _angle(loader, node, False))
+_Rosparam.add_implicit_resolver("!degrees", re.compile(r"^deg\([^)]*\)$"), ["d"])
+_Rosparam.add_implicit_resolver("!radians", re.compile(r"^rad\([^)]*\)$"), ["r"])
+
+
+def _load_rosparam(text: str, name: str, warnings: list, where: str | None = None) -> Any:
+    """The YAML document ``text`` (of file ``name``) read as rosparam reads it (``_Rosparam``); a key given twice is
+    a warning in ``warnings`` (its line after ``where``, default ``name:``), invalid YAML an MclError of one line
+    naming ``name`` and the line."""
+    loader = _Rosparam(text)
     try:
         doc = loader.get_single_data()
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f":{mark.line + 1}" if mark is not None else ""
+        problem = (getattr(e, "problem", None) or "").replace("\n", " ")
+        raise MclError(f"{name}{where}: invalid YAML" + (f": {problem}" if problem else "")) from None
+    except (RecursionError, MemoryError) as e:
+        raise MclError(f"{name}: invalid YAML ({type(e).__name__})") from None
     finally:
         loader.dispose()
     for line, key in loader.duplicates:
-        warnings.append(f"{where}{line}: {key} given twice: the last is read, as rosparam does")
+        warnings.append(f"{f'{name}:' if where is None else where}{line}: {key} given twice: the last is read, as "
+                        "rosparam does")
     return doc
+
+
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise MclError(f"{path}: not a text file (expected AMCL parameters as YAML or a .launch file)") from None
+    except (OSError, ValueError) as e:
+        raise MclError(f"{path}: cannot read: {getattr(e, 'strerror', None) or type(e).__name__}") from None
 
 
 def read_source(path: str | Path) -> Source:
     """The AMCL parameters of ``path``: a .launch / .xml file (or any file starting with '<') read as roslaunch
     XML, anything else as YAML. MclError (one line naming the file) when it is neither or holds none."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise MclError(f"{path}: not a text file (expected AMCL parameters as YAML or a .launch file)") from None
-    except (OSError, ValueError) as e:
-        raise MclError(f"{path}: cannot read: {getattr(e, 'strerror', None) or type(e).__name__}") from None
+    text = _read_text(path)
     if path.suffix.lower() in (".launch", ".xml") or text.lstrip().startswith("<"):
         return _from_launch(path, text)
     dup: list = []
-    try:
-        doc = read_yaml(path, MclError)
-    except MclError as e:
-        if ": duplicate key " not in str(e):
-            raise
-        doc = _read_last_wins(path, dup)
+    doc = _load_rosparam(text, str(path), dup, "line ")  # the warning names the file
     src = _from_yaml(path, doc)
     src.warnings[:0] = dup
     return src
@@ -648,10 +744,22 @@ class _Converter:
         group = ("max_particles", "min_particles", "pf_err", "pf_z")
         if any(map(self.given, group)):
             hi, lo = self.get("max_particles"), self.get("min_particles")
+            if self.flavour == NAV2:  # amcl_node.cpp initParameters' semantic checks, in their order
+                for key, fallback in (("max_particles", 2000), ("min_particles", 500)):
+                    v = hi if key == "max_particles" else lo
+                    if isinstance(v, int) and v < 0:
+                        self.warn(f"{self.said(key)} is negative: nav2 sets it to {fallback}, and so does this config")
+                        hi, lo = (fallback, lo) if key == "max_particles" else (hi, fallback)
             if isinstance(hi, int) and isinstance(lo, int) and lo > hi:
-                self.warn(f"{self.name('min_particles')} {lo} is above {self.name('max_particles')} {hi}: AMCL "
-                          "raises max_particles to it, and so does this config")
-                hi = lo
+                if self.flavour == NAV2:
+                    self.warn(f"{self.name('min_particles')} {lo} is above {self.name('max_particles')} {hi}: nav2 "
+                              "raises max_particles to it, and so does this config")
+                    hi = lo
+                else:  # the check that raises it is in reconfigureCB, whose first call (at start) returns at once
+                    self.warn(f"{self.name('min_particles')} {lo} is above {self.name('max_particles')} {hi}: ROS 1 "
+                              "amcl's set never grows past max_particles (pf.c clamps the KLD count to it last), so "
+                              f"this config's min_particles is {hi}")
+                    lo = hi
             self.set("filter.particles", hi, f"{self.said('max_particles')}: with kld, the maximum and the count "
                      "drawn at start", "max_particles")
             self.set("filter.min_particles", lo, self.said("min_particles"), "min_particles")
@@ -661,11 +769,11 @@ class _Converter:
             delta = 0.5 * math.erfc(z / math.sqrt(2.0))
             self.set("filter.kld_delta", float(f"{delta:.4g}"),
                      f"{self.said('pf_z')} is the normal quantile z_(1-delta) itself: delta = 1 - Phi(z)", "pf_z")
-        for key in ("update_min_d", "update_min_a"):
-            if self.given(key):
-                extra = (" (AMCL updates when |dx| or |dy| exceeds it, mcl when the distance does)"
-                         if key == "update_min_d" else "")
-                self.set(f"filter.{key}", self.get(key), f"{self.said(key)}{extra}", key)
+        gating = ("update_min_d", "update_min_a")
+        for key in gating if any(map(self.given, gating)) else ():  # a group: AMCL's default fills the other
+            extra = (" (AMCL updates when |dx| or |dy| exceeds it, mcl when the distance does)"
+                     if key == "update_min_d" else "")
+            self.set(f"filter.{key}", self.get(key), f"{self.said(key)}{extra}", key)
         if self.given("selective_resampling") and self.get("selective_resampling"):
             self.set("filter.resample_threshold", 0.5, "selective_resampling true: resample when N_eff < N / 2",
                      "selective_resampling")
@@ -697,13 +805,16 @@ class _Converter:
             self.warn(f"{said}: ROS 1's uncorrected model takes alpha1 rot^2 + alpha2 trans^2 as the std "
                       f"(ros-planning/navigation#20), mcl as the variance (as diff-corrected and nav2 do); the alphas "
                       f"are kept{wider}: retune them (mcl calibrate motion)")
-        elif "omni" in kind:
-            how = ("ROS AMCL's omni model (mcl.motion.OmniMotionModel): its alpha1 (translation and strafe noise from "
-                   "rotation) and alpha4 (rotation noise from rotation) are mcl's motion.alpha4 and motion.alpha1")
-            if kind == "omni" and self.flavour == ROS1:
+        elif "omni" in kind and self.flavour == ROS1:
+            how = ("ROS 1 AMCL's omni model (mcl.motion.OmniMotionModel): its alpha1 (translation and strafe noise "
+                   "from rotation) and alpha4 (rotation noise from rotation) are mcl's motion.alpha4 and motion.alpha1")
+            if kind == "omni":
                 self.warn(f"{said}: ROS 1's uncorrected omni takes alpha3 trans^2 + alpha1 rot^2 itself as the std "
                           "(ros-planning/navigation#20), mcl as the variance (as omni-corrected and nav2 do): the "
                           "alphas are kept, retune them")
+        elif "omni" in kind:
+            how = ("nav2's OmniMotionModel (mcl.motion.OmniMotionModel): the book's roles, alpha for alpha (alpha4, "
+                   "translation noise from rotation, is the strafe's too)")
         else:
             how = "not an AMCL motion model: the alphas are kept for the differential one"
             self.warn(f"{said}: not an AMCL motion model (diff, diff-corrected, omni, omni-corrected; nav2: "
@@ -713,9 +824,10 @@ class _Converter:
         self.set("motion.noise_step", 0.0, "the book's trans^2 at every step length, as AMCL draws it once an update")
         what = {"alpha1": "rotation noise from rotation", "alpha2": "rotation noise from translation",
                 "alpha3": "translation noise from translation", "alpha4": "translation noise from rotation"}
-        # AMCL's omni models (amcl_odom.cpp, nav2 omni_motion_model.cpp): rot std from alpha4 rot^2 + alpha2 trans^2,
-        # trans std from alpha3 trans^2 + alpha1 rot^2: alpha1 and alpha4 swap roles against the differential model
-        source = {"alpha1": "alpha4", "alpha4": "alpha1"} if "omni" in kind else {}
+        # ROS 1 AMCL's omni models (amcl_odom.cpp): rot std from alpha4 rot^2 + alpha2 trans^2, trans and strafe std
+        # from alpha3 trans^2 (alpha5 trans^2) + alpha1 rot^2: alpha1 and alpha4 swap roles against the differential
+        # model. nav2's (omni_motion_model.cpp) keeps the book's: rot from alpha1 rot^2, trans and strafe from alpha4.
+        source = {"alpha1": "alpha4", "alpha4": "alpha1"} if "omni" in kind and self.flavour == ROS1 else {}
         for a in alphas:
             src = source.get(a, a)
             self.set(f"motion.{a}", self.get(src), f"{self.said(src)}: {what[a]}", src)
@@ -852,6 +964,13 @@ class _Converter:
             self.used.update(keys)
 
     def start(self) -> None:
+        if self.given("random_seed"):
+            seed = self.get("random_seed")
+            if isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0:
+                self.set("seed", seed, self.said("random_seed"), "random_seed")
+            else:
+                self.note(f"{self.said('random_seed')}: a new seed every run in nav2; mcl's runs repeat, its seed "
+                          "kept", "random_seed")
         if self.flavour == NAV2:
             pose = ("initial_pose.x", "initial_pose.y", "initial_pose.yaw")
             if self.given("set_initial_pose") and self.get("set_initial_pose"):
@@ -927,7 +1046,7 @@ class _Converter:
                     lines.append(f"{head:<{col}}# {parts[0]}")
                     lines.extend(f"{'':<{col}}# {part}" for part in parts[1:])
 
-        order = ("filter", "motion", "sensor", "topics", "frames")
+        order = ("seed", "filter", "motion", "sensor", "topics", "frames")
         emit({k: tree[k] for k in sorted(tree, key=order.index)}, 0)
         if self.notes:
             lines.append("# Notes:")

@@ -373,7 +373,8 @@ def omni_sigmas(trans, rot, cfg):
 
 class OmniMotionModel(OdometryMotionModel):
     """The odometry motion model of an omnidirectional base (mecanum wheels, a PR2, a Ridgeback): ROS AMCL's omni
-    model (``OmniMotionModel``, the corrected form of nav2), in the book's names.
+    model in the book's names, nav2's ``OmniMotionModel`` alpha for alpha (ROS 1's ``omni-corrected`` is the same
+    model with alpha1 and alpha4 swapped).
 
     Table 5.6 moves a particle along its own heading turned by rot1, and rot1's noise grows with rot1: right for a
     differential drive, whose steps go along its heading (rot1 near 0 or pi). A base that strafes makes steps at any

@@ -613,3 +613,101 @@ def test_the_random_floors_range_is_noted_with_its_factor(tmp_path):
                                            "    z_hit: 0.5\n    z_rand: 0.5\n    sigma_hit: 0.2\n"))
     assert "mcl by sensor.range_max (100 m, from laser_max_range): for a laser of R m mcl's floor is R/100" in \
         " ".join(c.text.replace("# ", "").split())
+
+
+def test_nav2_omni_model_keeps_the_books_roles(tmp_path):
+    # nav2 omni_motion_model.cpp: rot std sqrt(alpha1 rot^2 + alpha2 trans^2), trans sqrt(alpha3 trans^2 + alpha4
+    # rot^2), strafe sqrt(alpha4 rot^2 + alpha5 trans^2): mcl's omni model alpha for alpha (ROS 1's swaps 1 and 4)
+    text = (NAV2.replace("nav2_amcl::DifferentialMotionModel", "nav2_amcl::OmniMotionModel")
+            .replace("alpha1: 0.2", "alpha1: 0.5").replace("alpha4: 0.2", "alpha4: 0.01"))
+    r = convert(_write(tmp_path, "nav2_omni.yaml", text))
+    k = r.keys
+    assert k["motion.model"] == "omni" and k["motion.alpha1"] == 0.5 and k["motion.alpha4"] == 0.01
+    assert k["motion.alpha_strafe"] == 0.2 and not r.warnings
+
+
+@pytest.mark.parametrize("written, radians", [("!degrees 10", math.radians(10)), ("deg(10)", math.radians(10)),
+                                              ("!radians pi/6", math.pi / 6), ("rad(pi / 6)", math.pi / 6),
+                                              ("!radians 0.25", 0.25), ("rad(2*pi/3)", 2 * math.pi / 3)])
+def test_rosparam_angle_tags_are_radians(tmp_path, written, radians):
+    # ros_comm rosparam reads !degrees / !radians and deg(...) / rad(...) (PAL's TIAGo amcl.yaml: !degrees 10)
+    text = ROS1 + f"  update_min_a: {written}\n  laser_lambda_short: 0.1\n  laser_lambda_short: 0.1\n"
+    r = convert(_write(tmp_path, "amcl.yaml", text))  # with a key given twice: read by the last-wins loader too
+    assert r.keys["filter.update_min_a"] == pytest.approx(radians, abs=1e-6)
+
+
+@pytest.mark.parametrize("written", ["!degrees ten", "!radians __import__('os')", "rad(2**2000)", "!radians pi/0"])
+def test_a_bad_angle_is_one_error_line_naming_file_and_line(tmp_path, capsys, written):
+    path = _write(tmp_path, "amcl.yaml", ROS1 + f"  update_min_a: {written}\n")
+    assert main(["config", "from-amcl", str(path)]) == 2
+    line = _one_error(capsys)
+    assert f"{path}:31: invalid YAML" in line and "not" in line
+
+
+def test_nav2_particle_counts_as_nav2_checks_them(tmp_path):
+    # amcl_node.cpp initParameters: a negative max_particles is 2000, a negative min 500; then min > max raises max
+    neg = convert(_write(tmp_path, "a.yaml", NAV2.replace("max_particles: 2000", "max_particles: -5")))
+    assert neg.keys["filter.particles"] == 2000 and neg.keys["filter.min_particles"] == 500
+    assert any("max_particles -5 is negative: nav2 sets it to 2000" in w for w in neg.warnings)
+    up = convert(_write(tmp_path, "b.yaml", NAV2.replace("max_particles: 2000", "max_particles: 300")))
+    assert up.keys["filter.particles"] == 500 and up.keys["filter.min_particles"] == 500
+    # ROS 1 raises max only on a reconfigure: at start pf.c clamps the set to max_particles
+    ros1 = convert(_write(tmp_path, "c.yaml", ROS1.replace("max_particles: 5000", "max_particles: 300")))
+    assert ros1.keys["filter.particles"] == 300 and ros1.keys["filter.min_particles"] == 300
+    assert any("never grows past max_particles" in w for w in ros1.warnings)
+
+
+def test_nav2_random_seed_and_parameters_without_counterpart(tmp_path):
+    r = convert(_write(tmp_path, "a.yaml", NAV2.replace("    z_short: 0.05\n", "    z_short: 0.05\n    random_seed: 7\n"
+                                                         "    initialize_at_saved_pose: false\n"
+                                                         "    freespace_downsampling: 2\n")))
+    assert r.keys["seed"] == 7
+    assert not any("not a nav2_amcl parameter" in w for w in r.warnings), r.warnings
+    assert "freespace_downsampling 2" in r.text and "initialize_at_saved_pose false" in r.text
+    random = convert(_write(tmp_path, "b.yaml", NAV2.replace("    z_short: 0.05\n", "    z_short: 0.05\n"
+                                                              "    random_seed: -1\n")))
+    assert "seed" not in random.keys and "random_seed -1: a new seed every run in nav2" in random.text
+    ros1 = convert(_write(tmp_path, "c.yaml", ROS1 + "  std_warn_level_x: 0.2\n"))
+    assert not any("not a ROS 1 amcl parameter" in w for w in ros1.warnings), ros1.warnings
+
+
+def test_update_gating_is_a_group(tmp_path):
+    # update_min_d alone: AMCL ran with its update_min_a default (ROS 1 pi/6), not mcl's
+    r = convert(_write(tmp_path, "a.yaml", "amcl:\n  odom_model_type: diff-corrected\n  update_min_d: 0.3\n"))
+    assert r.keys["filter.update_min_d"] == 0.3 and r.keys["filter.update_min_a"] == pytest.approx(math.pi / 6,
+                                                                                                   abs=1e-6)
+
+
+OUTER_LAUNCH = """\
+<launch>
+  <param name="amcl/max_particles" value="4000"/>
+  <rosparam ns="amcl">
+    odom_alpha1: 0.05
+  </rosparam>
+  <param name="other/max_particles" value="9"/>
+  <group ns="robot1">
+    <param name="amcl/min_particles" value="200"/>
+    <node pkg="amcl" type="amcl" name="amcl">
+      <param name="odom_model_type" value="diff-corrected"/>
+      <rosparam ns="unused_ns">
+        max_beams: 7
+      </rosparam>
+      <param from="$(find pkg)/amcl.yaml"/>
+    </node>
+  </group>
+</launch>
+"""
+
+
+def test_launch_parameters_outside_the_node_that_name_it_are_read(tmp_path):
+    # roslaunch sets every parameter before it starts the node: /robot1/amcl/min_particles is the node's; the
+    # root's amcl/... are another node's (/amcl); a <rosparam ns> in the node puts its keys under ~ns/
+    r = convert(_write(tmp_path, "amcl.launch", OUTER_LAUNCH))
+    assert r.keys["filter.min_particles"] == 200 and r.keys["filter.particles"] == 5000  # AMCL's default max
+    assert "motion.alpha1" not in r.keys or r.keys["motion.alpha1"] == 0.2
+    assert "sensor.max_beams" not in r.keys
+    assert any('<rosparam ns="unused_ns"> in the node' in w for w in r.warnings)
+    assert any("<param from=" in w and "is not read" in w for w in r.warnings)
+    root = convert(_write(tmp_path, "root.launch", OUTER_LAUNCH.replace('<group ns="robot1">', "<group>")))
+    assert root.keys["filter.particles"] == 4000 and root.keys["motion.alpha1"] == 0.05
+    assert root.keys["filter.min_particles"] == 200
