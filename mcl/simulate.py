@@ -5,7 +5,7 @@ a seed:
 
 ``map.yaml`` + ``map.pgm``
     The floor plan of ``kind`` (``mcl.worlds``: office, rooms, corridor,
-    hall, clutter, large). The default office (0.05 m cells): outer walls around a building of about
+    hall, clutter, large, warehouse). The default office (0.05 m cells): outer walls around a building of about
     20 m x 15 m with a corner cut off, a main corridor and a side corridor,
     rooms from a random binary space partition joined by doorways (a random
     spanning tree of the room adjacency graph plus extra doors), furniture
@@ -695,7 +695,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
 
     Deterministic for a given ``seed`` and parameters. ``kind`` picks the
     world generator (``mcl.worlds.KINDS``: office, rooms, corridor, hall,
-    clutter, large); ``speed``, ``dynamic_obstacles`` and
+    clutter, large, warehouse); ``speed``, ``dynamic_obstacles`` and
     ``unmapped_furniture`` left at None take the kind's defaults
     (``mcl.worlds.KIND_DEFAULTS``). ``range_sigma``,
     ``p_short`` (short readings from unexpected obstacles) and ``p_max``
@@ -1493,7 +1493,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="world layout: office (default; the demo's ~20x15 m building), rooms (identical rooms "
                         "off a corridor: ambiguous), corridor (60-150 m, featureless), hall (40-80 m open hall, "
                         "sparse pillars), clutter (office full of small furniture, people and furniture the map "
-                        "lacks), large (150-200 m building)")
+                        "lacks), large (150-200 m building), warehouse (40-70 m: rows of pallet racks, aisles "
+                        "alike)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (world, path, noise); default 0")
     parser.add_argument("--duration", type=float, default=60.0, help="seconds of driving, 1-3600; default 60")
     parser.add_argument("--range-max", type=float, default=12.0,
@@ -1506,7 +1507,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "--range-max 5.6 --fov 240)")
     parser.add_argument("--speed", type=float, default=None, metavar="V",
                         help="the robot's cruise speed in m/s; default the kind's (office and rooms 0.5, clutter "
-                        "0.4, corridor and hall 0.8, large 1.0). The path follower's 0.5 m lookahead keeps the "
+                        "0.4, corridor, hall and warehouse 0.8, large 1.0). The path follower's 0.5 m lookahead keeps the "
                         "drive under about 0.8 m/s whatever the cruise speed")
     parser.add_argument("--kidnap-at", type=float, default=None, metavar="T",
                         help="teleport the robot at time T s, before the drive's end (odometry does not see it); "

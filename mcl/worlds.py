@@ -27,6 +27,10 @@ planner may use; a room/zone id per free cell for the planner's goals):
 ``large``
     A 150-200 m x 90-130 m building: a grid of corridors, rows of rooms of
     random widths, a few open atria; for the per-update cost against map size.
+``warehouse``
+    A 40-70 m x 30-50 m warehouse: rows of pallet racks (uprights, bays full
+    or empty) with aisles that look alike, cross aisles, a staging area with
+    loose pallets, dock recesses and an office.
 
 ``KIND_DEFAULTS`` holds each kind's drive defaults (speed, the planner's cell
 stride and longest leg) and its unmapped clutter.
@@ -395,8 +399,9 @@ def make_world(rng: np.random.Generator, *, width: float = 20.0, height: float =
 # --------------------------------------------------------------------------
 
 def _finish(interior: np.ndarray, occupied: np.ndarray, room_id: np.ndarray, origin, clearance: float,
-            meta: dict) -> World:
-    """Outer walls around ``interior``, the distance field, and the connected cells clear of obstacles."""
+            meta: dict, keep_out: np.ndarray | None = None) -> World:
+    """Outer walls around ``interior``, the distance field, and the connected cells clear of obstacles (and out of
+    ``keep_out``: free cells the route planner must not use, a pallet rack's empty bays)."""
     from scipy.ndimage import binary_dilation, distance_transform_edt
 
     res = RESOLUTION
@@ -406,6 +411,8 @@ def _finish(interior: np.ndarray, occupied: np.ndarray, room_id: np.ndarray, ori
     occupied = occupied | (binary_dilation(interior, structure=disk) & ~interior)
     distance = distance_transform_edt(~occupied) * res
     trav = interior & ~occupied & (distance >= clearance)
+    if keep_out is not None:
+        trav &= ~keep_out
     lab, _ = _components(trav)
     sizes = np.bincount(lab.ravel())
     sizes[0] = 0
@@ -755,10 +762,101 @@ def _large_world(rng: np.random.Generator, clearance: float) -> World:
 
 
 # --------------------------------------------------------------------------
+# warehouse: aisles of pallet racks
+# --------------------------------------------------------------------------
+
+_UPRIGHT = 0.1  # m: a rack upright's side
+
+
+def _warehouse_world(rng: np.random.Generator, clearance: float) -> World:
+    """A 40-70 m x 30-50 m warehouse: rows of pallet racks with 2.8-3.4 m aisles between them, cut by one or two
+    cross aisles, a staging area along the dock wall with loose pallets and an office, a back aisle.
+
+    A rack row is two racks back to back (0.9-1.2 m deep each, a 0.2 m flue between), in bays of about 2.7 m.
+    An upright stands at every bay end on both faces of a rack; a bay holds a pallet at floor level (solid to a
+    laser at its height) with probability 0.75-1 (one share a world), else it is empty and a beam passes
+    between the uprights into the rack, and past an empty bay behind it into the next aisle. Aisle after aisle
+    looks alike: the pattern of full and empty bays and the ends of the aisles are what tell the aisles, and the
+    places along one, apart (a repeated world like ``rooms``, at a warehouse's scale). The robot drives the aisles,
+    never into a rack (``_finish``'s ``keep_out``).
+    """
+    W, H = rng.uniform(40.0, 70.0), rng.uniform(30.0, 50.0)
+    ras, interior, occupied, room_id, origin = _canvas(W, H)
+    interior[ras.slices(0.0, 0.0, W, H)] = True
+    h2 = _T_IN / 2
+    stage = rng.uniform(7.0, 10.0)  # the staging area along the dock wall (y = 0)
+    top = H - rng.uniform(3.0, 4.0)  # the racks end at the back aisle
+    depth, flue, aisle = rng.uniform(0.9, 1.2), 0.2, rng.uniform(2.8, 3.4)
+    full = rng.uniform(0.75, 1.0)
+    row_w = 2 * depth + flue
+    # cross aisles cut the rows into blocks at least 8 m long
+    n_cross = int(rng.integers(1, 3))
+    cw = rng.uniform(3.0, 3.6)
+    while n_cross and top - stage < 8.0 * (n_cross + 1) + cw * n_cross:
+        n_cross -= 1
+    spare = top - stage - 8.0 * (n_cross + 1) - cw * n_cross
+    cuts = np.sort(rng.uniform(0.0, spare, n_cross))
+    blocks, y = [], stage
+    for i in range(n_cross + 1):
+        y1 = top if i == n_cross else stage + 8.0 * (i + 1) + cw * i + cuts[i]
+        blocks.append((y, y1))
+        y = y1 + cw
+    racks = np.zeros_like(interior)
+    rows, x = [], rng.uniform(3.0, 4.0)
+    n_bays = n_full = 0
+    while x + row_w <= W - 3.0:
+        rows.append(x)
+        for y0, y1 in blocks:
+            racks[ras.slices(x, y0, x + row_w, y1)] = True
+            nb = max(int((y1 - y0) / 2.7), 1)
+            b = (y1 - y0) / nb
+            for s0 in (x, x + depth + flue):  # the two racks of the row
+                s1 = s0 + depth
+                for k in range(nb + 1):  # the uprights at every bay end, on both faces
+                    yk = min(max(y0 + k * b, y0 + _UPRIGHT / 2), y1 - _UPRIGHT / 2)
+                    for fx in (s0, s1 - _UPRIGHT):
+                        occupied[ras.slices(fx, yk - _UPRIGHT / 2, fx + _UPRIGHT, yk + _UPRIGHT / 2)] = True
+                for k in range(nb):
+                    n_bays += 1
+                    if rng.random() < full:  # a pallet load between the uprights
+                        n_full += 1
+                        occupied[ras.slices(s0 + 0.05, y0 + k * b + 0.1, s1 - 0.05, y0 + (k + 1) * b - 0.1)] = True
+        x += row_w + aisle
+    # the staging area: an office in a corner on the dock wall, loose pallets, dock door recesses
+    ow, oh = rng.uniform(5.0, 8.0), rng.uniform(3.5, stage - 3.0)
+    cx = 0.0 if rng.random() < 0.5 else W - ow
+    wx = cx + ow if cx == 0.0 else cx
+    occupied[ras.slices(cx, oh - h2, cx + ow, oh + h2)] = True
+    occupied[ras.slices(wx - h2, 0.0, wx + h2, oh)] = True
+    dx = rng.uniform(cx + 0.8, cx + ow - 2.0)
+    occupied[ras.slices(dx, oh - 2 * h2, dx + 1.2, oh + 2 * h2)] = False
+    rects = [(cx - 0.1, -0.1, cx + ow + 0.1, oh + 0.1)]
+    for _ in range(int(rng.integers(4, 11))):
+        s = rng.uniform(1.0, 1.3)
+        r = _place_apart(rng, rects, (s, s), (2.0, 1.5, W - 2.0, stage - 1.5), 1.2)
+        if r:
+            rects.append(r)
+            occupied[ras.slices(*r)] = True
+    docks = []
+    for _ in range(int(rng.integers(3, 8))):
+        d = rng.uniform(1.0, W - 4.0)
+        if all(abs(d - e) > 4.0 for e in docks) and (d + 3.0 < cx - 0.5 or d > cx + ow + 0.5):
+            docks.append(d)
+            interior[ras.slices(d, -0.4, d + 3.0, 0.0)] = True
+    occupied &= interior
+    zone = _zones(room_id, interior & ~racks, 0, int(round(6.0 / RESOLUTION)),
+                  (int(round(_MARGIN / RESOLUTION)),) * 2)
+    room_id[ras.slices(cx + h2, h2, cx + ow - h2, oh - h2)] = zone
+    meta = {"kind": "warehouse", "size": (W, H), "racks": [(x0, y0, x0 + row_w, y1) for x0 in rows for y0, y1 in blocks],
+            "aisle": aisle, "bays": n_bays, "full_bays": n_full, "docks": len(docks)}
+    return _finish(interior, occupied, room_id, origin, clearance, meta, keep_out=racks)
+
+
+# --------------------------------------------------------------------------
 # Kinds
 # --------------------------------------------------------------------------
 
-KINDS = ("office", "rooms", "corridor", "hall", "clutter", "large")
+KINDS = ("office", "rooms", "corridor", "hall", "clutter", "large", "warehouse")
 
 # Per kind: the robot's speed (m/s) when simulate() is given none; the route planner's cell stride (1 = every
 # 0.05 m cell; 4 = a 0.2 m lattice, for big maps) and longest leg (m of path to the next goal, None = any);
@@ -777,6 +875,8 @@ KIND_DEFAULTS: dict[str, dict] = {
                 "unmapped_furniture": 12, "size": "20 m x 15 m, 40 extra small items"},
     "large": {"speed": 1.0, "plan_stride": 4, "leg_max": 40.0, "dynamic_obstacles": 0, "unmapped_furniture": 0,
               "size": "150-200 m x 90-130 m"},
+    "warehouse": {"speed": 0.8, "plan_stride": 2, "leg_max": 40.0, "dynamic_obstacles": 0, "unmapped_furniture": 0,
+                  "size": "40-70 m x 30-50 m: rows of pallet racks, 2.8-3.4 m aisles"},
 }
 
 
@@ -786,7 +886,8 @@ def generate(kind: str, rng: np.random.Generator, *, clearance: float = 0.42) ->
         return make_world(rng, clearance=clearance)
     if kind == "clutter":
         return make_world(rng, clearance=clearance, small_items=40)
-    makers = {"rooms": _rooms_world, "corridor": _corridor_world, "hall": _hall_world, "large": _large_world}
+    makers = {"rooms": _rooms_world, "corridor": _corridor_world, "hall": _hall_world, "large": _large_world,
+              "warehouse": _warehouse_world}
     if kind not in makers:
         raise ValueError(f"unknown world kind {kind!r}; expected one of {', '.join(KINDS)}")
     return makers[kind](rng, clearance)

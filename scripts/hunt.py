@@ -89,10 +89,10 @@ REAL_CONDITIONS = {
 }
 
 
-def synthetic_world(k: int, fast: bool = False) -> dict:
-    """World ``k``'s suite entry: a random kind with three random conditions (see the module doc)."""
+def synthetic_world(k: int, fast: bool = False, kinds=KINDS) -> dict:
+    """World ``k``'s suite entry: a random kind (of ``kinds``) with three random conditions (see the module doc)."""
     rng = random.Random(k * 7919)
-    kind = rng.choice(KINDS)
+    kind = rng.choice(list(kinds))
     pool = sorted(c for c in CONDITIONS if not (fast and c.endswith("hz")))
     conds = rng.sample(pool, 3)
     sim: dict = {"kind": kind, "seed": k, "duration": 90}
@@ -120,9 +120,10 @@ def synthetic_world(k: int, fast: bool = False) -> dict:
     return {"name": f"{kind}-{'-'.join(conds)}-w{k}", "simulate": sim}
 
 
-def synthetic(seed: int, n: int, out: Path, fast: bool = False, modes=HUNT_MODES) -> list[str]:
-    """Write the suite of worlds ``seed``..``seed + n - 1`` to ``out``, run in ``modes``; return their names."""
-    datasets = [synthetic_world(k, fast) for k in range(seed, seed + n)]
+def synthetic(seed: int, n: int, out: Path, fast: bool = False, modes=HUNT_MODES, kinds=KINDS) -> list[str]:
+    """Write the suite of worlds ``seed``..``seed + n - 1`` (of ``kinds``) to ``out``, run in ``modes``; return their
+    names."""
+    datasets = [synthetic_world(k, fast, kinds) for k in range(seed, seed + n)]
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(yaml.safe_dump({"name": f"hunt{seed}", "modes": list(modes), "lost_m": 0.5,
                                    "datasets": datasets}, sort_keys=False, width=200))
@@ -196,6 +197,9 @@ def main(argv=None) -> int:
     s.add_argument("n", type=int, help="how many worlds")
     s.add_argument("out", type=Path, help="the suite file to write")
     s.add_argument("--fast", action="store_true", help="no scan-rate condition; every world at 15, 20 or 30 Hz")
+    s.add_argument("--kinds", default=",".join(KINDS), metavar="K,...",
+                   help=f"the world kinds drawn from (default {','.join(KINDS)}; mcl simulate --kind has "
+                   "warehouse too)")
     r = sub.add_parser("real", help="a suite of real logs degraded with random conditions")
     r.add_argument("seed", type=int, help="the first log's draw")
     r.add_argument("n", type=int, help="how many logs")
@@ -215,7 +219,13 @@ def main(argv=None) -> int:
     except MclError as e:
         ap.error(str(e))
     if a.what == "synthetic":
-        names = synthetic(a.seed, a.n, a.out, a.fast, modes)
+        from mcl.worlds import KINDS as ALL_KINDS
+
+        kinds = [k.strip() for k in a.kinds.split(",") if k.strip()]
+        bad = [k for k in kinds if k not in ALL_KINDS]
+        if bad or not kinds:
+            ap.error(f"--kinds: expected some of {', '.join(ALL_KINDS)}, got {a.kinds!r}")
+        names = synthetic(a.seed, a.n, a.out, a.fast, modes, kinds)
         print(f"{a.out}: {len(names)} worlds")
     else:
         try:

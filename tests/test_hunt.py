@@ -107,3 +107,14 @@ def test_a_real_hunt_keeps_a_dataset_to_the_modes_its_suite_runs_it_in(tmp_path,
         main(["real", "1000", "1", str(tmp_path / "g"), "--suite", str(base), "--modes", "global"])
     assert "no dataset of draws 1000..1000 runs in global" in str(e.value)
     assert "r1000: demo left out: its suite runs it in tracking, kidnapped only" in capsys.readouterr().err
+
+
+def test_a_hunt_of_chosen_kinds(tmp_path, capsys):
+    # --kinds draws from those kinds only (warehouse is not in the default draw, which stays as it was)
+    out = tmp_path / "wh.yaml"
+    assert main(["synthetic", "4529", "3", str(out), "--kinds", "warehouse"]) == 0
+    assert [d.name.split("-")[0] for d in load_suite(out).datasets] == ["warehouse"] * 3
+    assert synthetic_world(3690)["name"] == "hall-p24-res2-slips-w3690"
+    with pytest.raises(SystemExit) as e:
+        main(["synthetic", "4529", "3", str(tmp_path / "x.yaml"), "--kinds", "warehouse,barn"])
+    assert e.value.code == 2 and "--kinds: expected some of" in capsys.readouterr().err

@@ -235,7 +235,8 @@ def test_suite_lists_at_least_40_worlds_across_the_kinds(suite):
     names = [e["name"] for e in entries]
     assert len(set(names)) == len(names)
     kinds = [e["simulate"]["kind"] for e in entries]
-    counts = {k: kinds.count(k) for k in KINDS}
+    # the issue's kinds; the warehouse came later and has its own suite (test below)
+    counts = {k: kinds.count(k) for k in KINDS if k != "warehouse"}
     assert min(counts.values()) >= 6 and max(counts.values()) <= 9, counts  # roughly even
     short = [e for e in entries if e["simulate"].get("range_max", 12.0) <= 6.0]
     assert 7 <= len(short) <= 12
@@ -252,9 +253,25 @@ def test_suite_lists_at_least_40_worlds_across_the_kinds(suite):
         inspect.signature(simulate).bind("out", **kw)
 
 
+def test_the_warehouse_suite_is_warehouses_of_seeds_no_other_suite_uses():
+    wh = yaml.safe_load((ROOT / "suites" / "warehouse.yaml").read_text())
+    params = inspect.signature(simulate).parameters
+    worlds = [(e["simulate"]["kind"], e["simulate"]["seed"]) for e in wh["datasets"]]
+    assert len(set(worlds)) == len(worlds) >= 12 and {k for k, _ in worlds} == {"warehouse"}
+    for e in wh["datasets"]:
+        assert set(e["simulate"]) <= set(params) and "kidnap_at" not in e["simulate"], e["name"]
+    seeds = {s for _, s in worlds}
+    for other in (ROOT / "suites").glob("*.yaml"):
+        if other.name != "warehouse.yaml":
+            used = {e.get("simulate", {}).get("seed") for e in (yaml.safe_load(other.read_text()).get("datasets") or [])}
+            assert not seeds & used, other.name
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_suite_entries_generate(suite, kind, tmp_path):
     # one entry per kind (the one with the most options), shortened: its values pass the simulator's checks
+    if kind == "warehouse":
+        suite = yaml.safe_load((ROOT / "suites" / "warehouse.yaml").read_text())
     entries = [e for e in suite["datasets"] if e["simulate"]["kind"] == kind]
     e = max(entries, key=lambda e: len(e["simulate"]))
     kw = dict(e["simulate"], duration=6.0)
@@ -273,6 +290,31 @@ def test_the_held_out_suite_has_every_kind_and_no_world_of_the_tuning_suite(suit
     worlds = [(e["simulate"]["kind"], e["simulate"]["seed"]) for e in held["datasets"]]
     assert len(set(worlds)) == len(worlds) >= 18
     assert not set(worlds) & tuned
-    assert {k for k, _ in worlds} == set(KINDS)
+    assert {k for k, _ in worlds} == set(KINDS) - {"warehouse"}  # the issue's six (the warehouse: its own suite)
     assert held["lost_m"] == suite["lost_m"] and held["modes"] == suite["modes"]
     assert len(load_suite(ROOT / "suites" / "heldout.yaml").datasets) == len(worlds)
+
+
+def test_warehouse_aisles_alike_and_the_robot_stays_out_of_the_racks(sims, worlds):
+    """Rows of racks in bays full or empty, aisles a robot drives; it never drives into a rack (``keep_out``)."""
+    w = worlds["warehouse"]
+    racks = np.array(w.meta["racks"])
+    assert len(racks) >= 8 and 2.8 <= w.meta["aisle"] <= 3.4
+    assert 0.65 <= w.meta["full_bays"] / w.meta["bays"] <= 1.0  # drawn at 0.75-1 a world
+    res, (ox, oy) = w.resolution, w.origin
+    inside = np.zeros_like(w.reachable)
+    for x0, y0, x1, y1 in racks:
+        sl = (slice(int(np.ceil((y0 - oy) / res - 0.5)), int(np.floor((y1 - oy) / res - 0.5)) + 1),
+              slice(int(np.ceil((x0 - ox) / res - 0.5)), int(np.floor((x1 - ox) / res - 0.5)) + 1))
+        inside[sl] = True
+    # a rack: pallets and uprights, and empty bays a beam passes into (free, but no place for the robot)
+    assert 0.3 < np.mean(w.occupancy[inside] == 100) < 0.9
+    assert np.mean(w.occupancy[inside] == 0) > 0.1
+    assert not (w.reachable & inside).any()
+    # every row is the same rack in x: the same count of occupied cells across each block's columns
+    cols = [int(np.count_nonzero((w.occupancy[:, int((x0 - ox) / res):int((x1 - ox) / res)] == 100).any(axis=0)))
+            for x0, _, x1, _ in racks]
+    assert max(cols) - min(cols) <= 1
+    _, p = read_tum(sims["warehouse"][0] / "truth.tum")
+    for x0, y0, x1, y1 in racks:
+        assert not ((p[0] > x0) & (p[0] < x1) & (p[1] > y0) & (p[1] < y1)).any()
