@@ -257,6 +257,8 @@ class ParticleFilter:
         self.last_estimate: ClusterEstimate | None = None
         self._observation = None  # the last scan's observation (the recovery sampler may use it)
         self._scan_observation = None  # this update's full observation, before beam skipping (for the quality)
+        self.floor_tempered = 0  # updates whose scan filter.ess_floor tempered (_temper_to_floor)
+        self._floor_part = None  # this update's laser log-likelihood while ess_floor may temper it (correct)
         self._prepared_scan = None  # the scan last prepared (prepare)
         self._laser_pose = np.zeros(3)  # of the scan last prepared (beam skipping and the quality walk from there)
         self._injected = None  # (N,) bool: particles injected at the last resample (left out of w_avg)
@@ -661,6 +663,9 @@ class ParticleFilter:
             self.recovery.observe_likelihood(self.logw, loglik / max(measurement_count(observation), 1),
                                              self._injected)
         self._observation = observation
+        # filter.ess_floor: normalize tempers this scan if it leaves too few effective particles (not in a search or
+        # lost recovery, which temper by their own exponents)
+        self._floor_part = loglik if fc.ess_floor > 0.0 and not self._laser_searching() else None
         self.logw += loglik
 
     SWEEP_MATCH_STEPS = 10  # Gauss-Newton steps fitting each reading of a deskewed scan to the map (mcl.deskew)
@@ -986,10 +991,45 @@ class ParticleFilter:
             self.logw -= log_norm
         self.weights = w
         info.ess = float(effective_sample_size(w))
+        part, self._floor_part = self._floor_part, None
+        if not info.degenerate and part is not None and info.ess < self.cfg.filter.ess_floor * self.n:
+            self._temper_to_floor(part, info)
         if info.degenerate:
             self.recover_degenerate(info)
         else:
             self.zero_weights.ok()
+
+    def _temper_to_floor(self, loglik: np.ndarray, info: StepInfo) -> None:
+        """``filter.ess_floor``: this update's scan (``loglik``, already in the normalised weights) taken again times
+        the largest beta in [0, 1] that leaves an effective sample size of ``ess_floor`` x N or more (bisection to
+        1/4096); nothing when the weights before the scan were below that already.
+
+        A scan far sharper than the cloud's spread (beams a few cm sharp, scans seconds and a turn apart) hands the
+        whole weight to one or two particles, and the resample that follows keeps copies of one pose: on
+        ``intel_lab`` read 2 % long with 5 cm noise the effective sample size was 1.0 of 5,000, and the track went
+        1.5-4.9 m off. Tempered, the scan moves the set as far as that many particles can carry it, and the next
+        scans finish the job: the book's advice to overestimate the measurement noise (Prob. Rob. 6.3.4), taken only
+        where the set cannot hold the scan as it is."""
+        floor = self.cfg.filter.ess_floor * self.n
+        fin = np.isfinite(loglik)
+        part = np.where(fin, loglik, 0.0)
+        prior = np.where(fin, self.logw - part, -np.inf)  # the weights before the scan (a -inf stays weight zero)
+
+        def ess(beta: float) -> float:
+            w, norm = normalize_log_weights(prior + beta * part)
+            return effective_sample_size(w) if math.isfinite(norm) else 0.0
+
+        if ess(0.0) < floor:
+            return
+        lo, hi = 0.0, 1.0
+        for _ in range(12):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if ess(mid) >= floor else (lo, mid)
+        w, norm = normalize_log_weights(prior + lo * part)
+        self.logw = prior + lo * part - norm
+        self.weights = w
+        info.ess = float(effective_sample_size(w))
+        self.floor_tempered += 1
 
     def protect(self, info: StepInfo) -> None:
         """Settle a protected re-seed (``filter.reseed_odds``, ``mcl.adaptive.ProtectedReseed``) once one side

@@ -1498,6 +1498,7 @@ def _run(
         "stall_reseeds": stall_reseeds,
         "fault_updates": fault_updates,
         "blind_updates": pf.blind_updates,
+        "floor_tempered_updates": pf.floor_tempered,
         **({"odometry_scale": pf.odom_scale.k} if pf.odom_scale is not None else {}),  # motion.scale_window's last
         **({"sweep_order": pf.sweep_order.summary()}
            if pf.sweep_order is not None and pf.sweep_order.scans else {}),
