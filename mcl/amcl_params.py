@@ -48,7 +48,7 @@ from typing import Any
 import yaml
 
 from mcl.errors import ConfigError, MclError
-from mcl.yamlfile import SAFE_LOADER, finite_number, short_repr
+from mcl.yamlfile import _LEADING_ZEROS, SAFE_LOADER, _construct_float, _construct_int, finite_number, short_repr
 
 WIDTH = 118  # the output's lines, comments wrapped
 ROS1 = "ROS 1 amcl"
@@ -374,6 +374,9 @@ def _from_launch(path: Path, text: str) -> Source:
             if el.tag not in ("arg", "group", "node"):
                 continue
             if el.tag != "arg" and not any(n.get("pkg") in _AMCL_PKGS for n in el.iter("node")):
+                # a group with no amcl node may still set its parameters (<group ns="amcl"><param .../>)
+                if el.tag == "group" and any(x.tag in ("param", "rosparam") for x in el.iter()) and not skipped(el, args):
+                    walk(el, dict(args), {}, inner(el, args, ns))
                 continue
             if skipped(el, args):
                 not_launched += sum(n.get("pkg") in _AMCL_PKGS for n in el.iter("node"))
@@ -434,36 +437,65 @@ def _from_launch(path: Path, text: str) -> Source:
         else:
             unresolved.add(name)
 
-    # roslaunch sets the parameters of the whole file before it starts a node: those outside the node that name its
-    # own (<param name="amcl/x">, <rosparam ns="amcl">) count as its own; those in the node come after them
+    # roslaunch sets the parameters of the whole file before it starts a node, the later of two in document order
+    # winning: those outside the node that name its own (<param name="amcl/x">, <rosparam ns="amcl">) count as its
+    # own, in their place among the node's
     private = absolute(node.get("name", "amcl"), ns)
-    for el, el_args, el_ns in scoped:
-        if el.tag == "param" and el.get("name"):
+    order = {el: i for i, el in enumerate(root.iter())}
+
+    def under_private(where: str):
+        """The flat-name prefix of the node's parameters inside a rosparam loaded at namespace ``where``, or None
+        when the node's private namespace is not inside it."""
+        base = where.rstrip("/")
+        if private == base:
+            return ""
+        if not private.startswith(base + "/"):
+            return None
+        inside = private[len(base):].strip("/")
+        return inside.replace("/", ".") + "."
+
+    def load_under(el, el_args, where: str) -> None:
+        prefix = under_private(where)
+        if prefix is None:
+            return
+        flat = rosparam(el, el_args) or {}
+        params.update({k[len(prefix):]: v for k, v in flat.items() if k.startswith(prefix)})
+
+    todo = [(order.get(el, -1), el, el_args, el_ns, False) for el, el_args, el_ns in scoped]
+    todo += [(order.get(el, -1), el, args, ns, True) for el in node]
+    for _, el, el_args, el_ns, own in sorted(todo, key=lambda t: t[0]):
+        if own and skipped(el, el_args):
+            continue
+        if el.tag == "param" and not own and el.get("name"):
             full = absolute(el.get("name"), el_ns)
             if full.startswith(private + "/"):
                 param(el, el_args, full[len(private) + 1:])
-        elif el.tag == "rosparam" and el.get("command", "load") == "load":
-            where = absolute(el.get("ns") or "", el_ns)
-            if private == where or private.startswith(where + "/"):
-                inside = private[len(where):].strip("/")  # the node's path below the rosparam's namespace
-                flat = rosparam(el, el_args) or {}
-                prefix = inside.replace("/", ".") + "." if inside else ""
-                params.update({k[len(prefix):]: v for k, v in flat.items() if k.startswith(prefix)})
-    for el in node:
-        if skipped(el, args):
-            continue
-        if el.tag == "param" and el.get("from") is not None and not el.get("name"):
+        elif el.tag == "rosparam" and not own and el.get("command", "load") == "load":
+            load_under(el, el_args, absolute(el.get("ns") or "", el_ns))
+        elif el.tag == "param" and el.get("from") is not None and not el.get("name"):
             warnings.append(f"<param from=\"{el.get('from')}\"> (a ROS 2 parameter file) is not read: give that "
                             "file to mcl config from-amcl")
         elif el.tag == "param" and el.get("name"):
-            param(el, args, el.get("name").lstrip("~"))
+            name = el.get("name")
+            if name.startswith("/"):  # an absolute name: the node's own only if under its private namespace
+                full = absolute(name, "")
+                if full.startswith(private + "/"):
+                    param(el, el_args, full[len(private) + 1:])
+            else:
+                param(el, el_args, name.lstrip("~"))
         elif el.tag == "rosparam" and el.get("command", "load") == "load":
-            if (el.get("ns") or "").strip("/~"):  # under the node's own namespace: ~ns/..., names AMCL never reads
-                warnings.append(f"<rosparam ns=\"{el.get('ns')}\"> in the node: its parameters are under "
-                                f"~{el.get('ns').strip('/~')}/, where AMCL does not read them: not read")
-                continue
-            params.update(rosparam(el, args) or {})
-        elif el.tag == "remap":  # the node's own: over its scope's
+            ns_attr = (el.get("ns") or "").strip()
+            if ns_attr.startswith("/"):  # absolute: read where it names the node's private namespace
+                load_under(el, el_args, absolute(ns_attr, ""))
+            elif ns_attr.strip("/~"):  # under the node's own namespace: ~ns/..., names AMCL never reads
+                warnings.append(f"<rosparam ns=\"{ns_attr}\"> in the node: its parameters are under "
+                                f"~{ns_attr.strip('/~')}/, where AMCL does not read them: not read")
+            else:
+                params.update(rosparam(el, el_args) or {})
+    for el in node:
+        if skipped(el, args):
+            continue
+        if el.tag == "remap":  # the node's own: over its scope's
             r = remap_of(el, args, ns)
             if r is not None:
                 remaps[r[0]] = r[1]
@@ -543,6 +575,10 @@ def _angle(loader, node, degrees: bool) -> float:
     return v
 
 
+# numbers as mcl's own files read them (yamlfile): 010 is 10, 1:30 a string, a 5,000-digit integer an error line
+_Rosparam.add_constructor("tag:yaml.org,2002:int", _construct_int)
+_Rosparam.add_constructor("tag:yaml.org,2002:float", _construct_float)
+_Rosparam.add_implicit_resolver("tag:yaml.org,2002:int", _LEADING_ZEROS, list("-+0"))
 _Rosparam.add_constructor("!degrees", lambda loader, node: _angle(loader, node, True))
 _Rosparam.add_constructor("!radians", lambda loader, node: _angle(loader, node, False))
 _Rosparam.add_implicit_resolver("!degrees", re.compile(r"^deg\([^)]*\)$"), ["d"])
@@ -588,7 +624,7 @@ def read_source(path: str | Path) -> Source:
     if path.suffix.lower() in (".launch", ".xml") or text.lstrip().startswith("<"):
         return _from_launch(path, text)
     dup: list = []
-    doc = _load_rosparam(text, str(path), dup, "line ")  # the warning names the file
+    doc = _load_rosparam(text, str(path), dup, "line ")  # read_source's caller names the file
     src = _from_yaml(path, doc)
     src.warnings[:0] = dup
     return src

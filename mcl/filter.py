@@ -618,6 +618,7 @@ class ParticleFilter:
         as weight zero.
         """
         self._scan_observation = observation
+        self._floor_part = None
         if observation is None:
             return
         self._weigh_sweep_orders()
@@ -663,8 +664,8 @@ class ParticleFilter:
             self.recovery.observe_likelihood(self.logw, loglik / max(measurement_count(observation), 1),
                                              self._injected)
         self._observation = observation
-        # filter.ess_floor: normalize tempers this scan if it leaves too few effective particles (not in a search or
-        # lost recovery, which temper by their own exponents)
+        # filter.ess_floor: normalize tempers this scan if it leaves too few effective particles (not while a search
+        # runs, nor from a lost call until the filter is no longer lost: _laser_searching)
         self._floor_part = loglik if fc.ess_floor > 0.0 and not self._laser_searching() else None
         self.logw += loglik
 
@@ -992,7 +993,8 @@ class ParticleFilter:
         self.weights = w
         info.ess = float(effective_sample_size(w))
         part, self._floor_part = self._floor_part, None
-        if not info.degenerate and part is not None and info.ess < self.cfg.filter.ess_floor * self.n:
+        if (not info.degenerate and part is not None and part.size == self.n
+                and info.ess < self.cfg.filter.ess_floor * self.n):
             self._temper_to_floor(part, info)
         if info.degenerate:
             self.recover_degenerate(info)

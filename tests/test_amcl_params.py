@@ -711,3 +711,34 @@ def test_launch_parameters_outside_the_node_that_name_it_are_read(tmp_path):
     root = convert(_write(tmp_path, "root.launch", OUTER_LAUNCH.replace('<group ns="robot1">', "<group>")))
     assert root.keys["filter.particles"] == 4000 and root.keys["motion.alpha1"] == 0.05
     assert root.keys["filter.min_particles"] == 200
+
+
+def test_launch_parameters_in_document_order_at_the_root_in_other_groups_and_under_an_absolute_ns(tmp_path):
+    # roslaunch: a root <rosparam file> holding amcl: {...}; a <group ns="amcl"> with no node; the later of two
+    # declarations wins; <rosparam ns="/amcl"> in the node is the node's own namespace
+    (tmp_path / "p.yaml").write_text("amcl:\n  min_particles: 123\n  kld_err: 0.02\n")
+    text = """<launch>
+  <rosparam file="p.yaml"/>
+  <group ns="amcl"><param name="kld_z" value="0.95"/></group>
+  <node pkg="amcl" type="amcl" name="amcl">
+    <param name="max_particles" value="4000"/>
+    <param name="odom_model_type" value="diff-corrected"/>
+    <rosparam ns="/amcl">
+      odom_alpha1: 0.07
+    </rosparam>
+  </node>
+  <param name="amcl/max_particles" value="3000"/>
+</launch>
+"""
+    r = convert(_write(tmp_path, "amcl.launch", text))
+    k = r.keys
+    assert k["filter.min_particles"] == 123 and k["filter.kld_epsilon"] == 0.02
+    assert k["filter.kld_delta"] == pytest.approx(0.5 * math.erfc(0.95 / math.sqrt(2.0)), abs=1e-4)
+    assert k["filter.particles"] == 3000  # the later declaration, after the node
+    assert k["motion.alpha1"] == 0.07 and not any("unused_ns" in w or "not read" in w for w in r.warnings)
+
+
+def test_a_huge_integer_in_an_amcl_file_is_one_error_line(tmp_path, capsys):
+    path = _write(tmp_path, "amcl.yaml", ROS1 + "  laser_max_beams: 1" + "0" * 5000 + "\n")
+    assert main(["config", "from-amcl", str(path)]) == 2
+    assert "invalid YAML" in _one_error(capsys)

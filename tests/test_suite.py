@@ -33,7 +33,7 @@ BASELINE_KEYS = {"filter.particles", "filter.kld", "filter.recovery", "filter.es
                  "motion.fault_prob", "sensor.unmapped_skip", "filter.search_refine", "sensor.self_hit_skip",
                  "sensor.misfit_laser", "sensor.mount_yaw", "sensor.stamp_offset", "motion.sideways", "motion.noise_step",
                  "filter.search_refine_candidates", "motion.stalls",
-                 "motion.jumps", "motion.slips", "motion.fill_spread", "filter.ess_floor"}
+                 "motion.jumps", "motion.slips", "motion.fill_spread"}
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
