@@ -48,7 +48,7 @@ from typing import Any
 import yaml
 
 from mcl.errors import ConfigError, MclError
-from mcl.yamlfile import _LEADING_ZEROS, SAFE_LOADER, _construct_float, _construct_int, finite_number, short_repr
+from mcl.yamlfile import _Loader, finite_number, parse, short_repr
 
 WIDTH = 118  # the output's lines, comments wrapped
 ROS1 = "ROS 1 amcl"
@@ -512,30 +512,19 @@ def _resolve(name: str, ns: str) -> str:
     return "/" + "/".join(p for p in (*ns.strip("/").split("/"), name) if p)
 
 
-class _Rosparam(SAFE_LOADER):
-    """SAFE_LOADER as rosparam (PyYAML) reads a parameter file: the last of a key given twice in one mapping is
-    kept, and recorded (line, key) in ``duplicates`` (PAL's amcl.yaml repeats laser_lambda_short, which mcl's own
-    files refuse); rosparam's angle tags are read (ros_comm ``rosparam/__init__.py``): ``!degrees 30`` and
-    ``deg(30)`` are 30 degrees in radians, ``!radians pi/6`` and ``rad(pi/6)`` an expression of numbers and pi."""
+class _Rosparam(_Loader):
+    """mcl's loader (``mcl.yamlfile``: its numbers) as rosparam (PyYAML) reads a parameter file: the last of a key
+    given twice in one mapping is kept, and recorded (line, key) in ``duplicates`` (PAL's amcl.yaml repeats
+    laser_lambda_short, which mcl's own files refuse); rosparam's angle tags are read (ros_comm
+    ``rosparam/__init__.py``): ``!degrees 30`` and ``deg(30)`` are 30 degrees in radians, ``!radians pi/6`` and
+    ``rad(pi/6)`` an expression of numbers and pi."""
 
     def __init__(self, stream):
         super().__init__(stream)
         self.duplicates: list = []
-        self._checked: set = set()
 
-    def flatten_mapping(self, node):
-        first = node not in self._checked
-        self._checked.add(node)
-        own = [k for k, _ in node.value if k.tag != "tag:yaml.org,2002:merge"]
-        super().flatten_mapping(node)
-        if first:
-            seen = set()
-            for k in own:
-                if isinstance(k, yaml.ScalarNode):
-                    key = self.construct_object(k)
-                    if key in seen:
-                        self.duplicates.append((k.start_mark.line + 1, key))
-                    seen.add(key)
+    def duplicate(self, key, mark) -> None:
+        self.duplicates.append((mark.line + 1, key))
 
 
 _ARITH = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv}
@@ -575,10 +564,6 @@ def _angle(loader, node, degrees: bool) -> float:
     return v
 
 
-# numbers as mcl's own files read them (yamlfile): 010 is 10, 1:30 a string, a 5,000-digit integer an error line
-_Rosparam.add_constructor("tag:yaml.org,2002:int", _construct_int)
-_Rosparam.add_constructor("tag:yaml.org,2002:float", _construct_float)
-_Rosparam.add_implicit_resolver("tag:yaml.org,2002:int", _LEADING_ZEROS, list("-+0"))
 _Rosparam.add_constructor("!degrees", lambda loader, node: _angle(loader, node, True))
 _Rosparam.add_constructor("!radians", lambda loader, node: _angle(loader, node, False))
 _Rosparam.add_implicit_resolver("!degrees", re.compile(r"^deg\([^)]*\)$"), ["d"])
@@ -590,17 +575,7 @@ def _load_rosparam(text: str, name: str, warnings: list, where: str | None = Non
     a warning in ``warnings`` (its line after ``where``, default ``name:``), invalid YAML an MclError of one line
     naming ``name`` and the line."""
     loader = _Rosparam(text)
-    try:
-        doc = loader.get_single_data()
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f":{mark.line + 1}" if mark is not None else ""
-        problem = (getattr(e, "problem", None) or "").replace("\n", " ")
-        raise MclError(f"{name}{where}: invalid YAML" + (f": {problem}" if problem else "")) from None
-    except (RecursionError, MemoryError) as e:
-        raise MclError(f"{name}: invalid YAML ({type(e).__name__})") from None
-    finally:
-        loader.dispose()
+    doc = parse(loader, name, MclError)
     for line, key in loader.duplicates:
         warnings.append(f"{f'{name}:' if where is None else where}{line}: {key} given twice: the last is read, as "
                         "rosparam does")
@@ -781,11 +756,12 @@ class _Converter:
         if any(map(self.given, group)):
             hi, lo = self.get("max_particles"), self.get("min_particles")
             if self.flavour == NAV2:  # amcl_node.cpp initParameters' semantic checks, in their order
-                for key, fallback in (("max_particles", 2000), ("min_particles", 500)):
-                    v = hi if key == "max_particles" else lo
-                    if isinstance(v, int) and v < 0:
-                        self.warn(f"{self.said(key)} is negative: nav2 sets it to {fallback}, and so does this config")
-                        hi, lo = (fallback, lo) if key == "max_particles" else (hi, fallback)
+                if isinstance(hi, int) and hi < 0:
+                    self.warn(f"{self.said('max_particles')} is negative: nav2 sets it to 2000, and so does this config")
+                    hi = 2000
+                if isinstance(lo, int) and lo < 0:
+                    self.warn(f"{self.said('min_particles')} is negative: nav2 sets it to 500, and so does this config")
+                    lo = 500
             if isinstance(hi, int) and isinstance(lo, int) and lo > hi:
                 if self.flavour == NAV2:
                     self.warn(f"{self.name('min_particles')} {lo} is above {self.name('max_particles')} {hi}: nav2 "

@@ -42,8 +42,12 @@ class _Loader(SAFE_LOADER):
             if isinstance(k, yaml.ScalarNode):
                 key = self.construct_object(k)  # cached: construct_mapping reads it back
                 if key in seen:
-                    raise _DuplicateKey(key, k.start_mark)
+                    self.duplicate(key, k.start_mark)
                 seen.add(key)
+
+    def duplicate(self, key, mark) -> None:
+        """A key given twice in one mapping: refused (a loader that keeps the last overrides this)."""
+        raise _DuplicateKey(key, mark)
 
 
 # An integer with leading zeros is decimal, as YAML 1.2 and the command line read it: YAML 1.1 (PyYAML) read
@@ -98,8 +102,14 @@ def read_yaml(path: str | os.PathLike, error: type[MclError]):
         raise error(f"{name}: not a UTF-8 text file") from None
     except (OSError, ValueError) as e:  # ValueError: a NUL byte in the path
         raise error(f"{name}: cannot read: {getattr(e, 'strerror', None) or type(e).__name__}") from None
+    return parse(_Loader(text), name, error)
+
+
+def parse(loader: _Loader, name: str, error: type[MclError]):
+    """The single document ``loader`` (a ``_Loader``, or a subclass, on the text) holds, as ``read_yaml`` reads a
+    file: any problem is ``error`` with one line naming ``name`` and the line."""
     try:
-        return yaml.load(text, Loader=_Loader)  # noqa: S506 - a safe loader
+        return loader.get_single_data()
     except _DuplicateKey as e:
         raise error(f"{name}:{e.mark.line + 1}: duplicate key {_printable(e.key)}") from None
     except yaml.YAMLError as e:
@@ -109,6 +119,8 @@ def read_yaml(path: str | os.PathLike, error: type[MclError]):
         raise error(f"{name}{where}: invalid YAML" + (f": {problem}" if problem else "")) from None
     except (RecursionError, MemoryError) as e:  # hostile input: deeply nested or huge documents
         raise error(f"{name}: invalid YAML ({type(e).__name__})") from None
+    finally:
+        loader.dispose()
 
 
 def _printable(k) -> str:

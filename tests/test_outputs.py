@@ -225,14 +225,19 @@ def test_a_rerun_over_an_unfinished_run_replaces_it(world, tmp_path, monkeypatch
     assert not (out / ".mcl-previous").exists()
 
 
+def _set_aside(out, names):
+    """The files ``names`` of the run in ``out`` moved into out/.mcl-previous, as a rerun killed mid-way leaves them."""
+    (out / ".mcl-previous").mkdir()
+    for name in names:
+        os.replace(out / name, out / ".mcl-previous" / name)
+
+
 def test_a_finished_run_set_aside_by_a_killed_rerun_comes_back(world, tmp_path, monkeypatch):
     out = tmp_path / "again"
     assert _run(world, out) == 0
     before = _files(out)
     # kill -9 mid-rerun: the finished run aside, a few poses of the new one in the folder
-    (out / ".mcl-previous").mkdir()
-    for name in before:
-        os.replace(out / name, out / ".mcl-previous" / name)
+    _set_aside(out, before)
     (out / "config.yaml").write_text("seed: 2\n")
     (out / "trajectory.tum.partial").write_text("1.0 0 0 0 0 0 0 1\n")
     _stop_at(monkeypatch, 3, KeyboardInterrupt())
@@ -270,9 +275,7 @@ def test_a_run_killed_while_it_set_the_earlier_run_aside_or_put_it_back_gets_it_
     out = tmp_path / "again"
     assert _run(world, out) == 0
     before = _files(out)
-    (out / ".mcl-previous").mkdir()
-    for name in moved:
-        os.replace(out / name, out / ".mcl-previous" / name)
+    _set_aside(out, moved)
     _stop_at(monkeypatch, 3, KeyboardInterrupt())
     assert _run(world, out, "--seed", "3") == 130
     assert _files(out) == before and not (out / ".mcl-previous").exists()

@@ -311,9 +311,10 @@ def test_warehouse_aisles_alike_and_the_robot_stays_out_of_the_racks(sims, world
     assert 0.3 < np.mean(w.occupancy[inside] == 100) < 0.9
     assert np.mean(w.occupancy[inside] == 0) > 0.1
     assert not (w.reachable & inside).any()
-    # every row is the same rack in x: the same count of occupied cells across each block's columns
-    cols = [int(np.count_nonzero((w.occupancy[:, int((x0 - ox) / res):int((x1 - ox) / res)] == 100).any(axis=0)))
-            for x0, _, x1, _ in racks]
+    # every row is the same rack in x: the same count of occupied columns within each rack's own block
+    cols = [int(np.count_nonzero((w.occupancy[int((y0 - oy) / res):int((y1 - oy) / res),
+                                              int((x0 - ox) / res):int((x1 - ox) / res)] == 100).any(axis=0)))
+            for x0, y0, x1, y1 in racks]
     assert max(cols) - min(cols) <= 1
     _, p = read_tum(sims["warehouse"][0] / "truth.tum")
     for x0, y0, x1, y1 in racks:
