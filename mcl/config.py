@@ -61,6 +61,7 @@ class FilterConfig:
     resampling: Literal["systematic", "stratified", "residual", "multinomial"] = "systematic"
     resample_threshold: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # resample when ESS/N < this
     ess_floor: float = field(default=0.0, metadata=_rng(0.0, 1.0))  # temper a tracking scan so ESS/N stays above this
+    ess_floor_spread: float = field(default=0.08, metadata=_rng(0.0, None))  # ... only a cloud this wide (m or rad)
     update_min_d: float = field(default=0.05, metadata=_rng(0.0))  # m travelled before an update (AMCL)
     update_min_a: float = field(default=0.05, metadata=_rng(0.0))  # rad turned before an update (AMCL)
     # estimate: mean of the heaviest cluster (AMCL's pf_cluster_stats) or of the whole set (mcl.clusters)

@@ -21,6 +21,7 @@ from mcl.resampling import effective_sample_size, normalize_log_weights
 
 SHARED = PROJECT_ROOT.parent / "shared" / "data"
 INTEL = SHARED / "intel_lab"
+FR079 = SHARED / "fr079"
 
 
 def _pf(n=2000, floor=0.005):
@@ -85,6 +86,49 @@ def test_a_scan_the_set_can_hold_is_not_touched():
     assert pf.floor_tempered == 0 and info.ess < 0.005 * pf.n  # below the floor the default would keep
 
 
+def test_a_narrow_cloud_is_not_tempered_and_a_wide_one_is_in_position_or_heading_alone():
+    # filter.ess_floor_spread (0.08): the same scan, far sharper than the cloud in every case (ESS under 3 of 2,000)
+    def tempered(std):
+        pf = _pf()
+        pf.init_gaussian((5.0, 5.0, 0.0), std)
+        loglik = -0.5 * ((pf.particles[0] - 5.01) ** 2 + (pf.particles[1] - 4.99) ** 2) / 0.002 ** 2 * 60
+        loglik -= 0.5 * (pf.particles[2] - 0.01) ** 2 / 0.002 ** 2 * 60
+        w, _ = normalize_log_weights(pf.logw + loglik)
+        assert effective_sample_size(w) < 3.0
+        _corrected(pf, loglik)
+        return pf.floor_tempered
+
+    # a crowd's few walls on a cloud 5 cm and 0.05 rad wide (clutter-03 at 1.5 m/s: 0.04-0.05 m, 0.03-0.06 rad):
+    # the scan is taken whole
+    assert tempered((0.04, 0.04, 0.05)) == 0
+    assert tempered((0.3, 0.3, 0.02)) == 1  # wide in position (spread 0.42 m)
+    assert tempered((0.01, 0.01, 0.3)) == 1  # wide in heading alone
+
+
+def test_a_scan_after_a_slips_proposal_is_not_tempered():
+    # an odometry fault's or a slip's proposal (motion.slip_turn): its few far poses must be free to take the set
+    # (tests/test_slip.py's rooms: heading 1.09 rad off when tempered); the same scan after the plain model's motion
+    # is kept for the floor
+    from types import SimpleNamespace
+
+    from mcl.filter import Control, StepInfo
+    from mcl.kernels.raycast import cast_rays
+
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 181)
+    for slip in (0.0, 1.5):
+        grid = _pf().grid
+        cfg = load_config(None, ["filter.particles=2000", "filter.kld=false", "filter.recovery=false",
+                                 "filter.ess_floor=0.005", "motion.fault_prob=0.001", f"motion.slip_turn={slip}"])
+        pf = ParticleFilter(cfg, grid, rng=np.random.default_rng(1))
+        pf.init_gaussian((5.0, 5.0, 0.0), (0.05, 0.05, 0.05))
+        pf.predict(Control(np.zeros(3), np.array([0.1, 0.0, 0.5]), dt=0.5), StepInfo(particles=pf.n))
+        ranges = np.empty((1, 181))
+        cast_rays(np.array([[5.1], [5.0], [0.5]]), angles, np.ascontiguousarray(grid.occupied), grid.origin[0],
+                  grid.origin[1], grid.resolution, 30.0, ranges)
+        pf.correct(pf.prepare(SimpleNamespace(ranges=ranges[0], angles=angles, max_range=None, t=1.0), np.zeros(3)))
+        assert (pf._floor_part is None) == (slip > 0.0), slip
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not (INTEL / "log.clf").is_file(), reason=f"intel_lab data set not found at {INTEL}")
 def test_intel_lab_read_long_and_noisy_is_tracked_with_the_floor_and_lost_without(tmp_path):
@@ -117,6 +161,25 @@ def test_intel_lab_read_long_and_noisy_is_tracked_with_the_floor_and_lost_withou
         maxima[floor] = s["eval"]["ate_max"]
         assert (s["floor_tempered_updates"] > 0) == (floor > 0)
     assert maxima[0.005] < 1.0 < maxima[0.0], maxima
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (FR079 / "log.clf").is_file(), reason=f"fr079 data set not found at {FR079}")
+def test_fr079s_slip_is_held_with_the_floor_inside_the_fault_window(tmp_path):
+    # fr079 at 305 s: the odometry reports 0.1 m forward a scan for 6 s while the robot reverses; the lost call opens
+    # the odometry-fault window (motion.fault_*). Once the track holds again inside it the floor tempers as anywhere:
+    # seed 2 within 1.13 m (its suite bound 1.5 m). Off inside the window, as after a slip's proposal, the same seed
+    # was 2.60 m off (ninety-ninth session; without the floor at all, 0.98-1.03 m).
+    from mcl.runner import run
+
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={FR079 / 'map.yaml'}", f"log={FR079 / 'log.clf'}", f"truth={FR079 / 'truth.tum'}", "rerun.mode=off",
+        "seed=2", "filter.initial_pose=[0.001236, -0.001068, 0.000029]"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        s = run(cfg, tmp_path / "fr079", progress=False, echo=lambda *_: None)
+    assert s["fault_updates"] > 0 and s["floor_tempered_updates"] > 0
+    assert s["eval"]["ate_max"] < 1.5, s["eval"]
 
 
 def test_a_scan_left_from_an_update_that_corrected_nothing_is_not_tempered_again():
