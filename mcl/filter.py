@@ -1008,8 +1008,10 @@ class ParticleFilter:
 
     def _temper_to_floor(self, loglik: np.ndarray, info: StepInfo) -> None:
         """``filter.ess_floor``: this update's scan (``loglik``, already in the normalised weights) taken again times
-        the largest beta in [0, 1] that leaves an effective sample size of ``ess_floor`` x N or more (bisection to
-        1/4096); nothing when the weights before the scan were below that already.
+        a beta in [1/4096, 1] that leaves an effective sample size of ``ess_floor`` x N to ``FLOOR_SLACK`` times
+        that (regula falsi, Illinois variant, in log beta: a few evaluations); 0 (the weights before the scan) when
+        even 1/4096 leaves too few; nothing when the weights before the scan were below the floor already, or the
+        cloud is narrow (:meth:`_wide`).
 
         A scan far sharper than the cloud's spread (beams a few cm sharp, scans seconds and a turn apart) hands the
         whole weight to one or two particles, and the resample that follows keeps copies of one pose: on
@@ -1021,41 +1023,75 @@ class ParticleFilter:
         fin = np.isfinite(loglik)
         part = np.where(fin, loglik, 0.0)
         prior = np.where(fin, self.logw - part, -np.inf)  # the weights before the scan (a -inf stays weight zero)
+        log_floor = math.log(floor)
 
-        def ess(beta: float) -> float:
-            w, norm = normalize_log_weights(prior + beta * part)
-            return effective_sample_size(w) if math.isfinite(norm) else 0.0
+        def excess(beta: float) -> float:  # log ESS(beta) - log floor
+            x = prior + beta * part
+            m = float(x.max())
+            if not math.isfinite(m):
+                return -math.inf
+            e = np.exp(x - m)
+            s = float(np.einsum("i->", e))
+            return 2.0 * math.log(s) - math.log(float(np.einsum("i,i->", e, e))) - log_floor
 
-        if ess(0.0) < floor or not self._wide(prior):
+        w0, norm0 = normalize_log_weights(prior)
+        if not math.isfinite(norm0) or effective_sample_size(w0) < floor or not self._wide(w0):
             return
-        lo, hi = 0.0, 1.0
-        for _ in range(12):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if ess(mid) >= floor else (lo, mid)
+        # log ESS falls about linearly in log beta once the scan is sharper than the cloud (a Gaussian scan on a
+        # Gaussian cloud in d dimensions: ESS ~ beta^(-d/2)), so the root is sought in u = log beta, in
+        # [log 1/4096, 0]; the first try is that line's root for d = 3 from the full scan's ESS (info.ess)
+        u_min = math.log(1.0 / 4096.0)
+        u_lo, u_hi, f_hi = u_min, 0.0, math.log(info.ess) - log_floor
+        u = max(f_hi / 1.5, u_min)
+        f_lo = excess(math.exp(u))
+        if f_lo >= 0.0:
+            u_lo = u
+        else:
+            u_hi, f_hi = u, f_lo
+            f_lo = excess(1.0 / 4096.0) if u > u_min else f_lo
+            if not f_lo >= 0.0:  # even 1/4096 of the scan leaves too few: the weights before it
+                u_lo = -math.inf
+        side, at_lo = 0, f_lo  # at_lo: u_lo's own excess (f_lo is halved by the Illinois rule)
+        while math.isfinite(u_lo) and u_hi - u_lo > 1e-3 and at_lo > math.log(self.FLOOR_SLACK):
+            u = (u_lo * f_hi - u_hi * f_lo) / (f_hi - f_lo)
+            u = min(max(u, u_lo + 1e-4), u_hi - 1e-4)
+            f = excess(math.exp(u))
+            if f >= 0.0:
+                u_lo, f_lo, at_lo = u, f, f
+                if side == 1:
+                    f_hi *= 0.5  # Illinois: an end kept twice running counts half
+                side = 1
+            else:
+                u_hi, f_hi = u, f
+                if side == -1:
+                    f_lo *= 0.5
+                side = -1
+        lo = math.exp(u_lo)
         w, norm = normalize_log_weights(prior + lo * part)
         self.logw = prior + lo * part - norm
         self.weights = w
         info.ess = float(effective_sample_size(w))
         self.floor_tempered += 1
 
-    def _wide(self, logw: np.ndarray) -> bool:
-        """Whether the cloud weighted by ``logw`` is as wide as ``filter.ess_floor_spread``: its position spread (the
-        weighted RMS distance from its mean, m) or its heading spread (the circular std, rad) at least that.
+    FLOOR_SLACK = 1.05  # ess_floor: a tempered scan leaves at most this many times the floor's effective sample size
+
+    def _wide(self, w: np.ndarray) -> bool:
+        """Whether the cloud weighted by ``w`` (normalised) is as wide as ``filter.ess_floor_spread``: its position
+        spread (the weighted RMS distance from its mean, m) or its heading spread (the circular std, rad) at least
+        that.
 
         A narrow cloud that a scan narrows to a particle or two loses nothing the next prediction does not spread
         again: people crowding a robot in clutter leave a few walls that pin the pose to 2 of 5,000 particles of a
         cloud 5 cm and 0.06 rad wide, and tempered that scan let the track drift and be called lost (9.4 m off). The
         scans the floor is for fall on a cloud a turn and seconds without a scan spread: 0.12-0.39 m and 0.11-0.31
         rad on intel_lab read 2 % long."""
-        w, norm = normalize_log_weights(logw)
-        if not math.isfinite(norm):
-            return False
         p = self.particles
-        mx, my = float(w @ p[0]), float(w @ p[1])
+        dot = functools.partial(np.einsum, "i,i->")  # not np.dot: OpenBLAS's threads change the last digits
+        mx, my = float(dot(w, p[0])), float(dot(w, p[1]))
         spread = self.cfg.filter.ess_floor_spread
-        if float(w @ ((p[0] - mx) ** 2 + (p[1] - my) ** 2)) >= spread * spread:
+        if float(dot(w, (p[0] - mx) ** 2 + (p[1] - my) ** 2)) >= spread * spread:
             return True
-        r = math.hypot(float(w @ np.cos(p[2])), float(w @ np.sin(p[2])))  # the mean resultant length
+        r = math.hypot(float(dot(w, np.cos(p[2]))), float(dot(w, np.sin(p[2]))))  # the mean resultant length
         return r <= math.exp(-0.5 * spread * spread)  # circular std sqrt(-2 ln r) >= spread
 
     def protect(self, info: StepInfo) -> None:
