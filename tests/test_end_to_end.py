@@ -465,9 +465,9 @@ def test_a_rough_start_pose_is_corrected_at_once_with_the_initial_std_it_deserve
     # A start pose 0.7 m and 0.3 rad off (a pose clicked on a map), office world seed 103: the default's initial cloud
     # (std 0.1 m, 0.1 rad) holds no particle near the truth and follows a wrong pose for seconds (measured: max
     # 1.55 m, within 0.3 m after 9.0 s, seed 1); `--initial-std 0.3 0.3 0.2` covers it and is within 0.3 m at the
-    # first scan (measured: max 0.110 m). Bounds: 1.0 m and 0.2 m, each far from the other run's figure. Both without
-    # the ESS floor (filter.ess_floor 0), as measured: the floor's tempered scans follow the wrong pose less far
-    # (max 0.99 m), and the narrow run would no longer tell the two apart.
+    # first scan (measured: max 0.110 m). Bounds: 1.0 m and 0.2 m, each far from the other run's figure. The ESS floor
+    # is pinned off (filter.ess_floor 0, the default), as measured: with it (0.005) the narrow cloud's tempered scans
+    # follow the wrong pose less far (max 0.99 m), and the narrow run would no longer tell the two apart.
     from mcl.simulate import simulate
 
     w = tmp_path / "w"

@@ -48,9 +48,9 @@ def test_a_late_scan_stamp_at_the_junction_does_not_send_the_track_down_the_corr
     # The caps are tested with the book's noise (motion.noise_step 0), with which they were made: with the default's
     # 0.3 m the noise of these 1 m steps is narrower, and seed 2's cloud holds the turn with no lost call (the fault
     # mixture never opens); the bound is asserted for the default too (max 0.28 and 0.29 m, 2026-12-04). The caps'
-    # runs are without the ESS floor (filter.ess_floor 0), as made: with it (the default since the ninety-ninth
-    # session) and the book's noise, seed 1 went 12.8 m off (the floor tempered the window's scans on a cloud the
-    # fault component had spread 1-5 m, which kept it wide; README "Not met yet"), seed 2 0.27 m.
+    # runs pin the ESS floor off (filter.ess_floor 0, the default), as made: with it (0.005) and the book's noise,
+    # seed 1 went 12.8 m off (the floor tempered the window's scans on a cloud the fault component had spread 1-5 m,
+    # which kept it wide; README "A scan too sharp for the set"), seed 2 0.27 m.
     for seed, noise_step in ((1, 0.0), (2, 0.0), (1, 0.3), (2, 0.3)):
         cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
             f"map={CORRIDOR / 'map.yaml'}", f"log={log}", f"truth={CORRIDOR / 'truth.tum'}",
