@@ -48,7 +48,7 @@ from mcl.clusters import ClusterEstimate, cluster_estimate
 from mcl.config import Config
 from mcl.degenerate import EVENT_KINDS, InputGuard, ZeroWeights
 from mcl.deskew import SweepOrder
-from mcl.estimate import compose, estimate, inverse, wrap_angle
+from mcl.estimate import compose, estimate, inverse, moments, wrap_angle
 from mcl.kernels.clusters import cache_order
 from mcl.kernels.likelihood import refine_poses, refine_poses_serial
 from mcl.kernels.raycast import segments_blocked
@@ -57,7 +57,7 @@ from mcl.maps import byte_mask
 from mcl.motion import allowed_mask, allowed_masks, make_motion_model
 from mcl.parallel import choose
 from mcl.quality import Fit, ScanQuality
-from mcl.resampling import effective_sample_size, normalize_log_weights, resample
+from mcl.resampling import effective_sample_size, normalize_log_weights, resample, temper_to_ess
 from mcl.sensors import (BeamSkipping, UnmappedObjects, make_sensor_model, scored_view, sweep_of,
                          valid_returns)
 
@@ -1008,10 +1008,9 @@ class ParticleFilter:
 
     def _temper_to_floor(self, loglik: np.ndarray, info: StepInfo) -> None:
         """``filter.ess_floor``: this update's scan (``loglik``, already in the normalised weights) taken again times
-        a beta in [1/4096, 1] that leaves an effective sample size of ``ess_floor`` x N to ``FLOOR_SLACK`` times
-        that (regula falsi, Illinois variant, in log beta: a few evaluations); 0 (the weights before the scan) when
-        even 1/4096 leaves too few; nothing when the weights before the scan were below the floor already, or the
-        cloud is narrow (:meth:`_wide`).
+        the beta of :func:`mcl.resampling.temper_to_ess`, which leaves ``ess_floor`` x N effective particles to
+        ``FLOOR_SLACK`` times that (0, the weights before the scan, when even 1/4096 of it leaves too few); nothing
+        when the weights before the scan were below the floor already, or the cloud is narrow (:meth:`_wide`).
 
         A scan far sharper than the cloud's spread (beams a few cm sharp, scans seconds and a turn apart) hands the
         whole weight to one or two particles, and the resample that follows keeps copies of one pose: on
@@ -1023,54 +1022,12 @@ class ParticleFilter:
         fin = np.isfinite(loglik)
         part = np.where(fin, loglik, 0.0)
         prior = np.where(fin, self.logw - part, -np.inf)  # the weights before the scan (a -inf stays weight zero)
-        log_floor = math.log(floor)
-
-        def excess(beta: float) -> float:  # log ESS(beta) - log floor
-            x = prior + beta * part
-            m = float(x.max())
-            if not math.isfinite(m):
-                return -math.inf
-            e = np.exp(x - m)
-            s = float(np.einsum("i->", e))
-            return 2.0 * math.log(s) - math.log(float(np.einsum("i,i->", e, e))) - log_floor
-
         w0, norm0 = normalize_log_weights(prior)
         if not math.isfinite(norm0) or effective_sample_size(w0) < floor or not self._wide(w0):
             return
-        # log ESS falls about linearly in log beta once the scan is sharper than the cloud (a Gaussian scan on a
-        # Gaussian cloud in d dimensions: ESS ~ beta^(-d/2)), so the root is sought in u = log beta, in
-        # [log 1/4096, 0]; the first try is that line's root for d = 3 from the full scan's ESS (info.ess)
-        u_min = math.log(1.0 / 4096.0)
-        u_lo, u_hi, f_hi = u_min, 0.0, math.log(info.ess) - log_floor
-        u = max(f_hi / 1.5, u_min)
-        f_lo = excess(math.exp(u))
-        if f_lo >= 0.0:
-            u_lo = u
-        else:
-            u_hi, f_hi = u, f_lo
-            f_lo = excess(1.0 / 4096.0) if u > u_min else f_lo
-            if not f_lo >= 0.0:  # even 1/4096 of the scan leaves too few: the weights before it
-                u_lo = -math.inf
-        side, at_lo = 0, f_lo  # at_lo: u_lo's own excess (f_lo is halved by the Illinois rule)
-        for _ in range(64):  # 4-8 evaluations as a rule, 14 the most a fuzz of 3,000 scans took
-            if not (math.isfinite(u_lo) and u_hi - u_lo > 1e-3 and at_lo > math.log(self.FLOOR_SLACK)):
-                break
-            u = (u_lo * f_hi - u_hi * f_lo) / (f_hi - f_lo)
-            u = min(max(u, u_lo + 1e-4), u_hi - 1e-4)
-            f = excess(math.exp(u))
-            if f >= 0.0:
-                u_lo, f_lo, at_lo = u, f, f
-                if side == 1:
-                    f_hi *= 0.5  # Illinois: an end kept twice running counts half
-                side = 1
-            else:
-                u_hi, f_hi = u, f
-                if side == -1:
-                    f_lo *= 0.5
-                side = -1
-        lo = math.exp(u_lo)
-        w, norm = normalize_log_weights(prior + lo * part)
-        self.logw = prior + lo * part - norm
+        beta = temper_to_ess(prior, part, floor, info.ess, self.FLOOR_SLACK)
+        w, norm = normalize_log_weights(prior + beta * part)
+        self.logw = prior + beta * part - norm
         self.weights = w
         info.ess = float(effective_sample_size(w))
         self.floor_tempered += 1
@@ -1079,22 +1036,17 @@ class ParticleFilter:
 
     def _wide(self, w: np.ndarray) -> bool:
         """Whether the cloud weighted by ``w`` (normalised) is as wide as ``filter.ess_floor_spread``: its position
-        spread (the weighted RMS distance from its mean, m) or its heading spread (the circular std, rad) at least
-        that.
+        spread (the weighted RMS distance from its mean, m) or its heading spread (the weighted RMS of the headings'
+        wrapped differences from their circular mean, rad) at least that (``mcl.estimate.moments``).
 
         A narrow cloud that a scan narrows to a particle or two loses nothing the next prediction does not spread
         again: people crowding a robot in clutter leave a few walls that pin the pose to 2 of 5,000 particles of a
         cloud 5 cm and 0.06 rad wide, and tempered that scan let the track drift and be called lost (9.4 m off). The
         scans the floor is for fall on a cloud a turn and seconds without a scan spread: 0.12-0.39 m and 0.11-0.31
         rad on intel_lab read 2 % long."""
-        p = self.particles
-        dot = functools.partial(np.einsum, "i,i->")  # not np.dot: OpenBLAS's threads change the last digits
-        mx, my = float(dot(w, p[0])), float(dot(w, p[1]))
+        _, cov = moments(self.particles, w)
         spread = self.cfg.filter.ess_floor_spread
-        if float(dot(w, (p[0] - mx) ** 2 + (p[1] - my) ** 2)) >= spread * spread:
-            return True
-        r = math.hypot(float(dot(w, np.cos(p[2]))), float(dot(w, np.sin(p[2]))))  # the mean resultant length
-        return r <= math.exp(-0.5 * spread * spread)  # circular std sqrt(-2 ln r) >= spread
+        return cov[0, 0] + cov[1, 1] >= spread * spread or cov[2, 2] >= spread * spread
 
     def protect(self, info: StepInfo) -> None:
         """Settle a protected re-seed (``filter.reseed_odds``, ``mcl.adaptive.ProtectedReseed``) once one side

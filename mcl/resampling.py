@@ -18,6 +18,8 @@ every weight is zero the weights are treated as equal.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mcl.kernels import resample as _k
@@ -72,6 +74,54 @@ def _unnormalised(lw: np.ndarray) -> np.ndarray:
     if m == -np.inf:
         return np.ones(lw.size)
     return np.exp(lw - m)
+
+
+def temper_to_ess(prior: np.ndarray, loglik: np.ndarray, ess_floor: float, full_ess: float,
+                  slack: float = 1.05) -> float:
+    """The factor beta for ``loglik`` (N,) on the log-weights ``prior`` (N,) that leaves an effective sample size of
+    ``ess_floor`` to ``slack`` times that: prior + beta loglik, beta in [1/4096, 1), or 0 when even 1/4096 leaves
+    too few. ``full_ess`` is the ESS with beta = 1 (below the floor; the caller has it); the prior's ESS must be at
+    or above it. ``loglik`` is finite wherever ``prior`` is.
+
+    log ESS falls about linearly in log beta once the scan is sharper than the cloud (a Gaussian scan on a Gaussian
+    cloud in d dimensions: ESS ~ beta^(-d/2)), so the root is sought in u = log beta by regula falsi (Illinois
+    variant), the first try that line's root for d = 3 through ``full_ess``: 4-8 ESS evaluations as a rule (14 the
+    most a fuzz of 3,000 scans took), capped at 64."""
+    log_floor = math.log(ess_floor)
+
+    def excess(beta: float) -> float:  # log ESS(beta) - log floor
+        e = _unnormalised(prior + beta * loglik)
+        return 2.0 * math.log(float(np.einsum("i->", e))) - math.log(float(np.einsum("i,i->", e, e))) - log_floor
+
+    u_min = math.log(1.0 / 4096.0)
+    u_lo, u_hi, f_hi = u_min, 0.0, math.log(full_ess) - log_floor
+    u = max(f_hi / 1.5, u_min)
+    f_lo = excess(math.exp(u))
+    if f_lo >= 0.0:
+        u_lo = u
+    else:
+        u_hi, f_hi = u, f_lo
+        f_lo = excess(1.0 / 4096.0) if u > u_min else f_lo
+        if not f_lo >= 0.0:  # even 1/4096 of the scan leaves too few: the weights before it
+            return 0.0
+    side, at_lo = 0, f_lo  # at_lo: u_lo's own excess (f_lo is halved by the Illinois rule)
+    for _ in range(64):
+        if not (u_hi - u_lo > 1e-3 and at_lo > math.log(slack)):
+            break
+        u = (u_lo * f_hi - u_hi * f_lo) / (f_hi - f_lo)
+        u = min(max(u, u_lo + 1e-4), u_hi - 1e-4)
+        f = excess(math.exp(u))
+        if f >= 0.0:
+            u_lo, f_lo, at_lo = u, f, f
+            if side == 1:
+                f_hi *= 0.5  # Illinois: an end kept twice running counts half
+            side = 1
+        else:
+            u_hi, f_hi = u, f
+            if side == -1:
+                f_lo *= 0.5
+            side = -1
+    return math.exp(u_lo)
 
 
 def resample(name: str, logw, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
