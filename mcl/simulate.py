@@ -543,6 +543,16 @@ def _odometry_omni(truth, pre, rng, alphas, scale, yaw_drift, odom_rate=_ODOM_RA
     return _odometry_chain(truth, pre, rng, odom_rate, step)
 
 
+# sim.yaml's units, stated at its top: its numbers carry none of their own.
+SIM_YAML_HEADER = (
+    "# mcl simulate: the world's parameters. Units: metres, seconds and radians throughout;\n"
+    "# poses are [x m, y m, theta rad] in the map's frame (odom_start_pose in the odometry's);\n"
+    "# laser.fov and laser.angle_min rad, robot.turn_rate rad/s, robot.speed m/s,\n"
+    "# odometry.yaw_drift_per_m rad/m, map_rotation rad;\n"
+    "# time windows are [start s, end s] on the log's clock (0 at the drive's start).\n"
+)
+
+
 def beam_angles(n_beams: int, fov: float) -> np.ndarray:
     """Beam i at -fov/2 + i*fov/(n-1), counter-clockwise from the robot's heading."""
     return -fov / 2 + np.arange(n_beams) * (fov / (n_beams - 1))
@@ -1160,7 +1170,7 @@ def simulate(outdir, *, kind: str = "office", seed: int = 0, duration: float = 6
     if depth:
         params["depth"] = {"folder": "depth", "frames": n_depth, "every_scans": int(depth_every),
                            "camera": cam.to_dict()}
-    atomic_write_text(out / "sim.yaml", yaml.safe_dump(params, sort_keys=False))
+    atomic_write_text(out / "sim.yaml", SIM_YAML_HEADER + yaml.safe_dump(params, sort_keys=False))
     return {"outdir": str(out), "scans": int(np.count_nonzero(kept)), "duration": float(t[-1]),
             "path_length": round(length, 3), "start_pose": _pose_list(start), "kidnap": kidnap}
 

@@ -152,8 +152,12 @@ def test_log_parses_and_matches_truth_timing(sim):
     # odometry frame starts at the origin; the truth does not
     np.testing.assert_allclose(log.odometry[0, 1:4], 0.0)
     np.testing.assert_allclose(s0.odom, 0.0)
-    params = yaml.safe_load((out / "sim.yaml").read_text())
+    text = (out / "sim.yaml").read_text()
+    params = yaml.safe_load(text)
     np.testing.assert_allclose(params["start_pose"], p[:, 0], atol=1e-6)
+    # the file states its units (the numbers carry none): the fov is radians, as the header says
+    assert text.startswith("# mcl simulate") and "laser.fov and laser.angle_min rad" in text.splitlines()[2]
+    assert params["laser"]["fov"] == pytest.approx(s0.angle_increment * (s0.ranges.size - 1))
     assert math.hypot(*params["start_pose"][:2]) > 1.0
     # scan pose = ODOM pose at the same timestamp (laser at the robot centre)
     for s in log.scans[::17]:
