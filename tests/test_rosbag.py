@@ -1378,12 +1378,17 @@ def test_bag_info_names_what_mcl_would_use(scans, tmp_path, capsys):
     assert info["frames"] == {"/tf": ["odom -> base_link"], "/tf_static": ["base_link -> laser"]}
     assert info["mcl_uses"]["odometry"] == "/tf odom -> base_link"
     assert info["mcl_uses"]["laser_pose"]["/scan"] == [0.1, 0.0, 0.0]
+    # the beam geometry a run reads (a generated FLASER world: 181 beams over 180 degrees; its no-return reading)
+    beams = info["mcl_uses"]["beams"]["/scan"]
+    assert (beams["beams"], beams["fov_deg"], beams["angle_min_deg"]) == (181, 180.0, -90.0)
+    assert beams["scans"] == len(scans) and beams["max_range"] == pytest.approx(scans[0].max_range)
     assert info["mcl_uses"]["scan_span_s"] == [scans[0].t, scans[-1].t] == info["mcl_uses"]["odometry_span_s"]
     assert info["mcl_uses"]["warnings"] == []
     assert info["mcl_uses"]["references"] == []
     assert main(["bag", "info", str(bag)]) == 0
     text = capsys.readouterr().out
     assert "mcl would use:" in text and "/tf odom -> base_link" in text
+    assert f"beams:        /scan: 181 beams over 180 degrees from -90, no return at {scans[0].max_range:g} m" in text
     assert "reference:    no pose topic besides the odometry (--truth T.tum scores against a file)" in text
     assert f"stamps:       scans {scans[0].t:.3f}..{scans[-1].t:.3f} s, odometry {scans[0].t:.3f}..{scans[-1].t:.3f} s" in text
 

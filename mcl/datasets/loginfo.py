@@ -111,6 +111,36 @@ def _round(v, nd: int = 6):
     return None if v is None else round(float(v), nd) + 0.0  # no -0.0
 
 
+def laser_geometry(s, count: int, beams: list[int]) -> dict:
+    """One laser stream's geometry for ``log info`` and ``bag info``, from its first scan ``s``: ``count`` scans of
+    ``beams`` (the beam counts seen, sorted) beams, the field of view and first beam's bearing in degrees, the
+    reading that means no return (m) and the laser's pose on the robot."""
+    off = s.laser_offset
+    return {
+        "scans": int(count),
+        "beams": beams if len(beams) > 1 else beams[0],
+        "fov_deg": round(math.degrees(float(s.angle_increment) * max(int(s.ranges.size) - 1, 0)), 3),
+        "angle_min_deg": round(math.degrees(float(s.angle_min)), 3),
+        "max_range": _round(s.max_range, 3),
+        "laser_pose": None if off is None else [_round(v) for v in off],
+    }
+
+
+def beams_text(d: dict) -> str:
+    """``laser_geometry``'s dict ``d`` as "181 beams over 180 degrees from -90, no return at 80 m and beyond"."""
+    # the scans' max_range is where a reading means no return (the log's PARAM, a line's field, a LaserScan's
+    # range_max, or the threshold found under a no-return marker: 49.5 m under 50.00 m), not the laser's reach
+    rmax = "none given (sensor.range_max)" if d["max_range"] is None else f"at {d['max_range']:g} m and beyond"
+    beams = d["beams"] if isinstance(d["beams"], int) else f"{d['beams'][0]}..{d['beams'][-1]}"
+    return f"{beams} beams over {d['fov_deg']:g} degrees from {d['angle_min_deg']:g}, no return {rmax}"
+
+
+def laser_line(kind: str, d: dict) -> str:
+    """``laser_geometry``'s dict ``d`` of stream ``kind`` as one line."""
+    pose = "not given (sensor.laser_pose)" if d["laser_pose"] is None else str(d["laser_pose"])
+    return f"laser {kind}: {d['scans']} scans, {beams_text(d)}, laser pose {pose}"
+
+
 def log_info(path, laser: str = "auto", sensor=None) -> dict:
     """A CARMEN log's messages (each type's count, the skipped ones too), its time span, each laser stream (scans,
     beams, field of view, maximum range, mounting), and what a run with ``laser`` (the config key) and ``sensor``
@@ -128,17 +158,7 @@ def log_info(path, laser: str = "auto", sensor=None) -> dict:
     lasers = {}
     for kind in kinds:
         scans = log.scans_of(kind)
-        beams = sorted({int(s.ranges.size) for s in scans})
-        s = scans[0]
-        off = s.laser_offset
-        lasers[kind] = {
-            "scans": len(scans),
-            "beams": beams if len(beams) > 1 else beams[0],
-            "fov_deg": round(math.degrees(float(s.angle_increment) * max(int(s.ranges.size) - 1, 0)), 3),
-            "angle_min_deg": round(math.degrees(float(s.angle_min)), 3),
-            "max_range": _round(s.max_range, 3),
-            "laser_pose": None if off is None else [_round(v) for v in off],
-        }
+        lasers[kind] = laser_geometry(scans[0], len(scans), sorted({int(s.ranges.size) for s in scans}))
     info = {"path": str(path), "messages": messages,
             "duration_s": float(max(stamps) - min(stamps)) if stamps else 0.0,
             "time_span_s": [_round(min(stamps)), _round(max(stamps))] if stamps else None,
@@ -169,14 +189,7 @@ def format_log_info(info: dict) -> str:
     lines.append("messages:")
     w = max((len(k) for k in info["messages"]), default=0)
     lines += [f"  {k:<{w}}  {v:>8}" for k, v in info["messages"].items()]
-    for kind, d in info["lasers"].items():
-        # the scans' max_range is where a reading means no return (the log's PARAM, a line's field, or the
-        # threshold found under a no-return marker: 49.5 m under 50.00 m), not the laser's reach
-        rmax = "none given (sensor.range_max)" if d["max_range"] is None else f"at {d['max_range']:g} m and beyond"
-        pose = "not given (sensor.laser_pose)" if d["laser_pose"] is None else str(d["laser_pose"])
-        beams = d["beams"] if isinstance(d["beams"], int) else f"{d['beams'][0]}..{d['beams'][-1]}"
-        lines.append(f"laser {kind}: {d['scans']} scans, {beams} beams over {d['fov_deg']:g} degrees from "
-                     f"{d['angle_min_deg']:g}, no return {rmax}, laser pose {pose}")
+    lines += [laser_line(kind, d) for kind, d in info["lasers"].items()]
     u = info["mcl_uses"]
     lines.append("mcl would use:")
     if "error" in u:

@@ -58,7 +58,7 @@ import numpy as np
 import yaml
 
 from mcl.datasets.carmen import Scan
-from mcl.datasets.loginfo import check_lines, scan_checks
+from mcl.datasets.loginfo import beams_text, check_lines, laser_geometry, scan_checks
 from mcl.errors import DataError
 
 __all__ = ["BAG_SUFFIXES", "is_bag", "bag_kind", "open_bag", "BagSource", "BagScans", "bag_info", "format_info",
@@ -1352,6 +1352,7 @@ def bag_info(path, topics=None, frames=None, sensor=None) -> dict:
             "warnings": src.warnings + stamp_warnings,
             "laser_pose": {t: (None if o is None else [round(float(v), 6) for v in o])
                            for t, o in src.laser_offsets.items()},
+            "beams": _beam_geometry(src, info["topics"]),
             "sweep_s": {t: round(float(v), 6) for t, v in src.sweeps.items()},
             "map": "from the bag" if src.grid is not None else "needs --map",
             "initial_pose": (None if src.initial_pose is None
@@ -1363,6 +1364,19 @@ def bag_info(path, topics=None, frames=None, sensor=None) -> dict:
     except DataError as e:
         info["mcl_uses"] = {"error": str(e)}
     return info
+
+
+def _beam_geometry(src: "BagSource", topics: dict) -> dict:
+    """{scan topic: ``mcl.datasets.loginfo.laser_geometry``} from each topic's first scan as a run reads it (a
+    LaserScan's beams, range_max and mounting; a point cloud's beams as binned), the topic's message count beside
+    it. Reads the bag only up to the last topic's first scan."""
+    first: dict = {}
+    for s in src.scans:
+        first.setdefault(s.kind, s)
+        if len(first) == len(src.scans.topics):
+            break
+    return {t: laser_geometry(s, topics.get(t, {}).get("count", 0), [int(s.ranges.size)])
+            for t, s in sorted(first.items(), key=lambda kv: src.scans.topics.index(kv[0]))}
 
 
 def _scan_checks(src: "BagSource", sensor) -> dict:
@@ -1388,6 +1402,8 @@ def format_info(info: dict) -> str:
         lines.append(f"  odometry:     {u['odometry']}")
         (a, b), (c, d) = u["scan_span_s"], u["odometry_span_s"]
         lines.append(f"  stamps:       scans {a:.3f}..{b:.3f} s, odometry {c:.3f}..{d:.3f} s")
+        for t, d in u.get("beams", {}).items():
+            lines.append(f"  beams:        {t}: {beams_text(d)}")
         for t, p in u["laser_pose"].items():
             lines.append(f"  laser pose:   {t}: {p if p is not None else 'not in /tf_static or /tf (sensor.laser_pose)'}")
         for t, v in u.get("sweep_s", {}).items():
