@@ -400,10 +400,11 @@ def _fit_odometry_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="vari
                 f"({r[0]:.4f}, {r[1]:.4f}, {r[2]:.4f}) ({bad.size} such pairs); fit with motion.noise=normal")
         while nll(z0) >= 1e300 and z0[:4].max() < hi:
             z0[:4] += math.log(2.0)
-    best, z_best, converged, loose, notes = _maximise(lls, nll, z0, 4, [(-12.0, 12.0)], ALPHA_NAMES)
+    best, z_best, converged, loose, notes, se = _maximise(lls, nll, z0, 4, [(-12.0, 12.0)], ALPHA_NAMES)
     alphas, p = unpack(z_best)
     alphas = np.clip(alphas, *ALPHA_BOUNDS)  # exp(log(100)) is 100.00000000000004
-    return {"alphas": [float(a) for a in alphas], "p_turn": float(p), "log_likelihood": float(-best.fun * m),
+    return {"alphas": [float(a) for a in alphas], "alphas_se": se, "p_turn": float(p),
+            "log_likelihood": float(-best.fun * m),
             "pairs": int(m), "skipped": int(np.count_nonzero(still)), "converged": converged,
             "message": str(best.message), "undetermined": [ALPHA_NAMES[k] for k in loose], "noise_form": noise_form,
             "noise": noise, "noise_step": float(noise_step), "warnings": notes,
@@ -446,7 +447,53 @@ def _maximise(lls, nll, z0, n_alpha: int, extra_bounds: list, names) -> tuple:
                      f"as the motion itself): check that the reference is this log's, in step with its odometry")
     for n in notes:
         warnings.warn(n, MclWarning, stacklevel=3)
-    return best, z_best, bool((r.success or r0.success) and best.fun < 1e300), loose, notes
+    se = _alpha_se(lls, z_best, n_alpha, (lo, hi), extra_bounds, loose)
+    return best, z_best, bool((r.success or r0.success) and best.fun < 1e300), loose, notes, se
+
+
+SE_STEP = 1e-3  # the finite-difference step of the Hessian, in log-alpha (a 0.1 % change of an alpha)
+
+
+def _alpha_se(lls, z, n_alpha: int, alpha_bounds, extra_bounds: list, loose) -> list:
+    """Standard errors of the fitted alphas (m each, None where not given): the inverse of the observed information,
+    the Hessian of the negative log-likelihood ``-sum(lls(z))`` at the fit ``z`` by central differences in the
+    parameters the fit moves (log-alphas, then the extra ones). An alpha the log does not determine (``loose``) or
+    that sits on a bound has none, and is held fixed; a Hessian that is not positive definite (a flat or bounded
+    likelihood, triangular noise at its support's edge) gives none at all. By the delta method, the SE of alpha is
+    alpha times the SE of its log. The pairs are taken as independent (the model's noise is drawn per step); a
+    reference whose own errors are correlated along the log makes these too small."""
+    lo, hi = alpha_bounds
+    bounds = [(lo, hi)] * n_alpha + list(extra_bounds)
+    free = [k for k in range(z.size) if k not in loose
+            and bounds[k][0] + SE_STEP < z[k] < bounds[k][1] - SE_STEP]
+    out = [None] * n_alpha
+    if not free:
+        return out
+    h = SE_STEP
+
+    def f(dz):
+        zz = z.copy()
+        zz[free] += dz
+        return -float(np.sum(lls(zz)))
+
+    n = len(free)
+    f0, e = f(np.zeros(n)), np.eye(n) * h
+    hess = np.empty((n, n))
+    for i in range(n):
+        hess[i, i] = (f(e[i]) - 2.0 * f0 + f(-e[i])) / (h * h)
+        for j in range(i):
+            hess[i, j] = hess[j, i] = (f(e[i] + e[j]) - f(e[i] - e[j]) - f(e[j] - e[i]) + f(-e[i] - e[j])) / (4 * h * h)
+    if not np.isfinite(hess).all():
+        return out
+    try:
+        cov = np.linalg.inv(np.linalg.cholesky(hess))  # positive definite, or no standard errors
+    except np.linalg.LinAlgError:
+        return out
+    var = np.einsum("ij,ij->j", cov, cov)  # diag(H^-1) = column sums of squares of L^-1
+    for i, k in enumerate(free):
+        if k < n_alpha:
+            out[k] = float(math.exp(z[k]) * math.sqrt(var[i]))
+    return out
 
 
 def omni_pair_log_likelihoods(alphas, odom_prev, odom_now, x_prev, x_now, noise_form="variance", noise="normal",
@@ -485,10 +532,11 @@ def fit_omni_alphas(odom_prev, odom_now, x_prev, x_now, *, noise_form="variance"
         v = -float(np.sum(lls(z))) / m
         return v if np.isfinite(v) else 1e300
 
-    best, z_best, converged, loose, notes = _maximise(lls, nll, np.log(np.asarray(x0, dtype=np.float64)), 5, [],
-                                                      ALPHA_NAMES)
+    best, z_best, converged, loose, notes, se = _maximise(lls, nll, np.log(np.asarray(x0, dtype=np.float64)), 5,
+                                                          [], ALPHA_NAMES)
     alphas = np.clip(np.exp(z_best), *ALPHA_BOUNDS)
-    return {"alphas": [float(a) for a in alphas], "log_likelihood": float(-best.fun * m), "pairs": int(m),
+    return {"alphas": [float(a) for a in alphas], "alphas_se": se, "log_likelihood": float(-best.fun * m),
+            "pairs": int(m),
             "skipped": int(np.count_nonzero(still)), "converged": converged, "message": str(best.message),
             "undetermined": [ALPHA_NAMES[k] for k in loose], "noise_form": noise_form, "noise": noise,
             "noise_step": float(noise_step), "model": "omni", "warnings": notes}
@@ -513,7 +561,11 @@ def format_yaml(result: dict, noise_form: str, noise: str, source: str = "") -> 
         name = ALPHA_NAMES[k]
         if name in und:
             return f"  # {name}: not determined by this log (the fit drifted to {a[k]:.3g}); keep your own\n"
-        return f"  {name}: {a[k]:.6g}{'  # implausible (> 1)' if a[k] > ALPHA_PLAUSIBLE else ''}\n"
+        notes = ["implausible (> 1)"] if a[k] > ALPHA_PLAUSIBLE else []
+        se = (result.get("alphas_se") or [None] * len(a))[k]
+        if se is not None:  # the standard error, and as a share of the alpha
+            notes.append(f"+- {se:.2g} ({100.0 * se / a[k]:.0f} %)" if a[k] > 0 else f"+- {se:.2g}")
+        return f"  {name}: {a[k]:.6g}{'  # ' + '; '.join(notes) if notes else ''}\n"
     # model: odometry -- the alphas are the odometry model's (a velocity config's alpha1..4 mean something else)
     body = (f"motion:\n  model: {'omni' if omni else 'odometry'}\n  noise_form: {noise_form}\n"
             f"  noise_step: {result.get('noise_step', 0.0):g}\n  noise: {noise}\n")

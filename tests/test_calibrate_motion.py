@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import yaml
 
-from mcl.calibrate_motion import fit_odometry_alphas, pairs_from_log
+from mcl.calibrate_motion import fit_odometry_alphas, format_yaml, pairs_from_log
 from mcl.cli import main
 from mcl.config import load_config
 
@@ -74,6 +74,32 @@ def test_cli_prints_yaml_ready_to_paste(sim, capsys, tmp_path):
     cfg = load_config(p)
     got = [cfg.motion.alpha1, cfg.motion.alpha2, cfg.motion.alpha3, cfg.motion.alpha4]
     np.testing.assert_allclose(got, ALPHAS, rtol=0.30)
+
+
+def test_the_standard_errors_say_how_far_the_fit_is_from_the_truth():
+    # Pairs drawn from the model itself with known alphas A: the fitted alphas' errors over their standard errors
+    # are z-scores, whose mean square is 1 when the SEs are right (a 3x too small SE gives 9, 3x too large 0.11).
+    # Tolerance: 12 seeds x 4 alphas = 48 z-scores; their mean square has a spread of about sqrt(2/48) = 0.2, so
+    # 0.5-2 is 2.5 spreads either side (measured: 1.0-1.2 per alpha over 20 seeds).
+    zs = []
+    for seed in range(1, 13):
+        fit = fit_odometry_alphas(*_model_pairs(seed, m=1000))
+        zs.append((np.array(fit["alphas"]) - np.array(A)) / np.array(fit["alphas_se"], dtype=float))
+    assert 0.5 < float(np.mean(np.square(zs))) < 2.0
+    # four times the pairs halve them (1/sqrt(m)); 0.4-0.6 leaves room for one seed's sampling
+    few, many = (np.array(fit_odometry_alphas(*_model_pairs(1, m=m))["alphas_se"], dtype=float) for m in (1000, 4000))
+    assert np.all((many / few > 0.4) & (many / few < 0.6))
+
+
+def test_an_undetermined_alpha_has_no_standard_error():
+    # straight driving: no turn, so alpha1 and alpha4 are not determined; they get no SE, the others one
+    fit = fit_odometry_alphas(*_straight_pairs(1))
+    se = dict(zip(("alpha1", "alpha2", "alpha3", "alpha4"), fit["alphas_se"]))
+    assert set(fit["undetermined"]) >= {"alpha1", "alpha4"}
+    assert all(se[k] is None for k in fit["undetermined"])
+    assert se["alpha3"] is not None and 0 < se["alpha3"] < fit["alphas"][2]
+    block = format_yaml(fit, "variance", "normal")
+    assert f"alpha3: {fit['alphas'][2]:.6g}  # +- {se['alpha3']:.2g} (" in block
 
 
 def test_too_few_pairs_is_a_clear_error(tmp_path):
