@@ -439,7 +439,8 @@ def _add_calibrate(sub) -> None:
         description=(
             "Fit alpha1..alpha4 of the odometry motion model by maximum likelihood of the closed-form density over "
             "consecutive reference poses, with the log's odometry at the reference timestamps. The alphas describe "
-            "the odometry error over the reference spacing. Prints a motion: block ready to paste into a config."
+            "the odometry error over the reference spacing. Prints a motion: block ready to paste into a config, "
+            "each alpha with its standard error as a comment."
         ),
         epilog="example:\n  mcl calibrate motion --log data/demo/log.clf --truth data/demo/truth.tum",
     )
