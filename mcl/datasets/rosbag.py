@@ -1402,8 +1402,8 @@ def format_info(info: dict) -> str:
         lines.append(f"  odometry:     {u['odometry']}")
         (a, b), (c, d) = u["scan_span_s"], u["odometry_span_s"]
         lines.append(f"  stamps:       scans {a:.3f}..{b:.3f} s, odometry {c:.3f}..{d:.3f} s")
-        for t, d in u.get("beams", {}).items():
-            lines.append(f"  beams:        {t}: {beams_text(d)}")
+        for t, g in u.get("beams", {}).items():
+            lines.append(f"  beams:        {t}: {beams_text(g)}")
         for t, p in u["laser_pose"].items():
             lines.append(f"  laser pose:   {t}: {p if p is not None else 'not in /tf_static or /tf (sensor.laser_pose)'}")
         for t, v in u.get("sweep_s", {}).items():
