@@ -64,7 +64,9 @@ step of ``suites/synthetic.yaml``'s worlds is taken, one of belgioioso's: the od
 the reference -0.065). A laser at a ROS robot's rate (10-40 Hz) cuts a slip into steps of a few hundredths of a
 radian each, under the bounds: the check then spans the scans of about ``SLIP_SPAN`` s (2 at 10 Hz, 8 at 40 Hz), holds
 them back until it is done, and a slip's scans take the poses matched from the span's first (``suites/heldout24.yaml``:
-at 40 Hz no step was taken before). At 5 Hz and slower a span is one step, as before.
+at 40 Hz no step was taken before). At 5 Hz and slower a span is one step, as before. A match that corrects the
+turn by under ``SLIP_OFF`` and changes the odometry's travel by more than a slipping wheel could for that turn
+(``SLIP_LEVER``) slid along the scene, and the step is left as it came.
 """
 
 from __future__ import annotations
@@ -120,6 +122,16 @@ SLIP_OFF = 0.15  # rad
 SLIP_AFTER = 1.0  # s
 SLIP_TURN_AFTER = 0.05  # rad
 SLIP_OFF_AFTER = 0.05  # rad
+# A wheel that slips by s metres turns a differential drive's odometry by s / b (b its wheel base) and moves it by
+# s / 2: a slip's matched step that corrects the turn by less than SLIP_OFF (the steps the finer bound after a slip
+# lets through: noise-sized for sloppy odometry) may change the odometry's travel by at most SLIP_LEVER times that
+# turn (half of a 1 m wheel base), plus SLIP_TRAVEL for the matching's own error. A match that changes the travel
+# more has slid along a corridor: odometry with alphas 0.15 (heldout6's large-sloppy-long-odometry-h13) turned
+# 0.06-0.09 rad from its scans step after step, and the matches, each guessed from the last, drove 0.21-0.29 m a step
+# where the robot drove 0.16 (0.72-0.83 m off, the baseline 0.25 m). A larger correction is a slip's whatever the
+# travel: a 40 Hz slip's last span corrected 0.31 rad and 0.22 m, and without it the track ended 0.72 m off.
+SLIP_LEVER = 0.5  # m per rad
+SLIP_TRAVEL = 0.03  # m
 SLIP_SHARE = 0.5
 SLIP_PAIRED = 0.5
 SLIP_FIT = 0.7
@@ -322,7 +334,7 @@ class StallFill:
                 (SLIP_TURN_AFTER, SLIP_OFF_AFTER) if after else (SLIP_TURN, SLIP_OFF)))
         chain = [start, *(h for h in span if h.kind == s.kind)]
         rows = self._match(chain, entry, own) if self._slipped[key] else None
-        if rows is not None and _too_far(rows[-1, 1:4], own, s.t - start.t):
+        if rows is not None and (_too_far(rows[-1, 1:4], own, s.t - start.t) or _slid(rows[-1, 1:4], own)):
             rows = None  # a wrong match, not a slip
         if rows is None or (not after and _agree(rows[-1, 1:4], own)):
             yield from (self._moved(h, fix) for h in span)
@@ -446,6 +458,17 @@ def _too_far(matched, own, dt: float) -> bool:
     ``dt`` s (``JUMP_V``): a wrong match (a 90-degree turn on the spot was matched 1.22 m away in 0.2 s, and the
     estimate followed it 1.4-2.7 m off, where the plain baseline kept 0.20 m)."""
     return math.hypot(matched[0], matched[1]) > math.hypot(own[0], own[1]) + JUMP_V * dt
+
+
+def _slid(matched, own) -> bool:
+    """A slip's matched step ``matched`` corrects the turn of the odometry's ``own`` by under ``SLIP_OFF`` (a step the
+    finer bound after a slip let through, or one near the bound) and changes its travel by more than a slipping wheel
+    could for that turn (``SLIP_LEVER``, ``SLIP_TRAVEL``): the match slid along the scene."""
+    turn = abs(float(wrap_angle(own[2] - matched[2])))
+    if turn >= SLIP_OFF:  # a turn corrected by this much is a slip's, whatever the match made of the travel
+        return False
+    travel = abs(math.hypot(matched[0], matched[1]) - math.hypot(own[0], own[1]))
+    return travel > SLIP_LEVER * turn + SLIP_TRAVEL
 
 
 def _slipped(a, b, step, mount, turn_min: float = SLIP_TURN, off: float = SLIP_OFF) -> bool:
