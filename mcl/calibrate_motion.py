@@ -455,9 +455,9 @@ SE_STEP = 1e-3  # the finite-difference step of the Hessian, in log-alpha (a 0.1
 
 
 def _alpha_se(lls, z, n_alpha: int, alpha_bounds, extra_bounds: list, loose) -> list:
-    """Standard errors of the fitted alphas (m each, None where not given): the inverse of the observed information,
-    the Hessian of the negative log-likelihood ``-sum(lls(z))`` at the fit ``z`` by central differences in the
-    parameters the fit moves (log-alphas, then the extra ones). An alpha the log does not determine (``loose``) or
+    """Standard errors of the fitted alphas (a list of ``n_alpha``, None where not given): the inverse of the observed
+    information, the Hessian of the negative log-likelihood ``-sum(lls(z))`` at the fit ``z`` by central differences
+    in the parameters the fit moves (log-alphas, then the extra ones). An alpha the log does not determine (``loose``) or
     that sits on a bound has none, and is held fixed; a Hessian that is not positive definite (a flat or bounded
     likelihood, triangular noise at its support's edge) gives none at all. By the delta method, the SE of alpha is
     alpha times the SE of its log. The pairs are taken as independent (the model's noise is drawn per step); a
@@ -486,10 +486,10 @@ def _alpha_se(lls, z, n_alpha: int, alpha_bounds, extra_bounds: list, loose) -> 
     if not np.isfinite(hess).all():
         return out
     try:
-        cov = np.linalg.inv(np.linalg.cholesky(hess))  # positive definite, or no standard errors
+        l_inv = np.linalg.inv(np.linalg.cholesky(hess))  # H = L L^T: positive definite, or no standard errors
     except np.linalg.LinAlgError:
         return out
-    var = np.einsum("ij,ij->j", cov, cov)  # diag(H^-1) = column sums of squares of L^-1
+    var = np.einsum("ij,ij->j", l_inv, l_inv)  # diag(H^-1) = column sums of squares of L^-1
     for i, k in enumerate(free):
         if k < n_alpha:
             out[k] = float(math.exp(z[k]) * math.sqrt(var[i]))
