@@ -33,6 +33,7 @@ import numpy as np
 from mcl.config import default_config, load_config
 from mcl.errors import MclError
 from mcl.estimate import compose, inverse, wrap_angle
+from mcl.evaluate import interpolate_poses
 from mcl.odomcheck import run_mount
 from mcl.odomstall import StallFill
 from mcl.runner import _open_source
@@ -41,14 +42,20 @@ from mcl.trajectory import read_tum
 
 BETTER_M = 0.05  # m: a fill nearer the reference than the odometry by more than this is better (farther: worse)
 BETTER_A = 0.05  # rad: ... in heading
-STAMP_TOL = 0.05  # s: a window's end takes the reference pose this near it in time, else the window is left out
+SPACING = 1.5  # a window's end between two reference poses this many times their median spacing apart (or less)
+# takes the pose interpolated between them; across a longer gap of the reference the window is left out
 CAUSES = ("hold", "hold+jump", "jump", "slip")
 
 
 def _pose_at(t_ref: np.ndarray, poses: np.ndarray, t: float) -> np.ndarray | None:
-    """The reference pose (3,) nearest ``t``, or None when none lies within ``STAMP_TOL``."""
-    k = int(np.argmin(np.abs(t_ref - t)))
-    return poses[:, k] if abs(t_ref[k] - t) <= STAMP_TOL else None
+    """The reference pose (3,) at ``t``, interpolated between the two around it, or None outside the reference or
+    in a gap of it (the two over ``SPACING`` times its median spacing apart)."""
+    k = int(np.searchsorted(t_ref, t))
+    if k < len(t_ref) and t_ref[k] == t:
+        return poses[:, k]
+    if k == 0 or k == len(t_ref) or t_ref[k] - t_ref[k - 1] > SPACING * float(np.median(np.diff(t_ref))):
+        return None
+    return interpolate_poses(t_ref, poses, np.array([t]))[:, 0]
 
 
 def windows(cfg, truth: str) -> list[dict]:
