@@ -457,10 +457,10 @@ SE_STEP = 1e-3  # the finite-difference step of the Hessian, in log-alpha (a 0.1
 def _alpha_se(lls, z, n_alpha: int, alpha_bounds, extra_bounds: list, loose) -> list:
     """Standard errors of the fitted alphas (a list of ``n_alpha``, None where not given): the inverse of the observed
     information, the Hessian of the negative log-likelihood ``-sum(lls(z))`` at the fit ``z`` by central differences
-    in the parameters the fit moves (log-alphas, then the extra ones). An alpha the log does not determine (``loose``) or
-    that sits on a bound has none, and is held fixed; a Hessian that is not positive definite (a flat or bounded
-    likelihood, triangular noise at its support's edge) gives none at all. By the delta method, the SE of alpha is
-    alpha times the SE of its log. The pairs are taken as independent (the model's noise is drawn per step); a
+    in the parameters the fit moves (log-alphas, then the extra ones). An alpha the log does not determine
+    (``loose``) or that sits on a bound has none, and is held fixed; a Hessian that is not positive definite (a flat
+    or bounded likelihood, triangular noise at its support's edge) gives none at all. By the delta method, the SE of
+    alpha is alpha times the SE of its log. The pairs are taken as independent (the model's noise is drawn per step); a
     reference whose own errors are correlated along the log makes these too small."""
     lo, hi = alpha_bounds
     bounds = [(lo, hi)] * n_alpha + list(extra_bounds)

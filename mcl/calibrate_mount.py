@@ -15,8 +15,9 @@ bias: along a corridor the matches can read x or y 0.2-0.45 m off, 5-12 standard
 "Hundredth session").
 
 Measured (2026-12-01, 60 pairs each; the standard errors of 2026-12-07): the demo (laser at the centre) reads
-(-0.002, 0.016) m and 0.4 degrees, +- 0.011 and 0.016 m and 0.46 degrees; a generated office drive whose laser is 0.2 m ahead, told it is at the centre, (0.169,
--0.047) m +- 0.010 (with the robust sigma's standard errors, as the two halls below). The shared CARMEN logs, whose lines put the laser at the robot's centre, read -0.05..0.10 m ahead
+(-0.002, 0.016) m and 0.4 degrees, +- 0.011 and 0.016 m and 0.46 degrees; a generated office drive whose laser is
+0.2 m ahead, told it is at the centre, (0.169, -0.047) m +- 0.010 (with the robust sigma's standard errors, as the
+two halls below). The shared CARMEN logs, whose lines put the laser at the robot's centre, read -0.05..0.10 m ahead
 (intel_lab 0.095 +- 0.001) and within 1.7 degrees: where their odometry's reference point lies is not known, so a
 run does not move the laser by this; it fits the yaw alone (``sensor.mount_yaw``). In open halls and along
 corridors the matches are unsure and x and y can be far off: a generated hall whose laser sits at the centre read

@@ -37,7 +37,7 @@ from mcl.evaluate import interpolate_poses
 from mcl.odomcheck import run_mount
 from mcl.odomstall import StallFill
 from mcl.runner import _open_source
-from mcl.suite import _world_dir, load_suite, make_world
+from mcl.suite import _sim_kwargs, _world_dir, load_suite, make_world
 from mcl.trajectory import read_tum
 
 BETTER_M = 0.05  # m: a fill nearer the reference than the odometry by more than this is better (farther: worse)
@@ -129,7 +129,8 @@ def main(argv=None) -> int:
                 if a.cache is None:
                     print(f"{d.name}: a generated world (give --cache)", file=sys.stderr)
                     continue
-                world = Path(make_world(str(_world_dir(Path(a.cache), d, False)), dict(d.simulate)))
+                # the tracking world, as mcl eval makes and caches it (a kidnap_at of the suite's left out)
+                world = Path(make_world(str(_world_dir(Path(a.cache), d, False)), _sim_kwargs(d, False)))
                 data = [f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}"]
                 truth = str(world / "truth.tum")
             elif d.truth is not None and (d.log is not None or d.bag is not None):
