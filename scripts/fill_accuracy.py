@@ -47,13 +47,13 @@ SPACING = 1.5  # a window's end between two reference poses this many times thei
 CAUSES = ("hold", "hold+jump", "jump", "slip")
 
 
-def _pose_at(t_ref: np.ndarray, poses: np.ndarray, t: float) -> np.ndarray | None:
+def _pose_at(t_ref: np.ndarray, poses: np.ndarray, t: float, gap: float) -> np.ndarray | None:
     """The reference pose (3,) at ``t``, interpolated between the two around it, or None outside the reference or
-    in a gap of it (the two over ``SPACING`` times its median spacing apart)."""
+    in a gap of it (the two over ``gap`` s apart)."""
     k = int(np.searchsorted(t_ref, t))
     if k < len(t_ref) and t_ref[k] == t:
         return poses[:, k]
-    if k == 0 or k == len(t_ref) or t_ref[k] - t_ref[k - 1] > SPACING * float(np.median(np.diff(t_ref))):
+    if k == 0 or k == len(t_ref) or t_ref[k] - t_ref[k - 1] > gap:
         return None
     return interpolate_poses(t_ref, poses, np.array([t]))[:, 0]
 
@@ -70,11 +70,12 @@ def windows(cfg, truth: str) -> list[dict]:
     raw = {(s.kind, s.t): s.odom for s in scans}
     new = {(s.kind, s.t): s.odom for s in filled}
     t_ref, poses = read_tum(truth)
+    gap = SPACING * float(np.median(np.diff(t_ref))) if len(t_ref) > 1 else 0.0
     kind = scans[0].kind if scans else None
     out = []
     for st in fill.stalls:
         k0, k1 = (kind, st.t0), (kind, st.t1)
-        a, b = _pose_at(t_ref, poses, st.t0), _pose_at(t_ref, poses, st.t1)
+        a, b = _pose_at(t_ref, poses, st.t0, gap), _pose_at(t_ref, poses, st.t1, gap)
         if k0 not in raw or k1 not in raw or a is None or b is None:
             continue
         ref = compose(inverse(a), b)
