@@ -579,7 +579,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", required=True, help="reference trajectory (TUM) at (a subset of) the log's times")
     p.add_argument("--config", help="config whose motion.model (odometry or omni), motion.noise_form, "
                    "motion.noise_step and motion.noise the fit uses (default: the defaults)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override, e.g. motion.noise_form=std")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="config override, e.g. motion.noise_form=std")
     p.add_argument("--min-trans", type=float, default=None, metavar="M",
                    help="below this step (m, >= 0) rot1 = 0 for odometry and reference and the pair is scored on its "
                         "turn and translation only (default 0.01, the filter's)")
