@@ -143,7 +143,9 @@ def laser_odometry(scans, mount=None, rate0=None, max_misses: int = MAX_MISSES,
     ``thorough``: every scan is matched from three starts, the last step again, the same without its turn, and no
     motion, and the best match kept (a turn that did not go on led the match into a wrong place: a sparse hall
     scanned at 2 Hz); scans more than ``SPARSE_DT`` s apart also from ``TURNS``, standing and at the last step (a
-    thinned log, a scan every 3-6 s: the match from no motion settled 1.8 m from where a start turned 0.4 rad did)."""
+    thinned log, a scan every 3-6 s: the match from no motion settled 1.8 m from where a start turned 0.4 rad did);
+    a nearer scan whose best match pairs under ``GOOD_PAIRS`` of its points also from ``TURNS`` standing (a robot
+    that braked and spun on the spot: the three starts all drove on)."""
     mount = np.zeros(3) if mount is None else np.asarray(mount, dtype=np.float64)
     mount_inv = inverse(mount)
     rows = []
@@ -185,6 +187,12 @@ def laser_odometry(scans, mount=None, rate0=None, max_misses: int = MAX_MISSES,
                                 for a in TURNS for x, y in ((0.0, 0.0), (velocity[0], velocity[1]))]
                 if thorough or best[1] < GOOD_PAIRS * pts.shape[1]:
                     for g in guesses[1:]:
+                        best = min(best, icp(key, pts, g, prior=guesses[0], weight=weight), key=lambda m: m[2])
+                if thorough and not sparse and best[1] < GOOD_PAIRS * pts.shape[1]:
+                    # none of the starts pairs half the points: the robot may have stopped and turned on the spot
+                    # (belgioioso at 18.8 s: from 5 m/s to a spin of -3 rad/s), so turned starts from standing too
+                    for a in TURNS:
+                        g = compose(inverse(key_pose), compose(laser, np.array([0.0, 0.0, a])))
                         best = min(best, icp(key, pts, g, prior=guesses[0], weight=weight), key=lambda m: m[2])
                 rel, pairs, _ = best
             failed += pairs == 0

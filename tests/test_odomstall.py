@@ -285,6 +285,30 @@ def test_scans_far_apart_are_matched_from_turned_starts():
         assert math.hypot(*(found[:2] - truth[:2])) < 0.3 and abs(found[2] - truth[2]) < 0.05
 
 
+@pytest.mark.skipif(not (SHARED / "belgioioso").is_dir(), reason=f"real datasets not found at {SHARED}")
+def test_a_robot_that_brakes_and_spins_is_matched_from_turned_starts(monkeypatch):
+    # belgioioso from 18.0 to 21.2 s (16 scans at 5 Hz): the robot brakes from 5 m/s to a standstill by 18.8 s and
+    # spins on the spot at -3 rad/s, 2.6 m on and -1.27 rad turned by its reference. The three starts (the last
+    # step, the same without its turn, no motion) all pair under half the points at the first scans of the spin, and
+    # the chain drives on: 1.5 m off. Turned starts from standing where no start pairs half the points land within
+    # 0.07 m and 0.03 rad (0.3 m and 0.1 rad allowed).
+    from mcl import laser_odometry as lo
+
+    scans = read_carmen(SHARED / "belgioioso" / "log.clf").laser_stream()
+    t = np.array([s.t for s in scans])
+    i, j = int(np.searchsorted(t, 18.0 - 1e-6)), int(np.searchsorted(t, 21.2 - 1e-6))
+    chain = scans[i:j + 1]
+    tt, ref = read_tum(SHARED / "belgioioso" / "truth.tum")
+    truth = compose(inverse(ref[:, int(np.argmin(np.abs(tt - chain[0].t)))]),
+                    ref[:, int(np.argmin(np.abs(tt - chain[-1].t)))])
+    entry = compose(inverse(scans[i - 1].odom), chain[0].odom) / (chain[0].t - scans[i - 1].t)
+    found = lo.laser_odometry(chain, rate0=entry, max_misses=len(chain), thorough=True)[0][-1, 1:4]
+    assert math.hypot(*(found[:2] - truth[:2])) < 0.3 and abs(found[2] - truth[2]) < 0.1
+    monkeypatch.setattr(lo, "GOOD_PAIRS", 0.0)  # the three starts alone
+    three = lo.laser_odometry(chain, rate0=entry, max_misses=len(chain), thorough=True)[0][-1, 1:4]
+    assert math.hypot(*(three[:2] - truth[:2])) > 1.0
+
+
 def test_a_hold_longer_than_max_hold_passes_unmatched(worlds, monkeypatch):
     # An abrupt hold (a stall by its look) that lasts 25 s: past MAX_HOLD (20 s) the held scans pass as they came,
     # unmatched (a robot stopped dead along a corridor would otherwise be taken to drive on for as long).
