@@ -130,6 +130,12 @@ def icp(key: Key, pts: np.ndarray, guess, max_pair: float = 0.5, prior=None, wei
     return np.array([x, y, math.atan2(math.sin(th), math.cos(th))]), pairs, cost
 
 
+def _start(key_pose, laser, step) -> np.ndarray:
+    """A match's start (3,) in the key scan's frame (at ``key_pose``): the laser at ``laser`` moved by ``step``
+    (x, y, theta in its own frame)."""
+    return compose(inverse(key_pose), compose(laser, np.asarray(step, dtype=np.float64)))
+
+
 def laser_odometry(scans, mount=None, rate0=None, max_misses: int = MAX_MISSES,
                    thorough: bool = False) -> tuple[np.ndarray, int]:
     """(rows (M, 6): t, x, y, theta, 0, 0 of the robot at each scan, the first at the origin; how many scans after
@@ -172,28 +178,31 @@ def laser_odometry(scans, mount=None, rate0=None, max_misses: int = MAX_MISSES,
             if rates0 is not None:  # known velocities at the start: the first match's guess and prior, other starts
                 velocity, *others = rates0 * (float(scan.t) - t_prev)
                 rates0 = None
-            guesses = [compose(inverse(key_pose), compose(laser, v)) for v in (velocity, *others, np.zeros(3))]
+            guesses = [_start(key_pose, laser, v) for v in (velocity, *others, np.zeros(3))]
             rel, pairs = guesses[0], 0
             if pts.shape[1] >= MIN_PAIRS:
                 sparse = thorough and float(scan.t) - t_prev > SPARSE_DT
                 # scans far apart: the constant-velocity guess says little, and its prior only breaks ties
                 weight = SPARSE_PRIOR if sparse else PRIOR
+
+                def better(best, starts):
+                    """The lowest-cost of ``best`` and the matches from ``starts`` (the first on ties), each with
+                    its weak prior at the constant-velocity guess."""
+                    return min([best, *(icp(key, pts, g, prior=guesses[0], weight=weight) for g in starts)],
+                               key=lambda m: m[2])
+
                 best = icp(key, pts, guesses[0], weight=weight)
                 if thorough:
-                    straight = compose(inverse(key_pose), compose(laser, np.array([velocity[0], velocity[1], 0.0])))
-                    guesses.insert(1, straight)
+                    guesses.insert(1, _start(key_pose, laser, (velocity[0], velocity[1], 0.0)))  # without its turn
                 if sparse:  # turned starts too, standing and at the last step
-                    guesses += [compose(inverse(key_pose), compose(laser, np.array([x, y, a])))
+                    guesses += [_start(key_pose, laser, (x, y, a))
                                 for a in TURNS for x, y in ((0.0, 0.0), (velocity[0], velocity[1]))]
                 if thorough or best[1] < GOOD_PAIRS * pts.shape[1]:
-                    for g in guesses[1:]:
-                        best = min(best, icp(key, pts, g, prior=guesses[0], weight=weight), key=lambda m: m[2])
+                    best = better(best, guesses[1:])
                 if thorough and not sparse and best[1] < GOOD_PAIRS * pts.shape[1]:
                     # none of the starts pairs half the points: the robot may have stopped and turned on the spot
                     # (belgioioso at 18.8 s: from 5 m/s to a spin of -3 rad/s), so turned starts from standing too
-                    for a in TURNS:
-                        g = compose(inverse(key_pose), compose(laser, np.array([0.0, 0.0, a])))
-                        best = min(best, icp(key, pts, g, prior=guesses[0], weight=weight), key=lambda m: m[2])
+                    best = better(best, [_start(key_pose, laser, (0.0, 0.0, a)) for a in TURNS])
                 rel, pairs, _ = best
             failed += pairs == 0
             misses = 0 if pairs else misses + 1
