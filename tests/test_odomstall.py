@@ -590,24 +590,27 @@ def test_a_match_that_slid_along_the_scene_is_no_slip():
 
 def test_a_slip_matched_against_the_odometrys_travel_is_no_slip():
     # A slipping wheel adds travel on its own side; it does not turn the robot's travel round. A match that drives
-    # against the odometry's step, farther from it than 0.5 m per radian of turn corrected plus 3 cm, is a wrong
-    # match. Hunt w4854 at 66.6 s: matched 0.15 m forward, the odometry 0.26 m back with a 0.45 rad slip (0.43 m
-    # apart, against 0.26 m allowed). A slow robot whose slip reads a little travel the other way is a slip's.
+    # backwards along the odometry's step (by more than 3 cm), farther from it than 0.5 m per radian of turn
+    # corrected plus 3 cm, has its travel wrong. Hunt w4854 at 66.6 s: matched 0.15 m forward, the odometry 0.26 m
+    # back with a 0.45 rad slip (0.43 m apart, against 0.26 m allowed). A slow robot whose slip reads a little
+    # travel the other way is a slip's; a match that stood still (a 40 Hz corridor slip) is not turned round.
     from mcl.odomstall import _reversed
 
     assert _reversed(np.array([0.15, 0.07, 0.09]), np.array([-0.247, -0.097, -0.368]))
     assert not _reversed(np.array([-0.14, -0.07, 0.08]), np.array([-0.247, -0.097, -0.368]))  # the same way
     assert not _reversed(np.array([0.03, 0.0, 0.09]), np.array([-0.05, 0.0, -0.368]))  # within the lever
+    assert not _reversed(np.array([-0.002, -0.017, 0.011]), np.array([0.233, 0.038, 0.317]))  # stood still
     assert _reversed(np.array([0.2, 0.0, 0.0]), np.array([-0.2, 0.0, 0.05]))
+    assert not _reversed(np.array([0.2, 0.0, 0.0]), np.zeros(3))  # no travel to turn round
 
 
 def test_a_warehouse_slip_at_a_reversal_is_tracked(tmp_path):
     # Hunt w4854 (a warehouse, six reversals, a wheel slipping three times for 2 s, a holonomic base, odometry
     # alphas 0.1): at 66.4 s a slip begins as the robot reverses. Matched from the velocity before it (forward),
     # along racks that repeat every few tenths of a metre, four steps in a row settled 0.15 m forward where the
-    # robot backed 0.15 m, and the estimate went 1.19 m off (measured, seeds 1-3; the baseline 0.68 m). With the
-    # match that drives against the odometry left out, the run holds: 0.33-0.45 m over seeds 1-3 in `mcl eval`,
-    # 0.28 m here (measured). Bound 0.5 m, the suites' own.
+    # robot backed 0.15 m, and the estimate went 1.19 m off (measured, seeds 1-3; the baseline 0.68 m). With such a
+    # match's travel replaced by the odometry's (its turn kept), the run holds: 0.19-0.27 m over seeds 1-3 in
+    # `mcl eval`, 0.27 m here (measured). Bound 0.5 m, the suites' own.
     world = tmp_path / "world"
     simulate(world, kind="warehouse", seed=4854, duration=90.0, reversals=6, odom_slips=3, odom_slip_s=2.0,
              holonomic=1.0472, odom_alphas=(0.1, 0.1, 0.1, 0.1))
