@@ -470,20 +470,26 @@ def _too_far(matched, own, dt: float) -> bool:
 def _slid(matched, own) -> bool:
     """A slip's matched step ``matched`` corrects the turn of the odometry's ``own`` by under ``SLIP_OFF`` (a step the
     finer bound after a slip let through, or one near the bound) and changes its travel by more than a slipping wheel
-    could for that turn (``SLIP_LEVER``, ``SLIP_TRAVEL``): the match slid along the scene."""
-    turn = abs(float(wrap_angle(own[2] - matched[2])))
+    could for that turn (``_slip_reach``): the match slid along the scene."""
+    turn, reach = _slip_reach(matched, own)
     if turn >= SLIP_OFF:  # a turn corrected by this much is a slip's, whatever the match made of the travel
         return False
-    travel = abs(math.hypot(matched[0], matched[1]) - math.hypot(own[0], own[1]))
-    return travel > SLIP_LEVER * turn + SLIP_TRAVEL
+    return abs(math.hypot(matched[0], matched[1]) - math.hypot(own[0], own[1])) > reach
+
+
+def _slip_reach(matched, own) -> tuple[float, float]:
+    """(the turn (rad) a slip's matched step ``matched`` corrects in the odometry's ``own``, how far (m) a slipping
+    wheel could move the odometry's travel for it): a wheel that slips by s turns a differential drive's odometry by
+    s / b and moves it by s / 2, so ``SLIP_LEVER`` m per radian (a 1 m wheel base), plus ``SLIP_TRAVEL``."""
+    turn = abs(float(wrap_angle(own[2] - matched[2])))
+    return turn, SLIP_LEVER * turn + SLIP_TRAVEL
 
 
 def _reversed(matched, own) -> bool:
     """A slip's matched step ``matched`` drives against the odometry's ``own`` (their travels point apart) and
-    lies farther from it than a slipping wheel could put it for the turn corrected (``SLIP_LEVER``,
-    ``SLIP_TRAVEL``): the match's travel is wrong, as a wheel that slips adds travel on its own side and does not
-    turn the robot's travel round; its turn, which the scans' walls pin in any direction, is kept. Along a
-    warehouse's racks, which repeat every few tenths of a metre, a slip at a reversal was matched from the
+    lies farther from it than a slipping wheel could put it for the turn corrected (``_slip_reach``): the match's
+    travel is wrong, as a wheel that slips adds travel on its own side and does not turn the robot's travel round;
+    its turn, which the scans' walls pin in any direction, is kept. Along a warehouse's racks, which repeat every few tenths of a metre, a slip at a reversal was matched from the
     velocity before it: 0.15 m forward where the robot backed 0.15 m, four steps in a row, and the estimate 1.19 m
     off (the plain baseline 0.68 m). "Against" is backwards along the odometry's travel by more than
     ``SLIP_TRAVEL``: a match that stood still where a 40 Hz corridor slip's odometry drove 0.24 m (the robot 0.16 m)
@@ -493,8 +499,7 @@ def _reversed(matched, own) -> bool:
     # backwards along the odometry's travel by more than SLIP_TRAVEL: a match that stood still is not turned round
     if travel == 0.0 or float(matched[0] * own[0] + matched[1] * own[1]) / travel >= -SLIP_TRAVEL:
         return False
-    turn = abs(float(wrap_angle(own[2] - matched[2])))
-    return math.hypot(matched[0] - own[0], matched[1] - own[1]) > SLIP_LEVER * turn + SLIP_TRAVEL
+    return math.hypot(matched[0] - own[0], matched[1] - own[1]) > _slip_reach(matched, own)[1]
 
 
 def _slipped(a, b, step, mount, turn_min: float = SLIP_TURN, off: float = SLIP_OFF) -> bool:
