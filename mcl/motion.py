@@ -338,6 +338,14 @@ class OdometryMotionModel:
         return ((rot1, trans, rot2), noise_sigmas(rot1, trans, rot2, self.cfg), {}, _k.sample_odometry,
                 _k.sample_odometry_map)
 
+    def turn_heading_std(self, step) -> float:
+        """The std (rad) of the heading noise the turn of an odometry ``step`` (x, y, theta in the robot's frame)
+        adds: sigma_rot1 and sigma_rot2 of Table 5.6 with the translation left out (alpha1's terms), 0 on a step
+        that does not turn. (The translation's heading noise, alpha2's, is the travel's, not the turn's.)"""
+        rot1, _, rot2 = odometry_deltas(np.zeros(3), step)
+        s1, _, s2 = noise_sigmas(rot1, 0.0, rot2, self.cfg)
+        return math.hypot(s1, s2)
+
 
 def omni_deltas(odom_prev, odom_now) -> tuple[float, float, float]:
     """(bearing, trans, rot) of an odometry step of an omnidirectional base: the direction of travel in the robot's
@@ -403,6 +411,11 @@ class OmniMotionModel(OdometryMotionModel):
         bearing, trans, rot = omni_deltas(odom_prev, odom_now)
         return ((bearing, trans, rot), omni_sigmas(trans, rot, self.cfg), {"turns": (2,), "shifts": (0, 1)},
                 _k.sample_omni, _k.sample_omni_map)
+
+    def turn_heading_std(self, step) -> float:
+        """``OdometryMotionModel.turn_heading_std`` of this model: sigma_rot with the travel left out (a strafing
+        step turns nothing, whatever its direction)."""
+        return omni_sigmas(0.0, omni_deltas(np.zeros(3), step)[2], self.cfg)[2]
 
 
 SIDEWAYS_OMNI = 0.1  # share of the odometry's travel across the heading above which the base is omnidirectional

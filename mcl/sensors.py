@@ -711,8 +711,9 @@ class UnmappedObjects:
     def select(self, observation, candidates, pose, shifts=None, whole: bool = False, distance=None):
         """(the observation to score, the skipped robot-frame endpoints (2, k) or None) for the robot-frame
         endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``: a candidate
-        is skipped when farther than ``distance`` (m, or (K,) one per endpoint; default ``unmapped_distance``)
-        from every mapped obstacle. With ``shifts`` ((M, 2) world-frame offsets of ``pose``, or a function
+        is skipped when farther than ``distance`` (m, or (K,) one per endpoint, or a function returning them, called
+        only when a candidate lies farther than ``unmapped_distance``, which it must never go under; default
+        ``unmapped_distance``) from every mapped obstacle. With ``shifts`` ((M, 2) world-frame offsets of ``pose``, or a function
         returning them or None, called only when a candidate is far), a run of neighbouring candidates is kept
         whole when one shifted pose puts every endpoint of it within that distance of the map."""
         if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
@@ -725,9 +726,13 @@ class UnmappedObjects:
         # candidates is the map's when one shift puts all of it on mapped obstacles (mcl.kernels.field.far_runs)
         args = (self.dist, self.origin[0], self.origin[1], self.resolution, float(pose[0]), float(pose[1]),
                 math.cos(th), math.sin(th), e, idx)
-        d = np.asarray(self.cfg.unmapped_distance if distance is None else distance, dtype=np.float32)
+        later = distance if callable(distance) else None
+        d = np.asarray(self.cfg.unmapped_distance if distance is None or later else distance, dtype=np.float32)
         d = np.ascontiguousarray(np.broadcast_to(d, e.shape[1]))  # one per endpoint, in float32 as the field
         n_far = far_runs(*args, _NO_SHIFTS, _NO_SHIFTS, d, far)
+        if n_far and later is not None:  # none is far at the floor: none is at distances above it
+            d = np.ascontiguousarray(np.broadcast_to(np.asarray(later(), dtype=np.float32), e.shape[1]))
+            n_far = far_runs(*args, _NO_SHIFTS, _NO_SHIFTS, d, far)
         if n_far and callable(shifts):
             shifts = shifts()  # computed only when a candidate is far from the map
         if n_far and shifts is not None:

@@ -469,3 +469,26 @@ def test_a_velocity_model_given_only_the_odometry_pair_moves_by_it():
     np.testing.assert_allclose(new[2], 0.2, atol=1e-9)
     # given velocities are used as given
     assert Control(np.zeros(3), end, dt=0.2, v=1.0, w=0.0).velocities() == (1.0, 0.0, 0.2)
+
+
+@pytest.mark.parametrize("form", ["variance", "std"])
+def test_the_heading_noise_a_turn_adds_is_alpha1s_alone(form):
+    # sensor.unmapped_turn_sigmas reads it: Table 5.6's sigma_rot1 and sigma_rot2 with the translation left out. A turn
+    # on the spot of 0.4 rad (rot1 0, rot2 0.4): sqrt(alpha1) 0.4 (variance) or alpha1 0.4 (std); a straight step
+    # none, however long (alpha2's heading noise is the travel's); an arc of 0.4 rad over 1 m splits the turn into
+    # rot1 = rot2 = 0.2. The omni model: its sigma_rot of the turn alone, none on a strafing step, which the
+    # differential-drive model reads as rot1 = pi/2, rot2 = -pi/2.
+    from mcl.motion import OmniMotionModel
+
+    cfg = SimpleNamespace(alpha1=0.05, alpha2=0.2, alpha3=0.1, alpha4=0.1, alpha_strafe=0.1, noise_form=form,
+                          noise_step=0.3, max_tries=10)
+    odo, omni = OdometryMotionModel(cfg), OmniMotionModel(cfg)
+    one = (lambda r: math.sqrt(0.05) * r) if form == "variance" else (lambda r: 0.05 * r)
+    assert odo.turn_heading_std(np.array([0.0, 0.0, 0.4])) == pytest.approx(one(0.4))
+    assert odo.turn_heading_std(np.array([1.0, 0.0, 0.0])) == 0.0
+    arc = np.array([math.sin(0.4) / 0.4, (1.0 - math.cos(0.4)) / 0.4, 0.4])  # 1 m along a 0.4 rad arc
+    assert odo.turn_heading_std(arc) == pytest.approx(math.hypot(one(0.2), one(0.2)))
+    assert omni.turn_heading_std(np.array([0.3, 0.2, -0.4])) == pytest.approx(one(0.4))
+    assert omni.turn_heading_std(np.array([0.0, 1.0, 0.0])) == 0.0
+    assert odo.turn_heading_std(np.array([0.0, 1.0, 0.0])) == pytest.approx(math.hypot(one(math.pi / 2),
+                                                                                          one(math.pi / 2)))
