@@ -354,7 +354,7 @@ class SensorConfig:
     unmapped_spread: float = field(default=2.0, metadata=_rng(0.0))  # ... unless a forward shift (std) fits them
     # ... and on a turning step, not unless farther than this many std of the heading noise the turn adds times the
     # endpoint's range (0: off)
-    unmapped_turn_sigmas: float = field(default=1.0, metadata=_rng(0.0))
+    unmapped_turn_sigmas: float = field(default=0.5, metadata=_rng(0.0))
     unmapped_fit: float = field(default=0.9, metadata=_rng(-2.0, 1.0))  # the rest of the scan must fit this well
     unmapped_after: int = field(default=50, metadata=_rng(0, 1_000_000))  # updates since a lost call before any skip
     unmapped_unknown: bool = True  # while tracking, skip beams running over unknown cells only (a region never mapped)
