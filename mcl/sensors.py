@@ -713,9 +713,9 @@ class UnmappedObjects:
         endpoints ``observation`` (2, K), ``candidates`` from :meth:`candidates`, seen from ``pose``: a candidate
         is skipped when farther than ``distance`` (m, or (K,) one per endpoint, or a function returning them, called
         only when a candidate lies farther than ``unmapped_distance``, which it must never go under; default
-        ``unmapped_distance``) from every mapped obstacle. With ``shifts`` ((M, 2) world-frame offsets of ``pose``, or a function
-        returning them or None, called only when a candidate is far), a run of neighbouring candidates is kept
-        whole when one shifted pose puts every endpoint of it within that distance of the map."""
+        ``unmapped_distance``) from every mapped obstacle. With ``shifts`` ((M, 2) world-frame offsets of ``pose``,
+        or a function returning them or None, called only when a candidate is far), a run of neighbouring candidates
+        is kept whole when one shifted pose puts every endpoint of it within that distance of the map."""
         if candidates is None or candidates.shape[0] != observation.shape[1] or not candidates.any():
             return observation, None
         idx = np.flatnonzero(candidates)

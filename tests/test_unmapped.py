@@ -106,6 +106,16 @@ def _select_reference(dist, origin, res, d_max, observation, candidates, pose, s
     return skip
 
 
+
+def _random_trial(rng, trial: int):
+    """A random select case: (endpoints (2, K), candidates, pose, shifts or None on every third trial)."""
+    k = int(rng.integers(3, 90))
+    obs = np.vstack([rng.uniform(-3.0, 8.0, k), rng.uniform(-5.0, 5.0, k)])
+    cand = rng.random(k) < rng.uniform(0.05, 0.9)
+    pose = (rng.uniform(0.0, 7.0), rng.uniform(0.0, 4.0), rng.uniform(-3.2, 3.2))
+    shifts = None if trial % 3 == 0 else rng.normal(0.0, 0.5, (int(rng.integers(1, 17)), 2))
+    return obs, cand, pose, shifts
+
 def test_select_agrees_with_the_rule_written_out_on_random_scans_and_shifts():
     # the kernel (mcl.kernels.field.far_runs) against the rule in numpy: fields holding many distances equal to
     # unmapped_distance (0.3 = 6 cells of 0.05 m: compared in float32, as the float32 field is), runs of many
@@ -117,11 +127,7 @@ def test_select_agrees_with_the_rule_written_out_on_random_scans_and_shifts():
     unmapped = UnmappedObjects(grid, _cfg(), dist=dist)
     skipped_some = cleared_some = 0
     for trial in range(1500):
-        k = int(rng.integers(3, 90))
-        obs = np.vstack([rng.uniform(-3.0, 8.0, k), rng.uniform(-5.0, 5.0, k)])
-        cand = rng.random(k) < rng.uniform(0.05, 0.9)
-        pose = (rng.uniform(0.0, 7.0), rng.uniform(0.0, 4.0), rng.uniform(-3.2, 3.2))
-        shifts = None if trial % 3 == 0 else rng.normal(0.0, 0.5, (int(rng.integers(1, 17)), 2))
+        obs, cand, pose, shifts = _random_trial(rng, trial)
         want = _select_reference(dist, grid.origin, 0.05, 0.3, obs, cand, pose, shifts)
         kept, skipped = unmapped.select(obs, cand, pose, (lambda sh=shifts: sh) if trial % 2 else shifts)
         if want is None:
@@ -147,12 +153,8 @@ def test_select_with_a_distance_function_agrees_with_the_rule_and_calls_it_only_
     unmapped = UnmappedObjects(grid, _cfg(), dist=dist)
     calls = due = spared = 0
     for trial in range(600):
-        k = int(rng.integers(3, 90))
-        obs = np.vstack([rng.uniform(-3.0, 8.0, k), rng.uniform(-5.0, 5.0, k)])
-        cand = rng.random(k) < rng.uniform(0.05, 0.9)
-        pose = (rng.uniform(0.0, 7.0), rng.uniform(0.0, 4.0), rng.uniform(-3.2, 3.2))
-        shifts = None if trial % 3 == 0 else rng.normal(0.0, 0.5, (int(rng.integers(1, 17)), 2))
-        d = 0.3 + rng.exponential(0.3, k)
+        obs, cand, pose, shifts = _random_trial(rng, trial)
+        d = 0.3 + rng.exponential(0.3, obs.shape[1])
 
         def distances(d=d):
             nonlocal calls
