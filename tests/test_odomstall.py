@@ -720,8 +720,9 @@ def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
     # for 3 s (session 89's hunt log r2419). Two scans 5.6 s apart along a corridor do not pin the motion: the fill
     # takes its guess, the velocity before the hold, 2.84 m where the robot drove 0.82 m. Trusted like odometry
     # (motion.fill_spread 0) the cloud runs 2 m ahead and the track is lost (max 4.45 m measured at seed 1, 2.5-4.45 m
-    # over seeds 1-5); with the default's spread of the filled steps' travel it holds (0.46 m measured at seed 1,
-    # 0.46-0.73 m over seeds 1-5; 1 m is the hunts' bound for a real log).
+    # over seeds 1-5; 1.87 m at seed 1 since sensor.unmapped_turn_sigmas keeps far returns on the turning steps of a
+    # scan every few seconds); with the default's spread of the filled steps' travel it holds (0.46 m measured at seed
+    # 1, 0.46-0.73 m over seeds 1-5; 0.47 m now; 1 m is the hunts' bound for a real log).
     from mcl.runner import run
 
     world = degraded(tmp_path, "fr101", "--fov", "90", "--range-scale", "0.98", "--odom-stalls", "3", "--seed", "2419")
@@ -734,7 +735,7 @@ def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
         s = run(cfg, tmp_path / f"run-{spread}", progress=False, echo=lambda msg: None)
         assert [w["cause"] for w in s["odometry_stalls"]] == ["hold", "hold"]
         errors[spread] = s["eval"]["ate_max"]
-    assert errors[None] < 1.0 and errors[0.0] > 2.0
+    assert errors[None] < 1.0 and errors[0.0] > 1.5, errors
 
 
 @pytest.mark.parametrize("odom_lines", ["zero", "kept"])
