@@ -486,15 +486,15 @@ def _slip_reach(matched, own) -> tuple[float, float]:
 
 
 def _reversed(matched, own) -> bool:
-    """A slip's matched step ``matched`` drives against the odometry's ``own`` (their travels point apart) and
-    lies farther from it than a slipping wheel could put it for the turn corrected (``_slip_reach``): the match's
-    travel is wrong, as a wheel that slips adds travel on its own side and does not turn the robot's travel round;
-    its turn, which the scans' walls pin in any direction, is kept. Along a warehouse's racks, which repeat every few tenths of a metre, a slip at a reversal was matched from the
-    velocity before it: 0.15 m forward where the robot backed 0.15 m, four steps in a row, and the estimate 1.19 m
-    off (the plain baseline 0.68 m). "Against" is backwards along the odometry's travel by more than
-    ``SLIP_TRAVEL``: a match that stood still where a 40 Hz corridor slip's odometry drove 0.24 m (the robot 0.16 m)
-    is left to the checks above (with the odometry's travel it tracked 0.29-0.44 m over seeds 1-3, against
-    0.22-0.34 m)."""
+    """A slip's matched step ``matched`` drives against the odometry's ``own`` (their travels point apart) and lies
+    farther from it than a slipping wheel could put it for the turn corrected (``_slip_reach``): the match's travel
+    is wrong, as a wheel that slips adds travel on its own side and does not turn the robot's travel round; its turn,
+    which the scans' walls pin in any direction, is kept. Along a warehouse's racks, which repeat every few tenths of
+    a metre, a slip at a reversal was matched from the velocity before it: 0.15 m forward where the robot backed 0.15
+    m, four steps in a row, and the estimate 1.19 m off (the plain baseline 0.68 m). "Against" is backwards along the
+    odometry's travel by more than ``SLIP_TRAVEL``: a match that stood still where a 40 Hz corridor slip's odometry
+    drove 0.24 m (the robot 0.16 m) is left to the checks above (with the odometry's travel it tracked 0.29-0.44 m
+    over seeds 1-3, against 0.22-0.34 m)."""
     travel = math.hypot(own[0], own[1])
     # backwards along the odometry's travel by more than SLIP_TRAVEL: a match that stood still is not turned round
     if travel == 0.0 or float(matched[0] * own[0] + matched[1] * own[1]) / travel >= -SLIP_TRAVEL:

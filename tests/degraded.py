@@ -28,3 +28,18 @@ def degraded(tmp_path: Path, name: str, *options: str) -> Path:
     assert main([str(out), "--suite", str(tmp_path / "suite.yaml"), *options]) == 0
     (world,) = [p.parent for p in out.glob("*/log.clf")]
     return world
+
+
+def replay(world: Path, out: Path, start, *overrides: str, seed: int = 1, turned: bool = False,
+           log: Path | None = None) -> dict:
+    """The summary of ``mcl.runner.run`` with the default config on a ``degraded`` world (its turned map and
+    reference with ``turned``; ``log`` in place of its own), tracking from ``start`` (x, y, theta), with ``overrides``
+    (``--set`` items) after the rest; outputs in ``out``."""
+    from mcl.config import load_config
+    from mcl.runner import run
+
+    tag = "_turned" if turned else ""
+    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
+        f"map={world / f'map{tag}.yaml'}", f"log={log or world / 'log.clf'}", f"truth={world / f'truth{tag}.tum'}",
+        f"seed={seed}", "rerun.mode=off", f"filter.initial_pose=[{', '.join(str(v) for v in start)}]", *overrides])
+    return run(cfg, out, progress=False, echo=lambda msg: None)

@@ -14,7 +14,7 @@ from mcl.estimate import compose, inverse
 from mcl.odomstall import StallFill
 from mcl.simulate import simulate
 from mcl.trajectory import read_tum
-from tests.degraded import degraded
+from tests.degraded import degraded, replay
 
 
 
@@ -723,16 +723,11 @@ def test_a_fill_the_scans_do_not_pin_is_spread_along_the_travel(tmp_path):
     # over seeds 1-5; 1.87 m at seed 1 since sensor.unmapped_turn_sigmas keeps far returns on the turning steps of a
     # scan every few seconds); with the default's spread of the filled steps' travel it holds (0.46 m measured at seed
     # 1, 0.46-0.73 m over seeds 1-5; 0.47 m now; 1 m is the hunts' bound for a real log).
-    from mcl.runner import run
-
     world = degraded(tmp_path, "fr101", "--fov", "90", "--range-scale", "0.98", "--odom-stalls", "3", "--seed", "2419")
     errors = {}
     for spread in (None, 0.0):  # the default's, and none
-        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-            f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}", f"truth={world / 'truth.tum'}", "seed=1",
-            "rerun.mode=off", "filter.initial_pose=[0.108623, -0.03441, 0.552197]",
-            *([] if spread is None else [f"motion.fill_spread={spread}"])])
-        s = run(cfg, tmp_path / f"run-{spread}", progress=False, echo=lambda msg: None)
+        s = replay(world, tmp_path / f"run-{spread}", (0.108623, -0.03441, 0.552197),
+                   *([] if spread is None else [f"motion.fill_spread={spread}"]))
         assert [w["cause"] for w in s["odometry_stalls"]] == ["hold", "hold"]
         errors[spread] = s["eval"]["ate_max"]
     assert errors[None] < 1.0 and errors[0.0] > 1.5, errors
@@ -778,14 +773,9 @@ def test_a_slip_matched_farther_than_any_robot_drives_is_not_taken(tmp_path):
     # a 90-degree turn on the spot was checked as a slip and matched 1.22 m away in 0.2 s; the estimate followed it
     # 1.4-2.7 m off (max 2.67 m), where the plain baseline kept 0.20 m. A match that drove farther than the
     # odometry's travel plus 5 m/s (odomstall.JUMP_V) is a wrong match: max 0.21 m now (1 m: the hunts' bound).
-    from mcl.runner import run
-
     world = degraded(tmp_path, "belgioioso", "--sigma", "0.05", "--map-rotation", "30", "--turn-scale", "1.07",
                      "--seed", "3724")
-    cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-        f"map={world / 'map_turned.yaml'}", f"log={world / 'log.clf'}", f"truth={world / 'truth_turned.tum'}",
-        "seed=1", "rerun.mode=off", "filter.initial_pose=[0.078313, -0.002213, 0.016755]"])
-    s = run(cfg, tmp_path / "run", progress=False, echo=lambda msg: None)
+    s = replay(world, tmp_path / "run", (0.078313, -0.002213, 0.016755), turned=True)
     assert not [w for w in s["odometry_stalls"] if 21.0 < w["t0"] < 23.0]
     assert s["eval"]["ate_max"] < 1.0, s["eval"]
 

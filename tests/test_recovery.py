@@ -425,17 +425,12 @@ def test_a_sparse_logs_fault_window_does_not_stay_open_for_minutes(tmp_path):
     # motion.fault_window_s (20 s) too: 0.40 m measured (seeds 1-3: at most 0.48 m). Bound: 1 m, the hunts' and the
     # issue's bound for a real log. Both runs pin the ESS floor off (filter.ess_floor 0, the default): with it, seed 1
     # is 0.33 m with the bound and without (ninety-ninth session), and the control would tell nothing.
-    from mcl.config import load_config
-    from mcl.runner import run
-    from tests.degraded import degraded
+    from tests.degraded import degraded, replay
 
     world = degraded(tmp_path, "intel_lab", "--fov", "90", "--sigma", "0.05", "--seed", "3015")
     worst = {}
     for name, sets in (("bound", []), ("none", ["motion.fault_window_s=0"])):
-        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-            f"map={world / 'map.yaml'}", f"log={world / 'log.clf'}", f"truth={world / 'truth.tum'}", "seed=1",
-            "rerun.mode=off", "filter.initial_pose=[0.600266, -0.032033, -0.354665]", "filter.ess_floor=0", *sets])
-        s = run(cfg, tmp_path / name, progress=False, echo=lambda msg: None)
+        s = replay(world, tmp_path / name, (0.600266, -0.032033, -0.354665), "filter.ess_floor=0", *sets)
         worst[name] = s["eval"]["ate_max"]
     assert worst["bound"] < 1.0 < worst["none"], worst
 

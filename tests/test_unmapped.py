@@ -433,9 +433,7 @@ def test_a_turn_the_odometry_overshot_keeps_the_far_walls_that_turn_the_estimate
     # heading noise the turn adds times their range (sensor.unmapped_turn_sigmas 0.5) they are kept: 0.36-0.42 m over
     # the whole log, seeds 1-5. The log's first 25 s hold it all (seeds 1-5: 0.21-0.23 m with it, 0.64-20.8 m
     # without); seed 4: under 0.6 m with it, over 1 m without (measured 0.23 / 20.8 m).
-    from mcl.config import load_config
-    from mcl.runner import run
-    from tests.degraded import degraded
+    from tests.degraded import degraded, replay
 
     world = degraded(tmp_path, "infinite_corridor", "--odom-scale", "0.95", "--turn-scale", "1.07",
                      "--map-rotation", "30", "--fov", "180", "--sigma", "0", "--drop", "0", "--seed", "4330")
@@ -444,14 +442,12 @@ def test_a_turn_the_odometry_overshot_keeps_the_far_walls_that_turn_the_estimate
     log.write_text("".join(ln for ln in lines if not ln.startswith("#") and float(ln.split()[-3]) <= 25.0))
     errors = {}
     for sigmas in (None, 0.0):  # the default's, and none
-        cfg = load_config(PROJECT_ROOT / "configs" / "default.yaml", [
-            f"map={world / 'map_turned.yaml'}", f"log={log}", f"truth={world / 'truth_turned.tum'}", "seed=4",
-            "rerun.mode=off", "filter.initial_pose=[0.881552, 0.489587, 0.529556]",
-            *([] if sigmas is None else [f"sensor.unmapped_turn_sigmas={sigmas}"])])
-        s = run(cfg, tmp_path / f"run-{sigmas}", progress=False, echo=lambda msg: None)
+        s = replay(world, tmp_path / f"run-{sigmas}", (0.881552, 0.489587, 0.529556),
+                   *([] if sigmas is None else [f"sensor.unmapped_turn_sigmas={sigmas}"]), seed=4, turned=True, log=log)
         assert s["eval"]["scored"] >= 120, s["eval"]
         errors[sigmas] = s["eval"]["ate_max"]
     assert errors[None] < 0.6 and errors[0.0] > 1.0, errors
+
 
 def _open_hall():
     """A 40 m x 40 m hall (walls at its edges, origin (0, 0), 0.05 m cells) with one 0.4 m pillar at (24.4, 20)."""
